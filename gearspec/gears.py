@@ -1,0 +1,391 @@
+"""Gear trains: specs, presets, and the frequencies every shaft, mesh and stage puts into friction.
+
+A :class:`GearTrain` is read from a TOML spec (``CONTRACTS.md`` section 2) or taken from a built-in
+preset.  From it come the *lines*: the frequencies, in cycles per unit of ``theta`` (cycles/rad or
+cycles/m), at which the drive can ripple:
+
+* ``shaft``     once per revolution of every shaft (motor, each intermediate shaft, output);
+* ``mesh``      tooth-mesh frequency of a stage whose ``teeth`` are given;
+* ``wave``      the 1x / 2x / 4x wave-generator family of strain-wave (``harmonic``) stages;
+* ``harmonic``  integer multiples of the above;
+* ``sideband``  sum and difference of two of the above.
+
+Shafts, meshes and wave lines are *declared*: the spectrum fits them in every segment where they
+fit.  Harmonics and sidebands only serve to *label* a peak that was found.
+
+Conventions
+-----------
+``ratio`` is input turns per output turn of a stage.  Frequencies of a rotary train are per radian
+of the reference shaft: with ``reference = "motor"`` the motor shaft is at 1/(2 pi) cycles/rad and
+the output at 1/(2 pi N); with ``reference = "output"`` the output is at 1/(2 pi) and the motor at
+N/(2 pi).  A linear axis (``unit = "m"``) ends in a ``ballscrew`` or ``belt`` stage with ``lead``
+(m of travel per turn); its screw turns 1/lead times per metre.  ``teeth`` counts the teeth of the
+stage's input member; the mesh frequency is ``teeth`` times the input member's speed relative to
+the carrier (planetary, harmonic, cycloidal: input minus output) or to the housing (all others).
+``order`` is cycles per revolution of the output shaft (of the screw on a linear axis).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Iterable
+
+from .errors import InputError, warn
+
+__all__ = ["Stage", "Line", "GearTrain", "KINDS", "presets", "load_gear"]
+
+KINDS = ("planetary", "worm", "spur", "helical", "harmonic", "cycloidal", "ballscrew", "belt", "other")
+_CARRIER_KINDS = ("planetary", "harmonic", "cycloidal")
+_LINEAR_KINDS = ("ballscrew", "belt")
+_WAVE_MULTIPLES = (1, 2, 4)
+_KIND_RANK = {"shaft": 0, "wave": 1, "mesh": 2, "harmonic": 3, "sideband": 4}
+_TOP_KEYS = {"name", "reference", "unit", "torque_constant", "inertia", "stages", "description"}
+_STAGE_KEYS = {"name", "kind", "ratio", "teeth", "lead"}
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One gear stage, listed from the motor towards the output."""
+
+    name: str
+    kind: str
+    ratio: float = 1.0
+    teeth: int | None = None
+    lead: float | None = None
+
+    def __post_init__(self) -> None:
+        where = f"stage '{self.name}'"
+        if self.kind not in KINDS:
+            raise InputError(f"{where}: unknown kind '{self.kind}' (expected one of {', '.join(KINDS)})")
+        if not (isinstance(self.ratio, (int, float)) and math.isfinite(self.ratio) and self.ratio > 0):
+            raise InputError(f"{where}: ratio must be a positive number (input turns per output turn), got {self.ratio!r}")
+        if self.teeth is not None and (int(self.teeth) != self.teeth or self.teeth < 1):
+            raise InputError(f"{where}: teeth must be a positive integer, got {self.teeth!r}")
+        if self.lead is not None:
+            if self.kind not in _LINEAR_KINDS:
+                raise InputError(f"{where}: 'lead' is only meaningful for a ballscrew or belt stage, not '{self.kind}'")
+            if not (math.isfinite(self.lead) and self.lead > 0):
+                raise InputError(f"{where}: lead must be a positive length in m per turn, got {self.lead!r}")
+
+
+@dataclass(frozen=True)
+class Line:
+    """A frequency the gear train explains, in cycles per unit of theta."""
+
+    frequency: float
+    label: str
+    kind: str
+    order: float | None = None
+    parents: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        return {"frequency": self.frequency, "label": self.label, "kind": self.kind, "order": self.order}
+
+
+@dataclass(frozen=True)
+class GearTrain:
+    """A drive: reference shaft, units, optional torque constant and inertia, and its stages.
+
+    Parameters
+    ----------
+    name : str
+    reference : {"motor", "output"}
+        The shaft whose position the recording's ``theta`` measures.
+    unit : {"rad", "m"}
+        Unit of ``theta``: rotary (rad) or linear (m).
+    torque_constant : float, optional
+        Motor torque constant in Nm/A (needed when the recording has ``current`` but no torque).
+    inertia : float, optional
+        Inertia at the reference shaft, kg m^2 (kg on a linear axis); enables inertia removal.
+    stages : tuple of Stage
+        From the motor towards the output; may be empty (direct drive, unknown mechanics).
+    """
+
+    name: str
+    reference: str = "motor"
+    unit: str = "rad"
+    torque_constant: float | None = None
+    inertia: float | None = None
+    stages: tuple[Stage, ...] = ()
+    description: str = ""
+    source: str = field(default="", compare=False)
+
+    def __post_init__(self) -> None:
+        where = f"gear spec '{self.name}'"
+        if self.reference not in ("motor", "output"):
+            raise InputError(f"{where}: reference must be 'motor' or 'output', got '{self.reference}'")
+        if self.unit not in ("rad", "m"):
+            raise InputError(f"{where}: unit must be 'rad' (rotary) or 'm' (linear), got '{self.unit}'")
+        for key in ("torque_constant", "inertia"):
+            value = getattr(self, key)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise InputError(f"{where}: {key} must be a positive number, got {value!r}")
+        names = [s.name for s in self.stages]
+        if len(set(names)) != len(names):
+            raise InputError(f"{where}: stage names must be unique, got {names}")
+        linear = [i for i, s in enumerate(self.stages) if s.lead is not None]
+        if self.unit == "m":
+            if self.stages and linear != [len(self.stages) - 1]:
+                raise InputError(
+                    f"{where}: a linear axis (unit = 'm') with stages must end in one ballscrew or belt "
+                    "stage with 'lead' (m per turn), so that shaft frequencies per metre are known")
+        elif linear:
+            raise InputError(f"{where}: 'lead' given on a rotary axis (unit = 'rad'); use unit = 'm' for a linear axis")
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_dict(cls, spec: dict, source: str = "") -> "GearTrain":
+        where = f"gear spec {source or spec.get('name', '')}".strip()
+        unknown = set(spec) - _TOP_KEYS
+        if unknown:
+            warn(f"{where}: ignoring unknown keys {sorted(unknown)}")
+        stages = []
+        raw_stages = spec.get("stages", [])
+        if not isinstance(raw_stages, list):
+            raise InputError(f"{where}: 'stages' must be a list of [[stages]] tables")
+        for i, st in enumerate(raw_stages):
+            extra = set(st) - _STAGE_KEYS
+            if extra:
+                warn(f"{where}: stage {i + 1} ignores unknown keys {sorted(extra)}")
+            if "kind" not in st:
+                raise InputError(f"{where}: stage {i + 1} has no 'kind'")
+            kind = st["kind"]
+            if "ratio" not in st and kind not in _LINEAR_KINDS:
+                raise InputError(f"{where}: stage {i + 1} ('{st.get('name', kind)}') has no 'ratio'")
+            stages.append(Stage(name=str(st.get("name", f"{kind}{i + 1}")), kind=kind,
+                                ratio=float(st.get("ratio", 1.0)), teeth=st.get("teeth"),
+                                lead=None if st.get("lead") is None else float(st["lead"])))
+        try:
+            return cls(name=str(spec.get("name", Path(source).stem if source else "unnamed")),
+                       reference=spec.get("reference", "motor"), unit=spec.get("unit", "rad"),
+                       torque_constant=_opt_float(spec.get("torque_constant")),
+                       inertia=_opt_float(spec.get("inertia")), stages=tuple(stages),
+                       description=str(spec.get("description", "")), source=source)
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, InputError):
+                raise
+            raise InputError(f"{where}: {exc}") from None
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> "GearTrain":
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise InputError(f"gear spec {path}: cannot be read ({exc.strerror})") from None
+        try:
+            spec = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"gear spec {path}: not valid TOML ({exc})") from None
+        return cls.from_dict(spec, source=str(path))
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "reference": self.reference, "unit": self.unit}
+        if self.torque_constant is not None:
+            out["torque_constant"] = self.torque_constant
+        if self.inertia is not None:
+            out["inertia"] = self.inertia
+        out["stages"] = [{k: v for k, v in vars(s).items() if v is not None} for s in self.stages]
+        return out
+
+    # ------------------------------------------------------------------ kinematics
+    @property
+    def total_ratio(self) -> float:
+        """Motor turns per output turn (rotary stages only)."""
+        return math.prod(s.ratio for s in self.stages if s.lead is None)
+
+    def _shaft_turns_per_unit(self) -> list[float]:
+        """Turns of each shaft (motor, after stage 1, ..., output) per unit of theta."""
+        ratios = [s.ratio for s in self.stages]
+        n = len(self.stages)
+        if self.unit == "m":
+            if not self.stages:
+                return []
+            # last stage converts rotation to travel: screw turns per metre = 1/lead
+            turns = [0.0] * (n + 1)
+            turns[n - 1] = 1.0 / self.stages[-1].lead  # screw shaft = input of the last stage
+            for j in range(n - 2, -1, -1):
+                turns[j] = turns[j + 1] * ratios[j]
+            return turns[:n]  # there is no rotating shaft after the screw
+        if self.reference == "motor":
+            turns, acc = [], 1.0
+            for j in range(n + 1):
+                turns.append(acc / (2 * math.pi))
+                if j < n:
+                    acc /= ratios[j]
+            return turns
+        turns, acc = [], 1.0
+        for j in range(n, -1, -1):
+            turns.append(acc / (2 * math.pi))
+            if j > 0:
+                acc *= ratios[j - 1]
+        return turns[::-1]
+
+    def shaft_names(self) -> list[str]:
+        """Names of the shafts, in the order of :meth:`_shaft_turns_per_unit`."""
+        n = len(self.stages)
+        if self.unit == "m":
+            # shaft j is the input of stage j+1; the last one is the screw (or pulley) shaft
+            names = []
+            for j in range(n):
+                if j == n - 1:
+                    names.append(f"{self.stages[-1].name} shaft" + (" (= motor shaft)" if j == 0 else ""))
+                else:
+                    names.append("motor shaft" if j == 0 else f"{self.stages[j - 1].name} output shaft")
+            return names
+        names = ["motor shaft" if n else "shaft"]
+        for j, s in enumerate(self.stages):
+            names.append("output shaft" if j == n - 1 else f"{s.name} output shaft")
+        return names
+
+    @property
+    def output_frequency(self) -> float | None:
+        """Frequency of one output (or screw) revolution, cycles per unit of theta."""
+        turns = self._shaft_turns_per_unit()
+        return turns[-1] if turns else (1 / (2 * math.pi) if self.unit == "rad" else None)
+
+    def order(self, frequency: float) -> float | None:
+        """Cycles per revolution of the output shaft (of the screw on a linear axis)."""
+        fo = self.output_frequency
+        return None if fo is None else frequency / fo
+
+    def declared_lines(self, max_harmonic: int = 1) -> list[Line]:
+        """Shaft, mesh and wave-generator lines (plus their harmonics up to ``max_harmonic``).
+
+        Lines at the same frequency (to 1e-9 relative) are merged and their labels joined with
+        ' = ', so that a regression never gets two identical columns.
+        """
+        turns = self._shaft_turns_per_unit()
+        names = self.shaft_names()
+        base: list[Line] = []
+        for f, nm in zip(turns, names):
+            base.append(Line(f, nm, "shaft"))
+        for j, s in enumerate(self.stages):
+            if j >= len(turns):
+                break
+            f_in = turns[j]
+            f_out = turns[j + 1] if j + 1 < len(turns) else 0.0
+            if s.kind == "harmonic":
+                for m in _WAVE_MULTIPLES:
+                    if m == 1:
+                        continue  # 1x is the input shaft itself, already declared (label added below)
+                    base.append(Line(m * f_in, f"{s.name} {m}x wave generator", "wave"))
+            if s.teeth:
+                rel = (f_in - f_out) if s.kind in _CARRIER_KINDS else f_in
+                base.append(Line(s.teeth * abs(rel), f"{s.name} tooth mesh", "mesh"))
+        # the 1x wave generator is the input shaft of the harmonic stage: say so in its label
+        for j, s in enumerate(self.stages):
+            if s.kind == "harmonic" and j < len(turns):
+                base = [Line(b.frequency, f"{b.label} (= {s.name} 1x wave generator)", b.kind)
+                        if b.kind == "shaft" and math.isclose(b.frequency, turns[j], rel_tol=1e-12) else b
+                        for b in base]
+        lines = list(base)
+        for h in range(2, max_harmonic + 1):
+            lines += [Line(h * b.frequency, f"{h}x {b.label}", "harmonic", parents=(b.label,)) for b in base]
+        return self._finish(lines)
+
+    def candidate_lines(self, max_harmonic: int = 4, sidebands: bool = True) -> list[Line]:
+        """Every line that may explain a peak: declared lines, harmonics and sidebands."""
+        base = self.declared_lines(1)
+        lines = list(base)
+        for h in range(2, max_harmonic + 1):
+            lines += [Line(h * b.frequency, f"{h}x {b.label}", "harmonic", parents=(b.label,)) for b in base]
+        if sidebands:
+            for i, a in enumerate(base):
+                for b in base[i + 1:]:
+                    hi, lo = (a, b) if a.frequency >= b.frequency else (b, a)
+                    lines.append(Line(hi.frequency + lo.frequency, f"{hi.label} + {lo.label}", "sideband",
+                                      parents=(hi.label, lo.label)))
+                    if hi.frequency - lo.frequency > 1e-12 * hi.frequency:
+                        lines.append(Line(hi.frequency - lo.frequency, f"{hi.label} - {lo.label}", "sideband",
+                                          parents=(hi.label, lo.label)))
+        return self._finish(lines)
+
+    def _finish(self, lines: Iterable[Line]) -> list[Line]:
+        merged: list[Line] = []
+        for ln in sorted(lines, key=lambda x: (x.frequency, _KIND_RANK[x.kind])):
+            if merged and math.isclose(merged[-1].frequency, ln.frequency, rel_tol=1e-9):
+                prev = merged[-1]
+                if ln.label not in prev.label.split(" = "):
+                    merged[-1] = Line(prev.frequency, f"{prev.label} = {ln.label}", prev.kind, prev.order, prev.parents)
+                continue
+            merged.append(Line(ln.frequency, ln.label, ln.kind, self.order(ln.frequency), ln.parents))
+        return merged
+
+    def label(self, frequency: float, tolerance: float, max_harmonic: int = 4) -> Line | None:
+        """The simplest line within ``tolerance`` (cycles per unit) of ``frequency``, or None.
+
+        Simplest means: shaft before wave generator before mesh before harmonic before sideband;
+        among equals, the closest.
+        """
+        best = None
+        for ln in self.candidate_lines(max_harmonic):
+            d = abs(ln.frequency - frequency)
+            if d <= tolerance:
+                key = (_KIND_RANK[ln.kind], d)
+                if best is None or key < best[0]:
+                    best = (key, ln)
+        return None if best is None else best[1]
+
+    def torque_from_current(self, current):
+        """Drive torque at the reference shaft from motor current: k_t * I (times N at the output).
+
+        The conversion at the output ignores the gear's efficiency: what it returns is the torque
+        the motor delivers, reflected through the ideal ratio.
+        """
+        if self.torque_constant is None:
+            raise InputError(f"gear spec '{self.name}' has no torque_constant (Nm/A): it is needed to turn "
+                             "motor current into torque; add it to the spec, or record torque")
+        factor = self.torque_constant * (self.total_ratio if self.reference == "output" else 1.0)
+        return current * factor
+
+    def describe(self) -> str:
+        """A short human-readable table of the train and its declared lines."""
+        lines = [f"{self.name}  (reference: {self.reference}, theta in {self.unit})"]
+        if self.description:
+            lines.append(f"  {self.description}")
+        for s in self.stages:
+            extra = "".join(f", {k} {v}" for k, v in (("teeth", s.teeth), ("lead", s.lead)) if v is not None)
+            lines.append(f"  stage {s.name:<14} {s.kind:<10} ratio {s.ratio:g}{extra}")
+        if self.stages:
+            lines.append(f"  total ratio {self.total_ratio:g}")
+        per = "cycles/rad" if self.unit == "rad" else "cycles/m"
+        for ln in self.declared_lines():
+            o = "" if ln.order is None else f"   order {ln.order:.4g}"
+            lines.append(f"  {ln.frequency:12.6g} {per}{o}   {ln.label}")
+        return "\n".join(lines)
+
+
+def _opt_float(x):
+    return None if x is None else float(x)
+
+
+# ---------------------------------------------------------------------- presets
+def presets() -> dict[str, GearTrain]:
+    """Built-in gear trains by name (``gearspec gears`` lists them)."""
+    out = {}
+    for res in sorted(resources.files("gearspec.presets").iterdir(), key=lambda r: r.name):
+        if res.name.endswith(".toml"):
+            spec = tomllib.loads(res.read_text())
+            out[res.name[:-5]] = GearTrain.from_dict(spec, source=f"preset:{res.name[:-5]}")
+    return out
+
+
+def load_gear(spec: "str | Path | GearTrain | dict | None") -> GearTrain | None:
+    """A GearTrain from a preset name, a TOML path, a dict, or a GearTrain (returned as is)."""
+    if spec is None or isinstance(spec, GearTrain):
+        return spec
+    if isinstance(spec, dict):
+        return GearTrain.from_dict(spec)
+    text = str(spec)
+    known = presets()
+    if text in known:
+        return known[text]
+    path = Path(text)
+    if path.exists():
+        return GearTrain.from_toml(path)
+    raise InputError(f"gear spec '{text}': no such file and no such preset (presets: {', '.join(known)})")

@@ -1,0 +1,1 @@
+"""Built-in gear-train specs (TOML), listed by :func:`gearspec.gears.presets`."""

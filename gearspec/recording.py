@@ -1,0 +1,662 @@
+"""Recordings: load, map, scale and validate measured data (``CONTRACTS.md`` section 1).
+
+A :class:`Recording` holds the rows that can be analysed, in canonical columns and SI units, plus a
+ledger of every row that was excluded and why (``excluded``), and notes of everything that was done
+to the data on the way in (unwrapping, current-to-torque conversion, ...).  Nothing is dropped
+silently: ``n_read == len(data) + sum(excluded.values())``.
+
+Bad input raises :class:`~gearspec.errors.InputError` with one sentence naming the file, the column
+and the reason.  Doubtful input gives a :class:`~gearspec.errors.GearspecWarning`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from .errors import InputError, warn
+from .gears import GearTrain, load_gear
+
+__all__ = ["Recording", "load_recording", "CANONICAL", "parse_assignments"]
+
+CANONICAL = ("t", "theta", "torque", "current", "velocity", "load", "temperature", "run")
+_NUMERIC_REQUIRED = ("t", "theta", "torque", "current")
+_SUFFIXES = {".csv": "csv", ".txt": "csv", ".dat": "csv", ".tsv": "csv", ".parquet": "parquet",
+             ".pq": "parquet", ".mat": "mat", ".npz": "npz"}
+#: largest plausible speed of a rotary reference shaft, rad/s (about 19 000 rpm)
+MAX_PLAUSIBLE_RAD_S = 2000.0
+#: largest plausible speed of a linear axis, m/s
+MAX_PLAUSIBLE_M_S = 10.0
+
+
+@dataclass
+class Recording:
+    """Validated measurements of one drive, possibly over several runs.
+
+    Attributes
+    ----------
+    data : pandas.DataFrame
+        The usable rows: canonical columns (``t`` s, ``theta`` rad or m, ``torque`` Nm or N and/or
+        ``current`` A, optional ``velocity``, ``load``, ``temperature``), an integer ``run`` column
+        that is always present, and every other column of the source as an extra channel.
+    unit : {"rad", "m"}
+        Unit of ``theta``.
+    signal : {"torque", "current"}
+        The channel analysed; :attr:`tau` is it expressed as torque at the reference shaft.
+    excluded : collections.Counter
+        Rows excluded while loading, counted per reason.
+    n_read : int
+        Rows read from the sources.
+    notes : list of str
+        What was done to the data (unwrapping, conversions, gaps found, ...).
+    meta : dict
+        Scalars found in the source files (e.g. ``gtau`` in a .mat file).
+    gear : GearTrain or None
+    sources : list of str
+    """
+
+    data: pd.DataFrame
+    unit: str = "rad"
+    signal: str = "torque"
+    excluded: Counter = field(default_factory=Counter)
+    n_read: int = 0
+    notes: list[str] = field(default_factory=list)
+    meta: dict = field(default_factory=dict)
+    gear: GearTrain | None = None
+    sources: list[str] = field(default_factory=list)
+    _tau: np.ndarray | None = field(default=None, repr=False)
+
+    # ------------------------------------------------------------------ views
+    @property
+    def t(self) -> np.ndarray:
+        return self.data["t"].to_numpy()
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.data["theta"].to_numpy()
+
+    @property
+    def run(self) -> np.ndarray:
+        return self.data["run"].to_numpy()
+
+    @property
+    def tau(self) -> np.ndarray:
+        """The analysed signal as drive torque at the reference shaft (Nm, or N on a linear axis)."""
+        if self._tau is None:
+            if self.signal == "torque":
+                self._tau = self.data["torque"].to_numpy(dtype=float)
+            else:
+                self._tau = np.asarray(self.gear.torque_from_current(self.data["current"].to_numpy(dtype=float)))
+        return self._tau
+
+    def channel(self, name: str) -> np.ndarray:
+        """Any column of the recording as an array (``KeyError`` names what is there)."""
+        if name not in self.data:
+            raise KeyError(f"no channel '{name}' (channels: {', '.join(self.data.columns)})")
+        return self.data[name].to_numpy()
+
+    @property
+    def torque_unit(self) -> str:
+        return "Nm" if self.unit == "rad" else "N"
+
+    @property
+    def speed_unit(self) -> str:
+        return f"{self.unit}/s"
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    def pieces(self, gap_factor: float = 5.0) -> list[tuple[int, int, int]]:
+        """Contiguous stretches ``(run, start, stop)``: split at run boundaries and at time gaps.
+
+        A gap is a step in ``t`` longer than ``gap_factor`` times the run's median step; nothing
+        downstream treats data on both sides of a gap as continuous.
+        """
+        run = self.run
+        t = self.t
+        out = []
+        if len(run) == 0:
+            return out
+        cuts = np.flatnonzero(np.diff(run) != 0) + 1
+        bounds = np.concatenate(([0], cuts, [len(run)]))
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            dt = np.diff(t[a:b])
+            if len(dt):
+                med = np.median(dt)
+                gaps = np.flatnonzero(dt > gap_factor * med) + a + 1
+            else:
+                gaps = np.array([], dtype=int)
+            edges = np.concatenate(([a], gaps, [b]))
+            out += [(int(run[a]), int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e > s]
+        return out
+
+    def summary(self) -> str:
+        n_runs = len(np.unique(self.run)) if len(self) else 0
+        dur = sum(self.t[e - 1] - self.t[s] for _, s, e in self.pieces() if e - s > 1)
+        lines = [f"{len(self)} usable rows of {self.n_read} read, {n_runs} run(s), {dur:.4g} s in all; "
+                 f"theta in {self.unit}, analysing {self.signal}"]
+        if self.excluded:
+            lines.append("excluded while loading: " + ", ".join(f"{k} {v}" for k, v in sorted(self.excluded.items())))
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_arrays(cls, *, gear=None, unit: str | None = None, signal: str | None = None,
+                    source: str = "arrays", **columns) -> "Recording":
+        """A recording from arrays (``t=..., theta=..., torque=...``), validated like a file."""
+        frame = pd.DataFrame({k: np.asarray(v) for k, v in columns.items() if v is not None})
+        return _assemble([(source, frame, {})], gear=load_gear(gear), unit=unit, signal=signal, fs=None)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the recording in the recording format (.csv, .parquet or .npz by suffix)."""
+        path = Path(path)
+        kind = _SUFFIXES.get(path.suffix.lower())
+        frame = self.data
+        if kind == "csv":
+            frame.to_csv(path, index=False, float_format="%.17g")
+        elif kind == "parquet":
+            frame.to_parquet(path, index=False)
+        elif kind == "npz":
+            np.savez_compressed(path, **{c: frame[c].to_numpy() for c in frame.columns})
+        else:
+            raise InputError(f"cannot write recordings as '{path.suffix}' (use .csv, .parquet or .npz)")
+        return path
+
+
+# ---------------------------------------------------------------------- parsing helpers
+def parse_assignments(text: str | None, option: str, numeric: bool = False) -> dict:
+    """Parse ``a=b,c=d`` (as given to ``--map`` and ``--scale``) into a dict."""
+    out: dict = {}
+    if not text:
+        return out
+    for part in str(text).split(","):
+        part = part.strip()
+        if not part:
+            continue
+        if "=" not in part:
+            raise InputError(f"{option}: '{part}' is not of the form name=value")
+        k, v = (s.strip() for s in part.split("=", 1))
+        if not k or not v:
+            raise InputError(f"{option}: '{part}' is not of the form name=value")
+        if numeric:
+            try:
+                v = float(v)
+            except ValueError:
+                pass  # may name a scalar stored in the file (e.g. gtau in a .mat file)
+        out[k] = v
+    return out
+
+
+def _sniff_sep(path: Path) -> str:
+    with open(path, "r", errors="replace") as fh:
+        for line in fh:
+            if line.strip():
+                break
+        else:
+            return ","
+    for sep in (",", ";", "\t"):
+        if sep in line:
+            return sep
+    return r"\s+"
+
+
+def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] | None):
+    """Read one file into (frame, meta)."""
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder (folders are expanded by load_recording)")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty")
+    kind = _SUFFIXES.get(path.suffix.lower())
+    if kind is None:
+        raise InputError(f"{path}: unknown file type '{path.suffix}' (accepted: .csv, .parquet, .mat, .npz)")
+    meta: dict = {}
+    if kind == "csv":
+        sep = sep if sep is not None else _sniff_sep(path)
+        if sep in (" ", "whitespace", r"\s+"):
+            sep = r"\s+"
+        if names is not None and header:
+            raise InputError(f"{path}: --names is for files without a header row; add --no-header")
+        if not header and names is None:
+            raise InputError(f"{path}: --no-header needs --names to say what the columns are")
+        try:
+            frame = pd.read_csv(path, sep=sep, header=0 if header else None,
+                                names=list(names) if names is not None else None,
+                                skipinitialspace=True)
+        except pd.errors.EmptyDataError:
+            raise InputError(f"{path}: the file is empty") from None
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise InputError(f"{path}: cannot be read as a table ({str(exc).splitlines()[0]}); "
+                             "check --sep") from None
+        if names is not None and frame.shape[1] != len(names):
+            raise InputError(f"{path}: --names gives {len(names)} names but the file has {frame.shape[1]} columns")
+        frame.columns = [str(c).strip() for c in frame.columns]
+        if frame.shape[1] == 1 and len(frame) and sep == ",":
+            raise InputError(f"{path}: only one column ('{frame.columns[0]}') was found; "
+                             "if the file uses another separator, give --sep")
+    elif kind == "parquet":
+        try:
+            frame = pd.read_parquet(path)
+        except Exception as exc:  # pyarrow raises many types
+            raise InputError(f"{path}: cannot be read as parquet ({exc})") from None
+        frame.columns = [str(c) for c in frame.columns]
+    elif kind == "npz":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except Exception as exc:
+            raise InputError(f"{path}: cannot be read as .npz ({exc})") from None
+        frame, meta = _vectors_to_frame(path, arrays)
+    else:  # mat
+        import scipy.io
+
+        try:
+            arrays = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+        except NotImplementedError:
+            raise InputError(f"{path}: MATLAB v7.3 (HDF5) files are not supported; save it with "
+                             "save(..., '-v7') or export csv") from None
+        except Exception as exc:
+            raise InputError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
+        frame, meta = _vectors_to_frame(path, arrays)
+    if len(frame) == 0:
+        raise InputError(f"{path}: the file has a header but no data rows")
+    return frame, meta
+
+
+def _vectors_to_frame(path: Path, arrays: Mapping[str, np.ndarray]):
+    """Vectors of the common (longest) length become columns, scalars become meta."""
+    vectors, meta, other = {}, {}, []
+    for k, v in arrays.items():
+        v = np.asarray(v)
+        if v.dtype.kind not in "biuf":
+            other.append(k)
+            continue
+        if v.size == 1:
+            meta[k] = float(v.reshape(()))
+        elif v.ndim == 1 or (v.ndim == 2 and 1 in v.shape):
+            vectors[k] = v.reshape(-1)
+        elif v.ndim == 2:
+            for j in range(v.shape[1]):
+                vectors[f"{k}_{j}"] = v[:, j]
+        else:
+            other.append(k)
+    if not vectors:
+        raise InputError(f"{path}: holds no numeric vectors (variables: {', '.join(arrays) or 'none'})")
+    n = max(len(v) for v in vectors.values())
+    short = sorted(k for k, v in vectors.items() if len(v) != n)
+    frame = pd.DataFrame({k: v for k, v in vectors.items() if len(v) == n})
+    for k in short:
+        meta[k] = vectors[k]
+    if short or other:
+        warn(f"{path}: variables {', '.join(short + other)} are not vectors of length {n}; kept in meta, not as columns")
+    return frame, meta
+
+
+def _first_bad_cell(series: pd.Series) -> tuple[int, str] | None:
+    coerced = pd.to_numeric(series, errors="coerce")
+    bad = coerced.isna() & series.notna() & (series.astype(str).str.strip() != "")
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad.to_numpy())[0])
+    return i + 1, str(series.iloc[i])
+
+
+# ---------------------------------------------------------------------- main entry point
+def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
+                   map: Mapping[str, str] | str | None = None, scale: Mapping[str, float | str] | str | None = None,
+                   fs: float | None = None, sep: str | None = None, header: bool = True,
+                   names: Sequence[str] | str | None = None, signal: str | None = None,
+                   max_bad_fraction: float = 0.05) -> Recording:
+    """Load one or more recording files (or folders of them) into a validated :class:`Recording`.
+
+    Parameters
+    ----------
+    paths : path or list of paths
+        ``.csv`` (``.txt``, ``.dat``, ``.tsv``), ``.parquet``, ``.mat`` (v5/v7) or ``.npz`` files, or
+        folders holding them.  Each file is one experiment: it gets its own ``run`` unless it has a
+        ``run`` column.
+    gear : GearTrain, preset name or TOML path, optional
+        Gives the unit of ``theta`` and the torque constant for ``current``.
+    map : dict or "canonical=source,..."
+        Source column names for canonical columns, e.g. ``{"theta": "qm", "torque": "vir"}``.
+    scale : dict or "column=factor,..."
+        Factors applied after mapping, e.g. ``{"torque": 35.15}``; a factor may name a scalar stored
+        in the file (``torque=gtau`` for the EMPS .mat files).
+    fs : float, optional
+        Sample rate in Hz, for files without a time column.
+    sep, header, names
+        For csv: separator (sniffed when None; "whitespace" for runs of blanks), whether the first
+        row is a header, and the column names when it is not.
+    signal : {"torque", "current"}, optional
+        The channel to analyse when both are present (default torque).
+    max_bad_fraction : float
+        Rows with NaN/inf, duplicate or backward times are excluded and counted; if more than this
+        fraction of a file's rows are bad, the file is refused instead.
+    """
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    files: list[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in _SUFFIXES)
+            if not found:
+                raise InputError(f"{p}: the folder holds no recording files (.csv, .parquet, .mat, .npz)")
+            files += found
+        else:
+            files.append(p)
+    if not files:
+        raise InputError("no recording files given")
+    gear = load_gear(gear)
+    mapping = parse_assignments(map, "--map") if isinstance(map, str) or map is None else dict(map)
+    scaling = parse_assignments(scale, "--scale", numeric=True) if isinstance(scale, str) or scale is None else dict(scale)
+    if isinstance(names, str):
+        names = [n.strip() for n in names.split(",")]
+    bad_canon = [k for k in mapping if k not in CANONICAL]
+    if bad_canon:
+        raise InputError(f"--map: '{bad_canon[0]}' is not a canonical column ({', '.join(CANONICAL)})")
+    parts = []
+    for path in files:
+        frame, meta = _read_file(path, sep, header, names)
+        frame = _map_and_scale(path, frame, meta, mapping, scaling)
+        parts.append((str(path), frame, meta))
+    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction)
+
+
+def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, scaling: dict) -> pd.DataFrame:
+    cols = list(frame.columns)
+    rename = {}
+    for canon, src in mapping.items():
+        if src not in frame.columns:
+            raise InputError(f"{path}: no column '{src}' (given in --map {canon}={src}); columns are: {', '.join(cols)}")
+        rename[src] = canon
+    clash = [c for c in rename.values() if c in frame.columns and c not in rename]
+    if clash:
+        # the file already has a column with the canonical name: keep it as an extra channel
+        frame = frame.rename(columns={c: f"{c}_original" for c in clash})
+    frame = frame.rename(columns=rename)
+    for col, factor in scaling.items():
+        if col not in frame.columns:
+            raise InputError(f"{path}: --scale names column '{col}', which is not there (columns: {', '.join(frame.columns)})")
+        if isinstance(factor, str):
+            if factor not in meta:
+                raise InputError(f"{path}: --scale {col}={factor}: '{factor}' is neither a number nor a scalar stored in the file")
+            factor = meta[factor]
+        frame[col] = _numeric_column(path, frame, col) * float(factor)
+    return frame
+
+
+def _numeric_column(path, frame: pd.DataFrame, col: str) -> pd.Series:
+    s = frame[col]
+    if s.dtype.kind in "biuf":
+        return s.astype(float)
+    bad = _first_bad_cell(s)
+    if bad is not None:
+        line, value = bad
+        raise InputError(f"{path}: column '{col}', data row {line}: '{value}' is not a number")
+    return pd.to_numeric(s, errors="coerce").astype(float)
+
+
+def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
+              max_bad_fraction: float = 0.05) -> Recording:
+    unit = unit or (gear.unit if gear is not None else "rad")
+    if unit not in ("rad", "m"):
+        raise InputError(f"unit must be 'rad' or 'm', got '{unit}'")
+    if fs is not None and not (math.isfinite(fs) and fs > 0):
+        raise InputError(f"--fs must be a positive sample rate in Hz, got {fs}")
+    if signal not in (None, "torque", "current"):
+        raise InputError(f"--signal must be 'torque' or 'current', got '{signal}'")
+    excluded: Counter = Counter()
+    notes: list[str] = []
+    frames = []
+    meta_all: dict = {}
+    n_read = 0
+    sig_used = None
+    run_offset = 0
+    for path, frame, meta in parts:
+        n_read += len(frame)
+        meta_all.update(meta)
+        cols = list(frame.columns)
+        # --- required columns
+        if "theta" not in frame:
+            raise InputError(f"{path}: no column 'theta' (position); columns are: {', '.join(cols)}; "
+                             "name the position column with --map theta=NAME")
+        has_t = "t" in frame
+        if not has_t and fs is None:
+            raise InputError(f"{path}: no time column 't' and no --fs; columns are: {', '.join(cols)}; "
+                             "map the time column with --map t=NAME or give the sample rate with --fs HZ")
+        if has_t and fs is not None:
+            warn(f"{path}: has a time column 't'; --fs {fs:g} is ignored")
+        if "torque" not in frame and "current" not in frame:
+            raise InputError(f"{path}: neither 'torque' nor 'current' is there; columns are: {', '.join(cols)}; "
+                             "map one with --map torque=NAME or --map current=NAME")
+        this_sig = signal or ("torque" if "torque" in frame else "current")
+        if this_sig not in frame:
+            raise InputError(f"{path}: --signal {this_sig} but the file has no '{this_sig}' column")
+        if sig_used is not None and this_sig != sig_used:
+            raise InputError(f"{path}: analyses '{this_sig}' but earlier files analyse '{sig_used}'; "
+                             "give --signal to choose one for all files")
+        sig_used = this_sig
+        if this_sig == "current":
+            if gear is None or gear.torque_constant is None:
+                raise InputError(f"{path}: the analysed signal is motor current, which needs the gear spec's "
+                                 "torque_constant (Nm/A); give --gear with torque_constant, or record torque")
+        for col in ("t", "theta", "torque", "current", "velocity", "load", "temperature", "run"):
+            if col in frame:
+                frame[col] = _numeric_column(path, frame, col)
+        n = len(frame)
+        if not has_t:
+            frame.insert(0, "t", np.arange(n) / fs)
+            notes.append(f"{path}: no time column; t = sample index / {fs:g} Hz")
+        # --- run ids
+        if "run" in frame:
+            r = frame["run"].to_numpy()
+            ok = np.isfinite(r)
+            if not ok.all():
+                raise InputError(f"{path}: column 'run', data row {int(np.flatnonzero(~ok)[0]) + 1}: run ids must be integers, not NaN")
+            if np.any(r != np.round(r)):
+                raise InputError(f"{path}: column 'run' holds non-integer values; run ids must be integers")
+            uniq, inv = np.unique(r.astype(np.int64), return_inverse=True)
+            frame["run"] = inv + run_offset
+            if len(parts) > 1:
+                notes.append(f"{path}: runs {list(uniq)} renumbered {run_offset}..{run_offset + len(uniq) - 1}")
+            run_offset += len(uniq)
+        else:
+            frame["run"] = run_offset
+            run_offset += 1
+        frame["run"] = frame["run"].astype(np.int64)
+        # --- NaN / inf in the columns the analysis needs
+        need = ["t", "theta", this_sig]
+        finite = np.ones(n, bool)
+        for col in need:
+            v = frame[col].to_numpy()
+            fin = np.isfinite(v)
+            if not fin.any():
+                raise InputError(f"{path}: column '{col}' holds no finite number")
+            frac = 1 - fin.mean()
+            if frac > max_bad_fraction:
+                raise InputError(f"{path}: column '{col}' is NaN or inf in {frac:.0%} of rows "
+                                 f"(first at data row {int(np.flatnonzero(~fin)[0]) + 1}); too many to exclude")
+            finite &= fin
+        n_bad = int((~finite).sum())
+        if n_bad:
+            excluded["nan_or_inf"] += n_bad
+            warn(f"{path}: {n_bad} rows with NaN or inf in {', '.join(need)} excluded")
+            frame = frame.loc[finite]
+        # --- time: duplicates and backward steps, per run
+        keep = np.ones(len(frame), bool)
+        t = frame["t"].to_numpy()
+        runs = frame["run"].to_numpy()
+        for rid in np.unique(runs):
+            idx = np.flatnonzero(runs == rid)
+            tr = t[idx]
+            prev_max = np.concatenate(([-np.inf], np.maximum.accumulate(tr)[:-1]))
+            dup = tr == prev_max
+            back = tr < prev_max
+            if back.mean() > max_bad_fraction:
+                first = idx[np.flatnonzero(back)[0]]
+                raise InputError(
+                    f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
+                    f"row {first + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
+                    "several experiments, give each its own file or a 'run' column")
+            if dup.mean() > max_bad_fraction:
+                raise InputError(f"{path}: column 't' repeats the previous time in {int(dup.sum())} of {len(tr)} rows; "
+                                 "is the time column in the right unit (not rounded to whole seconds)?")
+            keep[idx[dup]] = False
+            keep[idx[back]] = False
+            if dup.any():
+                excluded["duplicate_time"] += int(dup.sum())
+            if back.any():
+                excluded["non_increasing_time"] += int(back.sum())
+        if not keep.all():
+            warn(f"{path}: {int((~keep).sum())} rows with duplicate or backward time excluded")
+            frame = frame.loc[keep]
+        # --- saturation of the analysed signal
+        frame, n_sat = _exclude_saturation(path, frame, this_sig)
+        if n_sat:
+            excluded["saturation"] += n_sat
+        # --- position: unwrap, plausibility
+        frame = _unwrap_theta(path, frame, unit, notes)
+        frames.append(frame)
+    data = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0].reset_index(drop=True)
+    rec = Recording(data=data, unit=unit, signal=sig_used, excluded=excluded, n_read=n_read, notes=notes,
+                    meta=meta_all, gear=gear, sources=[p for p, _, _ in parts])
+    _check_time_unit(rec)
+    _check_motion(rec)
+    _check_units(rec)
+    if sig_used == "current":
+        factor = gear.torque_constant * (gear.total_ratio if gear.reference == "output" else 1.0)
+        rec.notes.append(f"torque = {factor:g} Nm/A x current (torque constant {gear.torque_constant:g} Nm/A"
+                         + (f" x ratio {gear.total_ratio:g}, ideal gear" if gear.reference == "output" else "") + ")")
+    n_gaps = len(rec.pieces()) - len(np.unique(rec.run))
+    if n_gaps:
+        rec.notes.append(f"{n_gaps} time gap(s) longer than 5 sample periods; nothing is analysed across them")
+    return rec
+
+
+def _exclude_saturation(path, frame: pd.DataFrame, col: str):
+    v = frame[col].to_numpy()
+    n = len(v)
+    if n < 100:
+        return frame, 0
+    mask = np.zeros(n, bool)
+    for extreme in (v.max(), v.min()):
+        at = v == extreme
+        count = int(at.sum())
+        if count < max(5, 0.002 * n):
+            continue
+        # longest run of consecutive samples at the extreme
+        edges = np.diff(np.concatenate(([0], at.astype(np.int8), [0])))
+        longest = int((np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)).max())
+        if longest >= 5:
+            mask |= at
+    n_sat = int(mask.sum())
+    if n_sat:
+        warn(f"{path}: column '{col}' sits at its extreme value in {n_sat} rows; they look saturated and are excluded")
+        frame = frame.loc[~mask]
+    return frame, n_sat
+
+
+def _unwrap_theta(path, frame: pd.DataFrame, unit: str, notes: list[str]) -> pd.DataFrame:
+    if unit != "rad":
+        return frame
+    theta = frame["theta"].to_numpy(dtype=float)
+    runs = frame["run"].to_numpy()
+    out = theta.copy()
+    changed = False
+    for rid in np.unique(runs):
+        idx = np.flatnonzero(runs == rid)
+        th = theta[idx]
+        if len(th) < 3:
+            continue
+        d = np.diff(th)
+        lo, hi = th.min(), th.max()
+        for period, what in ((2 * np.pi, "2*pi"), (360.0, "360")):
+            big = np.abs(d) > 0.5 * period
+            if not big.any() or hi - lo > period * 1.02:
+                continue
+            if not np.all(np.abs(np.abs(d[big]) - period) < 0.25 * period):
+                continue
+            # typical step far below the jumps: it is a wrap, not fast motion
+            typical = np.median(np.abs(d[~big])) if (~big).any() else 0.0
+            if typical > 0.05 * period:
+                continue
+            out[idx] = np.unwrap(th, period=period)
+            changed = True
+            msg = f"{path}: theta wraps into a range of {what} ({int(big.sum())} wraps in run {rid}); unwrapped"
+            if what == "360":
+                warn(f"{path}: theta wraps at 360: it looks like degrees, not radians; unwrapped with period 360, "
+                     "but frequencies will be per degree: convert with --scale theta=0.0174533")
+            notes.append(msg)
+            break
+    if changed:
+        frame = frame.copy()
+        frame["theta"] = out
+    return frame
+
+
+def _check_time_unit(rec: Recording) -> None:
+    t = rec.t
+    if len(t) < 2:
+        raise InputError(f"{', '.join(rec.sources)}: fewer than two usable rows")
+    dts = []
+    for _, s, e in rec.pieces():
+        if e - s > 1:
+            dts.append(np.median(np.diff(t[s:e])))
+    med = float(np.median(dts)) if dts else 0.0
+    if med > 1.0:
+        warn(f"{', '.join(rec.sources)}: the median time step is {med:g} s; if 't' is in ms or sample numbers, "
+             "use --scale t=0.001 or --fs HZ")
+
+
+def _check_motion(rec: Recording) -> None:
+    theta = rec.theta
+    src = ", ".join(rec.sources)
+    if np.ptp(theta) == 0:
+        raise InputError(f"{src}: column 'theta' never changes (always {theta[0]:g}): the drive did not move, "
+                         "or the wrong column is mapped to theta")
+    moved = False
+    for _, s, e in rec.pieces():
+        th = theta[s:e]
+        if len(th) < 20:
+            continue
+        d = np.diff(th)
+        nz = np.abs(d[d != 0])
+        quantum = nz.min() if len(nz) else 0.0
+        noise = 1.4826 * np.median(np.abs(np.diff(d) - np.median(np.diff(d)))) / math.sqrt(6) if len(d) > 2 else 0.0
+        block = max(10, len(th) // 200)
+        disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
+        if disp.size and disp.max() > 5 * max(noise * math.sqrt(2), quantum):
+            moved = True
+            break
+    if not moved:
+        raise InputError(f"{src}: no motion: 'theta' only jitters (range {np.ptp(theta):.3g} {rec.unit}) without "
+                         "moving; friction needs the drive to turn")
+
+
+def _check_units(rec: Recording) -> None:
+    theta, t = rec.theta, rec.t
+    speeds = []
+    for _, s, e in rec.pieces():
+        if e - s < 20:
+            continue
+        step = max(1, (e - s) // 500)
+        th, tt = theta[s:e:step], t[s:e:step]
+        speeds.append(np.abs(np.diff(th) / np.diff(tt)))
+    if not speeds:
+        return
+    v99 = float(np.percentile(np.concatenate(speeds), 99))
+    src = ", ".join(rec.sources)
+    if rec.unit == "rad" and v99 > MAX_PLAUSIBLE_RAD_S:
+        warn(f"{src}: theta moves at up to {v99:.3g} rad/s ({v99 * 60 / (2 * math.pi):.3g} rpm), faster than any robot "
+             "drive; if it is in degrees use --scale theta=0.0174533, if in encoder counts scale by 2*pi/counts")
+    if rec.unit == "m" and v99 > MAX_PLAUSIBLE_M_S:
+        warn(f"{src}: theta moves at up to {v99:.3g} m/s; if it is in mm use --scale theta=0.001")

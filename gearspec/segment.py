@@ -1,0 +1,379 @@
+"""Constant-speed segments, direction split, derivatives and inertia removal.
+
+Segments are found from position alone (no commanded speed is needed):
+
+1. The recording is cut into *pieces* at run boundaries and time gaps; nothing spans a cut.
+2. Each piece is averaged over short blocks of ``b`` samples (block-mean time and position).
+3. Over a window of ``K = 4`` blocks (``window`` seconds) the speed is the least-squares slope of
+   position against time, before, across and after every block.  A block is *steady* when the
+   speed before it and after it agree within ``rel_tol`` of the speed across it, all three have
+   the same sign, and the speed is above ``min_speed``.  Averaging over a window makes the test
+   blind to closed-loop ripple that is faster than the window; ramps between plateaus fail it.
+4. Runs of steady blocks become candidate segments.  Two candidates separated by an excursion of
+   at most two windows, moving at the same speed (within ``rel_tol``), are joined: the drive left
+   the plateau briefly and came back.  A candidate whose speed drifts by more than
+   ``2 * rel_tol`` (a slow ramp) is split where its speed changes most (CUSUM), recursively.
+5. The ends of each candidate are trimmed where position leaves the band around the straight line
+   fitted to the candidate's middle 60 % (the band is 1.5 times the largest deviation there): this
+   removes a transient that a long window could not see, and nothing from a clean plateau.
+   Candidates shorter than ``min_duration`` (default two windows, at least 0.1 s) are dropped.
+6. With ``window="auto"`` steps 2-5 are repeated for windows of 0.02 ... 2 s and each piece keeps
+   the shortest window whose segments cover at least 80 % of the most any window covers.
+   Slow, stick-slipping plateaus thereby get long windows, brisk bang-bang profiles short ones
+   (a long window would hide a short transient at the start of a plateau).
+
+Every row of the recording ends in exactly one segment or is counted under one reason:
+``standstill`` (speed below ``min_speed``), ``transient`` (ramps, reversals, unsteady speed and the
+edges of pieces), ``short_plateau`` (steady, but shorter than ``min_duration``).
+
+Derivatives for inertia removal use a Savitzky-Golay filter (``scipy.signal.savgol_filter``,
+polynomial order 2, ``deriv_window`` samples, default about 20 ms and at least 7 samples) on each
+piece, on a uniform time grid (resampled linearly when the sampling jitters by more than 1 %).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal import savgol_filter
+
+from .errors import InputError
+from .recording import Recording
+
+__all__ = ["Segment", "Segmentation", "find_segments", "derivatives", "friction_torque"]
+
+_K = 4  # blocks per speed window
+_WINDOW_LADDER = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
+_COVER_FRACTION = 0.8
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A constant-speed stretch of one run, in one direction.
+
+    ``start``/``stop`` index rows of ``Recording.data`` (stop exclusive).  ``speed`` is the mean
+    speed (travel over duration, always >= 0, unit/s); ``direction`` is +1 or -1.
+    """
+
+    run: int
+    start: int
+    stop: int
+    direction: int
+    speed: float
+    speed_ripple: float = 0.0  # relative std of the window speed inside the segment
+    window: float = 0.0        # the speed window (s) used to find it
+
+    @property
+    def n(self) -> int:
+        return self.stop - self.start
+
+    @property
+    def rows(self) -> slice:
+        return slice(self.start, self.stop)
+
+    @property
+    def velocity(self) -> float:
+        """Signed mean velocity (unit/s)."""
+        return self.direction * self.speed
+
+    def to_dict(self) -> dict:
+        return {"run": self.run, "start": self.start, "stop": self.stop, "direction": self.direction,
+                "speed": self.speed, "n": self.n, "speed_ripple": self.speed_ripple, "window": self.window}
+
+
+@dataclass
+class Segmentation:
+    """The segments of a recording and the ledger of rows outside them."""
+
+    segments: list[Segment]
+    excluded: Counter
+    n_rows: int
+    settings: dict = field(default_factory=dict)
+
+    def __iter__(self):
+        return iter(self.segments)
+
+    def __len__(self) -> int:
+        return len(self.segments)
+
+    def check_ledger(self) -> None:
+        """Assert that every row is in one segment or counted once (an internal invariant)."""
+        covered = sum(s.n for s in self.segments) + sum(self.excluded.values())
+        if covered != self.n_rows:
+            raise AssertionError(f"row ledger broken: {covered} accounted for, {self.n_rows} rows")
+
+
+# ---------------------------------------------------------------------- segmentation
+def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: float = 0.15,
+                  min_speed: float | None = None, min_duration: float | None = None,
+                  min_samples: int = 32) -> Segmentation:
+    """Find constant-speed segments per direction (see the module docstring for the method).
+
+    Parameters
+    ----------
+    rec : Recording
+    window : float or "auto"
+        Speed-averaging window in seconds (four blocks); "auto" picks it per piece.
+    rel_tol : float
+        Allowed relative change of the window speed across a block, and half the allowed drift
+        of speed within a segment.
+    min_speed : float, optional
+        Speeds below this (unit/s) count as standstill.  Default: ten times the speed noise that
+        the position noise of the piece produces over one window.
+    min_duration : float, optional
+        Shortest segment kept, seconds.  Default: two windows, and at least 0.1 s.
+    min_samples : int
+        Shortest segment kept, samples.
+
+    Returns
+    -------
+    Segmentation
+    """
+    if not 0 < rel_tol < 1:
+        raise InputError(f"rel_tol must be between 0 and 1, got {rel_tol}")
+    if window != "auto":
+        window = float(window)
+        if not window > 0:
+            raise InputError(f"the segment window must be a positive time in s, got {window}")
+    t, theta = rec.t, rec.theta
+    segments: list[Segment] = []
+    excluded: Counter = Counter()
+    chosen = {}
+    for run, a, b in rec.pieces():
+        ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
+        tried = []
+        for w in ladder:
+            res = _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples)
+            if res is not None:
+                tried.append((sum(e - s for s, e, *_ in res[0]), w, res))
+        if not tried:  # piece too short for any window
+            excluded["transient"] += b - a
+            continue
+        # the shortest window that finds nearly as much plateau as any: long windows would
+        # also swallow short transients at the edges of plateaus
+        top = max(c for c, _, _ in tried)
+        _, w, (segs, labels) = next(x for x in tried if x[0] >= _COVER_FRACTION * top)
+        chosen[(run, a)] = w
+        for s, e, direction, speed, ripple in segs:
+            segments.append(Segment(run, a + s, a + e, direction, speed, ripple, w))
+        for reason, count in labels.items():
+            excluded[reason] += count
+    seg = Segmentation(segments, excluded, len(rec), {"window": window, "rel_tol": rel_tol,
+                                                      "min_speed": min_speed, "min_duration": min_duration,
+                                                      "windows_chosen": sorted(set(chosen.values()))})
+    seg.check_ledger()
+    return seg
+
+
+def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
+    """Least-squares slope of thb against tb over every window of k consecutive blocks."""
+    tw = sliding_window_view(tb, k)
+    yw = sliding_window_view(thb, k)
+    tc = tw - tw.mean(axis=1, keepdims=True)
+    yc = yw - yw.mean(axis=1, keepdims=True)
+    return (tc * yc).sum(axis=1) / (tc * tc).sum(axis=1)
+
+
+def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples):
+    n = len(t)
+    if n < 2:
+        return None
+    dt = float(np.median(np.diff(t)))
+    if dt <= 0:
+        return None
+    b = int(round(window / _K / dt))
+    if b < 2 or n < b * (2 * _K + 1):
+        return None
+    m = n // b
+    used = m * b
+    tb = t[:used].reshape(m, b).mean(axis=1)
+    thb = theta[:used].reshape(m, b).mean(axis=1)
+    # slope over K blocks: v_win[i] covers blocks i .. i+K-1
+    v_win = _block_slopes(tb - tb[0], thb - thb[0], _K)
+    # per block j: the window ending at j ("before") and the window starting at j ("after"); near
+    # the ends of a piece, where one of them does not exist, the first (last) two non-overlapping
+    # windows stand in, so a piece that ends on a plateau keeps it and one that starts with a
+    # ramp does not
+    j = np.arange(m)
+    left = j - _K + 1
+    right = j.copy()
+    at_start = left < 0
+    left[at_start] = 0
+    right[at_start] = np.maximum(right[at_start], _K)
+    at_end = right > m - _K
+    right[at_end] = m - _K
+    left[at_end] = np.minimum(left[at_end], m - 2 * _K)
+    before = v_win[np.clip(left, 0, m - _K)]
+    after = v_win[np.clip(right, 0, m - _K)]
+    across = 0.5 * (before + after)
+    # speed noise of a window from position noise (second differences), for the default min_speed
+    if min_speed is None:
+        d2 = np.diff(theta, 2)
+        sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6)
+        step = np.abs(np.diff(theta))
+        q = step[step > 0].min() if np.any(step > 0) else 0.0
+        sigma = max(sigma, q / math.sqrt(12))
+        nw = _K * b
+        v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
+        v_floor = 10 * v_noise
+    else:
+        v_floor = float(min_speed)
+    valid = np.ones(m, bool)
+    moving = valid & (np.abs(across) > v_floor)
+    same_sign = moving & (np.sign(before) == np.sign(across)) & (np.sign(after) == np.sign(across))
+    steady = same_sign & (np.abs(after - before) <= rel_tol * np.abs(across))
+    min_dur = max(2 * window, 0.1) if min_duration is None else float(min_duration)
+    block_label = np.where(valid & ~moving, 1, 0)  # 1 standstill, 0 transient; steady handled below
+    # runs of steady blocks, split where the speed drifts, then fragments of one plateau (broken
+    # by a ripple excursion shorter than a window) merged again
+    edges = np.diff(np.concatenate(([0], steady.astype(np.int8), [0])))
+    # runs shorter than a window are too short to know their speed: treated as part of a hole
+    runs_ = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if e - s >= _K]
+    runs_ = _merge_fragments(runs_, t, theta, b, rel_tol)
+    runs_ = [r for s, e in runs_ for r in _split_drift(across, s, e, rel_tol)]
+    segs = []
+    short_blocks = []
+    for s2, e2 in runs_:
+        rows_s, rows_e = _trim_to_line(t, theta, s2 * b, e2 * b, b)
+        s2, e2 = rows_s // b, -(-rows_e // b)
+        dur = t[rows_e - 1] - t[rows_s]
+        if dur < min_dur or rows_e - rows_s < min_samples:
+            short_blocks.append((s2, e2))
+            continue
+        speed = abs(theta[rows_e - 1] - theta[rows_s]) / dur
+        direction = int(np.sign(theta[rows_e - 1] - theta[rows_s]))
+        vs = across[s2:e2]
+        ripple = float(np.std(vs) / abs(np.mean(vs))) if len(vs) > 1 else 0.0
+        segs.append((rows_s, rows_e, direction, float(speed), ripple))
+    labels = Counter()
+    in_seg = np.zeros(m, bool)
+    for rs, re_, *_ in segs:
+        in_seg[rs // b: re_ // b] = True
+    short = np.zeros(m, bool)
+    for s2, e2 in short_blocks:
+        short[s2:e2] = True
+    labels["short_plateau"] += int(short.sum()) * b
+    standstill = (block_label == 1) & ~in_seg & ~short
+    labels["standstill"] += int(standstill.sum()) * b
+    labels["transient"] += int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)
+    labels = Counter({k: v for k, v in labels.items() if v})
+    return segs, labels
+
+
+def _trim_to_line(t, theta, a, z, b):
+    """Trim rows a..z at both ends (by whole blocks) where position leaves the straight-line band."""
+    n = z - a
+    if n < 10 * b:
+        return a, z
+    mid = slice(a + n // 5, z - n // 5)
+    tt, th = t[mid], theta[mid]
+    t0 = tt.mean()
+    v, c = np.polyfit(tt - t0, th, 1)
+    band = 1.5 * np.max(np.abs(th - (c + v * (tt - t0)))) + 1e-12
+    res = np.abs(theta[a:z] - (c + v * (t[a:z] - t0)))
+    out = res > band
+    edge = n // 5
+    head = np.flatnonzero(out[:edge])
+    tail = np.flatnonzero(out[n - edge:])
+    new_a = a + (head[-1] + 1 if len(head) else 0)
+    new_z = a + (n - edge + tail[0] if len(tail) else n)
+    # whole blocks, so that the ledger stays block-exact
+    new_a = a + -(-(new_a - a) // b) * b
+    new_z = a + ((new_z - a) // b) * b
+    return new_a, max(new_z, new_a)
+
+
+def _merge_fragments(runs_, t, theta, b, rel_tol):
+    """Join consecutive block runs of one plateau separated by a short excursion.
+
+    Two runs are joined when they move the same way at speeds within ``rel_tol``, the excursion
+    between them lasts no longer than two windows, and its mean speed (travel over time) is within
+    ``2 * rel_tol`` of theirs: the drive left the plateau briefly and came back.
+    """
+    def mean_speed(s, e):
+        a, z = s * b, e * b - 1
+        return (theta[z] - theta[a]) / (t[z] - t[a])
+
+    out = []
+    for s, e in runs_:
+        if out:
+            ps, pe = out[-1]
+            v1, v2 = mean_speed(ps, pe), mean_speed(s, e)
+            vg = (theta[s * b] - theta[pe * b - 1]) / (t[s * b] - t[pe * b - 1])
+            vm = 0.5 * (v1 + v2)
+            if (np.sign(v1) == np.sign(v2) and abs(v1 - v2) <= rel_tol * abs(vm)
+                    and (s - pe) <= 2 * _K and abs(vg - vm) <= 2 * rel_tol * abs(vm)):
+                out[-1] = (ps, e)
+                continue
+        out.append((s, e))
+    return out
+
+
+def _split_drift(v: np.ndarray, s: int, e: int, rel_tol: float, depth: int = 0):
+    """Split blocks s..e where the speed changes most (CUSUM), while the two sides differ by more
+    than ``rel_tol`` in mean speed: a slow ramp or a step, not ripple (which averages out)."""
+    seg = v[s:e]
+    if e - s < 2 * _K or depth > 20:
+        return [(s, e)]
+    c = np.cumsum(seg - seg.mean())
+    k = int(np.argmax(np.abs(c[:-1]))) + 1
+    v1, v2 = seg[:k].mean(), seg[k:].mean()
+    if abs(v1 - v2) <= rel_tol * abs(seg.mean()):
+        return [(s, e)]
+    return _split_drift(v, s, s + k, rel_tol, depth + 1) + _split_drift(v, s + k, e, rel_tol, depth + 1)
+
+
+# ---------------------------------------------------------------------- derivatives
+def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration of ``theta`` by a Savitzky-Golay filter, piece by piece.
+
+    Parameters
+    ----------
+    rec : Recording
+    deriv_window : int, optional
+        Filter length in samples (odd, >= 5).  Default: about 20 ms, at least 7 samples.
+
+    Returns
+    -------
+    velocity, acceleration : ndarray
+        In unit/s and unit/s^2, one value per row; pieces shorter than the window get NaN.
+    """
+    t, theta = rec.t, rec.theta
+    vel = np.full(len(t), np.nan)
+    acc = np.full(len(t), np.nan)
+    for _, a, b in rec.pieces():
+        tt, th = t[a:b], theta[a:b]
+        if b - a < 5:
+            continue
+        dt = float(np.median(np.diff(tt)))
+        w = deriv_window or max(7, int(round(0.02 / dt)) | 1)
+        w = int(w) | 1
+        if w > b - a:
+            continue
+        uniform = np.max(np.abs(np.diff(tt) - dt)) <= 0.01 * dt
+        if uniform:
+            vel[a:b] = savgol_filter(th, w, 2, deriv=1, delta=dt)
+            acc[a:b] = savgol_filter(th, w, 2, deriv=2, delta=dt)
+        else:
+            grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
+            thg = np.interp(grid, tt, th)
+            vel[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=1, delta=dt))
+            acc[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
+    return vel, acc
+
+
+def friction_torque(rec: Recording, inertia: float | None = None, deriv_window: int | None = None) -> np.ndarray:
+    """Drive torque minus inertia torque, ``tau - J * thetadd`` (SILO4 eq. 2).
+
+    ``inertia`` defaults to the gear spec's; without one the drive torque is returned unchanged.
+    """
+    J = inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
+    if not J:
+        return rec.tau
+    _, acc = derivatives(rec, deriv_window)
+    out = rec.tau - J * np.nan_to_num(acc)
+    return out
