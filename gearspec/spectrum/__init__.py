@@ -1,0 +1,15 @@
+"""Spectra of friction over position: resampling, order spectrum, Lomb-Scargle, harmonic fit.
+
+``analyze`` runs the whole per-segment analysis of a recording; the building blocks are public
+so that they can be used on any signal over position.
+"""
+
+from .analysis import Peak, SegmentSpectrum, SpectrumResult, analyze, analyze_segment
+from .fft import order_spectrum
+from .harmonic import HarmonicFit, harmonic_fit, min_degree_for_cycles
+from .periodogram import LombScargle, false_alarm_probability, local_noise
+from .resample import resample_over_position
+
+__all__ = ["analyze", "analyze_segment", "Peak", "SegmentSpectrum", "SpectrumResult", "order_spectrum",
+           "HarmonicFit", "harmonic_fit", "min_degree_for_cycles", "LombScargle", "false_alarm_probability",
+           "local_noise", "resample_over_position"]
