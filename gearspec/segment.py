@@ -159,7 +159,7 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         _, w, (segs, labels) = next(x for x in tried if x[0] >= _COVER_FRACTION * top)
         chosen[(run, a)] = w
         for s, e, direction, speed, ripple in segs:
-            segments.append(Segment(run, a + s, a + e, direction, speed, ripple, w))
+            segments.append(Segment(int(run), int(a + s), int(a + e), int(direction), float(speed), ripple, float(w)))
         for reason, count in labels.items():
             excluded[reason] += count
     seg = Segmentation(segments, excluded, len(rec), {"window": window, "rel_tol": rel_tol,

@@ -15,7 +15,9 @@ magnitude, so that levels and phases mean the same in both directions, as in SIL
    that does *not* complete ``min_cycles`` (so that it cannot bias the others).  Standard errors
    are rescaled by the local noise level of step 1 (honest for coloured noise).  A peak of step 2
    whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is dropped and
-   the fit repeated.
+   the fit repeated.  The frequencies of found peaks are refined by Gauss-Newton on the joint
+   model first (a phase at theta = 0 needs the frequency far more precisely than a periodogram
+   bin gives it).
 4. Calibrated order spectrum: torque resampled over position (anti-aliased), Hann-windowed FFT.
 
 Every declared line that fits is reported as a peak whether it is strong or not (its ``fap`` is
@@ -42,7 +44,7 @@ from ..gears import GearTrain, load_gear
 from ..recording import Recording
 from ..segment import Segment, Segmentation, find_segments, friction_torque
 from .fft import order_spectrum
-from .harmonic import HarmonicFit, harmonic_fit, min_degree_for_cycles
+from .harmonic import HarmonicFit, harmonic_fit, min_degree_for_cycles, refine_frequencies
 from .periodogram import LombScargle, false_alarm_probability, local_noise
 from .resample import resample_over_position
 
@@ -270,6 +272,10 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     # 3. joint fit; a peak found in the periodogram stays only if its amplitude in the joint fit
     # is still significant (a sidelobe of a stronger line is not, once that line is fitted)
     declared_f = [ln.frequency for ln in fitted]
+    if found:
+        f_all, _ = refine_frequencies(theta, y, declared_f + found, range(len(declared_f), len(declared_f) + len(found)),
+                                      degree=deg)
+        found = list(f_all[len(declared_f):])
     while True:
         all_freq = declared_f + found
         n_terms = deg + 1 + 2 * len(all_freq)

@@ -1,0 +1,8 @@
+"""Simulated recordings with known ground truth (twins and synthetic test signals).
+
+Simulations produce recordings and know nothing of the analysis.
+"""
+
+from .synthetic import Ripple, plateau_recording
+
+__all__ = ["Ripple", "plateau_recording"]

@@ -1,0 +1,156 @@
+"""Synthetic constant-speed recordings with position-locked ripple of known amplitude and phase.
+
+The signal is built the way SILO4 eq. 11 describes friction: at velocity v the drive torque is
+
+    tau = sign(v) * ( level(|v|, dir) + sum_k A_k(|v|, dir) sin(2 pi f_k theta + phi_k) ) + noise
+
+with ``A_k = amplitude_k * exp(-decay_k |v|)`` (per direction if given as a pair).  The velocity
+profile holds a list of plateaus, joined by linear ramps, with a closed-loop-like speed ripple
+(relative amplitude ``speed_ripple``, locked to position at ``speed_ripple_frequency``) on every
+plateau.  Everything is returned as a :class:`~gearspec.recording.Recording` plus the truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..recording import Recording
+
+__all__ = ["Ripple", "plateau_recording"]
+
+
+@dataclass(frozen=True)
+class Ripple:
+    """A position-locked component: ``amplitude * exp(-decay |v|) * sin(2 pi frequency theta + phase)``.
+
+    ``amplitude``, ``decay`` and ``phase`` may be pairs ``(positive, negative)`` for direction-
+    dependent values.
+    """
+
+    frequency: float
+    amplitude: float | tuple[float, float]
+    phase: float | tuple[float, float] = 0.0
+    decay: float | tuple[float, float] = 0.0
+
+    def value(self, name: str, direction: int) -> float:
+        v = getattr(self, name)
+        if isinstance(v, (tuple, list)):
+            return float(v[0] if direction > 0 else v[1])
+        return float(v)
+
+    def amplitude_at(self, speed: float, direction: int) -> float:
+        return self.value("amplitude", direction) * np.exp(-self.value("decay", direction) * abs(speed))
+
+
+def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0, ramp=0.2,
+                      speed_ripple=0.0, speed_ripple_frequency=None, noise=0.0, theta0=0.0,
+                      one_run_per_plateau=False, quantum=0.0, gear=None, unit="rad", seed=None):
+    """A recording that visits constant-velocity plateaus, with known ripple.
+
+    Parameters
+    ----------
+    speeds : sequence of float
+        Signed plateau velocities (unit/s), visited in order, starting from standstill.
+    ripples : sequence of Ripple
+    level : float or callable
+        Mean friction magnitude on a plateau: a number, or ``level(speed, direction)``.
+    duration : float or sequence
+        Seconds held on each plateau.
+    fs : float
+        Sample rate, Hz.
+    ramp : float
+        Seconds of each linear velocity ramp between plateaus (and from/to standstill).
+    speed_ripple : float
+        Relative speed ripple on plateaus, ``v (1 + r sin(2 pi f_r theta))``.
+    speed_ripple_frequency : float, optional
+        Its frequency over position (default: that of the first ripple, as a friction-driven
+        closed loop would show).
+    noise : float
+        Standard deviation of white torque noise.
+    one_run_per_plateau : bool
+        Give every plateau (with its ramps) its own ``run`` id and restart time at 0.
+    quantum : float
+        Encoder resolution: theta is rounded to multiples of it (0: exact).
+    gear, unit
+        Passed to the recording.
+    seed : int, optional
+
+    Returns
+    -------
+    recording : Recording
+    truth : list of dict
+        Per plateau: ``direction``, ``speed``, ``level``, ``t0``, ``t1`` (the held part), ``run``
+        and ``ripples`` (list of ``frequency``, ``amplitude``, ``phase``).
+    """
+    rng = np.random.default_rng(seed)
+    speeds = list(speeds)
+    durations = list(duration) if np.ndim(duration) else [float(duration)] * len(speeds)
+    lvl = level if callable(level) else (lambda s, d, _c=float(level): _c)
+    dt = 1.0 / fs
+    # velocity command profile: ramp -> hold -> (next) ..., back to 0 at the end
+    pieces_v, pieces_hold = [], []
+    prev = 0.0
+    for i, (v, dur) in enumerate(zip(speeds, durations)):
+        n_r = max(1, int(round(ramp * fs)))
+        start = 0.0 if one_run_per_plateau else prev
+        pieces_v.append(np.linspace(start, v, n_r, endpoint=False))
+        pieces_hold.append(np.zeros(n_r, bool))
+        n_h = int(round(dur * fs))
+        pieces_v.append(np.full(n_h, float(v)))
+        pieces_hold.append(np.ones(n_h, bool))
+        if one_run_per_plateau:
+            pieces_v.append(np.linspace(v, 0.0, n_r))
+            pieces_hold.append(np.zeros(n_r, bool))
+        prev = v
+    if not one_run_per_plateau:
+        n_r = max(1, int(round(ramp * fs)))
+        pieces_v.append(np.linspace(prev, 0.0, n_r))
+        pieces_hold.append(np.zeros(n_r, bool))
+    vcmd = np.concatenate(pieces_v)
+    hold = np.concatenate(pieces_hold)
+    # plateau index per sample (which plateau's hold/ramp-in it belongs to)
+    per = 3 if one_run_per_plateau else 2
+    idx = np.concatenate([np.full(len(pieces_v[j]), min(j // per, len(speeds) - 1)) for j in range(len(pieces_v))])
+    n = len(vcmd)
+    f_r = speed_ripple_frequency if speed_ripple_frequency is not None else (ripples[0].frequency if ripples else 1.0)
+    # integrate position with the position-locked speed ripple on plateaus
+    theta = np.empty(n)
+    th = float(theta0)
+    v_actual = np.empty(n)
+    for i in range(n):
+        v = vcmd[i] * (1.0 + (speed_ripple * np.sin(2 * np.pi * f_r * th) if hold[i] else 0.0))
+        v_actual[i] = v
+        theta[i] = th
+        th += v * dt
+    if one_run_per_plateau:
+        run = idx.astype(np.int64)
+        t = np.concatenate([np.arange(np.sum(run == r)) * dt for r in range(len(speeds))])
+    else:
+        run = np.zeros(n, np.int64)
+        t = np.arange(n) * dt
+    # friction magnitude
+    direction = np.sign(v_actual)
+    torque = np.zeros(n)
+    truth = []
+    for j, (v, dur) in enumerate(zip(speeds, durations)):
+        d = 1 if v > 0 else -1
+        sel = idx == j
+        spd = np.abs(v_actual[sel])
+        y = np.array([lvl(s, d) for s in spd]) if callable(level) else np.full(sel.sum(), lvl(abs(v), d))
+        rip = []
+        for r in ripples:
+            a = r.value("amplitude", d) * np.exp(-r.value("decay", d) * spd)
+            y = y + a * np.sin(2 * np.pi * r.frequency * theta[sel] + r.value("phase", d))
+            rip.append({"frequency": r.frequency, "amplitude": r.amplitude_at(abs(v), d), "phase": r.value("phase", d)})
+        torque[sel] = np.where(direction[sel] != 0, direction[sel], d) * y
+        held = sel & hold
+        truth.append({"direction": d, "speed": abs(v), "level": lvl(abs(v), d), "t0": float(t[held][0]),
+                      "t1": float(t[held][-1]), "run": int(run[held][0]), "ripples": rip})
+    if noise:
+        torque = torque + rng.normal(0.0, noise, n)
+    meas_theta = np.round(theta / quantum) * quantum if quantum else theta
+    rec = Recording.from_arrays(t=t, theta=meas_theta, torque=torque, run=run, gear=gear, unit=unit,
+                                source="synthetic")
+    return rec, truth
