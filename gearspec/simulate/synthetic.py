@@ -55,7 +55,8 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
         Signed plateau velocities (unit/s), visited in order, starting from standstill.
     ripples : sequence of Ripple
     level : float or callable
-        Mean friction magnitude on a plateau: a number, or ``level(speed, direction)``.
+        Friction magnitude without ripple: a number, or ``level(speed, direction)`` (vectorised
+        over an array of speeds).
     duration : float or sequence
         Seconds held on each plateau.
     fs : float
@@ -115,15 +116,17 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
     idx = np.concatenate([np.full(len(pieces_v[j]), min(j // per, len(speeds) - 1)) for j in range(len(pieces_v))])
     n = len(vcmd)
     f_r = speed_ripple_frequency if speed_ripple_frequency is not None else (ripples[0].frequency if ripples else 1.0)
-    # integrate position with the position-locked speed ripple on plateaus
-    theta = np.empty(n)
-    th = float(theta0)
-    v_actual = np.empty(n)
-    for i in range(n):
-        v = vcmd[i] * (1.0 + (speed_ripple * np.sin(2 * np.pi * f_r * th) if hold[i] else 0.0))
-        v_actual[i] = v
-        theta[i] = th
-        th += v * dt
+    # integrate position with the position-locked speed ripple on plateaus: a few fixed-point
+    # passes of theta = theta0 + cumsum(v(theta) dt) (the ripple is small, so this converges fast)
+    def integrate(v):
+        return float(theta0) + np.concatenate(([0.0], np.cumsum(v[:-1]) * dt))
+
+    theta = integrate(vcmd)
+    v_actual = vcmd
+    if speed_ripple:
+        for _ in range(4):
+            v_actual = vcmd * (1.0 + speed_ripple * np.sin(2 * np.pi * f_r * theta) * hold)
+            theta = integrate(v_actual)
     if one_run_per_plateau:
         run = idx.astype(np.int64)
         t = np.concatenate([np.arange(np.sum(run == r)) * dt for r in range(len(speeds))])
@@ -138,7 +141,7 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
         d = 1 if v > 0 else -1
         sel = idx == j
         spd = np.abs(v_actual[sel])
-        y = np.array([lvl(s, d) for s in spd]) if callable(level) else np.full(sel.sum(), lvl(abs(v), d))
+        y = np.broadcast_to(np.asarray(lvl(spd, d), dtype=float), spd.shape).copy()
         rip = []
         for r in ripples:
             a = r.value("amplitude", d) * np.exp(-r.value("decay", d) * spd)
@@ -146,7 +149,7 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
             rip.append({"frequency": r.frequency, "amplitude": r.amplitude_at(abs(v), d), "phase": r.value("phase", d)})
         torque[sel] = np.where(direction[sel] != 0, direction[sel], d) * y
         held = sel & hold
-        truth.append({"direction": d, "speed": abs(v), "level": lvl(abs(v), d), "t0": float(t[held][0]),
+        truth.append({"direction": d, "speed": abs(v), "level": float(lvl(np.float64(abs(v)), d)), "t0": float(t[held][0]),
                       "t1": float(t[held][-1]), "run": int(run[held][0]), "ripples": rip})
     if noise:
         torque = torque + rng.normal(0.0, noise, n)

@@ -3,12 +3,14 @@
 For every constant-speed segment, on ``y = direction * (torque - J thetadd)`` (the friction
 magnitude, so that levels and phases mean the same in both directions, as in SILO4 eq. 11):
 
-1. Lomb-Scargle periodogram of the raw samples over position, from one cycle per segment up to
-   the position Nyquist (or ``max_frequency``), and its local noise level.
-2. Search for peaks that no declared line explains: local maxima whose false-alarm probability
-   (local noise, all independent frequencies searched) is below ``fap_threshold``, strongest first,
-   none within three resolution steps (3/span) of a declared line or of a stronger peak, and none
-   so slow that the nuisance polynomial could mimic it (at least 2 cycles, and (degree+1)/pi).
+1. Joint fit of the declared lines (see 3), and the Lomb-Scargle periodogram of its residual on
+   the raw samples over position, from one cycle per segment up to the position Nyquist (or
+   ``max_frequency``), with its local noise level.
+2. Search for peaks that no declared line explains: local maxima of the residual periodogram
+   whose false-alarm probability (local noise, all independent frequencies searched) is below
+   ``fap_threshold``, strongest first, none within 1.5 resolution steps (1.5/span) of a declared
+   line or within three of a stronger peak, and none so slow that the nuisance polynomial could
+   mimic it (at least 2 cycles, and (degree+1)/pi).
 3. Joint least-squares fit, on the raw samples, of a sinusoid at every declared line that fits in
    the segment (at least ``min_cycles`` cycles, below the position Nyquist) and at every peak
    found, plus a Legendre nuisance polynomial whose degree grows with the slowest declared line
@@ -92,6 +94,7 @@ class SegmentSpectrum:
     fft_amplitude: np.ndarray | None = None
     ls_frequency: np.ndarray | None = None
     ls_amplitude: np.ndarray | None = None
+    ls_residual_amplitude: np.ndarray | None = None
     noise_amplitude: np.ndarray | None = None
     note: str = ""
 
@@ -240,28 +243,32 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         deg = max(1, min_degree_for_cycles(max(slow_cycles))) if slow_cycles else 1
     else:
         deg = int(degree)
-    # 1. periodogram and local noise
-    ls = LombScargle(theta, y, method=method)
+    declared_f = [ln.frequency for ln in fitted]
+    # 1. declared lines first; periodogram of the residual (of the signal too, for the figures)
+    fit0, resid = harmonic_fit(theta, y, declared_f, degree=deg, residual=True)
+    ls = LombScargle(theta, np.vstack([resid, y]) if keep_spectra else resid, method=method)
     fmin, df, nf = ls.autogrid(oversample=oversample, fmax=f_search_max)
-    power = np.atleast_1d(ls.power_grid(fmin, df, nf))
+    power_all = np.atleast_2d(ls.power_grid(fmin, df, nf))
+    power = power_all[0]
     freqs = fmin + df * np.arange(len(power))
-    guard = _GUARD / span
-    mask = np.zeros(len(freqs), bool)
-    for ln in fitted:
-        mask |= np.abs(freqs - ln.frequency) < guard
-    noise_power = local_noise(power, width=int(100 * oversample), mask=mask)
+    noise_power = local_noise(power, width=int(100 * oversample))
     fallback = float(np.nanmedian(power)) / math.log(2) if np.any(np.isfinite(power)) else 1.0
     noise_power = np.where(np.isfinite(noise_power) & (noise_power > 0), noise_power, fallback)
     z = power / noise_power
     m_eff = max(1.0, len(freqs) / oversample)
-    # 2. peaks no declared line explains; only where the nuisance polynomial cannot reach
+    # 2. peaks no declared line explains: not where the nuisance polynomial could mimic them, and
+    # not within 1.5 resolution steps of a declared line (the two could not be told apart)
+    guard = _GUARD / span
     f_found_min = max(2.0, min_cycles, (deg + 1) / math.pi) / span
-    found = []  # frequencies
+    near_declared = np.zeros(len(freqs), bool)
+    for f0 in declared_f:
+        near_declared |= np.abs(freqs - f0) < 1.5 / span
+    found = []
     if max_peaks > 0 and len(power) >= 3:
         is_max = np.zeros(len(power), bool)
         is_max[1:-1] = (power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])
         fap_all = false_alarm_probability(z, m_eff)
-        cand = np.flatnonzero(is_max & ~mask & (fap_all < fap_threshold) & (freqs >= f_found_min))
+        cand = np.flatnonzero(is_max & ~near_declared & (fap_all < fap_threshold) & (freqs >= f_found_min))
         for i in cand[np.argsort(-z[cand])]:
             f_pk = _refine(freqs, power, i)
             if any(abs(f_pk - f0) < guard for f0 in found):
@@ -275,7 +282,9 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     if found:
         f_all, _ = refine_frequencies(theta, y, declared_f + found, range(len(declared_f), len(declared_f) + len(found)),
                                       degree=deg)
-        found = list(f_all[len(declared_f):])
+        # keep a refinement only if it stayed within a resolution step and out of the polynomial's reach
+        found = [float(fr) if (abs(fr - f0) <= 1.0 / span and fr >= f_found_min) else f0
+                 for f0, fr in zip(found, f_all[len(declared_f):])]
     while True:
         all_freq = declared_f + found
         n_terms = deg + 1 + 2 * len(all_freq)
@@ -317,7 +326,8 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         grid, vals = resample_over_position(theta, y, max_frequency=max_frequency)
         out.fft_frequency, out.fft_amplitude = order_spectrum(vals, grid[1] - grid[0])
         out.ls_frequency = freqs
-        out.ls_amplitude = ls.amplitude(power=power)
+        out.ls_amplitude = ls.amplitude(power=power_all[1])
+        out.ls_residual_amplitude = ls.amplitude(power=power)
         out.noise_amplitude = ls.amplitude(power=noise_power)
     return out
 

@@ -198,10 +198,12 @@ def harmonic_fit(theta, y, frequency, degree: int = 1, chunk: int = 1 << 16,
         Ginv = Ginv_s / np.outer(scale, scale)
     rss = max(yy - float(beta @ h), 0.0)
     r = None
-    if residual:  # exact second pass in double precision
+    if residual:  # second pass (single-precision model, double-precision difference)
         r = np.empty(n)
+        b32 = beta.astype(np.float32)
         for i in range(0, n, chunk):
-            r[i:i + chunk] = (y[i:i + chunk] - y0) - _design(theta[i:i + chunk], freq, d, lo, hi) @ beta
+            th = theta[i:i + chunk]
+            r[i:i + chunk] = (y[i:i + chunk] - y0) - _design32(th, freq, d, lo, hi, X[: len(th)]) @ b32
         rss = float(r @ r)
     dof = n - p
     sigma = np.sqrt(rss / dof)
