@@ -303,14 +303,16 @@ class GearTrain:
                     if hi.frequency - lo.frequency > 1e-12 * hi.frequency:
                         lines.append(Line(hi.frequency - lo.frequency, f"{hi.label} - {lo.label}", "sideband",
                                           parents=(hi.label, lo.label)))
-        return self._finish(lines)
+        return self._finish(lines, join=False)
 
-    def _finish(self, lines: Iterable[Line]) -> list[Line]:
+    def _finish(self, lines: Iterable[Line], join: bool = True) -> list[Line]:
+        """Sort, attach orders, and merge lines at the same frequency: labels joined with ' = '
+        (``join``), or only the simplest kept."""
         merged: list[Line] = []
         for ln in sorted(lines, key=lambda x: (x.frequency, _KIND_RANK[x.kind])):
             if merged and math.isclose(merged[-1].frequency, ln.frequency, rel_tol=1e-9):
                 prev = merged[-1]
-                if ln.label not in prev.label.split(" = "):
+                if join and ln.label not in prev.label.split(" = "):
                     merged[-1] = Line(prev.frequency, f"{prev.label} = {ln.label}", prev.kind, prev.order, prev.parents)
                 continue
             merged.append(Line(ln.frequency, ln.label, ln.kind, self.order(ln.frequency), ln.parents))

@@ -12,7 +12,9 @@ Segments are found from position alone (no commanded speed is needed):
 4. Runs of steady blocks become candidate segments.  Two candidates separated by an excursion of
    at most two windows, moving at the same speed (within ``rel_tol``), are joined: the drive left
    the plateau briefly and came back.  A candidate whose speed drifts by more than
-   ``2 * rel_tol`` (a slow ramp) is split where its speed changes most (CUSUM), recursively.
+   ``2 * rel_tol`` (a slow ramp) is split where its speed changes most (CUSUM), recursively, and
+   edge blocks whose window speed is more than ``rel_tol`` off the candidate's median speed (the
+   end of a gentle ramp) are dropped.
 5. The ends of each candidate are trimmed where position leaves the band around the straight line
    fitted to the candidate's middle 60 % (the band is 1.5 times the largest deviation there): this
    removes a transient that a long window could not see, and nothing from a clean plateau.
@@ -235,6 +237,7 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     runs_ = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if e - s >= _K]
     runs_ = _merge_fragments(runs_, t, theta, b, rel_tol)
     runs_ = [r for s, e in runs_ for r in _split_drift(across, s, e, rel_tol)]
+    runs_ = [_trim_speed(across, s, e, rel_tol) for s, e in runs_]
     segs = []
     short_blocks = []
     for s2, e2 in runs_:
@@ -262,6 +265,20 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     labels["transient"] += int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)
     labels = Counter({k: v for k, v in labels.items() if v})
     return segs, labels
+
+
+def _trim_speed(v, s, e, rel_tol):
+    """Drop edge blocks whose window speed is off the run's median by more than ``rel_tol``: the
+    tail of a ramp that was gentle enough to pass the before/after test."""
+    if e - s < 3:
+        return s, e
+    med = np.median(v[s:e])
+    lim = rel_tol * abs(med)
+    while s < e and abs(v[s] - med) > lim:
+        s += 1
+    while e > s and abs(v[e - 1] - med) > lim:
+        e -= 1
+    return s, e
 
 
 def _trim_to_line(t, theta, a, z, b):

@@ -107,9 +107,9 @@ class SegmentSpectrum:
         return self.segment.speed
 
     def peak(self, label: str) -> Peak | None:
-        """The peak whose label is or contains ``label`` (first match), or None."""
+        """The peak labelled ``label`` (or with ``label`` among its ' = '-joined names), or None."""
         for p in self.peaks:
-            if p.label is not None and (p.label == label or label in p.label.split(" = ") or label in p.label):
+            if p.label is not None and (p.label == label or label in p.label.split(" = ")):
                 return p
         return None
 
@@ -251,7 +251,13 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     power_all = np.atleast_2d(ls.power_grid(fmin, df, nf))
     power = power_all[0]
     freqs = fmin + df * np.arange(len(power))
-    noise_power = local_noise(power, width=int(100 * oversample))
+    # the fit removed each declared line's power from its own bin and its neighbours: leave those
+    # bins out of the noise level, or it reads low
+    fitted_mask = np.zeros(len(freqs), bool)
+    for f0 in declared_f:
+        fitted_mask |= np.abs(freqs - f0) < 1.0 / span
+    noise_power, noise_bins = local_noise(power, width=int(100 * oversample), min_width=int(20 * oversample),
+                                          mask=fitted_mask, return_bins=True)
     fallback = float(np.nanmedian(power)) / math.log(2) if np.any(np.isfinite(power)) else 1.0
     noise_power = np.where(np.isfinite(noise_power) & (noise_power > 0), noise_power, fallback)
     z = power / noise_power
@@ -267,7 +273,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     if max_peaks > 0 and len(power) >= 3:
         is_max = np.zeros(len(power), bool)
         is_max[1:-1] = (power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])
-        fap_all = false_alarm_probability(z, m_eff)
+        fap_all = false_alarm_probability(z, m_eff, noise_bins, oversample)
         cand = np.flatnonzero(is_max & ~near_declared & (fap_all < fap_threshold) & (freqs >= f_found_min))
         for i in cand[np.argsort(-z[cand])]:
             f_pk = _refine(freqs, power, i)
@@ -293,9 +299,11 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
                                    None, note=f"{n} samples are too few for {n_terms} terms")
         fit = harmonic_fit(theta, y, all_freq, degree=deg)
         s_at = np.interp(all_freq, freqs, noise_power) if len(all_freq) else np.array([])
+        k_at = np.interp(all_freq, freqs, noise_bins) if len(all_freq) else np.array([])
         z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at, 1e-300)
-        fap_fit = np.where(np.arange(len(all_freq)) < len(declared_f), np.exp(-z_fit),
-                           false_alarm_probability(z_fit, m_eff))
+        fap_fit = np.where(np.arange(len(all_freq)) < len(declared_f),
+                           false_alarm_probability(z_fit, 1.0, k_at, oversample),
+                           false_alarm_probability(z_fit, m_eff, k_at, oversample))
         keep = [f for j, f in enumerate(found) if fap_fit[len(declared_f) + j] < fap_threshold]
         if len(keep) == len(found):
             break

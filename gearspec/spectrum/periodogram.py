@@ -18,8 +18,9 @@ Significance uses the noise level *around* each frequency (:func:`local_noise`),
 one: friction residuals are far from white (slow drifts, control-loop ripple), and a global level
 would flag every low-frequency bump.  Under Gaussian noise of local level S the power at one
 frequency is exponential with mean S, so the chance that noise alone reaches ``z = P/S`` at one
-given frequency is ``exp(-z)``, and somewhere among ``M`` independent frequencies
-``1 - (1 - exp(-z))**M`` (:func:`false_alarm_probability`; Scargle 1982, with a local S).
+given frequency is ``exp(-z)`` (F-distributed instead when S is itself estimated from a few
+bins), and somewhere among ``M`` independent frequencies ``1 - (1 - p1)**M``
+(:func:`false_alarm_probability`; Scargle 1982, with a local S).
 """
 
 from __future__ import annotations
@@ -123,37 +124,71 @@ class LombScargle:
         return np.sqrt(4.0 * np.maximum(p, 0) / self.n)
 
 
-def local_noise(power: np.ndarray, width: int, mask: np.ndarray | None = None) -> np.ndarray:
-    """Local mean noise power around every bin: a running median over ``width`` bins / ln 2.
+def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = None, min_width: int = 40,
+                relative: float = 0.3, return_bins: bool = False):
+    """Local mean noise power around every bin.
 
-    The median of an exponential distribution is ln 2 times its mean, and a median ignores the
-    few bins a line occupies.  Bins in ``mask`` (e.g. next to fitted lines) are left out.  The
-    median is taken over blocks of ``width`` bins and interpolated: O(n), not O(n width).
+    Bins are grouped in consecutive blocks whose width grows with frequency (``relative`` times
+    the block's starting bin, between ``min_width`` and ``width`` bins): a constant relative
+    bandwidth where the noise spectrum is steep (coloured noise at low frequency), a fixed width
+    higher up.  In each block the noise level is the mean power of the bins below ten times the
+    block's median level (so a line does not raise it); block levels are interpolated between
+    block centres, so the cost is O(n), not O(n width).  Bins in ``mask`` are left out.
+
+    With ``return_bins`` also returns, per bin, how many bins its block averaged (for the
+    estimation error of the level; see :func:`false_alarm_probability`).
     """
     p = np.asarray(power, dtype=float)
     n = len(p)
-    width = max(5, int(width))
+    width = max(int(min_width), int(width))
     if mask is not None:
         p = np.where(mask, np.nan, p)
-    nb = max(1, n // width)
-    edges = np.linspace(0, n, nb + 1).astype(int)
-    centres = np.empty(nb)
-    levels = np.empty(nb)
-    for i in range(nb):
-        blk = p[edges[i]:edges[i + 1]]
-        centres[i] = 0.5 * (edges[i] + edges[i + 1] - 1)
-        levels[i] = np.nanmedian(blk) if np.any(np.isfinite(blk)) else np.nan
+    edges = [0]
+    while edges[-1] < n:
+        i = edges[-1]
+        edges.append(min(n, i + int(np.clip(relative * i, min_width, width))))
+    if len(edges) > 2 and edges[-1] - edges[-2] < min_width // 2:
+        edges.pop(-2)  # fold a runt last block into its neighbour
+    centres = np.empty(len(edges) - 1)
+    levels = np.empty(len(edges) - 1)
+    counts = np.empty(len(edges) - 1)
+    for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        blk = p[a:b]
+        blk = blk[np.isfinite(blk)]
+        centres[k] = 0.5 * (a + b - 1)
+        if len(blk) == 0:
+            levels[k], counts[k] = np.nan, 0
+            continue
+        ref = np.median(blk) / math.log(2)
+        keep = blk[blk < 10 * ref]
+        levels[k] = keep.mean() if len(keep) else ref
+        counts[k] = len(keep)
     good = np.isfinite(levels)
     if not good.any():
-        return np.full(n, np.nan)
-    return np.interp(np.arange(n), centres[good], levels[good]) / math.log(2)
+        out = np.full(n, np.nan)
+        return (out, np.zeros(n)) if return_bins else out
+    idx = np.arange(n)
+    out = np.interp(idx, centres[good], levels[good])
+    if return_bins:
+        return out, np.interp(idx, centres[good], counts[good])
+    return out
 
 
-def false_alarm_probability(z, n_independent: float = 1.0):
+def false_alarm_probability(z, n_independent: float = 1.0, noise_bins=None, oversample: float = 1.0):
     """Probability that noise alone reaches ``z = power / local noise`` at least once among
-    ``n_independent`` frequencies (1 for a frequency chosen in advance)."""
+    ``n_independent`` frequencies (1 for a frequency chosen in advance).
+
+    With a known noise level the power at one frequency is exponential: ``P(> z) = exp(-z)``.
+    When the level is itself the mean of ``noise_bins`` periodogram bins (``noise_bins /
+    oversample`` independent ones, k), the ratio follows an F(2, 2k) law instead:
+    ``P(> z) = (1 + z/k)^(-k)``, which has the heavier tail that an estimated level deserves.
+    """
     z = np.asarray(z, dtype=float)
-    single = np.exp(-z)
+    if noise_bins is None:
+        single = np.exp(-z)
+    else:
+        k = np.maximum(np.asarray(noise_bins, dtype=float) / max(oversample, 1.0), 1.0)
+        single = np.exp(-k * np.log1p(z / k))
     m = max(1.0, float(n_independent))
     with np.errstate(divide="ignore"):
         return -np.expm1(m * np.log1p(-np.minimum(single, 1 - 1e-16)))

@@ -1,0 +1,121 @@
+"""Constant-speed segments: found from position, per direction, tolerant of ripple and ramps."""
+
+import numpy as np
+import pytest
+
+from gearspec.errors import InputError
+from gearspec.recording import Recording
+from gearspec.segment import derivatives, find_segments, friction_torque
+from gearspec.simulate import Ripple, plateau_recording
+
+
+def _match(segs, truth):
+    """For each true plateau, the segment with the same direction whose centre time lies in it."""
+    out = []
+    for tr in truth:
+        hits = [s for s in segs if s.direction == tr["direction"] and s.run == tr["run"]]
+        out.append(hits)
+    return out
+
+
+def test_plateaus_found_per_direction_with_ripple_and_ramps():
+    speeds = [2.0, 5.0, 11.0, -2.0, -5.0, -11.0]
+    rec, truth = plateau_recording(speeds, ripples=[Ripple(0.8, 0.05)], level=0.3, duration=3.0, fs=1000,
+                                   ramp=0.25, speed_ripple=0.08, noise=0.01, seed=3)
+    seg = find_segments(rec)
+    assert len(seg) == len(speeds)
+    t = rec.t
+    v = np.gradient(rec.theta, t)
+    for s, tr in zip(sorted(seg, key=lambda s: s.start), truth):
+        assert s.direction == tr["direction"]
+        assert s.speed == pytest.approx(tr["speed"], rel=0.01)       # mean speed, under a ripple of 8 %
+        t0, t1 = t[s.start], t[s.stop - 1]
+        # a segment may take in the last few % of a ramp (within the speed tolerance of 15 %, with
+        # the 8 % ripple on top), never more
+        ramp_part = (t[s.start:s.stop] < tr["t0"]) | (t[s.start:s.stop] > tr["t1"])
+        if ramp_part.any():
+            assert np.all(np.abs(np.abs(v[s.start:s.stop][ramp_part]) / tr["speed"] - 1) < 0.15 + 0.08)
+        assert (t1 - t0) >= 0.85 * (tr["t1"] - tr["t0"])                # and most of the plateau
+    seg.check_ledger()
+    assert sum(s.n for s in seg) + sum(seg.excluded.values()) == len(rec)
+
+
+def test_segments_never_straddle_runs_and_ledger_holds():
+    rec, truth = plateau_recording([3.0, -3.0, 6.0], ripples=[], level=0.2, duration=1.5, fs=500,
+                                   one_run_per_plateau=True, noise=0.005, seed=1)
+    seg = find_segments(rec)
+    run = rec.run
+    for s in seg:
+        assert np.all(run[s.start:s.stop] == s.run)
+    assert sorted({s.run for s in seg}) == [0, 1, 2]
+    seg.check_ledger()
+
+
+def test_slow_ramp_is_not_one_plateau():
+    # speed creeping from 1 to 2 rad/s over 20 s, then a true plateau at 2 rad/s
+    fs = 500
+    t = np.arange(0, 30, 1 / fs)
+    v = np.where(t < 20, 1 + t / 20, 2.0)
+    theta = np.cumsum(v) / fs
+    rec = Recording.from_arrays(t=t, theta=theta, torque=0.1 + 0.001 * np.sin(t))
+    seg = find_segments(rec, rel_tol=0.1)
+    for s in seg:
+        vs = v[s.start:s.stop]
+        assert vs.max() / vs.min() < 1 + 2 * 0.1 + 0.02  # no segment spans more than 2x the tolerance
+
+
+def test_stick_slip_plateau_with_long_window():
+    # a drive that sticks and slips 4 times a second around a mean of 0.05 rad/s
+    fs = 1000
+    t = np.arange(0, 8, 1 / fs)
+    v = 0.05 * (1 + 0.9 * np.sign(np.sin(2 * np.pi * 4 * t)))
+    v[t < 1] = 0.05 * t[t < 1]  # start from rest
+    theta = np.cumsum(v) / fs
+    rec = Recording.from_arrays(t=t, theta=theta, torque=0.1 + 0.001 * np.sin(t))
+    seg = find_segments(rec)
+    assert len(seg) == 1
+    s = seg.segments[0]
+    assert s.speed == pytest.approx(0.05, rel=0.03)
+    assert s.window >= 0.5                       # a long window averaged the stick-slip
+    assert rec.t[s.stop - 1] - rec.t[s.start] > 5.0
+
+
+def test_derivatives_and_inertia_removal():
+    fs = 1000
+    t = np.arange(0, 4, 1 / fs)
+    theta = 3 * t + 0.2 * np.sin(2 * np.pi * 2 * t)
+    acc_true = -0.2 * (2 * np.pi * 2) ** 2 * np.sin(2 * np.pi * 2 * t)
+    J = 0.01
+    tau = 0.5 + J * acc_true
+    rec = Recording.from_arrays(t=t, theta=theta, torque=tau, gear={"name": "g", "inertia": J})
+    vel, acc = derivatives(rec)
+    inner = slice(50, -50)
+    # a quadratic Savitzky-Golay fit over 21 ms errs by ~(omega h)^2 / 6 of the oscillating part:
+    # (2 pi 2 Hz x 10 ms)^2 / 6 = 0.3 %; allow 0.5 %
+    v_osc = 0.2 * 2 * np.pi * 2
+    assert np.max(np.abs(vel[inner] - (3 + v_osc * np.cos(2 * np.pi * 2 * t[inner])))) < 0.005 * v_osc
+    assert np.max(np.abs(acc[inner] - acc_true[inner])) < 0.005 * np.max(np.abs(acc_true))
+    f = friction_torque(rec)
+    assert np.max(np.abs(f[inner] - 0.5)) < 0.005 * J * np.max(np.abs(acc_true))
+
+
+def test_bad_options_are_refused():
+    rec, _ = plateau_recording([1.0], level=0.1, duration=1.0, fs=200, noise=0.001)
+    with pytest.raises(InputError, match="rel_tol"):
+        find_segments(rec, rel_tol=1.5)
+    with pytest.raises(InputError, match="window"):
+        find_segments(rec, window=-1)
+
+
+@pytest.mark.realdata
+def test_emps_plateaus_both_directions(data_dir):
+    from gearspec.recording import load_recording
+
+    rec = load_recording(data_dir / "emps" / "DATA_EMPS.mat", "emps", map="theta=qm,torque=vir", scale="torque=gtau")
+    seg = find_segments(rec)
+    for d in (1, -1):
+        speeds = sorted(s.speed for s in seg if s.direction == d)
+        for target in (0.04, 0.08, 0.12):
+            near = [v for v in speeds if abs(v - target) < 0.2 * target]
+            assert len(near) >= 4, (d, target, speeds)   # four cycles of the profile
+    seg.check_ledger()

@@ -1,0 +1,253 @@
+"""Known-answer tests of the spectral engine.
+
+Signal-to-noise: "SNR" here is ripple amplitude over the standard deviation of the white torque
+noise, per sample.  At SNR 20 with a few thousand samples per segment the statistical error of an
+amplitude is ~0.1 %, so the 2 % / 0.05 rad tolerances test for *bias* (leakage between lines,
+speed ripple, a component too slow to complete a cycle, resampling); the coverage tests check the
+standard errors themselves, where the noise is large.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from gearspec.gears import GearTrain, load_gear
+from gearspec.recording import Recording
+from gearspec.simulate import Ripple, plateau_recording
+from gearspec.spectrum import (LombScargle, analyze, analyze_segment, harmonic_fit, min_degree_for_cycles,
+                               order_spectrum, resample_over_position)
+
+SILO4 = load_gear("silo4-joint3")
+F = {ln.label: ln.frequency for ln in SILO4.declared_lines()}
+F_JOINT, F_WORM, F_MOTOR = F["output shaft"], F["planetary output shaft"], F["motor shaft"]
+
+
+def wrap(x):
+    return (x + np.pi) % (2 * np.pi) - np.pi
+
+
+def test_amplitudes_and_phases_at_every_declared_line():
+    """Several declared lines, direction-dependent amplitudes and phases, decay with speed, 3 %
+    closed-loop speed ripple, a joint-rotation component that never completes a cycle, SNR 20."""
+    ripples = [Ripple(F_JOINT, 3e-4, 1.2),                                    # < 1 cycle per segment
+               Ripple(F_WORM, (6e-4, 5e-4), (0.4, 2.0), (1.2e-3, 1.1e-3)),
+               Ripple(F_MOTOR, (1.5e-4, 1.2e-4), (np.pi - 0.2, -1.0), (5e-4, 1e-4))]
+    speeds = [30, 60, 120, 250, -30, -60, -120, -250]
+    durations = [max(2.0, 3.0 / (F_WORM * abs(v))) for v in speeds]
+    noise = 1.2e-4 / 20
+    rec, truth = plateau_recording(speeds, ripples=ripples, level=8e-3, duration=durations, fs=2000, ramp=0.3,
+                                   speed_ripple=0.03, speed_ripple_frequency=7 * F_MOTOR, noise=noise,
+                                   one_run_per_plateau=True, gear=SILO4, seed=11)
+    res = analyze(rec)
+    assert len(res.segments) == len(speeds)
+    checked = 0
+    for s in res.segments:
+        tr = next(t for t in truth if t["run"] == s.segment.run)
+        for r in tr["ripples"]:
+            label = {F_JOINT: "output shaft", F_WORM: "planetary output shaft", F_MOTOR: "motor shaft"}[r["frequency"]]
+            p = s.peak(label)
+            if r["frequency"] == F_JOINT:
+                assert p is None and any(k["label"] == "output shaft" for k in s.skipped)
+                continue
+            assert p is not None and p.declared
+            assert p.amplitude == pytest.approx(r["amplitude"], rel=0.02), (s.speed, label)
+            assert abs(wrap(p.phase - r["phase"])) < 0.05, (s.speed, label)
+            assert p.fap < 1e-10
+            checked += 1
+    assert checked == 2 * len(speeds)
+    # the level has no viscous term, so the speed ripple (7 per motor turn) puts nothing at 7x motor
+    # itself; but it modulates the speed-dependent amplitudes, and the only undeclared peaks found
+    # are those real modulation sidebands, 7 f_motor -+ f_worm: nothing else is invented
+    sidebands = np.array([7 * F_MOTOR - F_WORM, 7 * F_MOTOR + F_WORM])
+    for f in res.unexplained()["frequency"]:
+        assert np.min(np.abs(sidebands - f)) < 1e-3 * f, f
+
+
+def test_close_lines_do_not_leak_into_each_other():
+    # two declared shafts 1.5 resolution steps apart, amplitudes 1 and 0.05
+    g = GearTrain.from_dict({"name": "close", "reference": "motor",
+                             "stages": [{"name": "s", "kind": "spur", "ratio": 1.02}]})
+    f1, f2 = 1 / (2 * np.pi), 1 / (2 * np.pi * 1.02)
+    rng = np.random.default_rng(2)
+    span = 1.5 / (f1 - f2)
+    theta = np.sort(rng.uniform(0, span, 20000))
+    y = 1.0 * np.sin(2 * np.pi * f1 * theta + 0.3) + 0.05 * np.sin(2 * np.pi * f2 * theta - 1.0) \
+        + 0.5 + rng.normal(0, 0.01, theta.size)
+    s = analyze_segment(theta, y, g, keep_spectra=True)
+    p1, p2 = s.peak("motor shaft"), s.peak("output shaft")
+    assert p1.amplitude == pytest.approx(1.0, rel=0.005)
+    assert p2.amplitude == pytest.approx(0.05, rel=0.02)
+    assert abs(wrap(p2.phase + 1.0)) < 0.05
+    # the windowed FFT cannot tell the weak line from the strong one's leakage
+    fft_at = np.interp(f2, s.fft_frequency, s.fft_amplitude)
+    assert abs(fft_at - 0.05) > 0.1 * 0.05
+
+
+def test_component_with_less_than_a_cycle_does_not_bias_the_others():
+    rng = np.random.default_rng(4)
+    theta = np.linspace(0, 60, 6000)
+    slow = 2.0 * np.sin(2 * np.pi * theta / 150 + 0.7)   # 0.4 cycle in the segment, 40x the line
+    y = slow + 0.05 * np.sin(2 * np.pi * 0.2 * theta + 0.5) + rng.normal(0, 0.0025, theta.size)
+    # the degree the analysis picks for a 0.4-cycle component (see min_degree_for_cycles)
+    deg = min_degree_for_cycles(0.4)
+    direct = harmonic_fit(theta, y, [0.2], degree=deg)
+    naive = harmonic_fit(theta, y, [0.2], degree=1)
+    assert direct.amplitude[0] == pytest.approx(0.05, rel=0.02)
+    assert abs(wrap(direct.phase[0] - 0.5)) < 0.05
+    assert direct.sigma < 1.2 * 0.0025                          # the slow component is absorbed
+    assert abs(naive.amplitude[0] / 0.05 - 1) > 0.02            # a trend-only nuisance is biased
+
+
+def test_auto_nuisance_degree_follows_slow_declared_lines():
+    theta = np.linspace(0, 100, 5000)
+    rng = np.random.default_rng(5)
+    # with the SILO4 train at the motor, the output shaft completes 0.055 cycles, the worm 1.1
+    y = 3e-4 * np.sin(2 * np.pi * F_JOINT * theta + 1) + 6e-4 * np.sin(2 * np.pi * F_WORM * theta + 0.4) \
+        + 1.5e-4 * np.sin(2 * np.pi * F_MOTOR * theta + 3) + rng.normal(0, 5e-6, theta.size)
+    s = analyze_segment(theta, y, SILO4, keep_spectra=False)
+    assert s.degree >= 3
+    assert s.peak("planetary output shaft").amplitude == pytest.approx(6e-4, rel=0.02)
+    assert s.peak("motor shaft").amplitude == pytest.approx(1.5e-4, rel=0.02)
+
+
+def _coverage(noise_kind, n_seeds=150, noise_model="local"):
+    g = GearTrain.from_dict({"name": "g", "reference": "motor",
+                             "stages": [{"name": "a", "kind": "spur", "ratio": 3.0},
+                                        {"name": "b", "kind": "spur", "ratio": 5.0}]})
+    lines = [ln.frequency for ln in g.declared_lines()]
+    amps = [0.02, 0.03, 0.05]
+    phases = [0.3, -1.2, 2.5]
+    hits_a = hits_p = total = 0
+    for seed in range(n_seeds):
+        rng = np.random.default_rng(1000 + seed)
+        n = 3000
+        theta = np.cumsum(rng.uniform(0.05, 0.15, n)) + 10
+        if noise_kind == "white":
+            e = rng.normal(0, 0.2, n)
+        else:  # AR(1), strongly coloured: 16x more noise power at the slow line than white noise of
+            # the same innovation; innovations scaled so that every line keeps an SNR (A / s.e.) >= 4,
+            # where the delta-method errors hold (below it the amplitude is Rice-biased upwards)
+            w = rng.normal(0, 0.01, n)
+            e = np.empty(n)
+            e[0] = w[0]
+            for i in range(1, n):
+                e[i] = 0.9 * e[i - 1] + w[i]
+        y = 1.0 + sum(a * np.sin(2 * np.pi * f * theta + p) for a, f, p in zip(amps, lines, phases)) + e
+        s = analyze_segment(theta, y, g, keep_spectra=False, max_peaks=0, noise=noise_model)
+        for a, f, p in zip(amps, lines, phases):
+            pk = next(q for q in s.peaks if abs(q.frequency - f) < 1e-12)
+            hits_a += abs(pk.amplitude - a) < 1.96 * pk.amplitude_se
+            hits_p += abs(wrap(pk.phase - p)) < 1.96 * pk.phase_se
+            total += 1
+    return hits_a / total, hits_p / total
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("noise_kind", ["white", "ar1"])
+def test_standard_errors_cover_the_truth(noise_kind):
+    """95 % intervals hold the truth ~95 % of the time (450 intervals: +-2 sd is +-2 %).
+
+    The local noise level is itself estimated from >= 20 independent bins, which costs ~1 % of
+    coverage (a t-distribution with ~40 degrees of freedom), hence the band 0.92-0.98."""
+    cov_a, cov_p = _coverage(noise_kind)
+    assert 0.92 <= cov_a <= 0.98, cov_a
+    assert 0.92 <= cov_p <= 0.98, cov_p
+
+
+@pytest.mark.slow
+def test_white_noise_errors_would_be_wrong_for_coloured_noise():
+    # the same AR(1) data with white-noise error bars: the slow line's bars are far too narrow
+    cov_a, _ = _coverage("ar1", n_seeds=60, noise_model="white")
+    assert cov_a < 0.85
+
+
+def test_found_peaks_harmonics_and_integer_hints():
+    rng = np.random.default_rng(8)
+    theta = np.linspace(0, 300, 30000)
+    y = (0.01 + 1e-3 * np.sin(2 * np.pi * F_MOTOR * theta)          # declared
+         + 4e-4 * np.sin(2 * np.pi * 2 * F_MOTOR * theta + 1.0)   # a harmonic of it
+         + 3e-4 * np.sin(2 * np.pi * 7 * F_MOTOR * theta - 0.5)   # 7 per motor turn: a pole-pair order?
+         + 2e-4 * np.sin(2 * np.pi * 1.234 * theta + 0.2)         # nothing explains this one
+         + rng.normal(0, 1e-4, theta.size))
+    s = analyze_segment(theta, y, SILO4, keep_spectra=False)
+    found = {round(p.frequency, 3): p for p in s.peaks if not p.declared}
+    assert set(found) == {round(2 * F_MOTOR, 3), round(7 * F_MOTOR, 3), 1.234}
+    h2 = found[round(2 * F_MOTOR, 3)]
+    assert h2.label == "2x motor shaft" and h2.amplitude == pytest.approx(4e-4, rel=0.03)
+    h7 = found[round(7 * F_MOTOR, 3)]
+    assert h7.label is None and h7.hint == "7x motor shaft"
+    assert h7.frequency == pytest.approx(7 * F_MOTOR, rel=1e-4)
+    assert abs(wrap(h7.phase + 0.5)) < 0.05
+    u = found[1.234]
+    assert u.label is None and u.hint is None and u.fap < 1e-6
+    assert u.frequency == pytest.approx(1.234, rel=1e-4)
+
+
+@pytest.mark.slow
+def test_no_false_discoveries_on_pure_noise():
+    """fap threshold 0.01 per segment: over 100 noise-only segments, expect ~1 with a false peak."""
+    false = 0
+    for seed in range(100):
+        rng = np.random.default_rng(seed)
+        theta = np.cumsum(rng.uniform(0.05, 0.15, 2000))
+        s = analyze_segment(theta, rng.normal(0, 1, theta.size), None, keep_spectra=False)
+        false += any(not p.declared for p in s.peaks)
+    assert false <= 5  # binomial(100, 0.01): P(> 5) < 1e-3
+
+
+def test_order_spectrum_is_amplitude_calibrated():
+    h = 0.01
+    x = np.arange(8192) * h
+    f_on = 100 / (8192 * h)
+    a, f_grid = order_spectrum(np.sin(2 * np.pi * f_on * x) * 0.7 + 3, h)[::-1]
+    assert a[np.argmin(np.abs(f_grid - f_on))] == pytest.approx(0.7, rel=0.005)
+    f_off = 100.5 / (8192 * h)
+    f2, a2 = order_spectrum(0.7 * np.sin(2 * np.pi * f_off * x), h, window="flattop")
+    assert a2.max() == pytest.approx(0.7, rel=0.01)
+
+
+def test_lomb_scargle_backends_agree_and_are_calibrated():
+    rng = np.random.default_rng(3)
+    theta = np.sort(rng.uniform(0, 50, 3000))
+    y = 2 + 0.4 * np.sin(2 * np.pi * 1.5 * theta) + rng.normal(0, 0.1, theta.size)
+    ls = LombScargle(theta, y)
+    fmin, df, nf = 0.1, 0.01, 500
+    p_n = LombScargle(theta, y, method="nifty").power_grid(fmin, df, nf)
+    f = fmin + df * np.arange(nf)
+    p_a = LombScargle(theta, y, method="astropy").power(f)
+    p_s = LombScargle(theta, y, method="scipy").power(f)
+    assert np.allclose(p_n, p_a, rtol=1e-4, atol=1e-6 * p_a.max())
+    assert np.allclose(p_s, p_a, rtol=1e-6, atol=1e-9 * p_a.max())
+    assert ls.amplitude([1.5])[0] == pytest.approx(0.4, rel=0.02)
+
+
+def test_resampling_antialiases_and_keeps_the_passband():
+    rng = np.random.default_rng(6)
+    theta = np.cumsum(rng.uniform(0.5, 1.5, 200000)) * 1e-3   # ~1000 samples per unit
+    y = np.sin(2 * np.pi * 5 * theta) + 0.5 * np.sin(2 * np.pi * 180 * theta)
+    grid, v = resample_over_position(theta, y, max_frequency=20)   # grid Nyquist >= 50, < 180
+    f, a = order_spectrum(v, grid[1] - grid[0], window="flattop")
+    assert a[np.argmin(np.abs(f - 5))] == pytest.approx(1.0, rel=0.01)
+    assert a[f > 8].max() < 0.01                                  # the 180 line did not fold in
+    # a drive that sits still for a while: the many samples at one place are averaged, not aliased
+    th = np.concatenate([np.linspace(0, 1, 1000), np.full(5000, 1.0), np.linspace(1, 2, 1000)])
+    yy = np.concatenate([np.zeros(1000), rng.normal(0, 1, 5000), np.zeros(1000)])
+    g2, v2 = resample_over_position(th, yy)
+    assert np.max(np.abs(v2)) < 0.1
+
+
+def test_result_json_contract_and_row_ledger(tmp_path):
+    import json
+
+    rec, _ = plateau_recording([40, -40], ripples=[Ripple(F_MOTOR, 1e-3, 0.5)], level=0.01, duration=3,
+                               fs=1000, noise=1e-4, gear=SILO4, seed=2)
+    res = analyze(rec)
+    path = res.to_json(tmp_path / "s.json")
+    d = json.loads(path.read_text())
+    assert sum(s["n"] for s in d["segments"]) + sum(d["excluded"].values()) == len(rec) == d["n_rows"]
+    for s in d["segments"]:
+        assert s["direction"] in (1, -1) and s["speed"] > 0 and "run" in s
+        for p in s["peaks"]:
+            assert set(p) >= {"frequency", "amplitude", "amplitude_se", "phase", "phase_se", "fap", "order", "label"}
+        assert any(p["label"] == "motor shaft" for p in s["peaks"])
