@@ -176,10 +176,21 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
         ax.scatter(sub["speed"] * np.sign(sub["direction"]), sub["frequency"], s=15 + 300 * sub["amplitude"] / amax,
                    color=color, alpha=0.6, edgecolor="k", lw=0.3,
                    label="harmonic or sideband of a declared line" if lab else "unexplained")
-    for _, r in t.sort_values("amplitude", ascending=False).head(12).iterrows():
-        txt = r["label"].split(" = ")[0] if isinstance(r["label"], str) else (r["hint"] or f"{r['frequency']:.4g}")
-        ax.annotate(f"{txt} ({r['amplitude']:.2g} {tu})", (r["speed"] * np.sign(r["direction"]), r["frequency"]),
-                    fontsize=6.5, xytext=(4, 2), textcoords="offset points")
+    # one annotation per frequency band (within 15 %), at its strongest peak
+    done: list[float] = []
+    for _, r in t.sort_values("amplitude", ascending=False).iterrows():
+        f = r["frequency"]
+        if any(abs(math.log(f / g)) < math.log(1.15) for g in done) or len(done) >= 10:
+            continue
+        done.append(f)
+        if isinstance(r["label"], str):
+            txt = r["label"].split(" = ")[0]
+        elif isinstance(r.get("hint"), str):
+            txt = r["hint"]
+        else:
+            txt = f"{f:.4g} cycles/{unit}"
+        ax.annotate(f"{txt} (up to {r['amplitude']:.2g} {tu})", (r["speed"] * np.sign(r["direction"]), f),
+                    fontsize=7, xytext=(6, 3), textcoords="offset points")
     if result.gear is not None:
         for ln in result.gear.declared_lines():
             ax.axhline(ln.frequency, color="#9467bd", lw=0.6, ls="--")
@@ -190,6 +201,6 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
     ax.set_ylabel(f"frequency (cycles/{unit})")
     ax.set_title(f"Peaks no declared line explains (fap <= {max_fap:g}); marker area ~ amplitude; "
                  "dashed: declared lines", fontsize=9)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     return _save(fig, path)

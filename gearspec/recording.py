@@ -12,6 +12,7 @@ and the reason.  Doubtful input gives a :class:`~gearspec.errors.GearspecWarning
 from __future__ import annotations
 
 import math
+import warnings
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -185,6 +186,8 @@ def parse_assignments(text: str | None, option: str, numeric: bool = False) -> d
         k, v = (s.strip() for s in part.split("=", 1))
         if not k or not v:
             raise InputError(f"{option}: '{part}' is not of the form name=value")
+        if k in out:
+            raise InputError(f"{option}: '{k}' is given twice ({k}={out[k]} and {k}={v}); give it once")
         if numeric:
             try:
                 v = float(v)
@@ -228,16 +231,12 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
         if not header and names is None:
             raise InputError(f"{path}: --no-header needs --names to say what the columns are")
         try:
-            frame = pd.read_csv(path, sep=sep, header=0 if header else None,
-                                names=list(names) if names is not None else None,
-                                skipinitialspace=True)
+            frame = _read_csv(path, sep, header, names)
         except pd.errors.EmptyDataError:
             raise InputError(f"{path}: the file is empty") from None
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise InputError(f"{path}: cannot be read as a table ({str(exc).splitlines()[0]}); "
                              "check --sep") from None
-        if names is not None and frame.shape[1] != len(names):
-            raise InputError(f"{path}: --names gives {len(names)} names but the file has {frame.shape[1]} columns")
         frame.columns = [str(c).strip() for c in frame.columns]
         if frame.shape[1] == 1 and len(frame) and sep == ",":
             raise InputError(f"{path}: only one column ('{frame.columns[0]}') was found; "
@@ -247,6 +246,8 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
             frame = pd.read_parquet(path)
         except Exception as exc:  # pyarrow raises many types
             raise InputError(f"{path}: cannot be read as parquet ({exc})") from None
+        if not isinstance(frame.index, pd.RangeIndex) or any(n is not None for n in frame.index.names):
+            frame = frame.reset_index()  # a stored index (e.g. time) is a column like any other
         frame.columns = [str(c) for c in frame.columns]
     elif kind == "npz":
         try:
@@ -269,6 +270,36 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
     if len(frame) == 0:
         raise InputError(f"{path}: the file has a header but no data rows")
     return frame, meta
+
+
+def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -> pd.DataFrame:
+    """pandas.read_csv that never shifts columns silently.
+
+    Left to itself, pandas takes the leading columns as the index when the header (or ``names``) has
+    fewer fields than the data rows, so every column would get its neighbour's values.  A trailing
+    separator at the end of every line (an empty last field) is accepted; any other extra field is
+    refused.
+    """
+    kw = dict(sep=sep, skipinitialspace=True)
+    if not header:
+        frame = pd.read_csv(path, header=None, **kw)
+        if names is not None:
+            if frame.shape[1] == len(names) + 1 and frame.iloc[:, -1].isna().all():
+                frame = frame.iloc[:, :-1]  # a separator at the end of every line
+            if frame.shape[1] != len(names):
+                raise InputError(f"{path}: --names gives {len(names)} names but the file has {frame.shape[1]} columns")
+            frame.columns = list(names)
+        return frame
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", pd.errors.ParserWarning)
+        frame = pd.read_csv(path, header=0, index_col=False, **kw)
+    if any(issubclass(w.category, pd.errors.ParserWarning) for w in caught):
+        # data rows have more fields than the header: allowed only if the extra ones are all empty
+        rows = pd.read_csv(path, header=None, skiprows=1, **kw)
+        if rows.iloc[:, frame.shape[1]:].notna().any().any():
+            raise InputError(f"{path}: the header row names {frame.shape[1]} columns but data rows have "
+                             f"{rows.shape[1]} fields; give every column a name in the header, or check --sep")
+    return frame
 
 
 def _vectors_to_frame(path: Path, arrays: Mapping[str, np.ndarray]):
@@ -295,8 +326,11 @@ def _vectors_to_frame(path: Path, arrays: Mapping[str, np.ndarray]):
     frame = pd.DataFrame({k: v for k, v in vectors.items() if len(v) == n})
     for k in short:
         meta[k] = vectors[k]
-    if short or other:
-        warn(f"{path}: variables {', '.join(short + other)} are not vectors of length {n}; kept in meta, not as columns")
+    if short:
+        warn(f"{path}: variables {', '.join(short)} are not vectors of length {n}; kept in meta, not as columns")
+    if other:
+        warn(f"{path}: variables {', '.join(other)} are not numeric vectors or matrices (text, structs, cells, "
+             "3-D arrays); ignored")
     return frame, meta
 
 
@@ -363,6 +397,12 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
     bad_canon = [k for k in mapping if k not in CANONICAL]
     if bad_canon:
         raise InputError(f"--map: '{bad_canon[0]}' is not a canonical column ({', '.join(CANONICAL)})")
+    by_source: dict = {}
+    for canon, src in mapping.items():
+        if src in by_source:
+            raise InputError(f"--map: column '{src}' is given for both {by_source[src]} and {canon}; "
+                             "each source column can be mapped to one canonical column only")
+        by_source[src] = canon
     parts = []
     for path in files:
         frame, meta = _read_file(path, sep, header, names)
@@ -385,12 +425,29 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
     frame = frame.rename(columns=rename)
     for col, factor in scaling.items():
         if col not in frame.columns:
-            raise InputError(f"{path}: --scale names column '{col}', which is not there (columns: {', '.join(frame.columns)})")
+            hint = "".join(f"; --scale applies after --map: use --scale {canon}=..." for canon, src in mapping.items()
+                           if src == col)
+            raise InputError(f"{path}: --scale names column '{col}', which is not there "
+                             f"(columns: {', '.join(frame.columns)}){hint}")
+        given = factor
         if isinstance(factor, str):
-            if factor not in meta:
-                raise InputError(f"{path}: --scale {col}={factor}: '{factor}' is neither a number nor a scalar stored in the file")
-            factor = meta[factor]
-        frame[col] = _numeric_column(path, frame, col) * float(factor)
+            try:
+                factor = float(factor)
+            except ValueError:
+                if factor not in meta:
+                    raise InputError(f"{path}: --scale {col}={factor}: '{factor}' is neither a number nor a scalar "
+                                     "stored in the file") from None
+                if np.size(meta[factor]) != 1:
+                    raise InputError(f"{path}: --scale {col}={factor}: '{factor}' holds {np.size(meta[factor])} values, "
+                                     "not a single number") from None
+                factor = float(np.asarray(meta[factor]).reshape(()))
+        try:
+            factor = float(factor)
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: --scale {col}={given!r}: the factor is not a number") from None
+        if not math.isfinite(factor) or factor == 0:
+            raise InputError(f"{path}: --scale {col}={given}: the factor must be a finite, non-zero number, got {factor:g}")
+        frame[col] = _numeric_column(path, frame, col) * factor
     return frame
 
 
@@ -422,6 +479,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
     sig_used = None
     run_offset = 0
     for path, frame, meta in parts:
+        frame = frame.reset_index(drop=True)  # index = data row - 1, kept through exclusions for messages
         n_read += len(frame)
         meta_all.update(meta)
         cols = list(frame.columns)
@@ -505,7 +563,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
                 first = idx[np.flatnonzero(back)[0]]
                 raise InputError(
                     f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
-                    f"row {first + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
+                    f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
                     "several experiments, give each its own file or a 'run' column")
             if dup.mean() > max_bad_fraction:
                 raise InputError(f"{path}: column 't' repeats the previous time in {int(dup.sum())} of {len(tr)} rows; "
@@ -546,6 +604,13 @@ def _exclude_saturation(path, frame: pd.DataFrame, col: str):
     v = frame[col].to_numpy()
     n = len(v)
     if n < 100:
+        return frame, 0
+    # Saturation shows as a signal that varies from sample to sample but sticks at its extreme.  A
+    # signal that often holds its value anyway (noise-free simulation, coarse quantisation) sits at
+    # its extremes by nature: that is no evidence of saturation, and nothing is excluded.
+    at_end = (v == v.max()) | (v == v.min())
+    inner = ~at_end[:-1] & ~at_end[1:]
+    if inner.sum() < 20 or np.mean(np.diff(v)[inner] == 0) > 0.2:
         return frame, 0
     mask = np.zeros(n, bool)
     for extreme in (v.max(), v.min()):
@@ -612,7 +677,7 @@ def _check_time_unit(rec: Recording) -> None:
         if e - s > 1:
             dts.append(np.median(np.diff(t[s:e])))
     med = float(np.median(dts)) if dts else 0.0
-    if med > 1.0:
+    if med >= 1.0:
         warn(f"{', '.join(rec.sources)}: the median time step is {med:g} s; if 't' is in ms or sample numbers, "
              "use --scale t=0.001 or --fs HZ")
 
@@ -624,7 +689,13 @@ def _check_motion(rec: Recording) -> None:
         raise InputError(f"{src}: column 'theta' never changes (always {theta[0]:g}): the drive did not move, "
                          "or the wrong column is mapped to theta")
     moved = False
-    for _, s, e in rec.pieces():
+    pieces = rec.pieces()
+    longest = max(e - s for _, s, e in pieces)
+    if longest < 20:
+        lost = ", ".join(f"{k} {v}" for k, v in sorted(rec.excluded.items())) or "none"
+        raise InputError(f"{src}: no stretch of at least 20 contiguous usable rows (longest {longest}, "
+                         f"{len(rec)} usable of {rec.n_read}; excluded: {lost}); nothing can be analysed")
+    for _, s, e in pieces:
         th = theta[s:e]
         if len(th) < 20:
             continue
@@ -634,7 +705,11 @@ def _check_motion(rec: Recording) -> None:
         noise = 1.4826 * np.median(np.abs(np.diff(d) - np.median(np.diff(d)))) / math.sqrt(6) if len(d) > 2 else 0.0
         block = max(10, len(th) // 200)
         disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
-        if disp.size and disp.max() > 5 * max(noise * math.sqrt(2), quantum):
+        # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
+        # means too (averaging takes jitter down, a steady drift stays)
+        nb = len(th) // block
+        means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
+        if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
             moved = True
             break
     if not moved:

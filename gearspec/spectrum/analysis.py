@@ -144,6 +144,7 @@ class SpectrumResult:
 
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(_clean(self.to_dict()), indent=1))
         return path
 
@@ -344,11 +345,14 @@ def _integer_hint(gear: GearTrain, f: float, tol: float) -> str | None:
     """'7x motor shaft' when f sits within tol of an integer multiple (>= 2) of a shaft line.
 
     Not a label: a high multiple of a slow shaft matches almost anything, so only multiples up to
-    64 are tried, fastest shaft (smallest multiple) first.  A motor pole-pair or cogging order
+    64 are tried, fastest shaft (smallest multiple) first, and only shafts whose frequency is ten
+    times the tolerance (so that neighbouring multiples are distinguishable).  A motor pole-pair or cogging order
     shows up this way.
     """
     shafts = sorted((ln for ln in gear.declared_lines() if ln.kind == "shaft"), key=lambda x: -x.frequency)
     for ln in shafts:
+        if tol > 0.1 * ln.frequency:  # neighbouring multiples cannot be told apart
+            continue
         m = round(f / ln.frequency)
         if 2 <= m <= 64 and abs(f - m * ln.frequency) <= tol:
             return f"{m}x {ln.label}"
