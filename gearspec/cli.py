@@ -6,7 +6,6 @@ Exit status: 0 on success, 2 on bad input (one message on stderr), 1 on an inter
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 import time

@@ -27,6 +27,7 @@ the carrier (planetary, harmonic, cycloidal: input minus output) or to the housi
 
 from __future__ import annotations
 
+import functools
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -325,7 +326,7 @@ class GearTrain:
         among equals, the closest.
         """
         best = None
-        for ln in self.candidate_lines(max_harmonic):
+        for ln in _candidates(self, max_harmonic):
             d = abs(ln.frequency - frequency)
             if d <= tolerance:
                 key = (_KIND_RANK[ln.kind], d)
@@ -360,6 +361,11 @@ class GearTrain:
             o = "" if ln.order is None else f"   order {ln.order:.4g}"
             lines.append(f"  {ln.frequency:12.6g} {per}{o}   {ln.label}")
         return "\n".join(lines)
+
+
+@functools.lru_cache(maxsize=64)
+def _candidates(gear: "GearTrain", max_harmonic: int) -> tuple[Line, ...]:
+    return tuple(gear.candidate_lines(max_harmonic))
 
 
 def _opt_float(x):

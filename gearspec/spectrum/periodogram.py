@@ -52,15 +52,11 @@ class LombScargle:
         theta = np.asarray(theta, dtype=float)
         y = np.asarray(y, dtype=float)
         d = np.diff(theta)
-        if np.all(d >= 0):
-            self._sorted = True
-        elif np.all(d <= 0):
+        if np.all(d <= 0):  # a segment in the negative direction: reversed, no copy
             theta, y = theta[::-1], y[..., ::-1]
-            self._sorted = True
-        else:
+        elif not np.all(d >= 0):  # stick-slip jitter: sort
             order = np.argsort(theta, kind="stable")
             theta, y = theta[order], y[..., order]
-            self._sorted = True
         self.theta = theta
         self.y = y
         self.method = method

@@ -1,0 +1,76 @@
+"""The command line as a user meets it: exit codes, messages, files written."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gearspec.cli import main
+from gearspec.simulate import Ripple, plateau_recording
+
+
+@pytest.fixture
+def recording_csv(tmp_path):
+    rec, _ = plateau_recording([40, -40, 80, -80], ripples=[Ripple(1 / (2 * np.pi), 1e-3, 0.5)], level=0.01,
+                               duration=2.5, fs=1000, noise=1e-4, seed=4)
+    return rec.save(tmp_path / "rec.csv")
+
+
+def test_spectrum_writes_report_and_json(recording_csv, tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["spectrum", str(recording_csv), "--gear", "silo4-joint3", "--out", str(out),
+                 "--json", str(out / "s.json")])
+    assert code == 0
+    d = json.loads((out / "s.json").read_text())
+    assert len(d["segments"]) == 4
+    assert sum(s["n"] for s in d["segments"]) + sum(d["excluded"].values()) == d["n_rows"]
+    for s in d["segments"]:
+        p = next(p for p in s["peaks"] if p["label"] == "motor shaft")
+        assert p["amplitude"] == pytest.approx(1e-3, rel=0.02)
+    for name in ("report.md", "segments.png", "spectra_01.png", "amplitude_vs_speed.png", "peaks.csv"):
+        assert (out / name).stat().st_size > 0
+    text = (out / "report.md").read_text()
+    assert "motor shaft" in text and "![segments](segments.png)" in text
+    assert "4 segments" in capsys.readouterr().out
+
+
+def test_bad_input_exits_2_with_one_message(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,position,torque\n0,0,1\n0.001,0.1,1\n")
+    assert main(["spectrum", str(bad), "--gear", "silo4-joint3"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gearspec: error:") and "no column 'theta'" in err and "--map theta=" in err
+    assert main(["spectrum", str(bad), "--gear", "no-such-gear"]) == 2
+    assert "no such preset" in capsys.readouterr().err
+
+
+def test_no_segment_is_a_clear_error(tmp_path, capsys):
+    t = np.arange(0, 2, 0.001)
+    theta = 0.5 * np.sin(2 * np.pi * 3 * t)        # never holds a speed
+    import pandas as pd
+
+    pd.DataFrame({"t": t, "theta": theta, "torque": np.cos(t) + 0.01 * np.sin(77 * t)}).to_csv(tmp_path / "o.csv",
+                                                                                              index=False)
+    assert main(["spectrum", str(tmp_path / "o.csv")]) == 2
+    assert "no constant-speed segment" in capsys.readouterr().err
+
+
+def test_gears_command_lists_presets(capsys):
+    assert main(["gears"]) == 0
+    assert "silo4-joint3" in capsys.readouterr().out
+    assert main(["gears", "silo4-joint3"]) == 0
+    assert "287" in capsys.readouterr().out
+
+
+def test_console_script_runs_demo(tmp_path):
+    # the installed entry point, as `make demo` calls it
+    r = subprocess.run([sys.executable, "-m", "gearspec.cli", "demo", "--out", str(tmp_path / "demo")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    d = json.loads((tmp_path / "demo" / "spectrum.json").read_text())
+    assert len(d["segments"]) == 10
+    # the demo's drive has an undeclared 7-per-motor-turn ripple: found in every segment, unlabelled
+    for s in d["segments"]:
+        assert any(p["hint"] == "7x motor shaft" and p["label"] is None for p in s["peaks"])
