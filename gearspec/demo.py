@@ -65,7 +65,7 @@ def run_demo(out: str | Path = "demo-out") -> Path:
     path = rec.save(out / "demo_recording.csv")
     rec = load_recording(path, "silo4-joint3")
     seg = find_segments(rec)
-    result = analyze(rec, segmentation=seg)
+    result = analyze(rec, segmentation=seg, keep_spectra=True)
     result.to_json(out / "spectrum.json")
     return write_spectrum_report(result, rec, seg, out, command=f"gearspec spectrum {path} --gear silo4-joint3 "
                                                                    f"--out {out} --json {out / 'spectrum.json'}")

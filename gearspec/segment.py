@@ -148,8 +148,9 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
     for run, a, b in rec.pieces():
         ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
         tried = []
+        noise = _position_noise(theta[a:b]) if min_speed is None else None
         for w in ladder:
-            res = _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples)
+            res = _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise)
             if res is not None:
                 tried.append((sum(e - s for s, e, *_ in res[0]), w, res))
         if not tried:  # piece too short for any window
@@ -180,11 +181,27 @@ def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
     return (tc * yc).sum(axis=1) / (tc * tc).sum(axis=1)
 
 
-def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples):
+def _position_noise(theta: np.ndarray, chunks: int = 20, size: int = 5000) -> float:
+    """Noise of a position signal: robust sd of second differences / sqrt(6), floored by the
+    encoder quantum / sqrt(12); from up to ``chunks`` contiguous stretches of ``size`` samples."""
+    n = len(theta)
+    if n <= chunks * size:
+        parts = [theta]
+    else:
+        starts = np.linspace(0, n - size, chunks).astype(int)
+        parts = [theta[s:s + size] for s in starts]
+    d2 = np.concatenate([np.diff(p, 2) for p in parts])
+    d1 = np.abs(np.concatenate([np.diff(p) for p in parts]))
+    sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6) if len(d2) else 0.0
+    q = d1[d1 > 0].min() if np.any(d1 > 0) else 0.0
+    return max(float(sigma), q / math.sqrt(12))
+
+
+def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise=None):
     n = len(t)
     if n < 2:
         return None
-    dt = float(np.median(np.diff(t)))
+    dt = float(np.median(np.diff(t[: min(n, 100_000)])))
     if dt <= 0:
         return None
     b = int(round(window / _K / dt))
@@ -214,11 +231,7 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     across = 0.5 * (before + after)
     # speed noise of a window from position noise (second differences), for the default min_speed
     if min_speed is None:
-        d2 = np.diff(theta, 2)
-        sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6)
-        step = np.abs(np.diff(theta))
-        q = step[step > 0].min() if np.any(step > 0) else 0.0
-        sigma = max(sigma, q / math.sqrt(12))
+        sigma = noise if noise is not None else _position_noise(theta)
         nw = _K * b
         v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
         v_floor = 10 * v_noise
@@ -282,22 +295,29 @@ def _trim_speed(v, s, e, rel_tol):
 
 
 def _trim_to_line(t, theta, a, z, b):
-    """Trim rows a..z at both ends (by whole blocks) where position leaves the straight-line band."""
+    """Trim rows a..z at both ends (by whole blocks) where position leaves the straight-line band.
+
+    Works on every ``max(1, b // 4)``-th sample: the band and the trim are at block resolution.
+    """
     n = z - a
     if n < 10 * b:
         return a, z
-    mid = slice(a + n // 5, z - n // 5)
-    tt, th = t[mid], theta[mid]
+    stride = max(1, b // 4)
+    tt_all, th_all = t[a:z:stride], theta[a:z:stride]
+    m = len(tt_all)
+    mid = slice(m // 5, m - m // 5)
+    tt, th = tt_all[mid], th_all[mid]
     t0 = tt.mean()
-    v, c = np.polyfit(tt - t0, th, 1)
-    band = 1.5 * np.max(np.abs(th - (c + v * (tt - t0)))) + 1e-12
-    res = np.abs(theta[a:z] - (c + v * (t[a:z] - t0)))
-    out = res > band
-    edge = n // 5
+    dtt = tt - t0
+    v = float(dtt @ (th - th.mean()) / (dtt @ dtt))
+    c = float(th.mean())
+    band = 1.5 * np.max(np.abs(th - (c + v * dtt))) + 1e-12
+    out = np.abs(th_all - (c + v * (tt_all - t0))) > band
+    edge = m // 5
     head = np.flatnonzero(out[:edge])
-    tail = np.flatnonzero(out[n - edge:])
-    new_a = a + (head[-1] + 1 if len(head) else 0)
-    new_z = a + (n - edge + tail[0] if len(tail) else n)
+    tail = np.flatnonzero(out[m - edge:])
+    new_a = a + (head[-1] + 1) * stride if len(head) else a
+    new_z = a + (m - edge + tail[0]) * stride if len(tail) else z
     # whole blocks, so that the ledger stays block-exact
     new_a = a + -(-(new_a - a) // b) * b
     new_z = a + ((new_z - a) // b) * b

@@ -47,7 +47,7 @@ def test_emps_spectrum_per_plateau_in_cycles_per_metre(data_dir, tmp_path):
     import json
 
     rec = ds.load("emps")
-    res = analyze(rec)
+    res = analyze(rec, keep_spectra=True)
     d = res.to_dict()
     assert d["frequency_unit"] == "cycles/m" and d["torque_unit"] == "N"
     for direction in (1, -1):

@@ -27,7 +27,8 @@ def wrap(x):
     return (x + np.pi) % (2 * np.pi) - np.pi
 
 
-def test_amplitudes_and_phases_at_every_declared_line():
+@pytest.mark.parametrize("periodogram", ["lombscargle", "fft"])
+def test_amplitudes_and_phases_at_every_declared_line(periodogram):
     """Several declared lines, direction-dependent amplitudes and phases, decay with speed, 3 %
     closed-loop speed ripple, a joint-rotation component that never completes a cycle, SNR 20."""
     ripples = [Ripple(F_JOINT, 3e-4, 1.2),                                    # < 1 cycle per segment
@@ -39,7 +40,7 @@ def test_amplitudes_and_phases_at_every_declared_line():
     rec, truth = plateau_recording(speeds, ripples=ripples, level=8e-3, duration=durations, fs=2000, ramp=0.3,
                                    speed_ripple=0.03, speed_ripple_frequency=7 * F_MOTOR, noise=noise,
                                    one_run_per_plateau=True, gear=SILO4, seed=11)
-    res = analyze(rec)
+    res = analyze(rec, periodogram=periodogram)
     assert len(res.segments) == len(speeds)
     checked = 0
     for s in res.segments:
@@ -111,7 +112,7 @@ def test_auto_nuisance_degree_follows_slow_declared_lines():
     assert s.peak("motor shaft").amplitude == pytest.approx(1.5e-4, rel=0.02)
 
 
-def _coverage(noise_kind, n_seeds=150, noise_model="local"):
+def _coverage(noise_kind, n_seeds=150, noise_model="local", periodogram="auto"):
     g = GearTrain.from_dict({"name": "g", "reference": "motor",
                              "stages": [{"name": "a", "kind": "spur", "ratio": 3.0},
                                         {"name": "b", "kind": "spur", "ratio": 5.0}]})
@@ -134,7 +135,7 @@ def _coverage(noise_kind, n_seeds=150, noise_model="local"):
             for i in range(1, n):
                 e[i] = 0.9 * e[i - 1] + w[i]
         y = 1.0 + sum(a * np.sin(2 * np.pi * f * theta + p) for a, f, p in zip(amps, lines, phases)) + e
-        s = analyze_segment(theta, y, g, keep_spectra=False, max_peaks=0, noise=noise_model)
+        s = analyze_segment(theta, y, g, max_peaks=0, noise=noise_model, periodogram=periodogram)
         for a, f, p in zip(amps, lines, phases):
             pk = next(q for q in s.peaks if abs(q.frequency - f) < 1e-12)
             hits_a += abs(pk.amplitude - a) < 1.96 * pk.amplitude_se
@@ -144,15 +145,17 @@ def _coverage(noise_kind, n_seeds=150, noise_model="local"):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("periodogram", ["lombscargle", "fft"])
 @pytest.mark.parametrize("noise_kind", ["white", "ar1"])
-def test_standard_errors_cover_the_truth(noise_kind):
+def test_standard_errors_cover_the_truth(noise_kind, periodogram):
     """95 % intervals hold the truth ~95 % of the time (450 intervals: +-2 sd is +-2 %).
 
-    The local noise level is itself estimated from >= 20 independent bins, which costs ~1 % of
-    coverage (a t-distribution with ~40 degrees of freedom), hence the band 0.92-0.98."""
-    cov_a, cov_p = _coverage(noise_kind)
-    assert 0.92 <= cov_a <= 0.98, cov_a
-    assert 0.92 <= cov_p <= 0.98, cov_p
+    The local noise level is itself estimated: at the lowest frequencies from as few as ~10-20
+    independent bins (more would blur a steep coloured spectrum), which makes +-1.96 s.e. a
+    t-interval with 20-40 degrees of freedom (92-94 % coverage); hence the band 0.90-0.98."""
+    cov_a, cov_p = _coverage(noise_kind, periodogram=periodogram)
+    assert 0.90 <= cov_a <= 0.98, cov_a
+    assert 0.90 <= cov_p <= 0.98, cov_p
 
 
 @pytest.mark.slow
@@ -162,7 +165,8 @@ def test_white_noise_errors_would_be_wrong_for_coloured_noise():
     assert cov_a < 0.85
 
 
-def test_found_peaks_harmonics_and_integer_hints():
+@pytest.mark.parametrize("periodogram", ["lombscargle", "fft"])
+def test_found_peaks_harmonics_and_integer_hints(periodogram):
     rng = np.random.default_rng(8)
     theta = np.linspace(0, 300, 30000)
     y = (0.01 + 1e-3 * np.sin(2 * np.pi * F_MOTOR * theta)          # declared
@@ -170,7 +174,7 @@ def test_found_peaks_harmonics_and_integer_hints():
          + 3e-4 * np.sin(2 * np.pi * 7 * F_MOTOR * theta - 0.5)   # 7 per motor turn: a pole-pair order?
          + 2e-4 * np.sin(2 * np.pi * 1.234 * theta + 0.2)         # nothing explains this one
          + rng.normal(0, 1e-4, theta.size))
-    s = analyze_segment(theta, y, SILO4, keep_spectra=False)
+    s = analyze_segment(theta, y, SILO4, periodogram=periodogram)
     found = {round(p.frequency, 3): p for p in s.peaks if not p.declared}
     assert set(found) == {round(2 * F_MOTOR, 3), round(7 * F_MOTOR, 3), 1.234}
     h2 = found[round(2 * F_MOTOR, 3)]
@@ -185,13 +189,14 @@ def test_found_peaks_harmonics_and_integer_hints():
 
 
 @pytest.mark.slow
-def test_no_false_discoveries_on_pure_noise():
+@pytest.mark.parametrize("periodogram", ["lombscargle", "fft"])
+def test_no_false_discoveries_on_pure_noise(periodogram):
     """fap threshold 0.01 per segment: over 100 noise-only segments, expect ~1 with a false peak."""
     false = 0
     for seed in range(100):
         rng = np.random.default_rng(seed)
         theta = np.cumsum(rng.uniform(0.05, 0.15, 2000))
-        s = analyze_segment(theta, rng.normal(0, 1, theta.size), None, keep_spectra=False)
+        s = analyze_segment(theta, rng.normal(0, 1, theta.size), None, periodogram=periodogram)
         false += any(not p.declared for p in s.peaks)
     assert false <= 5  # binomial(100, 0.01): P(> 5) < 1e-3
 

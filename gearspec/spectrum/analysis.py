@@ -3,30 +3,30 @@
 For every constant-speed segment, on ``y = direction * (torque - J thetadd)`` (the friction
 magnitude, so that levels and phases mean the same in both directions, as in SILO4 eq. 11):
 
-1. Joint fit of the declared lines (see 3), and the Lomb-Scargle periodogram of its residual on
-   the raw samples over position, from one cycle per segment up to the position Nyquist (or
-   ``max_frequency``), with its local noise level.
-2. Search for peaks that no declared line explains: local maxima of the residual periodogram
-   whose false-alarm probability (local noise, all independent frequencies searched) is below
-   ``fap_threshold``, strongest first, none within 1.5 resolution steps (1.5/span) of a declared
-   line or within three of a stronger peak, and none so slow that the nuisance polynomial could
-   mimic it (at least 2 cycles, and (degree+1)/pi).
-3. Joint least-squares fit, on the raw samples, of a sinusoid at every declared line that fits in
-   the segment (at least ``min_cycles`` cycles, below the position Nyquist) and at every peak
-   found, plus a Legendre nuisance polynomial whose degree grows with the slowest declared line
-   that does *not* complete ``min_cycles`` (so that it cannot bias the others).  Standard errors
-   are rescaled by the local noise level of step 1 (honest for coloured noise).  A peak of step 2
-   whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is dropped and
-   the fit repeated.  The frequencies of found peaks are refined by Gauss-Newton on the joint
-   model first (a phase at theta = 0 needs the frequency far more precisely than a periodogram
-   bin gives it).
-4. Calibrated order spectrum: torque resampled over position (anti-aliased), Hann-windowed FFT.
+1. Joint least-squares fit, on the raw samples, of a sinusoid at every declared line that fits
+   in the segment (at least ``min_cycles`` cycles, below the position Nyquist), plus a Legendre
+   nuisance polynomial whose degree grows with the slowest declared line that does *not*
+   complete ``min_cycles`` (so that it cannot bias the others).  One pass over the samples.
+2. Periodogram of the residual: Lomb-Scargle on the raw samples for segments up to
+   ``LS_MAX_SAMPLES`` samples; beyond, the Hann spectrum of the signal resampled over position
+   (anti-aliased), with the fitted nuisance and lines taken out in closed form -- one FFT.  Its
+   local noise level (constant relative bandwidth at low frequency) calibrates everything after.
+3. Search for peaks that no declared line explains: local maxima whose false-alarm probability
+   (local noise, F-distributed for an estimated level, all independent frequencies searched) is
+   below ``fap_threshold``, strongest first, none within 1.5 resolution steps (1.5/span) of a
+   declared line or within three of a stronger peak, none so slow that the nuisance polynomial
+   could mimic it (at least 2 cycles, and (degree+1)/pi).
+4. Joint fit of declared and found lines, the found frequencies refined by Gauss-Newton (a phase
+   at theta = 0 needs the frequency far more precisely than a periodogram bin gives it); a found
+   peak whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is
+   dropped.  Standard errors are rescaled by the local noise level (honest for coloured noise).
+   Without found peaks the whole analysis is one pass over the samples plus one spectrum.
 
 Every declared line that fits is reported as a peak whether it is strong or not (its ``fap`` is
 the chance that noise alone gives that much fitted power at that one frequency); a found peak's
 ``fap`` counts every independent frequency searched.  Lines that do not fit are listed with the
-reason.  Peaks found in step 2 carry the label of the harmonic or sideband of
-declared lines that explains them, or ``None``.
+reason.  Peaks found in step 3 carry the label of the harmonic or sideband of declared lines
+that explains them, or ``None`` (and perhaps an integer-multiple ``hint``).
 """
 
 from __future__ import annotations
@@ -45,8 +45,8 @@ from ..errors import InputError
 from ..gears import GearTrain, load_gear
 from ..recording import Recording
 from ..segment import Segment, Segmentation, find_segments, friction_torque
-from .fft import order_spectrum
-from .harmonic import HarmonicFit, harmonic_fit, min_degree_for_cycles, refine_frequencies
+from .fft import hann_sinusoid_dft, hann_spectrum
+from .harmonic import HarmonicFit, NormalEquations, min_degree_for_cycles, refine_frequencies
 from .periodogram import LombScargle, false_alarm_probability, local_noise
 from .resample import resample_over_position
 
@@ -201,23 +201,41 @@ def _clean(obj):
 
 
 # ---------------------------------------------------------------------- one segment
+#: segments up to this many samples search the Lomb-Scargle periodogram of the raw residual;
+#: longer ones the Hann spectrum of the residual resampled over position (see analyze_segment)
+LS_MAX_SAMPLES = 200_000
+
+
 def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = None, *,
                     segment: Segment | None = None, max_frequency: float | None = None,
                     min_cycles: float = 1.0, harmonics: int = 1, degree: int | str = "auto",
                     fap_threshold: float = 0.01, max_peaks: int = 8, oversample: float = 2.0,
-                    noise: str = "local", method: str = "auto", keep_spectra: bool = True) -> SegmentSpectrum:
+                    noise: str = "local", periodogram: str = "auto", method: str = "auto",
+                    keep_spectra: bool = False) -> SegmentSpectrum:
     """Analyse one stretch of friction ``y`` over position ``theta`` (see the module docstring).
 
     ``y`` should already be the friction magnitude (direction times torque).  Frequencies are in
     cycles per unit of theta; amplitudes in the unit of ``y``.
+
+    ``periodogram`` chooses the spectrum searched for undeclared peaks: ``"lombscargle"`` (of the
+    residual on the raw samples; exact for any sampling, O(N log N) with a large constant),
+    ``"fft"`` (Hann spectrum of the signal resampled over position, with the fitted declared
+    lines and nuisance taken out in closed form: one FFT), or ``"auto"`` (Lomb-Scargle up to
+    ``LS_MAX_SAMPLES`` samples).  Either way amplitudes, phases and errors come from the joint fit
+    on the raw samples.  ``keep_spectra`` keeps the order spectrum and the Lomb-Scargle of the
+    signal for figures.
     """
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
     n = len(theta)
+    if periodogram not in ("auto", "lombscargle", "fft"):
+        raise InputError(f"periodogram must be 'auto', 'lombscargle' or 'fft', got '{periodogram}'")
+    if noise not in ("local", "white"):
+        raise InputError(f"noise must be 'local' or 'white', got '{noise}'")
     if segment is None:
         d = int(np.sign(theta[-1] - theta[0])) or 1
         segment = Segment(run=0, start=0, stop=n, direction=d, speed=float("nan"))
-    span = float(np.ptp(theta))
+    span = float(np.ptp(theta)) if n else 0.0
     if n < 16 or span <= 0:
         return SegmentSpectrum(segment, [], float(np.mean(y)) if n else float("nan"), float("nan"), span,
                                float("nan"), 0, [], None, note="too few samples to analyse")
@@ -240,18 +258,27 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
                             "reason": f"above 0.9 x the position Nyquist frequency ({nyquist:.4g})"})
         else:
             fitted.append(ln)
-    if degree == "auto":
-        deg = max(1, min_degree_for_cycles(max(slow_cycles))) if slow_cycles else 1
-    else:
-        deg = int(degree)
+    deg = (max(1, min_degree_for_cycles(max(slow_cycles))) if slow_cycles else 1) if degree == "auto" else int(degree)
     declared_f = [ln.frequency for ln in fitted]
-    # 1. declared lines first; periodogram of the residual (of the signal too, for the figures)
-    fit0, resid = harmonic_fit(theta, y, declared_f, degree=deg, residual=True)
-    ls = LombScargle(theta, np.vstack([resid, y]) if keep_spectra else resid, method=method)
-    fmin, df, nf = ls.autogrid(oversample=oversample, fmax=f_search_max)
-    power_all = np.atleast_2d(ls.power_grid(fmin, df, nf))
-    power = power_all[0]
-    freqs = fmin + df * np.arange(len(power))
+    n_terms = deg + 1 + 2 * len(declared_f)
+    if n <= n_terms + 8:
+        return SegmentSpectrum(segment, [], float(np.mean(y)), float("nan"), span, nyquist, deg, skipped, None,
+                               note=f"{n} samples are too few for {n_terms} terms")
+    # 1. the declared lines: one pass over the samples
+    eq = NormalEquations.accumulate(theta, y, declared_f, deg)
+    fit0 = eq.fit()
+    # 2. periodogram of the residual, in units where a sinusoid of amplitude A has power n A^2/4
+    use_ls = periodogram == "lombscargle" or (periodogram == "auto" and n <= LS_MAX_SAMPLES)
+    out = SegmentSpectrum(segment, [], level=float(np.mean(y)), sigma=fit0.sigma, span=span, nyquist=nyquist,
+                          degree=deg, skipped=skipped, fit=fit0)
+    if use_ls:
+        ls = LombScargle(theta, y - fit0.predict(theta), method=method)
+        fmin, df, nf = ls.autogrid(oversample=oversample, fmax=f_search_max)
+        power = np.atleast_1d(ls.power_grid(fmin, df, nf))
+        freqs = fmin + df * np.arange(len(power))
+        enbw = 1.0
+    else:
+        freqs, power, enbw = _fft_residual_power(theta, y, fit0, oversample, f_search_max, out if keep_spectra else None)
     # the fit removed each declared line's power from its own bin and its neighbours: leave those
     # bins out of the noise level, or it reads low
     fitted_mask = np.zeros(len(freqs), bool)
@@ -259,23 +286,25 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         fitted_mask |= np.abs(freqs - f0) < 1.0 / span
     noise_power, noise_bins = local_noise(power, width=int(100 * oversample), min_width=int(20 * oversample),
                                           mask=fitted_mask, return_bins=True)
-    fallback = float(np.nanmedian(power)) / math.log(2) if np.any(np.isfinite(power)) else 1.0
+    noise_bins = noise_bins / enbw  # Hann-windowed bins are correlated: fewer independent ones
+    fallback = float(np.nanmedian(power)) if np.any(np.isfinite(power)) else 1.0
     noise_power = np.where(np.isfinite(noise_power) & (noise_power > 0), noise_power, fallback)
     z = power / noise_power
     m_eff = max(1.0, len(freqs) / oversample)
-    # 2. peaks no declared line explains: not where the nuisance polynomial could mimic them, and
+    # 3. peaks no declared line explains: not where the nuisance polynomial could mimic them, and
     # not within 1.5 resolution steps of a declared line (the two could not be told apart)
     guard = _GUARD / span
     f_found_min = max(2.0, min_cycles, (deg + 1) / math.pi) / span
     near_declared = np.zeros(len(freqs), bool)
     for f0 in declared_f:
         near_declared |= np.abs(freqs - f0) < 1.5 / span
-    found = []
+    found: list[float] = []
     if max_peaks > 0 and len(power) >= 3:
         is_max = np.zeros(len(power), bool)
         is_max[1:-1] = (power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])
-        fap_all = false_alarm_probability(z, m_eff, noise_bins, oversample)
-        cand = np.flatnonzero(is_max & ~near_declared & (fap_all < fap_threshold) & (freqs >= f_found_min))
+        cand = np.flatnonzero(is_max & ~near_declared & (freqs >= f_found_min))
+        fap_c = false_alarm_probability(z[cand], m_eff, noise_bins[cand], oversample)
+        cand, fap_c = cand[fap_c < fap_threshold], fap_c[fap_c < fap_threshold]
         for i in cand[np.argsort(-z[cand])]:
             f_pk = _refine(freqs, power, i)
             if any(abs(f_pk - f0) < guard for f0 in found):
@@ -283,42 +312,36 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
             found.append(f_pk)
             if len(found) >= max_peaks:
                 break
-    # 3. joint fit; a peak found in the periodogram stays only if its amplitude in the joint fit
-    # is still significant (a sidelobe of a stronger line is not, once that line is fitted)
-    declared_f = [ln.frequency for ln in fitted]
+    # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass, the
+    # last one also the joint fit); a found peak stays only while its fitted amplitude is
+    # significant (a sidelobe of a stronger line is not, once that line is fitted): dropping one
+    # is a smaller solve of the same normal equations, not another pass
     if found:
-        f_all, _ = refine_frequencies(theta, y, declared_f + found, range(len(declared_f), len(declared_f) + len(found)),
-                                      degree=deg)
-        # keep a refinement only if it stayed within a resolution step and out of the polynomial's reach
-        found = [float(fr) if (abs(fr - f0) <= 1.0 / span and fr >= f_found_min) else f0
-                 for f0, fr in zip(found, f_all[len(declared_f):])]
+        n_dec = len(declared_f)
+        _, _, eq = refine_frequencies(theta, y, declared_f + found, range(n_dec, n_dec + len(found)), degree=deg,
+                                      iterations=3)
+    all_f = eq.frequency
+    keep = list(range(len(all_f)))
     while True:
-        all_freq = declared_f + found
-        n_terms = deg + 1 + 2 * len(all_freq)
-        if n <= n_terms + 8:
-            return SegmentSpectrum(segment, [], float(np.mean(y)), float("nan"), span, nyquist, deg, skipped,
-                                   None, note=f"{n} samples are too few for {n_terms} terms")
-        fit = harmonic_fit(theta, y, all_freq, degree=deg)
-        s_at = np.interp(all_freq, freqs, noise_power) if len(all_freq) else np.array([])
-        k_at = np.interp(all_freq, freqs, noise_bins) if len(all_freq) else np.array([])
-        z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at, 1e-300)
-        fap_fit = np.where(np.arange(len(all_freq)) < len(declared_f),
-                           false_alarm_probability(z_fit, 1.0, k_at, oversample),
+        fit = eq.fit(keep)
+        s_at = np.interp(fit.frequency, freqs, noise_power) if len(keep) else np.array([])
+        k_at = np.interp(fit.frequency, freqs, noise_bins) if len(keep) else np.array([])
+        z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at / enbw, 1e-300)
+        is_dec = np.array([j < len(declared_f) for j in keep], bool)
+        fap_fit = np.where(is_dec, false_alarm_probability(z_fit, 1.0, k_at, oversample),
                            false_alarm_probability(z_fit, m_eff, k_at, oversample))
-        keep = [f for j, f in enumerate(found) if fap_fit[len(declared_f) + j] < fap_threshold]
-        if len(keep) == len(found):
+        bad = [j for j, dec, fp, f in zip(keep, is_dec, fap_fit, fit.frequency)
+               if not dec and (fp >= fap_threshold or f < f_found_min)]
+        if not bad:
             break
-        found = keep
-    if noise == "local" and len(all_freq):
-        factor = np.clip(s_at / max(fit.sigma**2, 1e-300), 0.05, 1e6)
-        fit = fit.scaled(factor)
-    elif noise not in ("local", "white"):
-        raise InputError(f"noise must be 'local' or 'white', got '{noise}'")
+        keep = [j for j in keep if j not in bad]
+    if noise == "local" and len(keep):
+        fit = fit.scaled(np.clip(s_at / enbw / max(fit.sigma**2, 1e-300), 0.05, 1e6))
     amp, amp_se, ph, ph_se = fit.amplitude, fit.amplitude_se, fit.phase, fit.phase_se
     peaks = []
-    for k, f in enumerate(all_freq):
-        if k < len(fitted):
-            label, declared = fitted[k].label, True
+    for k, (j, f) in enumerate(zip(keep, fit.frequency)):
+        if j < len(declared_f):
+            label, declared = fitted[j].label, True
         else:
             tol = max(0.5 / span, 1e-6 * f)
             line = gear.label(f, tol) if gear is not None else None
@@ -328,17 +351,62 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
                           phase=float(ph[k]), phase_se=float(ph_se[k]), fap=float(fap_fit[k]),
                           order=None if gear is None else gear.order(f), label=label, declared=declared,
                           snr=float(z_fit[k]), hint=hint))
-    out = SegmentSpectrum(segment, peaks, level=float(np.mean(y)), sigma=fit.sigma, span=span, nyquist=nyquist,
-                          degree=deg, skipped=skipped, fit=fit)
-    # 4. order spectrum
+    out.peaks, out.fit, out.sigma = peaks, fit, fit.sigma
+    # 5. spectra for the figures
     if keep_spectra:
-        grid, vals = resample_over_position(theta, y, max_frequency=max_frequency)
-        out.fft_frequency, out.fft_amplitude = order_spectrum(vals, grid[1] - grid[0])
-        out.ls_frequency = freqs
-        out.ls_amplitude = ls.amplitude(power=power_all[1])
-        out.ls_residual_amplitude = ls.amplitude(power=power)
-        out.noise_amplitude = ls.amplitude(power=noise_power)
+        if out.fft_frequency is None:
+            _fft_residual_power(theta, y, fit0, oversample, f_search_max, out)
+        ls_sig = LombScargle(theta, y, method=method)
+        out.ls_frequency = freqs.astype(np.float32)
+        p_sig = ls_sig.power_grid(freqs[0], freqs[1] - freqs[0], len(freqs)) if len(freqs) > 1 else power
+        out.ls_amplitude = ls_sig.amplitude(power=p_sig).astype(np.float32)
+        out.ls_residual_amplitude = np.sqrt(4.0 * np.maximum(power, 0) / enbw / n).astype(np.float32)
+        out.noise_amplitude = np.sqrt(4.0 * noise_power / enbw / n).astype(np.float32)
     return out
+
+
+def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None):
+    """Power of the residual of ``fit0`` from one Hann-windowed FFT of the signal resampled over
+    position: the nuisance polynomial is subtracted on the grid, the fitted lines in closed form
+    near their bins (:func:`~gearspec.spectrum.fft.hann_sinusoid_dft`; beyond +-40 bins the
+    window's leakage is below 1e-7).  Scaled so that a sinusoid of amplitude A has power
+    n A^2 / 4; white noise then has power ``enbw * sigma^2``.
+
+    With ``keep_into`` (a SegmentSpectrum) the calibrated amplitude spectrum of the signal (line
+    included, nuisance removed) is stored there for the figures.
+    """
+    from numpy.polynomial import legendre
+
+    n = len(theta)
+    grid, vals = resample_over_position(theta, y)
+    h = grid[1] - grid[0]
+    x = 2.0 * (grid - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
+    vals -= legendre.legval(x, fit0.nuisance)
+    spec, df, wsum, enbw = hann_spectrum(vals, h, pad=oversample)
+    nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
+    if keep_into is not None:
+        amp = np.abs(spec) * (2.0 / wsum)
+        keep_into.fft_frequency = (df * np.arange(len(spec))).astype(np.float32)
+        keep_into.fft_amplitude = amp.astype(np.float32)
+    for f, a, b in zip(fit0.frequency, fit0.coef_cos, fit0.coef_sin):
+        k0 = int(round(f / df))
+        k = np.arange(max(0, k0 - 40), min(len(spec), k0 + 41))
+        spec[k] -= hann_sinusoid_dft(k, nfft, len(vals), grid[0], h, f, a, b)
+    k_lo = max(1, int(np.ceil((1.0 / (np.ptp(theta))) / df)))
+    k_hi = min(len(spec) - 1, int(np.floor(f_max / df)))
+    sel = spec[k_lo:k_hi + 1]
+    power = (sel.real**2 + sel.imag**2) * (n / wsum**2)
+    return df * np.arange(k_lo, k_hi + 1), power, enbw
+
+
+def _refine(freqs, power, i):
+    """Peak frequency by a parabola through the log power of the three bins around bin i."""
+    if i <= 0 or i >= len(power) - 1:
+        return float(freqs[i])
+    a, b, c = np.log(np.maximum(power[i - 1:i + 2], 1e-300))
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    return float(freqs[i] + np.clip(shift, -0.5, 0.5) * (freqs[1] - freqs[0]))
 
 
 def _integer_hint(gear: GearTrain, f: float, tol: float) -> str | None:
@@ -357,16 +425,6 @@ def _integer_hint(gear: GearTrain, f: float, tol: float) -> str | None:
         if 2 <= m <= 64 and abs(f - m * ln.frequency) <= tol:
             return f"{m}x {ln.label}"
     return None
-
-
-def _refine(freqs, power, i):
-    """Peak frequency by a parabola through the log power of the three bins around bin i."""
-    if i <= 0 or i >= len(power) - 1:
-        return float(freqs[i])
-    a, b, c = np.log(np.maximum(power[i - 1:i + 2], 1e-300))
-    den = a - 2 * b + c
-    shift = 0.5 * (a - c) / den if den < 0 else 0.0
-    return float(freqs[i] + np.clip(shift, -0.5, 0.5) * (freqs[1] - freqs[0]))
 
 
 # ---------------------------------------------------------------------- a whole recording

@@ -26,6 +26,7 @@ bins), and somewhere among ``M`` independent frequencies ``1 - (1 - p1)**M``
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -105,7 +106,10 @@ class LombScargle:
         elif method == "scipy":
             from scipy.signal import lombscargle
 
-            out = np.array([lombscargle(self.theta, yy, 2 * np.pi * f, floating_mean=True) for yy in ys])
+            # scipy holds several (N, M) arrays at once: feed it blocks of ~2e7 elements
+            step = max(1, int(2e7 // max(self.n, 1)))
+            out = np.array([np.concatenate([lombscargle(self.theta, yy, 2 * np.pi * f[i:i + step], floating_mean=True)
+                                            for i in range(0, len(f), step)]) for yy in ys])
         elif method == "nifty":
             if len(f) > 1 and np.allclose(np.diff(f), f[1] - f[0], rtol=1e-9, atol=0):
                 return self.power_grid(f[0], f[1] - f[0], len(f))
@@ -139,26 +143,45 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
     width = max(int(min_width), int(width))
     if mask is not None:
         p = np.where(mask, np.nan, p)
+    # growing blocks first (a few), then blocks of the full width (vectorised)
     edges = [0]
-    while edges[-1] < n:
+    while edges[-1] < n and relative * edges[-1] < width:
         i = edges[-1]
         edges.append(min(n, i + int(np.clip(relative * i, min_width, width))))
-    if len(edges) > 2 and edges[-1] - edges[-2] < min_width // 2:
-        edges.pop(-2)  # fold a runt last block into its neighbour
-    centres = np.empty(len(edges) - 1)
+    start = edges[-1]
+    n_full = (n - start) // width
+    edges += [start + width * (j + 1) for j in range(n_full)]
+    if edges[-1] < n:
+        if n - edges[-1] < min_width // 2 and len(edges) > 1:
+            edges[-1] = n  # fold a runt last block into its neighbour
+        else:
+            edges.append(n)
+    edges = np.array(edges)
+    centres = 0.5 * (edges[:-1] + edges[1:] - 1)
     levels = np.empty(len(edges) - 1)
     counts = np.empty(len(edges) - 1)
-    for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
-        blk = p[a:b]
-        blk = blk[np.isfinite(blk)]
-        centres[k] = 0.5 * (a + b - 1)
-        if len(blk) == 0:
-            levels[k], counts[k] = np.nan, 0
-            continue
-        ref = np.median(blk) / math.log(2)
-        keep = blk[blk < 10 * ref]
-        levels[k] = keep.mean() if len(keep) else ref
-        counts[k] = len(keep)
+
+    def block_levels(blocks):  # rows of equal width, NaN for masked bins
+        ref = np.nanmedian(blocks, axis=1, keepdims=True) / math.log(2)
+        kept = np.where(blocks < 10 * ref, blocks, np.nan)
+        cnt = np.sum(np.isfinite(kept), axis=1)
+        with np.errstate(invalid="ignore"):
+            lev = np.nansum(kept, axis=1) / np.maximum(cnt, 1)
+        lev = np.where(cnt > 0, lev, ref[:, 0])
+        return lev, cnt
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN (masked) blocks
+        n_grow = int(np.searchsorted(edges, start))
+        for k in range(n_grow):
+            lev, cnt = block_levels(p[None, edges[k]:edges[k + 1]])
+            levels[k], counts[k] = lev[0], cnt[0]
+        if n_full:
+            lev, cnt = block_levels(p[start:start + n_full * width].reshape(n_full, width))
+            levels[n_grow:n_grow + n_full], counts[n_grow:n_grow + n_full] = lev, cnt
+        for k in range(n_grow + n_full, len(edges) - 1):
+            lev, cnt = block_levels(p[None, edges[k]:edges[k + 1]])
+            levels[k], counts[k] = lev[0], cnt[0]
     good = np.isfinite(levels)
     if not good.any():
         out = np.full(n, np.nan)
