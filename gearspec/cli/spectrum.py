@@ -1,0 +1,72 @@
+"""``gearspec spectrum``: constant-speed segments and their order spectra."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+
+
+def register(sub) -> None:
+    sp = sub.add_parser("spectrum", help="constant-speed segments and their order spectra",
+                        description="Find constant-speed segments per direction and analyse the torque ripple over "
+                                    "position in each: amplitude, phase and standard error at every declared gear "
+                                    "line, and peaks no declared line explains.")
+    add_recording_options(sp)
+    add_segment_options(sp)
+    g = sp.add_argument_group("spectra")
+    g.add_argument("--max-frequency", type=float, help="highest frequency searched, cycles per unit of theta")
+    g.add_argument("--min-cycles", type=float, default=1.0, help="cycles a declared line must complete in a segment")
+    g.add_argument("--harmonics", type=int, default=1, help="fit declared lines up to this harmonic (default 1)")
+    g.add_argument("--fap", type=float, default=0.01, help="false-alarm probability for a found peak (default 0.01)")
+    g.add_argument("--max-peaks", type=int, default=8, help="most undeclared peaks per segment (default 8)")
+    g.add_argument("--method", default="auto", choices=("auto", "nifty", "astropy", "scipy"),
+                   help="Lomb-Scargle implementation")
+    add_output_options(sp)
+    sp.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..report import write_spectrum_report
+    from ..spectrum import analyze
+
+    t0 = time.perf_counter()
+    rec = load_from_args(args)
+    seg = segments_from_args(rec, args)
+    result = analyze(rec, segmentation=seg, inertia=not args.no_inertia, max_frequency=args.max_frequency,
+                     min_cycles=args.min_cycles, harmonics=args.harmonics, fap_threshold=args.fap,
+                     max_peaks=args.max_peaks, method=args.method, keep_spectra=bool(args.out),
+                     progress=None if not args.quiet else False)
+    if args.json:
+        result.to_json(args.json)
+    if args.out:
+        write_spectrum_report(result, rec, seg, args.out, command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])))
+    if not args.quiet:
+        _print_summary(result, time.perf_counter() - t0, args)
+    return 0
+
+
+def _print_summary(result, elapsed, args) -> None:
+    unit = result.unit
+    tu = "Nm" if unit == "rad" else "N"
+    print(f"{len(result.segments)} segments; rows: {result.n_rows} read, "
+          f"{sum(s.segment.n for s in result.segments)} in segments"
+          + "".join(f", {v} {k}" for k, v in sorted(result.excluded.items())) + f"  ({elapsed:.1f} s)")
+    print(f"{'seg':>3} {'run':>3} {'dir':>3} {'speed':>10} {'n':>8}  strongest lines "
+          f"(frequency cycles/{unit}: amplitude {tu})")
+    for i, s in enumerate(result.segments):
+        top = sorted(s.peaks, key=lambda p: -p.amplitude)[:3]
+        txt = "; ".join(f"{p.frequency:.4g}: {p.amplitude:.3g}" + (f" [{p.label.split(' = ')[0]}]" if p.label else " [?]")
+                        for p in top)
+        print(f"{i:>3} {s.segment.run:>3} {s.direction:>+3d} {s.speed:>10.4g} {s.segment.n:>8}  {txt}")
+    un = result.unexplained()
+    if len(un):
+        print(f"{len(un)} significant peak(s) no declared line explains; see the report"
+              + ("" if args.out else " (--out DIR)"))
+    if args.out:
+        print(f"report: {Path(args.out) / 'report.md'}")
+    if args.json:
+        print(f"json: {args.json}")
