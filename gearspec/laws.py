@@ -20,7 +20,7 @@ paper) -- eqs. (8), (11), (12), (13).
 
 from __future__ import annotations
 
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Mapping
 
 import numpy as np
 

@@ -1,42 +1,18 @@
-"""Markdown reports.  A leaf module: nothing in the analysis imports it."""
+"""The report of ``gearspec spectrum``: segments, declared lines, unexplained peaks, spectra."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from . import plots
-from .recording import Recording
-from .segment import Segmentation
-from .spectrum.analysis import SpectrumResult
+from .. import plots
+from ..recording import Recording
+from ..segment import Segmentation
+from ..spectrum.analysis import SpectrumResult
+from . import _rpm, markdown_table
 
-__all__ = ["write_spectrum_report", "markdown_table"]
-
-
-def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
-    """A pandas DataFrame as a GitHub Markdown table (no extra dependency)."""
-    if df.empty:
-        return "_(none)_\n"
-    cols = list(df.columns)
-
-    def fmt(v):
-        if v is None or (isinstance(v, float) and math.isnan(v)):
-            return ""
-        if isinstance(v, (float, np.floating)):
-            return format(float(v), floatfmt)
-        return str(v).replace("|", "/")
-
-    lines = ["| " + " | ".join(str(c) for c in cols) + " |", "|" + "---|" * len(cols)]
-    for row in df.itertuples(index=False):
-        lines.append("| " + " | ".join(fmt(v) for v in row) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def _rpm(speed: float, unit: str) -> str:
-    return f"{speed * 60 / (2 * math.pi):.4g}" if unit == "rad" else ""
+__all__ = ["write_spectrum_report"]
 
 
 def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentation, out: str | Path,
@@ -62,7 +38,7 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     n_seg = sum(s.segment.n for s in result.segments)
     md += [f"Rows read: {result.n_rows}; in segments: {n_seg}; excluded: "
            + (", ".join(f"{k} {v}" for k, v in sorted(result.excluded.items())) or "none")
-           + f". (Every row is in one segment or counted once.)", ""]
+           + ". (Every row is in one segment or counted once.)", ""]
     if result.gear is not None:
         md += ["## Gear train", "", "```", result.gear.describe(), "```", ""]
     else:

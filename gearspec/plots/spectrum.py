@@ -1,34 +1,18 @@
-"""Figures (matplotlib, Agg).  A leaf module: nothing in the analysis imports it.
-
-Every function takes results and an output path, draws one figure, saves it as PNG and returns
-the path.  Units are on every axis.
-"""
+"""Figures of ``gearspec spectrum``."""
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .recording import Recording  # noqa: E402
-from .segment import Segmentation  # noqa: E402
-from .spectrum.analysis import SpectrumResult  # noqa: E402
+from ..recording import Recording
+from ..segment import Segmentation
+from ..spectrum.analysis import SpectrumResult
+from . import NEG as _NEG, POS as _POS, plt, save as _save
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained"]
-
-_POS, _NEG = "#1f77b4", "#d62728"
-
-
-def _save(fig, path) -> Path:
-    path = Path(path)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
 
 
 def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 200_000) -> Path:

@@ -1,0 +1,216 @@
+"""The data a friction model is fitted to and scored on: samples inside constant-speed segments,
+and plateau averages.
+
+:class:`FitData` holds, for every sample inside a segment of a recording, the position, the
+velocity, the friction torque (drive torque minus ``J thetadd`` when the gear spec gives ``J``;
+sign of the velocity) and whatever else the recording has (load, temperature, time, run), plus
+the segment each sample belongs to -- so that held-out errors can leave out *whole segments or
+runs*, never interleaved samples.  :meth:`FitData.plateaus` averages each segment (the Stribeck
+curve of SILO4 Fig. 4).  Quasi-static operating points (the Lola/CROPS testbed) are FitData too,
+one "segment" per point (:meth:`FitData.from_points`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+import pandas as pd
+
+from .errors import InputError
+from .recording import Recording
+from .segment import Segmentation, derivatives, find_segments
+
+__all__ = ["FitData"]
+
+_ARRAYS = ("theta", "v", "y", "acc", "load", "temperature", "t", "run", "segment", "direction")
+
+
+@dataclass
+class FitData:
+    """Samples for identification (all arrays of one length; optional channels may be None).
+
+    Attributes
+    ----------
+    theta : ndarray or None
+        Position, rad (or m).
+    v : ndarray
+        Velocity used by the laws, rad/s: the segment's mean velocity (``velocity="segment"``) or
+        the measured/differentiated one (``velocity="measured"``).
+    y : ndarray
+        Friction torque, Nm (N), with the sign of the motion.
+    acc : ndarray or None
+        Acceleration, rad/s^2 (Savitzky-Golay), when known.
+    load, temperature, t : ndarray or None
+        Output load (Nm), temperature (degC), time (s).
+    run, segment : ndarray of int
+        Run id and segment id of each sample.
+    direction : ndarray of int
+        +1 / -1.
+    unit : str
+        "rad" or "m".
+    segments : DataFrame
+        One row per segment id: ``segment, run, direction, speed, velocity, n`` (and ``t0, t1``).
+    notes : list of str
+    """
+
+    theta: np.ndarray | None
+    v: np.ndarray
+    y: np.ndarray
+    acc: np.ndarray | None = None
+    load: np.ndarray | None = None
+    temperature: np.ndarray | None = None
+    t: np.ndarray | None = None
+    run: np.ndarray | None = None
+    segment: np.ndarray | None = None
+    direction: np.ndarray | None = None
+    unit: str = "rad"
+    segments: pd.DataFrame = field(default_factory=pd.DataFrame)
+    notes: list = field(default_factory=list)
+
+    def __post_init__(self):
+        n = len(self.v)
+        for name in _ARRAYS:
+            a = getattr(self, name)
+            if a is not None:
+                a = np.asarray(a)
+                if a.shape != (n,):
+                    raise InputError(f"fit data: '{name}' has {a.shape} values, velocity has {n}")
+                setattr(self, name, a)
+        if self.direction is None:
+            self.direction = np.where(self.v >= 0, 1, -1).astype(np.int8)
+        if self.segment is None:
+            self.segment = np.zeros(n, np.int64)
+        if self.run is None:
+            self.run = np.zeros(n, np.int64)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, velocity: str = "segment",
+                       inertia: bool = True, **segment_options) -> "FitData":
+        """Samples inside the constant-speed segments of ``rec``.
+
+        Parameters
+        ----------
+        rec : Recording
+        segmentation : Segmentation, optional
+            Default: :func:`~gearspec.segment.find_segments` with ``segment_options``.
+        velocity : {"segment", "measured"}
+            The velocity the laws are evaluated at: each segment's mean velocity (robust to
+            closed-loop speed ripple and encoder noise; what the papers do), or the per-sample one
+            (the recording's ``velocity`` channel if it has one, else a Savitzky-Golay derivative).
+        inertia : bool
+            Subtract ``J thetadd`` when the gear spec gives ``J``.
+        """
+        if velocity not in ("segment", "measured"):
+            raise InputError(f"velocity must be 'segment' or 'measured', got '{velocity}'")
+        seg = segmentation if segmentation is not None else find_segments(rec, **segment_options)
+        if len(seg) == 0:
+            raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found (rows: {dict(seg.excluded)})")
+        vel, acc = derivatives(rec)
+        J = rec.gear.inertia if (inertia and rec.gear is not None and rec.gear.inertia) else None
+        tau = rec.tau
+        idx = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
+        sid = np.concatenate([np.full(s.n, i) for i, s in enumerate(seg.segments)])
+        d = np.concatenate([np.full(s.n, s.direction, np.int8) for s in seg.segments])
+        if velocity == "segment":
+            v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
+        elif "velocity" in rec.data:
+            v = rec.data["velocity"].to_numpy(dtype=float)[idx]
+        else:
+            v = vel[idx]
+        a = np.nan_to_num(acc[idx])
+        y = tau[idx] - (J * a if J else 0.0)
+        get = lambda c: rec.data[c].to_numpy(dtype=float)[idx] if c in rec.data else None  # noqa: E731
+        rows = [{"segment": i, "run": s.run, "direction": s.direction, "speed": s.speed, "velocity": s.velocity,
+                 "n": s.n, "t0": float(rec.t[s.start]), "t1": float(rec.t[s.stop - 1])}
+                for i, s in enumerate(seg.segments)]
+        notes = [f"{len(idx)} samples in {len(seg)} segments; velocity: {velocity}"]
+        if J:
+            notes.append(f"inertia removed: tau - {J:g} x thetadd")
+        return cls(theta=rec.theta[idx], v=v, y=y, acc=a, load=get("load"), temperature=get("temperature"),
+                   t=rec.t[idx], run=rec.run[idx], segment=sid, direction=d, unit=rec.unit,
+                   segments=pd.DataFrame(rows), notes=notes)
+
+    @classmethod
+    def from_points(cls, v, y, *, load=None, temperature=None, theta=None, unit: str = "rad") -> "FitData":
+        """Quasi-static operating points (one value each, e.g. the Lola/CROPS testbed's means):
+        each point is its own segment."""
+        v = np.asarray(v, dtype=float)
+        n = len(v)
+        if n == 0:
+            raise InputError("fit data: no points")
+        sid = np.arange(n)
+        d = np.where(v >= 0, 1, -1).astype(np.int8)
+        seg = pd.DataFrame({"segment": sid, "run": 0, "direction": d, "speed": np.abs(v), "velocity": v, "n": 1})
+        f = lambda x: None if x is None else np.asarray(x, dtype=float)  # noqa: E731
+        return cls(theta=f(theta), v=v, y=np.asarray(y, dtype=float), load=f(load), temperature=f(temperature),
+                   segment=sid, run=np.zeros(n, np.int64), direction=d, unit=unit, segments=seg)
+
+    # ------------------------------------------------------------------ views
+    def __len__(self) -> int:
+        return len(self.v)
+
+    @property
+    def n_segments(self) -> int:
+        return int(len(np.unique(self.segment)))
+
+    def inputs(self) -> dict:
+        """Keyword inputs of :meth:`gearspec.model.FrictionModel.evaluate`."""
+        return {"theta": self.theta, "v": self.v, "load": self.load, "temperature": self.temperature,
+                "t": self.t, "acc": self.acc, "run": self.run}
+
+    def subset(self, mask) -> "FitData":
+        """The samples where ``mask`` is true (a boolean array, or an index array)."""
+        mask = np.asarray(mask)
+        kw = {name: (None if getattr(self, name) is None else getattr(self, name)[mask]) for name in _ARRAYS}
+        keep = np.unique(kw["segment"])
+        segs = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) if len(self.segments) else \
+            self.segments
+        return replace(self, **kw, segments=segs, notes=list(self.notes))
+
+    def direction_subset(self, direction: int) -> "FitData":
+        return self.subset(self.direction == direction)
+
+    def groups(self, by: str = "segment") -> np.ndarray:
+        """Group id per sample for held-out folds: ``"segment"`` or ``"run"``."""
+        if by == "segment":
+            return self.segment
+        if by == "run":
+            return self.run
+        raise InputError(f"held-out groups must be 'segment' or 'run', got '{by}'")
+
+    def plateaus(self, blocks: int = 8) -> pd.DataFrame:
+        """One row per segment: mean speed, mean friction magnitude ``level`` and its standard
+        error (from ``blocks`` consecutive block means, so that ripple and coloured noise count),
+        mean load and temperature.  Sorted by direction and speed."""
+        rows = []
+        mag = self.direction * self.y
+        order = np.argsort(self.segment, kind="stable")
+        sids, starts = np.unique(self.segment[order], return_index=True)
+        bounds = np.append(starts, len(order))
+        info = self.segments.set_index("segment") if len(self.segments) else None
+        for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
+            ii = order[a:b]
+            m = mag[ii]
+            nb = min(blocks, len(m))
+            if nb >= 2:
+                bm = np.array([x.mean() for x in np.array_split(m, nb)])
+                se = float(bm.std(ddof=1) / np.sqrt(nb))
+            else:
+                se = float("nan")
+            row = {"segment": int(sid), "run": int(self.run[ii[0]]), "direction": int(self.direction[ii[0]]),
+                   "speed": float(np.mean(np.abs(self.v[ii]))), "n": len(ii), "level": float(m.mean()),
+                   "level_se": se}
+            if info is not None and sid in info.index:
+                row["speed"] = float(info.loc[sid, "speed"])
+            for c in ("load", "temperature", "t"):
+                arr = getattr(self, c)
+                if arr is not None:
+                    row[c] = float(np.mean(arr[ii]))
+            rows.append(row)
+        df = pd.DataFrame(rows)
+        return df.sort_values(["direction", "speed"], ascending=[False, True]).reset_index(drop=True)
+
+    def channels(self) -> list[str]:
+        return [f.name for f in fields(self) if f.name in _ARRAYS and getattr(self, f.name) is not None]

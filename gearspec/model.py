@@ -1,0 +1,400 @@
+"""FrictionModel: a friction law with per-direction parameters, position-locked harmonics and
+extra terms; evaluated, serialised, printed like the papers' tables, and scored on data.
+
+A model is
+
+    tau(theta, v, ...) = sign(v) * [ base_i(|v|, load) + sum_k H_k,i(theta, |v|, load) + magnitude terms ]
+                         + signed terms (inertia, offset)
+
+with ``i`` the direction of motion (``positive`` for v > 0, ``negative`` for v < 0), ``base`` one of
+the laws of :mod:`gearspec.laws` (:data:`LAWS`), ``H_k`` a position-locked sinusoid with a speed-
+dependent amplitude (SILO4 eqs. 6, 8, 14) and the extra terms of :mod:`gearspec.terms` (what the
+closed loop adds).  The friction torque has the sign of the velocity (``CONTRACTS.md``); at
+``v = 0`` the model gives only its signed terms.
+
+Serialised (``to_dict``/``to_json``) in the form of ``gearspec fit --json`` (``CONTRACTS.md`` section
+4): ``{"law", "directions": {"positive": P, "negative": P}, "rmse", "rmse_holdout", "terms", ...}``,
+every value ``x`` with its standard error ``x_se`` (NaN/None where unknown), harmonics as
+``{"frequency", "amplitude", "decay", "phase", ...}`` with ``decay`` in s/rad.  A model read back
+evaluates identically.
+
+Parameters that the data could not identify are ``None`` (never invented) and listed in
+``not_identified`` with the reason; evaluating a model with a missing parameter raises an error
+that names it.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from . import laws
+from .errors import InputError
+from .terms import TERMS, evaluate_term
+
+__all__ = ["FrictionModel", "LAWS", "Law", "RPM", "DIRECTIONS"]
+
+#: rad/s per rpm
+RPM = 2.0 * math.pi / 60.0
+DIRECTIONS = ("positive", "negative")
+
+
+@dataclass(frozen=True)
+class Law:
+    """A base friction law: its parameters (SI units) and its magnitude ``f(speed, load, **p)``."""
+
+    name: str
+    params: tuple[str, ...]
+    units: tuple[str, ...]          # per parameter, for a rotary axis (Nm, rad/s, Nm s/rad, -, s/rad)
+    magnitude: Callable
+    needs_load: bool = False
+    description: str = ""
+
+
+def _stribeck_mag(speed, load, tau_c, tau_s, v_s, viscous):
+    return laws.stribeck(speed, tau_c, tau_s, v_s, viscous)
+
+
+def _cv_mag(speed, load, tau_c, viscous):
+    return tau_c + viscous * speed
+
+
+def _lola8_mag(speed, load, t_f0, mu, b, gamma):
+    return laws.lola8(speed, load, t_f0, mu, b, gamma)
+
+
+def _lola11_mag(speed, load, t_f0, mu, b, t_fs, v_s):
+    return laws.lola11(speed, load, t_f0, mu, b, t_fs, v_s)
+
+
+#: base laws by name; ``silo4`` is eq. 3 plus the harmonics of eq. 11
+LAWS: dict[str, Law] = {
+    "none": Law("none", (), (), lambda speed, load: np.zeros_like(speed), description="no base friction"),
+    "coulomb_viscous": Law("coulomb_viscous", ("tau_c", "viscous"), ("Nm", "Nm s/rad"), _cv_mag,
+                           description="Coulomb + viscous: tau_c + B|v|"),
+    "stribeck": Law("stribeck", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
+                    description="SILO4 eq. 3: tau_c + (tau_s - tau_c) exp(-|v|/v_s) + B|v|"),
+    "silo4": Law("silo4", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
+                 description="SILO4 eq. 11: eq. 3 + position ripple + meshing ripple decaying as exp(-b|v|)"),
+    "lola8": Law("lola8", ("t_f0", "mu", "b", "gamma"), ("Nm", "-", "Nm s/rad", "s/rad"), _lola8_mag, True,
+                 "Lola/CROPS law (8): T_f0 + mu|T_l| + (b + gamma|T_l|)|v|"),
+    "lola11": Law("lola11", ("t_f0", "mu", "b", "t_fs", "v_s"), ("Nm", "-", "Nm s/rad", "Nm", "rad/s"), _lola11_mag,
+                  True, "Lola/CROPS law (11), Stribeck term made odd: T_f0 + mu|T_l| + (T_fS - T_f0)/(1+(v/v_S)^2) + b|v|"),
+}
+
+HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
+
+
+def _f(x):
+    """float or None (for JSON: NaN/inf become None)."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+class FrictionModel:
+    """A friction model with direction-dependent parameters (scikit-learn-like: a fitted model
+    carries what it learned; configuration and data checks happen in :mod:`gearspec.identify`).
+
+    Parameters
+    ----------
+    law : str
+        Base law, a key of :data:`LAWS`.
+    positive, negative : mapping
+        Parameters of the base law for each direction (``x`` and optionally ``x_se``), and
+        ``harmonics``: a list of mappings with ``frequency`` (cycles per unit of theta),
+        ``amplitude`` (Nm), ``decay`` (s/rad, default 0), ``phase`` (rad, default 0) and optionally
+        ``label``, ``law`` (amplitude law: exp (default), const, rational, power),
+        ``load_coefficient`` (SILO4 eq. 14) and the ``_se`` of each.  ``negative`` defaults to a
+        copy of ``positive`` (a symmetric model).
+    terms : iterable of dict
+        Extra terms (:mod:`gearspec.terms`).
+    unit : {"rad", "m"}
+        Unit of theta: torques are Nm (or N on a linear axis).
+    rmse, rmse_holdout : float, optional
+        Fit statistics (in-sample and on held-out data), in torque units.
+    not_identified : dict, optional
+        ``"direction.parameter" -> reason`` for parameters the data could not identify.
+    notes : list of str, optional
+    """
+
+    def __init__(self, law: str, positive: Mapping, negative: Mapping | None = None, *, terms: Iterable = (),
+                 unit: str = "rad", rmse: float | None = None, rmse_holdout: float | None = None,
+                 not_identified: Mapping | None = None, notes: Iterable[str] = (), name: str | None = None,
+                 meta: Mapping | None = None):
+        if law not in LAWS:
+            raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
+        if unit not in ("rad", "m"):
+            raise InputError(f"unit must be 'rad' or 'm', got '{unit}'")
+        self.law = law
+        self.directions = {"positive": self._clean_params(positive),
+                           "negative": self._clean_params(negative if negative is not None else positive)}
+        self.terms = [dict(t) for t in terms]
+        for t in self.terms:
+            if t.get("kind") not in TERMS:
+                raise InputError(f"unknown friction term kind '{t.get('kind')}'")
+        self.unit = unit
+        self.rmse = rmse
+        self.rmse_holdout = rmse_holdout
+        self.not_identified = dict(not_identified or {})
+        self.notes = list(notes)
+        self.name = name or law
+        self.meta = dict(meta or {})
+
+    # ------------------------------------------------------------------ parameters
+    def _clean_params(self, p: Mapping) -> dict:
+        p = dict(copy.deepcopy(dict(p)))
+        p["harmonics"] = [dict(h) for h in p.get("harmonics", [])]
+        for h in p["harmonics"]:
+            missing = [k for k in ("frequency", "amplitude") if k not in h]
+            if missing:
+                raise InputError(f"a harmonic of the model lacks {', '.join(missing)}")
+            h.setdefault("decay", 0.0)
+            h.setdefault("phase", 0.0)
+        for k in LAWS[self.law].params:
+            p.setdefault(k, None)
+        return p
+
+    @property
+    def law_spec(self) -> Law:
+        return LAWS[self.law]
+
+    def params(self, direction) -> dict:
+        """Parameters of one direction (``"positive"``/``"negative"`` or +1/-1)."""
+        return self.directions[_dir_name(direction)]
+
+    def harmonics(self, direction) -> list[dict]:
+        return self.params(direction)["harmonics"]
+
+    @property
+    def symmetric(self) -> bool:
+        return self.directions["positive"] == self.directions["negative"]
+
+    def copy(self) -> "FrictionModel":
+        return FrictionModel.from_dict(self.to_dict())
+
+    def with_terms(self, *terms: dict, name: str | None = None) -> "FrictionModel":
+        """A copy with extra terms appended."""
+        m = self.copy()
+        m.terms += [dict(t) for t in terms]
+        if name:
+            m.name = name
+        m.rmse = m.rmse_holdout = None
+        return m
+
+    def with_harmonic(self, harmonic: Mapping, direction=None) -> "FrictionModel":
+        """A copy with a harmonic added in one direction (or in both)."""
+        m = self.copy()
+        for d in ((_dir_name(direction),) if direction is not None else DIRECTIONS):
+            m.directions[d]["harmonics"].append(dict(harmonic))
+        m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
+        m.rmse = m.rmse_holdout = None
+        return m
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(self, theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None) -> np.ndarray:
+        """Torque the drive supplies according to the model, at each sample.
+
+        Friction (base law + harmonics + magnitude terms) has the sign of ``v``; signed terms
+        (inertia, offset) are added as they are.  Inputs are arrays of one length (scalars
+        broadcast): ``theta`` (rad or m; needed by harmonics), ``v`` (rad/s or m/s), ``load``
+        (Nm at the output), ``temperature`` (degC), ``t`` (s), ``acc`` (rad/s^2) and ``run``.
+        """
+        if v is None:
+            raise InputError("the model needs the velocity v")
+        v = np.atleast_1d(np.asarray(v, dtype=float))
+        shape = v.shape
+        bc = lambda x: None if x is None else np.broadcast_to(np.asarray(x, dtype=float), shape)  # noqa: E731
+        theta, load, temperature, t, acc = map(bc, (theta, load, temperature, t, acc))
+        run = None if run is None else np.broadcast_to(np.asarray(run), shape)
+        law = self.law_spec
+        if law.needs_load and load is None:
+            raise InputError(f"law {self.law} needs the output load torque ('load' channel), which the data does not have")
+        out = np.zeros(shape)
+        speed = np.abs(v)
+        sign = np.sign(v)
+        for d, name in ((1.0, "positive"), (-1.0, "negative")):
+            sel = sign == d
+            if not sel.any():
+                continue
+            p = self.directions[name]
+            missing = [k for k in law.params if p.get(k) is None]
+            if missing:
+                raise InputError(f"the model has no {name}-direction value for {', '.join(missing)} "
+                                 f"(not identified: {self.not_identified.get(name + '.' + missing[0], 'no data')}); "
+                                 f"it cannot predict motion in that direction")
+            ld = None if load is None else load[sel]
+            mag = np.asarray(law.magnitude(speed[sel], ld, *[p[k] for k in law.params]), dtype=float)
+            mag = np.broadcast_to(mag, (int(sel.sum()),)).copy()
+            for h in p["harmonics"]:
+                if h.get("amplitude") is None:
+                    continue
+                if theta is None:
+                    raise InputError("the model has position-locked harmonics and needs theta")
+                contrib, _ = evaluate_term({"kind": "periodic", **h}, theta=theta[sel], v=v[sel], load=ld)
+                mag += contrib
+            out[sel] = d * mag
+        inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
+        for term in self.terms:
+            contrib, signed = evaluate_term(term, **inputs)
+            out += contrib if signed else sign * contrib
+        return out
+
+    def friction(self, theta=None, v=None, **inputs) -> np.ndarray:
+        """Friction alone: :meth:`evaluate` without the signed terms (inertia, offset)."""
+        signed = [t for t in self.terms if TERMS[t["kind"]].signed]
+        if not signed:
+            return self.evaluate(theta, v, **inputs)
+        m = self.copy()
+        m.terms = [t for t in m.terms if not TERMS[t["kind"]].signed]
+        return m.evaluate(theta, v, **inputs)
+
+    def mean_level(self, speed, direction, load=None) -> np.ndarray:
+        """Friction magnitude averaged over position (the base law and magnitude terms that do
+        not depend on position): what a plateau average measures, for Stribeck-curve plots."""
+        d = 1.0 if _dir_name(direction) == "positive" else -1.0
+        s = np.atleast_1d(np.asarray(speed, dtype=float))
+        m = self.copy()
+        for p in m.directions.values():
+            p["harmonics"] = []
+        m.terms = [t for t in m.terms if t["kind"] not in ("periodic", "hysteresis") and not TERMS[t["kind"]].signed
+                   and not set(TERMS[t["kind"]].needs) - {"load"}]
+        return np.abs(m.evaluate(None, d * s, load=load))
+
+    # ------------------------------------------------------------------ scoring
+    def residual(self, data) -> np.ndarray:
+        """``data.y - prediction`` on a :class:`~gearspec.fitdata.FitData` (torque units)."""
+        return data.y - self.evaluate(**data.inputs())
+
+    def rmse_on(self, data) -> float:
+        r = self.residual(data)
+        return float(np.sqrt(np.mean(r * r))) if len(r) else float("nan")
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict:
+        """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready."""
+
+        def clean(obj):
+            if isinstance(obj, dict):
+                return {str(k): clean(v) for k, v in obj.items()}
+            if isinstance(obj, (list, tuple)):
+                return [clean(v) for v in obj]
+            if isinstance(obj, (bool, np.bool_)):
+                return bool(obj)
+            if isinstance(obj, (int, np.integer)):
+                return int(obj)
+            if isinstance(obj, (float, np.floating)):
+                return _f(obj)
+            return obj
+
+        return clean({"law": self.law, "name": self.name, "unit": self.unit,
+                      "directions": self.directions, "terms": self.terms,
+                      "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
+                      "not_identified": self.not_identified, "notes": self.notes, "meta": self.meta})
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "FrictionModel":
+        if "law" not in d or "directions" not in d:
+            raise InputError("a friction model needs 'law' and 'directions' (the gearspec fit --json form)")
+        dirs = d["directions"]
+        return cls(d["law"], dirs["positive"], dirs.get("negative"), terms=d.get("terms", ()), unit=d.get("unit", "rad"),
+                   rmse=d.get("rmse"), rmse_holdout=d.get("rmse_holdout"), not_identified=d.get("not_identified"),
+                   notes=d.get("notes", ()), name=d.get("name"), meta=d.get("meta"))
+
+    def to_json(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), indent=1))
+        return path
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> "FrictionModel":
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError(f"{path}: not a friction model JSON file ({exc})") from exc
+        return cls.from_dict(d)
+
+    # ------------------------------------------------------------------ tables
+    def table(self) -> pd.DataFrame:
+        """One row per parameter: SI value and standard error per direction, and on a rotary axis
+        the papers' units beside (mNm, rpm, mNm/rpm, 1/rpm)."""
+        rows = []
+        law = self.law_spec
+        for k, u in zip(law.params, law.units):
+            rows.append(_row(k, u, self.directions, lambda p, k=k: (p.get(k), p.get(k + "_se")), self.unit))
+        nh = max(len(p["harmonics"]) for p in self.directions.values())
+        for i in range(nh):
+            hs = {d: (p["harmonics"][i] if i < len(p["harmonics"]) else {}) for d, p in self.directions.items()}
+            lab = next((h.get("label") for h in hs.values() if h.get("label")), None) or f"harmonic {i + 1}"
+            f = next((h.get("frequency") for h in hs.values() if h.get("frequency") is not None), float("nan"))
+            for key, u in (("amplitude", "Nm"), ("decay", "s/rad"), ("phase", "rad")):
+                r = _row(f"{lab} {key}", u, {d: hs[d] for d in hs}, lambda h, key=key: (h.get(key), h.get(key + "_se")),
+                         self.unit)
+                r["frequency"] = f
+                rows.append(r)
+        for t in self.terms:
+            rows.append({"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None})
+        return pd.DataFrame(rows)
+
+    def __repr__(self) -> str:
+        return f"FrictionModel(law={self.law!r}, name={self.name!r}, terms={len(self.terms)})"
+
+    def __str__(self) -> str:
+        return self.describe()
+
+    def describe(self) -> str:
+        """A plain-text table of the parameters."""
+        df = self.table()
+        lines = [f"{self.name} (law {self.law}: {self.law_spec.description})"]
+        cols = [c for c in ("parameter", "unit", "positive", "positive_se", "negative", "negative_se",
+                            "paper_unit", "positive_paper", "negative_paper") if c in df]
+        lines.append(df[cols].to_string(index=False, float_format=lambda x: f"{x:.5g}"))
+        if self.rmse is not None or self.rmse_holdout is not None:
+            lines.append(f"rmse {_fmt(self.rmse)}, held-out rmse {_fmt(self.rmse_holdout)} "
+                         f"({'Nm' if self.unit == 'rad' else 'N'})")
+        for k, why in self.not_identified.items():
+            lines.append(f"not identified: {k}: {why}")
+        return "\n".join(lines)
+
+
+def _fmt(x):
+    return "n/a" if x is None else f"{x:.4g}"
+
+
+def _dir_name(direction) -> str:
+    if direction in ("positive", "negative"):
+        return direction
+    if direction in (1, 1.0, "+", "+1"):
+        return "positive"
+    if direction in (-1, -1.0, "-", "-1"):
+        return "negative"
+    raise InputError(f"direction must be 'positive'/'negative' or +1/-1, got {direction!r}")
+
+
+# conversion of SI units to the SILO4 paper's (mNm, rpm at the motor)
+_PAPER = {"Nm": ("mNm", 1e3), "rad/s": ("rpm", 1 / RPM), "Nm s/rad": ("mNm/rpm", 1e3 * RPM),
+          "s/rad": ("1/rpm", RPM), "rad": ("rad", 1.0), "-": ("-", 1.0)}
+
+
+def _row(name, unit, directions, get, axis_unit) -> dict:
+    r = {"parameter": name, "unit": unit if axis_unit == "rad" else unit.replace("Nm", "N").replace("rad", "m")}
+    conv = _PAPER.get(unit) if axis_unit == "rad" else None
+    if conv:
+        r["paper_unit"] = conv[0]
+    for d, p in directions.items():
+        val, se = get(p)
+        r[d] = _f(val)
+        r[d + "_se"] = _f(se)
+        if conv:
+            r[d + "_paper"] = None if val is None else float(val) * conv[1]
+    return r

@@ -1,0 +1,32 @@
+"""Figures (matplotlib, Agg), one module per command.  A leaf package: nothing in the analysis
+imports it.
+
+Every function takes results and an output path, draws one figure, saves it as PNG and returns
+the path.  Units are on every axis.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+__all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained", "save", "plt",
+           "POS", "NEG"]
+
+#: colours of the positive and negative direction in every figure
+POS, NEG = "#1f77b4", "#d62728"
+
+
+def save(fig, path) -> Path:
+    """Save a figure as PNG (110 dpi) and close it."""
+    path = Path(path)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+from .spectrum import plot_amplitude_vs_speed, plot_order_spectra, plot_segments, plot_unexplained  # noqa: E402
