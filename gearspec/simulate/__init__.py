@@ -3,6 +3,6 @@
 Simulations produce recordings and know nothing of the analysis.
 """
 
-from .synthetic import Ripple, plateau_recording
+from .synthetic import Ripple, model_recording, plateau_recording
 
-__all__ = ["Ripple", "plateau_recording"]
+__all__ = ["Ripple", "plateau_recording", "model_recording"]

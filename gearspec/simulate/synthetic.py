@@ -18,7 +18,7 @@ import numpy as np
 
 from ..recording import Recording
 
-__all__ = ["Ripple", "plateau_recording"]
+__all__ = ["Ripple", "plateau_recording", "model_recording"]
 
 
 @dataclass(frozen=True)
@@ -87,52 +87,11 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
     """
     rng = np.random.default_rng(seed)
     speeds = list(speeds)
-    durations = list(duration) if np.ndim(duration) else [float(duration)] * len(speeds)
     lvl = level if callable(level) else (lambda s, d, _c=float(level): _c)
-    dt = 1.0 / fs
-    # velocity command profile: ramp -> hold -> (next) ..., back to 0 at the end
-    pieces_v, pieces_hold = [], []
-    prev = 0.0
-    for i, (v, dur) in enumerate(zip(speeds, durations)):
-        n_r = max(1, int(round(ramp * fs)))
-        start = 0.0 if one_run_per_plateau else prev
-        pieces_v.append(np.linspace(start, v, n_r, endpoint=False))
-        pieces_hold.append(np.zeros(n_r, bool))
-        n_h = int(round(dur * fs))
-        pieces_v.append(np.full(n_h, float(v)))
-        pieces_hold.append(np.ones(n_h, bool))
-        if one_run_per_plateau:
-            pieces_v.append(np.linspace(v, 0.0, n_r))
-            pieces_hold.append(np.zeros(n_r, bool))
-        prev = v
-    if not one_run_per_plateau:
-        n_r = max(1, int(round(ramp * fs)))
-        pieces_v.append(np.linspace(prev, 0.0, n_r))
-        pieces_hold.append(np.zeros(n_r, bool))
-    vcmd = np.concatenate(pieces_v)
-    hold = np.concatenate(pieces_hold)
-    # plateau index per sample (which plateau's hold/ramp-in it belongs to)
-    per = 3 if one_run_per_plateau else 2
-    idx = np.concatenate([np.full(len(pieces_v[j]), min(j // per, len(speeds) - 1)) for j in range(len(pieces_v))])
-    n = len(vcmd)
     f_r = speed_ripple_frequency if speed_ripple_frequency is not None else (ripples[0].frequency if ripples else 1.0)
-    # integrate position with the position-locked speed ripple on plateaus: a few fixed-point
-    # passes of theta = theta0 + cumsum(v(theta) dt) (the ripple is small, so this converges fast)
-    def integrate(v):
-        return float(theta0) + np.concatenate(([0.0], np.cumsum(v[:-1]) * dt))
-
-    theta = integrate(vcmd)
-    v_actual = vcmd
-    if speed_ripple:
-        for _ in range(4):
-            v_actual = vcmd * (1.0 + speed_ripple * np.sin(2 * np.pi * f_r * theta) * hold)
-            theta = integrate(v_actual)
-    if one_run_per_plateau:
-        run = idx.astype(np.int64)
-        t = np.concatenate([np.arange(np.sum(run == r)) * dt for r in range(len(speeds))])
-    else:
-        run = np.zeros(n, np.int64)
-        t = np.arange(n) * dt
+    t, theta, v_actual, hold, idx, run, durations = _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0,
+                                                             one_run_per_plateau)
+    n = len(t)
     # friction magnitude
     direction = np.sign(v_actual)
     torque = np.zeros(n)
@@ -157,3 +116,123 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
     rec = Recording.from_arrays(t=t, theta=meas_theta, torque=torque, run=run, gear=gear, unit=unit,
                                 source="synthetic")
     return rec, truth
+
+
+def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_plateau):
+    """Velocity profile of plateaus joined by linear ramps, with a position-locked speed ripple on
+    the plateaus; returns ``t, theta, v, hold, plateau_index, run, durations``."""
+    durations = list(duration) if np.ndim(duration) else [float(duration)] * len(speeds)
+    if len(durations) != len(speeds):
+        raise ValueError(f"{len(durations)} durations for {len(speeds)} plateaus")
+    dt = 1.0 / fs
+    # velocity command profile: ramp -> hold -> (next) ..., back to 0 at the end
+    pieces_v, pieces_hold = [], []
+    prev = 0.0
+    n_r = max(1, int(round(ramp * fs)))
+    for v, dur in zip(speeds, durations):
+        start = 0.0 if one_run_per_plateau else prev
+        pieces_v.append(np.linspace(start, v, n_r, endpoint=False))
+        pieces_hold.append(np.zeros(n_r, bool))
+        n_h = int(round(dur * fs))
+        pieces_v.append(np.full(n_h, float(v)))
+        pieces_hold.append(np.ones(n_h, bool))
+        if one_run_per_plateau:
+            pieces_v.append(np.linspace(v, 0.0, n_r))
+            pieces_hold.append(np.zeros(n_r, bool))
+        prev = v
+    if not one_run_per_plateau:
+        pieces_v.append(np.linspace(prev, 0.0, n_r))
+        pieces_hold.append(np.zeros(n_r, bool))
+    vcmd = np.concatenate(pieces_v)
+    hold = np.concatenate(pieces_hold)
+    # plateau index per sample (which plateau's hold/ramp-in it belongs to)
+    per = 3 if one_run_per_plateau else 2
+    idx = np.concatenate([np.full(len(pieces_v[j]), min(j // per, len(speeds) - 1)) for j in range(len(pieces_v))])
+    n = len(vcmd)
+
+    # integrate position with the position-locked speed ripple on plateaus: a few fixed-point
+    # passes of theta = theta0 + cumsum(v(theta) dt) (the ripple is small, so this converges fast)
+    def integrate(v):
+        return float(theta0) + np.concatenate(([0.0], np.cumsum(v[:-1]) * dt))
+
+    theta = integrate(vcmd)
+    v_actual = vcmd
+    if speed_ripple:
+        for _ in range(4):
+            v_actual = vcmd * (1.0 + speed_ripple * np.sin(2 * np.pi * f_r * theta) * hold)
+            theta = integrate(v_actual)
+    if one_run_per_plateau:
+        run = idx.astype(np.int64)
+        t = np.concatenate([np.arange(np.sum(run == r)) * dt for r in range(len(speeds))])
+    else:
+        run = np.zeros(n, np.int64)
+        t = np.arange(n) * dt
+    return t, theta, v_actual, hold, idx, run, durations
+
+
+def _per_plateau(value, idx, t, name, n_plateaus):
+    """A channel from a scalar, a per-plateau sequence or a callable of time."""
+    if value is None:
+        return None
+    if callable(value):
+        return np.asarray(value(t), dtype=float) * np.ones(len(t))
+    if np.ndim(value) == 0:
+        return np.full(len(t), float(value))
+    value = np.asarray(value, dtype=float)
+    if len(value) != n_plateaus:
+        raise ValueError(f"{name}: {len(value)} values for {n_plateaus} plateaus")
+    return value[idx]
+
+
+def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_ripple=0.0,
+                    speed_ripple_frequency=1.0, noise=0.0, load=None, temperature=None, inertia=0.0,
+                    one_run_per_plateau=True, quantum=0.0, gear=None, unit="rad", theta0=0.0, seed=None):
+    """A recording of plateaus whose friction is ``model`` (a FrictionModel), with known truth.
+
+    Parameters
+    ----------
+    model : FrictionModel
+        The true friction; evaluated at every sample (position, actual velocity, load,
+        temperature, time, acceleration, run).
+    speeds, duration, fs, ramp, speed_ripple, one_run_per_plateau, quantum, gear, unit, theta0, seed
+        As in :func:`plateau_recording`.
+    speed_ripple_frequency : float
+        Frequency over position of the speed ripple, cycles per unit.
+    noise : float
+        Standard deviation of white torque noise (Nm).
+    load, temperature : float, sequence (one per plateau) or callable of t, optional
+        Load torque (Nm) and temperature (degC) channels; recorded and passed to the model.
+        A callable gets the time of each sample (restarting at 0 in each run when
+        ``one_run_per_plateau``).
+    inertia : float
+        Rotor inertia J: the drive torque is ``friction + J thetadd``.
+
+    Returns
+    -------
+    recording : Recording
+    truth : list of dict
+        Per plateau: ``direction``, ``speed``, ``run``, ``t0``, ``t1`` and ``level`` (the model's
+        position-averaged friction magnitude at the plateau speed).
+    """
+    rng = np.random.default_rng(seed)
+    speeds = list(speeds)
+    t, theta, v, hold, idx, run, durations = _profile(speeds, duration, fs, ramp, speed_ripple,
+                                                      speed_ripple_frequency, theta0, one_run_per_plateau)
+    ld = _per_plateau(load, idx, t, "load", len(speeds))
+    temp = _per_plateau(temperature, idx, t, "temperature", len(speeds))
+    acc = np.gradient(v, 1.0 / fs)
+    torque = model.evaluate(theta, v, load=ld, temperature=temp, t=t, acc=acc, run=run) + inertia * acc
+    if noise:
+        torque = torque + rng.normal(0.0, noise, len(t))
+    truth = []
+    for j, sp in enumerate(speeds):
+        held = (idx == j) & hold
+        d = 1 if sp > 0 else -1
+        lvl = model.mean_level(abs(sp), d, load=None if ld is None else ld[held][:1])
+        truth.append({"direction": d, "speed": abs(sp), "run": int(run[held][0]), "t0": float(t[held][0]),
+                      "t1": float(t[held][-1]), "level": float(lvl[0])})
+    meas_theta = np.round(theta / quantum) * quantum if quantum else theta
+    rec = Recording.from_arrays(t=t, theta=meas_theta, torque=torque, run=run, load=ld, temperature=temp, gear=gear,
+                                unit=unit, source="synthetic")
+    return rec, truth
+
