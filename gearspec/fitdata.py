@@ -67,6 +67,9 @@ class FitData:
     unit: str = "rad"
     segments: pd.DataFrame = field(default_factory=pd.DataFrame)
     notes: list = field(default_factory=list)
+    #: per-segment results computed once (e.g. the sufficient statistics of identify.fit), keyed
+    #: by what was computed; shared with subsets, whose segments keep their ids
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
         n = len(self.v)
@@ -167,7 +170,7 @@ class FitData:
         keep = np.unique(kw["segment"])
         segs = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) if len(self.segments) else \
             self.segments
-        return replace(self, **kw, segments=segs, notes=list(self.notes))
+        return replace(self, **kw, segments=segs, notes=list(self.notes), cache=self.cache)
 
     def direction_subset(self, direction: int) -> "FitData":
         return self.subset(self.direction == direction)

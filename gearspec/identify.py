@@ -1,0 +1,1029 @@
+"""Identification of friction models: the papers' procedures and better estimators beside them.
+
+Two estimators of the SILO4 model (eq. 11) and its parts:
+
+* :func:`silo4_published` -- the procedure as published (SILO4 section 3-4): Coulomb and viscous
+  friction from a straight line through the plateau averages above ``high_speed`` (100 rpm),
+  static friction and Stribeck velocity from the log-linear fit of eqs. 4-5 on the plateaus
+  below it (viscous term neglected), and per stage and direction the amplitude and decay constant
+  from the log-linear fit of eq. 10 to the amplitudes of the spectra (``constant`` stages, the
+  paper's F1, keep a constant amplitude, eq. 6), phases from the spectra (circular mean).
+* :func:`fit` -- weighted nonlinear least squares of all parameters of a direction jointly, on the
+  samples themselves (amplitudes fitted in the position domain, not through logs of noisy
+  amplitudes), with standard errors from the covariance (or a bootstrap over segments).
+
+How :func:`fit` works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
+coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the friction level, and
+``A_k e^{-b_k |v_s|}`` times ``cos phi_k``, ``sin phi_k`` of every harmonic), so the residual sum of
+squares of the segment is exactly ``(beta_s - beta_hat_s)^T G_s (beta_s - beta_hat_s) + const``
+with ``G_s = X_s^T X_s`` and ``beta_hat_s`` the segment's own least-squares coefficients (X_s: the
+columns 1, sin, cos at the samples' positions).  One pass over the samples gives every ``G_s`` and
+``beta_hat_s``; the fit then works on a few numbers per segment -- exact, and independent of the
+number of samples.  Each segment is weighted by the inverse of its own residual variance (pure
+error: the variance left after its unrestricted local fit).  The law's linear parameters are
+solved in closed form for given nonlinear ones (variable projection: Stribeck velocity, decay
+constants), the nonlinear ones by ``scipy.optimize.least_squares`` from a grid start, and a last
+joint Gauss-Newton pass over all parameters gives the covariance.  This needs the velocity constant
+within a segment: the laws are evaluated at each segment's mean velocity (``FitData`` with
+``velocity="segment"``), and a load-dependent law at the segment's mean load.
+
+Lola/CROPS: :func:`fit` with ``law="lola8"``/``"lola11"`` fits friction points (from
+:meth:`FitData.from_points` or the load-holding segments of a recording); :func:`fit_efficiency`
+fits the efficiency (eq. 13) of such points as the paper does (eq. 9) with the constraints of
+eq. 10; :func:`fit_catalog` fits law (8) to a catalog table of efficiency.
+
+Held-out errors (:func:`holdout_rmse`, :func:`compare`) leave out whole segments or runs, never
+interleaved samples.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import optimize
+
+from . import laws
+from .errors import InputError, warn
+from .fitdata import FitData
+from .gears import GearTrain, load_gear
+from .model import LAWS, RPM, FrictionModel
+
+__all__ = ["fit", "silo4_published", "holdout_rmse", "compare", "refit", "harmonic_specs", "fit_efficiency",
+           "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError"]
+
+_TWO_PI = 2.0 * np.pi
+
+
+class ConvergenceError(InputError):
+    """The fit did not converge (too few data for the law, or data the law cannot describe)."""
+
+
+# ---------------------------------------------------------------------- laws as linear bases
+@dataclass(frozen=True)
+class _Basis:
+    """A base law written as ``sum_j lin_j * column_j(speed, load; nonlin)``."""
+
+    lin: tuple[str, ...]
+    nonlin: tuple[str, ...]
+    columns: Callable          # (speed, load, *nonlin) -> (n, len(lin))
+    nonneg: tuple[str, ...] = ()   # linear parameters constrained >= 0 (eq. 10)
+
+
+def _stribeck_cols(s, load, v_s):
+    e = np.exp(-s / v_s)
+    return np.column_stack([1.0 - e, e, s])
+
+
+def _lola11_cols(s, load, v_s):
+    r = 1.0 / (1.0 + (s / v_s) ** 2)
+    tl = np.abs(load)
+    return np.column_stack([1.0 - r, tl, s, r])
+
+
+_BASES = {
+    "none": _Basis((), (), lambda s, load: np.zeros((len(s), 0))),
+    "coulomb_viscous": _Basis(("tau_c", "viscous"), (), lambda s, load: np.column_stack([np.ones_like(s), s])),
+    "stribeck": _Basis(("tau_c", "tau_s", "viscous"), ("v_s",), _stribeck_cols),
+    "silo4": _Basis(("tau_c", "tau_s", "viscous"), ("v_s",), _stribeck_cols),
+    "lola8": _Basis(("t_f0", "mu", "b", "gamma"), (),
+                    lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s, np.abs(load) * s])),
+    "lola11": _Basis(("t_f0", "mu", "b", "t_fs"), ("v_s",), _lola11_cols),
+}
+
+
+# ---------------------------------------------------------------------- harmonics to fit
+def harmonic_specs(harmonics=None, gear: GearTrain | str | None = None) -> list[dict]:
+    """The position-locked lines a model fits: ``[{"frequency", "label"}]``.
+
+    ``harmonics``: None (every declared line of ``gear``: shafts, wave generator, meshes), a
+    list of frequencies (cycles per unit of theta), or a list of dicts with ``frequency`` and
+    optionally ``label``, ``law`` (amplitude law: exp, const, rational, power) and ``decay``
+    (False to keep the amplitude constant, SILO4 eq. 6).
+    """
+    if harmonics is None:
+        g = load_gear(gear) if gear is not None else None
+        if g is None:
+            return []
+        return [{"frequency": ln.frequency, "label": ln.label} for ln in g.declared_lines()]
+    out = []
+    for h in harmonics:
+        if isinstance(h, Mapping):
+            if "frequency" not in h:
+                raise InputError("a harmonic to fit needs a 'frequency' (cycles per unit of theta)")
+            out.append(dict(h))
+        else:
+            out.append({"frequency": float(h), "label": None})
+    for h in out:
+        if not (np.isfinite(h["frequency"]) and h["frequency"] > 0):
+            raise InputError(f"harmonic frequency must be positive, got {h['frequency']}")
+    return out
+
+
+# ---------------------------------------------------------------------- sufficient statistics
+@dataclass
+class SegmentStats:
+    """Per-segment sufficient statistics of the samples for one direction.
+
+    ``G[s]``, ``g[s]``, ``yy[s]``: normal equations of the local model ``[1, sin_k, cos_k]`` on the
+    friction magnitude; ``active[s, k]``: whether harmonic k is fitted in segment s (it completes
+    at least ``min_cycles`` cycles and lies below ``nyquist_fraction`` of the position Nyquist);
+    ``speed``, ``load`` (mean), ``n``, ``sigma2`` (residual variance of the unrestricted local fit).
+    """
+
+    segment: np.ndarray
+    speed: np.ndarray
+    load: np.ndarray | None
+    n: np.ndarray
+    G: np.ndarray          # (S, P, P)
+    g: np.ndarray          # (S, P)
+    yy: np.ndarray         # (S,)
+    active: np.ndarray     # (S, K) bool
+    cycles: np.ndarray     # (S, K) cycles of each line in each segment
+    sigma2: np.ndarray     # (S,)
+    beta_hat: np.ndarray   # (S, P)
+    rss_hat: np.ndarray    # (S,)
+    frequencies: np.ndarray
+
+    def take(self, idx) -> "SegmentStats":
+        """The statistics of the segments ``idx`` (rows; repeats allowed, as in a bootstrap)."""
+        idx = np.asarray(idx)
+        t = lambda a: None if a is None else a[idx]  # noqa: E731
+        return SegmentStats(np.arange(len(idx)), t(self.speed), t(self.load), t(self.n), t(self.G), t(self.g),
+                            t(self.yy), t(self.active), t(self.cycles), t(self.sigma2), t(self.beta_hat),
+                            t(self.rss_hat), self.frequencies)
+
+
+def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: float = 1.0,
+                  nyquist_fraction: float = 0.8) -> SegmentStats:
+    """One pass over the samples of ``data`` (one direction): see :class:`SegmentStats`.
+
+    Results are cached per segment on ``data`` (and shared with its whole-segment subsets), so
+    that cross-validation and refits do not pass over the samples again.
+    """
+    freqs = np.asarray(list(frequencies), dtype=float)
+    key = (tuple(freqs.tolist()), float(min_cycles), float(nyquist_fraction))
+    cache = data.cache.setdefault(("segment_stats",) + key, {})
+    order = np.argsort(data.segment, kind="stable")
+    sids, starts = np.unique(data.segment[order], return_index=True)
+    bounds = np.append(starts, len(order))
+    rows = []
+    for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
+        ii = order[a:b]
+        tag = (int(sid), len(ii), float(data.y[ii[0]]), float(data.y[ii[-1]]))
+        row = cache.get(tag)
+        if row is None:
+            row = _one_segment_stats(data, ii, freqs, min_cycles, nyquist_fraction)
+            cache[tag] = row
+        rows.append(row)
+    K = len(freqs)
+    P = 1 + 2 * K
+    S = len(rows)
+    stack = lambda name, shape: (np.array([r[name] for r in rows]) if S else np.zeros(shape))  # noqa: E731
+    load = stack("load", (0,)) if data.load is not None else None
+    return SegmentStats(sids, stack("speed", (0,)), load, stack("n", (0,)).astype(int), stack("G", (0, P, P)),
+                        stack("g", (0, P)), stack("yy", (0,)), stack("active", (0, K)).astype(bool),
+                        stack("cycles", (0, K)), stack("sigma2", (0,)), stack("beta_hat", (0, P)),
+                        stack("rss_hat", (0,)), freqs)
+
+
+def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cycles: float,
+                       nyquist_fraction: float) -> dict:
+    K = len(freqs)
+    P = 1 + 2 * K
+    y = data.direction[ii] * data.y[ii]
+    out = {"n": len(ii), "speed": float(np.mean(np.abs(data.v[ii]))),
+           "load": float(np.mean(np.abs(data.load[ii]))) if data.load is not None else 0.0,
+           "active": np.zeros(K, bool), "cycles": np.zeros(K)}
+    X = np.ones((len(ii), P))
+    if K:
+        if data.theta is None:
+            raise InputError("harmonics need positions (theta) in the fit data")
+        th = data.theta[ii]
+        span = float(np.ptp(th)) if len(th) > 1 else 0.0
+        out["cycles"] = freqs * span
+        dth = np.abs(np.diff(np.sort(th))) if len(th) > 2 else np.array([np.inf])
+        step = float(np.percentile(dth[dth > 0], 90)) if np.any(dth > 0) else np.inf
+        nyq = 0.5 / step if step > 0 else np.inf
+        out["active"] = (out["cycles"] >= min_cycles) & (freqs < nyquist_fraction * nyq)
+        # phases from positions centred on the segment (exact in double precision), rotated back
+        # to theta = 0: sin(w(th-m) + wm) = sin(w(th-m)) cos(wm) + cos(w(th-m)) sin(wm)
+        m = th.mean()
+        ph = _TWO_PI * np.outer(th - m, freqs)
+        sn, cs = np.sin(ph), np.cos(ph)
+        rot = _TWO_PI * freqs * m
+        c, s_ = np.cos(rot), np.sin(rot)
+        X[:, 1::2] = sn * c + cs * s_
+        X[:, 2::2] = cs * c - sn * s_
+        X[:, 1:][:, np.repeat(~out["active"], 2)] = 0.0
+    G = X.T @ X
+    g = X.T @ y
+    yy = float(y @ y)
+    beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
+    rss = max(yy - beta @ g, 0.0)
+    dof = len(ii) - (1 + 2 * int(out["active"].sum()))
+    out.update(G=G, g=g, yy=yy, beta_hat=beta, rss_hat=rss, sigma2=rss / dof if dof >= 3 else np.nan)
+    return out
+
+
+# ---------------------------------------------------------------------- the joint fit of one direction
+@dataclass
+class _Problem:
+    stats: SegmentStats
+    basis: _Basis
+    harmonics: list[dict]
+    decay_free: np.ndarray     # (K,) bool: decay fitted (else fixed 0)
+    amp_law: list[str]
+    weights: np.ndarray        # (S,)
+    Lt: np.ndarray             # (S, P, P): sqrt(w) diag(sqrt(lambda)) U^T
+
+    @property
+    def K(self):
+        return len(self.harmonics)
+
+    def factors(self, decays):
+        """(S, K) amplitude factor of each harmonic at each segment's speed."""
+        s = self.stats.speed[:, None]
+        out = np.ones((len(s), self.K))
+        for k, law in enumerate(self.amp_law):
+            b = decays[k]
+            if law == "exp":
+                out[:, k] = np.exp(-b * s[:, 0])
+            elif law == "rational":
+                out[:, k] = 1.0 / (1.0 + (b * s[:, 0]) ** 2)
+            elif law == "power":
+                out[:, k] = (1.0 + s[:, 0]) ** (-b)
+            elif law == "const":
+                out[:, k] = 1.0
+            else:
+                raise InputError(f"unknown amplitude law '{law}'")
+        return out
+
+    def design(self, nonlin_base, decays):
+        """M (S, P, L): local coefficients = M @ lin, lin = [base lin..., a_1, c_1, ...]."""
+        st = self.stats
+        S, P = st.g.shape
+        nb = len(self.basis.lin)
+        L = nb + 2 * self.K
+        M = np.zeros((S, P, L))
+        if nb:
+            M[:, 0, :nb] = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
+        fac = self.factors(decays) * st.active
+        for k in range(self.K):
+            M[:, 1 + 2 * k, nb + 2 * k] = fac[:, k]
+            M[:, 2 + 2 * k, nb + 2 * k + 1] = fac[:, k]
+        return M
+
+    def solve_linear(self, nonlin_base, decays):
+        M = self.design(nonlin_base, decays)
+        A = np.einsum("spq,sql->spl", self.Lt, M).reshape(-1, M.shape[2])
+        rhs = np.einsum("spq,sq->sp", self.Lt, self.stats.beta_hat).ravel()
+        nonneg = [j for j, nm in enumerate(self.basis.lin) if nm in self.basis.nonneg]
+        if nonneg:
+            lo = np.full(A.shape[1], -np.inf)
+            lo[nonneg] = 0.0
+            sol = optimize.lsq_linear(A, rhs, bounds=(lo, np.inf), method="bvls").x
+        else:
+            sol = np.linalg.lstsq(A, rhs, rcond=None)[0]
+        return sol, A @ sol - rhs
+
+    def residual_full(self, lin, nonlin_base, decays):
+        M = self.design(nonlin_base, decays)
+        beta = np.einsum("spl,l->sp", M, lin)
+        return np.einsum("spq,sq->sp", self.Lt, beta - self.stats.beta_hat).ravel()
+
+    def rss_const(self):
+        return float(np.sum(self.weights * self.stats.rss_hat))
+
+
+def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
+    basis = _BASES[law]
+    S, P = stats.g.shape
+    if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
+        w = 1.0 / stats.sigma2
+        w = w / np.median(w)
+    elif weights in ("segment", "uniform"):
+        w = np.ones(S)
+    else:
+        raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
+    Lt = np.zeros((S, P, P))
+    for i in range(S):
+        lam, U = np.linalg.eigh(stats.G[i])
+        lam = np.clip(lam, 0.0, None)
+        Lt[i] = math.sqrt(w[i]) * (np.sqrt(lam)[:, None] * U.T)
+    decay_free = np.array([h.get("decay", True) is not False and h.get("law", "exp") != "const" for h in harmonics],
+                          bool)
+    amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
+    return _Problem(stats, basis, harmonics, decay_free, amp_law, w, Lt)
+
+
+def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
+    """Variable projection from a grid start, then one joint least-squares pass for the covariance."""
+    st = prob.stats
+    nb_nl = len(prob.basis.nonlin)
+    free = np.flatnonzero(prob.decay_free)
+    spd = st.speed[st.speed > 0]
+    # grids for the start: Stribeck velocity over the plateau speeds, decays from 0
+    if nb_nl:
+        lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
+        grid_vs = np.geomspace(lo / 10, hi * 2, 25)
+        if init and init.get("v_s"):
+            grid_vs = np.append(grid_vs, float(init["v_s"]))
+    else:
+        grid_vs = [None]
+    dec0 = np.zeros(prob.K)
+    if init:
+        for k, h in enumerate(init.get("harmonics", [])[:prob.K]):
+            if h.get("decay") is not None and prob.decay_free[k]:
+                dec0[k] = float(h["decay"])
+    best = None
+    for vs in grid_vs:
+        nl = [] if vs is None else [vs]
+        _, r = prob.solve_linear(nl, dec0)
+        c = float(r @ r)
+        if best is None or c < best[0]:
+            best = (c, nl)
+    # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
+    sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
+    x0 = np.concatenate([np.log(best[1]) if nb_nl else [], dec0[free] / sscale])
+
+    def unpack(x):
+        nl = list(np.exp(x[:nb_nl])) if nb_nl else []
+        dec = dec0.copy()
+        dec[free] = x[nb_nl:] * sscale
+        return nl, dec
+
+    def proj(x):
+        nl, dec = unpack(x)
+        return prob.solve_linear(nl, dec)[1]
+
+    if len(x0):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            res = optimize.least_squares(proj, x0, method="trf", x_scale="jac", max_nfev=400)
+        if not np.all(np.isfinite(res.x)):
+            raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
+        x_opt = res.x
+        status = res.status
+    else:
+        x_opt = x0
+        status = 1
+    nl, dec = unpack(x_opt)
+    lin, _ = prob.solve_linear(nl, dec)
+    # joint pass over all parameters: covariance from the Jacobian at the optimum
+    nb = len(prob.basis.lin)
+
+    def full(z):
+        lin_ = z[:len(lin)]
+        x = z[len(lin):]
+        nl_, dec_ = unpack(x)
+        return prob.residual_full(lin_, nl_, dec_)
+
+    z = np.concatenate([lin, x_opt])
+    r = full(z)
+    J = _jacobian(full, z)
+    rss = float(r @ r) + prob.rss_const()
+    N = int(np.sum(st.n))
+    p = len(z)
+    dof = max(N - p, 1)
+    s2 = rss / dof
+    JtJ = J.T @ J
+    try:
+        cov = np.linalg.inv(JtJ) * s2
+        ok = np.all(np.isfinite(cov))
+    except np.linalg.LinAlgError:
+        cov = np.full((p, p), np.nan)
+        ok = False
+    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if ok else np.full(p, np.nan)
+    out = {"lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2, "dof": dof,
+           "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
+    return out
+
+
+def _jacobian(fun, z):
+    f0 = fun(z)
+    J = np.empty((len(f0), len(z)))
+    for j in range(len(z)):
+        h = 1e-6 * max(abs(z[j]), 1e-8)
+        zp = z.copy()
+        zp[j] += h
+        zm = z.copy()
+        zm[j] -= h
+        J[:, j] = (fun(zp) - fun(zm)) / (2 * h)
+    return J
+
+
+def _direction_params(prob: _Problem, sol: dict) -> dict:
+    """Fitted values and standard errors of one direction, in the FrictionModel form."""
+    basis = prob.basis
+    lin, se, cov = sol["lin"], sol["se"], sol["cov"]
+    nb = sol["n_lin"]
+    L = len(lin)
+    P: dict = {}
+    for j, name in enumerate(basis.lin):
+        P[name] = float(lin[j])
+        P[name + "_se"] = float(se[j])
+    # nonlinear base parameters are fitted as logs: delta method
+    for j, name in enumerate(basis.nonlin):
+        val = float(sol["nonlin"][j])
+        P[name] = val
+        P[name + "_se"] = float(val * se[L + j])
+    harm = []
+    free = list(sol["free"])
+    for k, h in enumerate(prob.harmonics):
+        a, c = lin[nb + 2 * k], lin[nb + 2 * k + 1]
+        ia, ic = nb + 2 * k, nb + 2 * k + 1
+        A = float(math.hypot(a, c))
+        phi = float(math.atan2(c, a))
+        if A > 0 and np.all(np.isfinite(cov)):
+            ga = np.array([a / A, c / A])
+            gp = np.array([-c / A ** 2, a / A ** 2])
+            C2 = cov[np.ix_([ia, ic], [ia, ic])]
+            a_se = float(math.sqrt(max(ga @ C2 @ ga, 0)))
+            p_se = float(math.sqrt(max(gp @ C2 @ gp, 0)))
+        else:
+            a_se = p_se = float("nan")
+        entry = {"frequency": float(h["frequency"]), "amplitude": A, "amplitude_se": a_se,
+                 "decay": float(sol["decays"][k]), "phase": phi, "phase_se": p_se,
+                 "law": prob.amp_law[k]}
+        if k in free:
+            j = L + sol["nb_nl"] + free.index(k)
+            entry["decay_se"] = float(se[j] * sol["sscale"])
+        else:
+            entry["decay_se"] = 0.0 if prob.amp_law[k] == "const" else float("nan")
+        if h.get("label"):
+            entry["label"] = h["label"]
+        entry["segments"] = int(prob.stats.active[:, k].sum())
+        harm.append(entry)
+    P["harmonics"] = harm
+    return P
+
+
+def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",
+        se: str = "covariance", bootstrap: int = 200, min_cycles: float = 1.0, holdout: str | None = "segment",
+        folds: int = 5, init: FrictionModel | None = None, seed: int = 0, name: str | None = None) -> FrictionModel:
+    """Fit a friction law to samples, jointly per direction (weighted nonlinear least squares).
+
+    Parameters
+    ----------
+    data : FitData
+        Samples in constant-speed segments (``velocity="segment"``) or quasi-static points.
+    law : str
+        ``silo4`` (eq. 11: eq. 3 + harmonics), ``stribeck`` (eq. 3 alone), ``coulomb_viscous``,
+        ``lola8``, ``lola11`` or ``none`` (harmonics only).  ``silo4`` fits the declared lines of
+        ``gear`` unless ``harmonics`` says otherwise; the others fit ``harmonics`` only if given.
+    harmonics, gear
+        See :func:`harmonic_specs`.
+    weights : {"segment", "uniform"}
+        Weight each segment by the inverse of its own residual variance, or all samples alike.
+    se : {"covariance", "bootstrap"}
+        Standard errors from the covariance of the weighted fit, or from ``bootstrap`` refits on
+        segments resampled with replacement (per direction).
+    min_cycles : float
+        A harmonic is fitted in a segment where it completes at least this many cycles.
+    holdout : {"segment", "run", None}
+        Also compute ``rmse_holdout`` by ``folds``-fold cross-validation over whole segments or
+        runs (None: skip).
+    init : FrictionModel, optional
+        Starting values (e.g. from :func:`silo4_published`).
+
+    Returns
+    -------
+    FrictionModel
+        With ``rmse`` (in-sample), ``rmse_holdout``, ``not_identified`` and, in ``meta["fit"]``,
+        the settings that :func:`refit` uses.
+    """
+    if law not in _BASES:
+        raise InputError(f"unknown friction law '{law}' (known: {', '.join(_BASES)})")
+    if se not in ("covariance", "bootstrap"):
+        raise InputError(f"se must be 'covariance' or 'bootstrap', got '{se}'")
+    if LAWS[law].needs_load and data.load is None:
+        raise InputError(f"law {law} needs the output load torque: the data has no 'load' channel")
+    if law == "silo4" and harmonics is None:
+        specs = harmonic_specs(None, gear)
+        if not specs:
+            warn("law silo4 without a gear spec or harmonics: fitting eq. 3 only")
+    else:
+        specs = harmonic_specs(harmonics, gear) if harmonics is not None else []
+    settings = {"law": law, "harmonics": specs, "weights": weights, "se": se, "min_cycles": min_cycles,
+                "bootstrap": bootstrap}
+    directions: dict[str, dict] = {}
+    not_identified: dict[str, str] = {}
+    notes: list[str] = []
+    for d, dname in ((1, "positive"), (-1, "negative")):
+        sub = data.direction_subset(d)
+        if len(sub) == 0:
+            directions[dname] = {k: None for k in LAWS[law].params}
+            directions[dname]["harmonics"] = []
+            for k in LAWS[law].params:
+                not_identified[f"{dname}.{k}"] = f"no segment in the {dname} direction"
+            for h in specs:
+                not_identified[f"{dname}.{h.get('label') or h['frequency']}"] = f"no segment in the {dname} direction"
+            continue
+        P, ni, nt = _fit_one_direction(sub, law, specs, dname, weights=weights, min_cycles=min_cycles,
+                                       init=None if init is None else init.params(dname), se=se,
+                                       bootstrap=bootstrap, seed=seed)
+        directions[dname] = P
+        not_identified.update(ni)
+        notes += nt
+    model = FrictionModel(law if law != "none" else "none", directions["positive"], directions["negative"],
+                          unit=data.unit, not_identified=not_identified, notes=notes, name=name or law,
+                          meta={"fit": settings})
+    model.rmse = _safe_rmse(model, data)
+    if holdout:
+        model.rmse_holdout = holdout_rmse(lambda tr: refit(model, tr, holdout=None), data, by=holdout, folds=folds)
+    return model
+
+
+def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
+    ok = np.zeros(len(data), bool)
+    for d, dname in ((1, "positive"), (-1, "negative")):
+        p = model.params(dname)
+        if all(p.get(k) is not None for k in model.law_spec.params):
+            ok |= data.direction == d
+    if not ok.any():
+        return None
+    return model.rmse_on(data.subset(ok))
+
+
+def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
+                       bootstrap, seed):
+    notes: list[str] = []
+    ni: dict[str, str] = {}
+    freqs = [h["frequency"] for h in specs]
+    stats = segment_stats(sub, freqs, min_cycles=min_cycles)
+    # harmonics that complete min_cycles in no segment cannot be identified: leave them out
+    keep = [k for k in range(len(specs)) if stats.active[:, k].any()]
+    for k in range(len(specs)):
+        if k not in keep:
+            lab = specs[k].get("label") or f"{specs[k]['frequency']:.6g}"
+            need = min_cycles / specs[k]["frequency"]
+            ni[f"{dname}.{lab}"] = (f"completes fewer than {min_cycles:g} cycle(s) in every {dname} segment "
+                                    f"(longest travel {np.max(stats.cycles[:, k]) / specs[k]['frequency']:.4g}, "
+                                    f"needs {need:.4g} {sub.unit})")
+    if len(keep) < len(specs):
+        specs = [specs[k] for k in keep]
+        stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
+    # a decay needs the line at two speeds or more
+    specs = [dict(h) for h in specs]
+    for k, h in enumerate(specs):
+        speeds = np.unique(np.round(stats.speed[stats.active[:, k]], 9))
+        if len(speeds) < 2 and h.get("decay", True) is not False and h.get("law", "exp") != "const":
+            h["decay"] = False
+            lab = h.get("label") or f"{h['frequency']:.6g}"
+            ni[f"{dname}.{lab}.decay"] = "the line is fitted at one speed only: its amplitude is held constant"
+    basis = _BASES[law]
+    distinct = len(np.unique(np.round(stats.speed, 9)))
+    need = len(basis.lin) + len(basis.nonlin)
+    if law in ("lola8", "lola11"):
+        distinct_load = len(np.unique(np.round(stats.load, 9))) if stats.load is not None else 0
+        if distinct_load < 2:
+            raise ConvergenceError(f"law {law} needs points at two loads or more in the {dname} direction")
+    if distinct < need - (1 if law in ("lola8", "lola11") else 0):
+        raise ConvergenceError(f"law {law} has {need} parameters per direction but the {dname} direction has "
+                               f"plateaus at only {distinct} speed(s); fit a simpler law "
+                               f"(e.g. coulomb_viscous) or record more speeds")
+    prob = _make_problem(stats, law, specs, weights)
+    sol = _fit_direction(prob, init=init)
+    if sol["status"] <= 0:
+        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction")
+    P = _direction_params(prob, sol)
+    if se == "bootstrap":
+        _bootstrap_se(P, stats, law, specs, weights, bootstrap, seed)
+    # parameters the data cannot pin down: a Stribeck velocity outside the plateau speeds
+    if "v_s" in P and P["v_s"] is not None:
+        lo, hi = float(np.min(stats.speed)), float(np.max(stats.speed))
+        rel = P["v_s_se"] / P["v_s"] if P["v_s"] > 0 else np.inf
+        if not np.isfinite(rel) or rel > 1.0 or P["v_s"] < 0.2 * lo:
+            ni[f"{dname}.v_s"] = (f"Stribeck velocity {P['v_s']:.3g} {sub.unit}/s is not identified by plateaus at "
+                                  f"{lo:.3g}..{hi:.3g} {sub.unit}/s (relative standard error {rel:.2g}); "
+                                  f"record slower plateaus")
+    P["n_segments"] = int(len(stats.speed))
+    P["n_samples"] = int(np.sum(stats.n))
+    return P, ni, notes
+
+
+def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
+    """Replace the standard errors by the spread of refits on segments resampled with replacement."""
+    rng = np.random.default_rng(seed)
+    S = len(stats.speed)
+    base_names = list(_BASES[law].lin) + list(_BASES[law].nonlin)
+    draws = {k: [] for k in base_names}
+    hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P["harmonics"]]
+    for _ in range(B):
+        bs = stats.take(rng.integers(0, S, S))
+        if len(np.unique(np.round(bs.speed, 9))) < len(base_names):
+            continue
+        try:
+            prob = _make_problem(bs, law, specs, weights)
+            Q = _direction_params(prob, _fit_direction(prob))
+        except (InputError, np.linalg.LinAlgError, ValueError):
+            continue
+        for k in base_names:
+            draws[k].append(Q[k])
+        for k, h in enumerate(Q["harmonics"]):
+            hdraws[k]["amplitude"].append(h["amplitude"])
+            hdraws[k]["decay"].append(h["decay"])
+            hdraws[k]["phase"].append(h["phase"])
+    for k in base_names:
+        if len(draws[k]) >= 10:
+            P[k + "_se"] = float(np.std(draws[k], ddof=1))
+    for h, dr in zip(P["harmonics"], hdraws):
+        if len(dr["amplitude"]) >= 10:
+            h["amplitude_se"] = float(np.std(dr["amplitude"], ddof=1))
+            h["decay_se"] = float(np.std(dr["decay"], ddof=1))
+            ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h["phase"])))
+            h["phase_se"] = float(np.sqrt(np.mean(ph ** 2)))
+    P["se_method"] = f"bootstrap over segments ({B} resamples)"
+
+
+# ---------------------------------------------------------------------- held-out errors
+def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
+    """Fold of each group: groups sorted by direction and speed, dealt round-robin (so every fold
+    spans the speed range of both directions)."""
+    groups = data.groups(by)
+    ug = np.unique(groups)
+    key = []
+    for gid in ug:
+        m = groups == gid
+        key.append((int(np.sign(np.mean(data.direction[m]))), float(np.mean(np.abs(data.v[m]))), gid))
+    key.sort()
+    fold_of = {}
+    counters = {}
+    for dsign, _, gid in key:
+        c = counters.get(dsign, 0)
+        fold_of[gid] = c % folds
+        counters[dsign] = c + 1
+    return np.array([fold_of[g] for g in groups])
+
+
+def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
+                 folds: int = 5) -> float | None:
+    """Root-mean-square error on held-out data: ``folds``-fold cross-validation over whole
+    segments (or runs); each fold is predicted by a model fitted to the others.  Folds where the
+    fit fails (too few speeds left) are skipped; None when every fold fails."""
+    groups = data.groups(by)
+    ng = len(np.unique(groups))
+    if ng < 2:
+        return None
+    k = min(folds, ng)
+    fold = _folds(data, by, k)
+    sse, n = 0.0, 0
+    for f in range(k):
+        test = fold == f
+        if not test.any() or test.all():
+            continue
+        try:
+            m = fit_fn(data.subset(~test))
+            r = m.residual(data.subset(test))
+        except InputError:
+            continue
+        r = r[np.isfinite(r)]
+        sse += float(r @ r)
+        n += len(r)
+    return math.sqrt(sse / n) if n else None
+
+
+def refit(model: FrictionModel, data: FitData, **overrides) -> FrictionModel:
+    """Fit ``model``'s law and harmonics again, with the settings it was fitted with, to other data."""
+    s = dict(model.meta.get("fit") or {})
+    if not s:
+        raise InputError("this model carries no fit settings (it was not made by gearspec.identify.fit)")
+    kw = {"harmonics": s.get("harmonics") or None, "weights": s.get("weights", "segment"), "se": "covariance",
+          "min_cycles": s.get("min_cycles", 1.0), "name": model.name}
+    if s["law"] != "silo4" and not s.get("harmonics"):
+        kw["harmonics"] = None
+    if s["law"] == "silo4" and not s.get("harmonics"):
+        kw["harmonics"] = []
+    kw.update(overrides)
+    if s.get("method") == "efficiency":
+        return fit_efficiency(data, s["law"], ratio=s["ratio"], holdout=kw.get("holdout"), name=model.name)
+    return fit(data, s["law"], **kw)
+
+
+def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *, by: str = "segment",
+            folds: int = 5) -> pd.DataFrame:
+    """Models side by side on the same data: rmse (in-sample) and held-out rmse.
+
+    ``candidates`` maps a name to a fitted model (refitted per fold with its own settings for the
+    held-out error; a model without fit settings is scored as is, ``rmse_holdout`` = its rmse on
+    the data) or to keyword arguments of :func:`fit` (``{"law": "stribeck"}``).
+    """
+    rows = []
+    for name, c in candidates.items():
+        if isinstance(c, FrictionModel):
+            m = c
+            if m.meta.get("fit"):
+                ho = holdout_rmse(lambda tr, m=m: refit(m, tr, holdout=None), data, by=by, folds=folds)
+            else:
+                ho = None
+        else:
+            kw = dict(c)
+            kw.setdefault("holdout", None)
+            m = fit(data, **kw)
+            ho = holdout_rmse(lambda tr, kw=kw: fit(tr, **kw), data, by=by, folds=folds)
+        n_par = _n_params(m)
+        rows.append({"model": name, "law": m.law, "parameters": n_par, "rmse": _safe_rmse(m, data),
+                     "rmse_holdout": ho})
+    return pd.DataFrame(rows)
+
+
+def _n_params(m: FrictionModel) -> int:
+    n = 0
+    for p in m.directions.values():
+        n += sum(1 for k in m.law_spec.params if p.get(k) is not None)
+        n += sum(3 if h.get("law", "exp") != "const" else 2 for h in p["harmonics"])
+    return n + sum(len([k for k in t if k not in ("kind", "label", "direction", "law") and not k.endswith("_se")])
+                   for t in m.terms)
+
+
+# ---------------------------------------------------------------------- the published SILO4 procedure
+def silo4_published(data: FitData, spectrum=None, *, high_speed: float = 100 * RPM,
+                    constant: Iterable[str] = ("output shaft",), harmonics=None, gear=None,
+                    holdout: str | None = "segment", folds: int = 5) -> FrictionModel:
+    """The SILO4 identification procedure as published (section 3-4; see the module docstring).
+
+    Parameters
+    ----------
+    data : FitData
+        Samples in segments (the plateau averages come from it).
+    spectrum : SpectrumResult, optional
+        Per-segment spectra (:func:`gearspec.spectrum.analyze` on the same segmentation) for the
+        amplitudes and phases of the declared lines; without it only eq. 3 is identified.
+    high_speed : float
+        Plateaus above this speed give Coulomb and viscous friction (the paper: 100 rpm, in rad/s
+        here); the others static friction and Stribeck velocity.
+    constant : labels
+        Lines modelled with a constant amplitude (eq. 6): the paper's F1, one joint turn.
+    """
+    plate = data.plateaus()
+    constant = set(constant)
+    directions, ni, notes = {}, {}, []
+    lines = []
+    if spectrum is not None:
+        lines = [ln for ln in harmonic_specs(harmonics, gear if gear is not None else spectrum.gear)]
+    for d, dname in ((1, "positive"), (-1, "negative")):
+        pl = plate[plate["direction"] == d]
+        P = {"tau_c": None, "tau_s": None, "v_s": None, "viscous": None, "harmonics": []}
+        hi = pl[pl["speed"] > high_speed]
+        lo = pl[pl["speed"] <= high_speed]
+        if len(hi) >= 2:
+            X = np.column_stack([np.ones(len(hi)), hi["speed"]])
+            coef, se = _ols(X, hi["level"].to_numpy())
+            P["tau_c"], P["viscous"] = float(coef[0]), float(coef[1])
+            P["tau_c_se"], P["viscous_se"] = float(se[0]), float(se[1])
+        else:
+            ni[f"{dname}.tau_c"] = ni[f"{dname}.viscous"] = (f"needs two plateaus above {high_speed:.4g} "
+                                                               f"{data.unit}/s in the {dname} direction, has {len(hi)}")
+        if P["tau_c"] is not None:
+            excess = lo["level"].to_numpy() - P["tau_c"]
+            ok = excess > 0
+            if ok.sum() >= 2:
+                X = np.column_stack([np.ones(ok.sum()), lo["speed"].to_numpy()[ok]])
+                coef, se = _ols(X, np.log(excess[ok]))
+                m_, n_ = coef[1], coef[0]
+                if m_ < 0:
+                    P["v_s"] = float(-1.0 / m_)
+                    P["v_s_se"] = float(se[1] / m_ ** 2)
+                    P["tau_s"] = float(P["tau_c"] + math.exp(n_))
+                    P["tau_s_se"] = float(math.exp(n_) * se[0])
+                    if ok.sum() < len(lo):
+                        notes.append(f"{dname}: {len(lo) - ok.sum()} low-speed plateau(s) below the Coulomb level "
+                                     f"left out of the log-linear fit (eq. 4 cannot take their log)")
+                else:
+                    ni[f"{dname}.v_s"] = ni[f"{dname}.tau_s"] = "the low-speed plateaus do not fall with speed"
+            else:
+                ni[f"{dname}.v_s"] = ni[f"{dname}.tau_s"] = (f"needs two plateaus below {high_speed:.4g} "
+                                                             f"{data.unit}/s above the Coulomb level, has {ok.sum()}")
+        # amplitudes and decays from the spectra (eq. 10)
+        for ln in lines:
+            lab = ln.get("label")
+            rows = []
+            for s in spectrum.segments:
+                if s.direction != d:
+                    continue
+                p = s.peak(lab) if lab else None
+                if p is not None and p.amplitude > 0:
+                    rows.append((s.speed, p.amplitude, p.phase, p.amplitude_se))
+            if not rows:
+                ni[f"{dname}.{lab}"] = "not fitted in any segment of the spectra (too few cycles)"
+                continue
+            sp, amp, ph, ase = map(np.asarray, zip(*rows))
+            phase = float(np.angle(np.sum(amp * np.exp(1j * ph))))
+            if lab in constant or len(np.unique(sp)) < 2:
+                h = {"frequency": ln["frequency"], "label": lab, "amplitude": float(np.mean(amp)),
+                     "amplitude_se": float(np.std(amp, ddof=1) / math.sqrt(len(amp))) if len(amp) > 1 else float("nan"),
+                     "decay": 0.0, "decay_se": 0.0, "phase": phase, "law": "const"}
+                if lab not in constant:
+                    ni[f"{dname}.{lab}.decay"] = "the line is in the spectra at one speed only"
+            else:
+                X = np.column_stack([np.ones(len(sp)), sp])
+                coef, se = _ols(X, np.log(amp))
+                h = {"frequency": ln["frequency"], "label": lab, "amplitude": float(math.exp(coef[0])),
+                     "amplitude_se": float(math.exp(coef[0]) * se[0]), "decay": float(-coef[1]),
+                     "decay_se": float(se[1]), "phase": phase}
+            P["harmonics"].append(h)
+        directions[dname] = P
+    model = FrictionModel("silo4", directions["positive"], directions["negative"], unit=data.unit,
+                          not_identified=ni, notes=notes, name="SILO4 published procedure",
+                          meta={"procedure": "published", "high_speed": high_speed})
+    model.rmse = _safe_rmse(model, data)
+    if holdout and spectrum is not None:
+        model.rmse_holdout = _published_holdout(data, spectrum, high_speed, constant, harmonics, gear, holdout, folds)
+    return model
+
+
+def _published_holdout(data, spectrum, high_speed, constant, harmonics, gear, by, folds):
+    """Held-out error of the published procedure: per fold, the plateaus and spectra of the other
+    segments (the spectra are per segment already, so only the selection changes)."""
+    import copy as _copy
+
+    groups = data.groups(by)
+    k = min(folds, len(np.unique(groups)))
+    if k < 2:
+        return None
+    fold = _folds(data, by, k)
+    seg_ids = data.segments
+    sse, n = 0.0, 0
+    for f in range(k):
+        test = fold == f
+        if not test.any() or test.all():
+            continue
+        train_segs = set(np.unique(data.segment[~test]))
+        sp = _copy.copy(spectrum)
+        sp.segments = [s for i, s in enumerate(spectrum.segments) if _segment_id(seg_ids, s) in train_segs]
+        try:
+            m = silo4_published(data.subset(~test), sp, high_speed=high_speed, constant=constant,
+                                harmonics=harmonics, gear=gear, holdout=None)
+            r = m.residual(data.subset(test))
+        except InputError:
+            continue
+        r = r[np.isfinite(r)]
+        sse += float(r @ r)
+        n += len(r)
+    return math.sqrt(sse / n) if n else None
+
+
+def _segment_id(segments: pd.DataFrame, seg_spectrum) -> int | None:
+    s = seg_spectrum.segment
+    m = segments[(segments["run"] == s.run) & (segments["direction"] == s.direction)
+                 & (np.isclose(segments["speed"], s.speed))]
+    return int(m["segment"].iloc[0]) if len(m) else None
+
+
+def _ols(X, y):
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    dof = max(len(y) - X.shape[1], 1)
+    s2 = float(r @ r) / dof
+    try:
+        cov = np.linalg.inv(X.T @ X) * s2
+        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(X.shape[1], np.nan)
+    if len(y) <= X.shape[1]:
+        se = np.full(X.shape[1], np.nan)
+    return coef, se
+
+
+# ---------------------------------------------------------------------- Lola/CROPS: efficiency
+def efficiency_model(model: FrictionModel, v, load, ratio: float) -> np.ndarray:
+    """Efficiency a friction model predicts when the motor drives the load (Lola eq. 13 with
+    eq. 12): ``eta = (|T_l|/N) / (|T_l|/N + |tau_f(v, T_l)|)``."""
+    tau = model.friction(None, v, load=load)
+    return laws.efficiency_from_friction(tau, load, ratio)
+
+
+_EFF_LAWS = ("lola8", "lola11")
+
+
+def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: FrictionModel | None = None,
+                   holdout: str | None = None, folds: int = 5, name: str | None = None,
+                   gamma_free: bool = True) -> FrictionModel:
+    """Fit law (8) or (11) to the *efficiency* of quasi-static points (Lola eq. 9) under the
+    constraints of eq. 10 (``T_f0, mu, b >= 0``; law (11) also ``T_fS >= 0``, ``v_S > 0``).
+
+    ``data`` carries the measured efficiency as ``y`` (dimensionless) with ``v`` the motor speed
+    and ``load`` the output torque (e.g. ``FitData.from_points(v, eta, load=T_l)``).  The RMS of the
+    efficiency residual is ``rmse`` (what the paper's Tables III-V call RMS).  Symmetric model.
+    """
+    if law not in _EFF_LAWS:
+        raise InputError(f"efficiency fits take law lola8 or lola11, got '{law}'")
+    if data.load is None:
+        raise InputError("an efficiency fit needs the output load torque ('load')")
+    if not ratio or ratio <= 0:
+        raise InputError("an efficiency fit needs the gear ratio N")
+    eta = np.asarray(data.y, dtype=float)
+    v = np.abs(data.v)
+    tl = np.abs(data.load)
+    if np.any(tl <= 0):
+        raise InputError("efficiency points need a nonzero load (eta = 0 at no load carries no information)")
+    all_names = list(LAWS[law].params)
+    fixed = {"gamma": 0.0} if (not gamma_free and "gamma" in all_names) else {}
+    names = [k for k in all_names if k not in fixed]
+    # start: friction implied by the efficiency, fitted linearly
+    tau_implied = (tl / ratio) * (1.0 / np.clip(eta, 1e-3, None) - 1.0)
+    pts = FitData.from_points(v, tau_implied, load=tl, unit=data.unit)
+    src = init
+    if src is None:
+        try:
+            src = fit(pts, law, holdout=None, weights="uniform")
+        except InputError:
+            src = None
+    if src is not None:
+        x0 = np.array([src.params("positive")[k] for k in names], float)
+    else:
+        guess = {"t_f0": float(np.median(tau_implied)), "mu": 1e-3, "b": 1e-4, "gamma": 0.0,
+                 "t_fs": float(np.median(tau_implied)), "v_s": float(np.median(v))}
+        x0 = np.array([guess[k] for k in names])
+    lo = np.full(len(names), -np.inf)
+    for k in ("t_f0", "mu", "b", "t_fs"):
+        if k in names:
+            lo[names.index(k)] = 0.0
+    if "v_s" in names:
+        lo[names.index("v_s")] = 1e-9
+    x0 = np.where(np.isfinite(lo), np.maximum(x0, lo + 1e-12), x0)
+
+    def params_of(x):
+        p = dict(zip(names, x))
+        p.update(fixed)
+        return [p[k] for k in all_names]
+
+    def resid(x):
+        tau = LAWS[law].magnitude(v, tl, *params_of(x))
+        return laws.efficiency_from_friction(tau, tl, ratio) - eta
+
+    scale = np.where(np.abs(x0) > 0, np.abs(x0), 1.0)
+    res = optimize.least_squares(resid, x0, bounds=(lo, np.inf), x_scale=scale, method="trf", max_nfev=2000)
+    if res.status <= 0:
+        raise ConvergenceError(f"the efficiency fit of law {law} did not converge ({res.message})")
+    r = res.fun
+    dof = max(len(r) - len(names), 1)
+    s2 = float(r @ r) / dof
+    cov = np.linalg.pinv(res.jac.T @ res.jac) * s2
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    P = {k: float(x) for k, x in zip(names, res.x)}
+    P.update({k + "_se": float(e) for k, e in zip(names, se)})
+    for k, val in fixed.items():
+        P[k], P[k + "_se"] = val, 0.0
+    at_bound = [k for k, x, lb in zip(names, res.x, lo) if np.isfinite(lb) and x <= lb + 1e-12 and k != "gamma"]
+    notes = [f"fitted to efficiency (eq. 9) of {len(r)} points, ratio N = {ratio:g}; constraints of eq. 10"]
+    if at_bound:
+        notes.append("at the eq. 10 bound (0): " + ", ".join(at_bound))
+    m = FrictionModel(law, P, None, unit=data.unit, notes=notes, name=name or f"{law} (efficiency fit)",
+                      meta={"fit": {"law": law, "method": "efficiency", "ratio": ratio}})
+    m.rmse = float(math.sqrt(np.mean(r * r)))
+    if holdout:
+        m.rmse_holdout = _eff_holdout(data, law, ratio, holdout, folds)
+    return m
+
+
+def _eff_holdout(data, law, ratio, by, folds):
+    groups = data.groups(by)
+    k = min(folds, len(np.unique(groups)))
+    fold = _folds(data, by, k)
+    sse, n = 0.0, 0
+    for f in range(k):
+        test = fold == f
+        try:
+            m = fit_efficiency(data.subset(~test), law, ratio=ratio)
+        except InputError:
+            continue
+        t = data.subset(test)
+        r = efficiency_model(m, t.v, t.load, ratio) - t.y
+        sse += float(r @ r)
+        n += len(r)
+    return math.sqrt(sse / n) if n else None
+
+
+def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_extrapolated: bool = True
+                ) -> tuple[FrictionModel, pd.DataFrame]:
+    """Fit law (8) (or (11)) to a catalog efficiency table (Lola Table V), as the paper does.
+
+    ``table`` has columns ``input_speed_rpm``, ``load`` (output torque, Nm) and ``efficiency``
+    -- e.g. the product form ``eta_R(speed) * K(load)`` of ``gearspec.datasets.load
+    ("harmonic_drive_catalog")``.  Rows at zero speed (an extrapolation in that source) and zero
+    load (zero output power, where efficiency carries no information) are left out when
+    ``drop_extrapolated``.  Returns the model (``rmse``: RMS of the efficiency residual) and the
+    table with the model's efficiency beside the catalog's.
+    """
+    need = {"input_speed_rpm", "load", "efficiency"}
+    if not need <= set(table.columns):
+        raise InputError(f"a catalog table needs columns {sorted(need)}, has {list(table.columns)}")
+    t = table.copy()
+    if drop_extrapolated:
+        t = t[(t["input_speed_rpm"] > 0) & (t["load"] > 0)]
+    data = FitData.from_points(t["input_speed_rpm"].to_numpy() * RPM, t["efficiency"].to_numpy(),
+                               load=t["load"].to_numpy())
+    m = fit_efficiency(data, law, ratio=ratio, name=f"law ({law[4:]}) fitted to catalog efficiency")
+    out = table.copy()
+    ok = (out["load"] > 0)
+    out["model"] = np.nan
+    out.loc[ok, "model"] = efficiency_model(m, out.loc[ok, "input_speed_rpm"].to_numpy() * RPM,
+                                            out.loc[ok, "load"].to_numpy(), ratio)
+    out["used"] = out.index.isin(t.index)
+    return m, out
