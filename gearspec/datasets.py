@@ -42,7 +42,7 @@ import pooch
 from .errors import InputError
 from .recording import Recording, load_recording
 
-__all__ = ["DataSet", "REGISTRY", "ENV_VAR", "get", "names", "cache_dir", "data_dir", "search_path",
+__all__ = ["DataSet", "REGISTRY", "ENV_VAR", "get", "names", "cache_dir", "data_dir", "search_path", "catalog_efficiency",
            "fetch", "list_datasets", "describe", "load", "commanded_velocity", "kinova_breakaway"]
 
 #: environment variable naming a folder with one subfolder per data set
@@ -500,3 +500,18 @@ def kinova_breakaway(download: bool = False) -> pd.DataFrame:
     path = paths["static_torque_breakaway_point.csv"]
     return pd.read_csv(path, sep=r"\s+", header=None, names=["breakaway_torque", "ramp_rate"])
 
+
+
+def catalog_efficiency(download: bool = False) -> pd.DataFrame:
+    """The strain-wave catalog tables as one efficiency grid, the catalog's product form
+    ``eta(n_in, T_load) = eta_R(n_in) * K(T_load)``: columns ``input_speed_rpm``, ``load`` (output
+    torque, Nm), ``eta_rated``, ``compensation`` and ``efficiency`` (see the data set's SOURCE.md;
+    the 0 rpm row is the source's own extrapolation)."""
+    tables = load("harmonic_drive_catalog", download=download)
+    speed = tables["efficiency_vs_input_speed"]
+    comp = tables["compensation_vs_load_torque"]
+    grid = speed.merge(comp, how="cross")
+    grid = grid.rename(columns={"efficiency_at_rated_torque": "eta_rated", "output_load_torque_Nm": "load",
+                                "compensation_coefficient": "compensation"})
+    grid["efficiency"] = grid["eta_rated"] * grid["compensation"]
+    return grid[["input_speed_rpm", "load", "eta_rated", "compensation", "efficiency"]]

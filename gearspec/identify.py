@@ -93,6 +93,9 @@ _BASES = {
     "lola8": _Basis(("t_f0", "mu", "b", "gamma"), (),
                     lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s, np.abs(load) * s])),
     "lola11": _Basis(("t_f0", "mu", "b", "t_fs"), ("v_s",), _lola11_cols),
+    # law (11) without its Stribeck part (when v_S is not identified)
+    "lola8_nogamma": _Basis(("t_f0", "mu", "b"), (),
+                            lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s])),
 }
 
 
@@ -328,10 +331,14 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     free = np.flatnonzero(prob.decay_free)
     spd = st.speed[st.speed > 0]
     # grids for the start: Stribeck velocity over the plateau speeds, decays from 0
+    lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
+    # a Stribeck velocity far outside the plateau speeds is not identifiable (the term is then a
+    # constant or a straight line): the search is bounded to [lo/50, 2 hi] and a result on a
+    # bound is reported as not identified
+    vs_bounds = (math.log(lo / 50), math.log(2 * hi))
     if nb_nl:
-        lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
         grid_vs = np.geomspace(lo / 10, hi * 2, 25)
-        if init and init.get("v_s"):
+        if init and init.get("v_s") and lo / 50 < float(init["v_s"]) < 2 * hi:
             grid_vs = np.append(grid_vs, float(init["v_s"]))
     else:
         grid_vs = [None]
@@ -364,7 +371,10 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     if len(x0):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            res = optimize.least_squares(proj, x0, method="trf", x_scale="jac", max_nfev=400)
+            lb = np.concatenate([[vs_bounds[0]] * nb_nl, np.full(len(free), -np.inf)])
+            ub = np.concatenate([[vs_bounds[1]] * nb_nl, np.full(len(free), np.inf)])
+            x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
+            res = optimize.least_squares(proj, x0, bounds=(lb, ub), method="trf", x_scale="jac", max_nfev=400)
         if not np.all(np.isfinite(res.x)):
             raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
         x_opt = res.x
@@ -399,7 +409,8 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         cov = np.full((p, p), np.nan)
         ok = False
     se = np.sqrt(np.clip(np.diag(cov), 0, None)) if ok else np.full(p, np.nan)
-    out = {"lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2, "dof": dof,
+    on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
+    out = {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2, "dof": dof,
            "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
     return out
 
@@ -497,8 +508,8 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
         With ``rmse`` (in-sample), ``rmse_holdout``, ``not_identified`` and, in ``meta["fit"]``,
         the settings that :func:`refit` uses.
     """
-    if law not in _BASES:
-        raise InputError(f"unknown friction law '{law}' (known: {', '.join(_BASES)})")
+    if law not in LAWS:
+        raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
     if se not in ("covariance", "bootstrap"):
         raise InputError(f"se must be 'covariance' or 'bootstrap', got '{se}'")
     if LAWS[law].needs_load and data.load is None:
@@ -543,7 +554,7 @@ def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
     ok = np.zeros(len(data), bool)
     for d, dname in ((1, "positive"), (-1, "negative")):
         p = model.params(dname)
-        if all(p.get(k) is not None for k in model.law_spec.params):
+        if all(p.get(k) is not None for k in model.law_spec.params if k not in model.law_spec.optional):
             ok |= data.direction == d
     if not ok.any():
         return None
@@ -594,14 +605,23 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     P = _direction_params(prob, sol)
     if se == "bootstrap":
         _bootstrap_se(P, stats, law, specs, weights, bootstrap, seed)
-    # parameters the data cannot pin down: a Stribeck velocity outside the plateau speeds
-    if "v_s" in P and P["v_s"] is not None:
+    # parameters the data cannot pin down: a Stribeck velocity outside the plateau speeds.  Then
+    # the Stribeck part is left out (None) and the rest refitted without it: the law degrades to
+    # its Coulomb + viscous part over the measured speeds, and says so
+    if basis.nonlin:
         lo, hi = float(np.min(stats.speed)), float(np.max(stats.speed))
         rel = P["v_s_se"] / P["v_s"] if P["v_s"] > 0 else np.inf
-        if not np.isfinite(rel) or rel > 1.0 or P["v_s"] < 0.2 * lo:
-            ni[f"{dname}.v_s"] = (f"Stribeck velocity {P['v_s']:.3g} {sub.unit}/s is not identified by plateaus at "
-                                  f"{lo:.3g}..{hi:.3g} {sub.unit}/s (relative standard error {rel:.2g}); "
-                                  f"record slower plateaus")
+        if sol["on_bound"] or not np.isfinite(rel) or rel > 1.0:
+            why = (f"not identified by plateaus at {lo:.3g}..{hi:.3g} {sub.unit}/s (the fit went to "
+                   f"{P['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}); record slower plateaus")
+            reduced = {"stribeck": "coulomb_viscous", "silo4": "coulomb_viscous", "lola11": "lola8_nogamma"}[law]
+            prob2 = _make_problem(stats, reduced, specs, weights)
+            P2 = _direction_params(prob2, _fit_direction(prob2, init=init))
+            drop = {"stribeck": ("tau_s", "v_s"), "silo4": ("tau_s", "v_s"), "lola11": ("t_fs", "v_s")}[law]
+            P = {**P2, **{k: None for k in drop}, **{k + "_se": None for k in drop}}
+            for k in drop:
+                ni[f"{dname}.{k}"] = why
+            notes.append(f"{dname}: Stribeck part of law {law} not identified; Coulomb + viscous part fitted alone")
     P["n_segments"] = int(len(stats.speed))
     P["n_samples"] = int(np.sum(stats.n))
     return P, ni, notes

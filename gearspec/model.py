@@ -56,9 +56,13 @@ class Law:
     magnitude: Callable
     needs_load: bool = False
     description: str = ""
+    #: parameters that may be missing (not identified): the law then drops the part they define
+    optional: tuple[str, ...] = ()
 
 
 def _stribeck_mag(speed, load, tau_c, tau_s, v_s, viscous):
+    if tau_s is None or v_s is None:  # Stribeck part not identified: Coulomb + viscous
+        return tau_c + viscous * np.asarray(speed, dtype=float)
     return laws.stribeck(speed, tau_c, tau_s, v_s, viscous)
 
 
@@ -71,6 +75,8 @@ def _lola8_mag(speed, load, t_f0, mu, b, gamma):
 
 
 def _lola11_mag(speed, load, t_f0, mu, b, t_fs, v_s):
+    if t_fs is None or v_s is None:  # Stribeck part not identified
+        return laws.lola8(speed, load, t_f0, mu, b, 0.0)
     return laws.lola11(speed, load, t_f0, mu, b, t_fs, v_s)
 
 
@@ -80,13 +86,15 @@ LAWS: dict[str, Law] = {
     "coulomb_viscous": Law("coulomb_viscous", ("tau_c", "viscous"), ("Nm", "Nm s/rad"), _cv_mag,
                            description="Coulomb + viscous: tau_c + B|v|"),
     "stribeck": Law("stribeck", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
-                    description="SILO4 eq. 3: tau_c + (tau_s - tau_c) exp(-|v|/v_s) + B|v|"),
+                    description="SILO4 eq. 3: tau_c + (tau_s - tau_c) exp(-|v|/v_s) + B|v|", optional=("tau_s", "v_s")),
     "silo4": Law("silo4", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
-                 description="SILO4 eq. 11: eq. 3 + position ripple + meshing ripple decaying as exp(-b|v|)"),
+                 description="SILO4 eq. 11: eq. 3 + position ripple + meshing ripple decaying as exp(-b|v|)",
+                 optional=("tau_s", "v_s")),
     "lola8": Law("lola8", ("t_f0", "mu", "b", "gamma"), ("Nm", "-", "Nm s/rad", "s/rad"), _lola8_mag, True,
                  "Lola/CROPS law (8): T_f0 + mu|T_l| + (b + gamma|T_l|)|v|"),
     "lola11": Law("lola11", ("t_f0", "mu", "b", "t_fs", "v_s"), ("Nm", "-", "Nm s/rad", "Nm", "rad/s"), _lola11_mag,
-                  True, "Lola/CROPS law (11), Stribeck term made odd: T_f0 + mu|T_l| + (T_fS - T_f0)/(1+(v/v_S)^2) + b|v|"),
+                  True, "Lola/CROPS law (11), Stribeck term made odd: T_f0 + mu|T_l| + (T_fS - T_f0)/(1+(v/v_S)^2) + b|v|",
+                  optional=("t_fs", "v_s")),
 }
 
 HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
@@ -226,7 +234,7 @@ class FrictionModel:
             if not sel.any():
                 continue
             p = self.directions[name]
-            missing = [k for k in law.params if p.get(k) is None]
+            missing = [k for k in law.params if p.get(k) is None and k not in law.optional]
             if missing:
                 raise InputError(f"the model has no {name}-direction value for {', '.join(missing)} "
                                  f"(not identified: {self.not_identified.get(name + '.' + missing[0], 'no data')}); "
