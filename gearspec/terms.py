@@ -216,7 +216,8 @@ def _hysteresis(term, *, theta, v, run=None, **_):
         start = np.zeros(n, bool)
         start[0] = True
     # index of the last reversal (reset at run starts)
-    mark = np.where(rev, idx, np.where(start, -1, -2))
+    # the turning point is the last sample before the new direction
+    mark = np.where(rev, idx - 1, np.where(start, -1, -2))
     # forward fill of the last event (a reversal, or -1 at a run start)
     last_rev = np.full(n, -1)
     events = np.flatnonzero(mark != -2)
