@@ -229,3 +229,67 @@ def _hysteresis(term, *, theta, v, run=None, **_):
     has = last_rev >= 0
     out[has] = -term["scale"] * np.exp(-np.abs(theta[has] - theta[last_rev[has]]) / term["length"])
     return out
+
+
+# ---------------------------------------------------------------------- kinds added for the twins' effects
+# (gearspec.simulate.effects injects them into a truth model; any model may use them)
+@register_term("cogging", signed=True, needs=("theta",), params=("frequency", "amplitude", "phase"),
+               describe=lambda t: (f"cogging (same sign both ways) at {t['frequency']:.6g} cycles/unit: "
+                                   f"{t['amplitude']:.4g}"))
+def _cogging(term, *, theta, v, **_):
+    """A conservative position-locked torque ``A sin(2 pi f theta + phi)`` (signed).
+
+    Motor cogging (detent torque of the magnets, commutation of a brushed motor), an unbalanced
+    shaft or a spring: unlike friction it does not reverse with the motion, so it is added to the
+    drive torque as it is (not multiplied by sign(v)).  In the friction magnitude that the
+    spectrum analyses (``direction * torque``) it shows at ``f`` with phases ``phi`` forwards and
+    ``phi + pi`` backwards.
+    """
+    return term["amplitude"] * np.sin(2 * np.pi * term["frequency"] * np.asarray(theta, dtype=float)
+                                      + term.get("phase", 0.0))
+
+
+def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
+    """Distance travelled since the last reversal of the motion, per sample (inf before the first
+    reversal of a run).  Same rule as the ``hysteresis`` term: a reversal is a sample whose sign
+    of v differs from the last nonzero sign before it in the same run, and the turning point is
+    the sample before it."""
+    theta = np.asarray(theta, dtype=float)
+    s = np.sign(np.asarray(v, dtype=float))
+    n = len(theta)
+    idx = np.arange(n)
+    nz = s != 0
+    last = np.maximum.accumulate(np.where(nz, idx, -1))
+    prev_sign = np.where(last >= 0, s[np.maximum(last, 0)], 0)
+    ps = np.concatenate(([0.0], prev_sign[:-1]))
+    rev = np.zeros(n, bool)
+    rev[1:] = nz[1:] & (ps[1:] != 0) & (s[1:] != ps[1:])
+    start = np.zeros(n, bool)
+    if n:
+        start[0] = True
+    if run is not None:
+        r = np.asarray(run)
+        rev[1:] &= r[1:] == r[:-1]
+        start[1:] = r[1:] != r[:-1]
+    mark = np.where(rev, idx - 1, np.where(start, -1, -2))
+    last_rev = np.full(n, -1)
+    events = np.flatnonzero(mark != -2)
+    if len(events):
+        last_rev[events[0]:] = np.repeat(mark[events], np.diff(np.concatenate((events, [n]))))
+    out = np.full(n, np.inf)
+    has = last_rev >= 0
+    out[has] = np.abs(theta[has] - theta[last_rev[has]])
+    return out
+
+
+@register_term("backlash", needs=("theta",), params=("scale", "gap"),
+               describe=lambda t: f"backlash: {t['scale']:.4g} less friction over {t['gap']:.4g} after a reversal")
+def _backlash(term, *, theta, v, run=None, **_):
+    """Backlash seen from the motor: for a travel ``gap`` after every reversal of the motion the
+    teeth are not in contact, so the friction of everything behind the gap (``scale``, torque
+    units) is missing; then it is back at once.  Contribution to the magnitude: ``-scale`` while
+    ``|theta - theta_turn| < gap``, 0 otherwise (nothing before the first reversal of a run).
+    Evaluated on ordered samples, with the reversal rule of ``hysteresis``.
+    """
+    d = _travel_since_reversal(theta, v, run)
+    return np.where(d < term["gap"], -float(term["scale"]), 0.0)
