@@ -90,7 +90,7 @@ class FitData:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, velocity: str = "segment",
-                       inertia: bool = True, **segment_options) -> "FitData":
+                       inertia: bool = True, load_ratio: float | None = None, **segment_options) -> "FitData":
         """Samples inside the constant-speed segments of ``rec``.
 
         Parameters
@@ -104,6 +104,10 @@ class FitData:
             (the recording's ``velocity`` channel if it has one, else a Savitzky-Golay derivative).
         inertia : bool
             Subtract ``J thetadd`` when the gear spec gives ``J``.
+        load_ratio : float, optional
+            Subtract the load torque carried to the reference shaft, ``|load| / load_ratio`` in the
+            direction of motion (Lola/CROPS eq. 12: a brake that always opposes the motion, and a
+            torque measured at the motor of a gear of that ratio).  Default: nothing subtracted.
         """
         if velocity not in ("segment", "measured"):
             raise InputError(f"velocity must be 'segment' or 'measured', got '{velocity}'")
@@ -125,10 +129,16 @@ class FitData:
         a = np.nan_to_num(acc[idx])
         y = tau[idx] - (J * a if J else 0.0)
         get = lambda c: rec.data[c].to_numpy(dtype=float)[idx] if c in rec.data else None  # noqa: E731
+        notes = []
+        if load_ratio:
+            if "load" not in rec.data:
+                raise InputError(f"{', '.join(rec.sources)}: no 'load' column to subtract (load_ratio given)")
+            y = y - d * np.abs(get("load")) / float(load_ratio)
+            notes.append(f"load torque at the motor subtracted: |load| / {load_ratio:g} against the motion (eq. 12)")
         rows = [{"segment": i, "run": s.run, "direction": s.direction, "speed": s.speed, "velocity": s.velocity,
                  "n": s.n, "t0": float(rec.t[s.start]), "t1": float(rec.t[s.stop - 1])}
                 for i, s in enumerate(seg.segments)]
-        notes = [f"{len(idx)} samples in {len(seg)} segments; velocity: {velocity}"]
+        notes.insert(0, f"{len(idx)} samples in {len(seg)} segments; velocity: {velocity}")
         if J:
             notes.append(f"inertia removed: tau - {J:g} x thetadd")
         return cls(theta=rec.theta[idx], v=v, y=y, acc=a, load=get("load"), temperature=get("temperature"),

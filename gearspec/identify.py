@@ -54,7 +54,8 @@ from .gears import GearTrain, load_gear
 from .model import LAWS, RPM, FrictionModel
 
 __all__ = ["fit", "silo4_published", "holdout_rmse", "compare", "refit", "harmonic_specs", "fit_efficiency",
-           "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError"]
+           "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError", "segment_errors", "identify_recording", "FitResult",
+           "line_amplitudes", "amplitudes_from_spectrum"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -120,7 +121,7 @@ def harmonic_specs(harmonics=None, gear: GearTrain | str | None = None) -> list[
                 raise InputError("a harmonic to fit needs a 'frequency' (cycles per unit of theta)")
             out.append(dict(h))
         else:
-            out.append({"frequency": float(h), "label": None})
+            out.append({"frequency": float(h), "label": f"line {float(h):.6g}"})
     for h in out:
         if not (np.isfinite(h["frequency"]) and h["frequency"] > 0):
             raise InputError(f"harmonic frequency must be positive, got {h['frequency']}")
@@ -611,9 +612,15 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     if basis.nonlin:
         lo, hi = float(np.min(stats.speed)), float(np.max(stats.speed))
         rel = P["v_s_se"] / P["v_s"] if P["v_s"] > 0 else np.inf
-        if sol["on_bound"] or not np.isfinite(rel) or rel > 1.0:
-            why = (f"not identified by plateaus at {lo:.3g}..{hi:.3g} {sub.unit}/s (the fit went to "
-                   f"{P['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}); record slower plateaus")
+        # the height of the Stribeck term must be there too: static minus Coulomb larger than its
+        # error (either sign: Lola's Table IV has T_fS < T_f0, friction rising towards T_f0)
+        top, base = ("tau_s", "tau_c") if "tau_s" in P else ("t_fs", "t_f0")
+        hump = P[top] - P[base]
+        weak = not (np.isfinite(P[top + "_se"]) and P[top + "_se"] < abs(hump))
+        if sol["on_bound"] or not np.isfinite(rel) or rel > 1.0 or weak:
+            why = (f"not identified by plateaus at {lo:.3g}..{hi:.3g} {sub.unit}/s (the fit went to v_s = "
+                   f"{P['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
+                   f"{hump:.3g} +- {P[top + '_se']:.2g}); record slower plateaus")
             reduced = {"stribeck": "coulomb_viscous", "silo4": "coulomb_viscous", "lola11": "lola8_nogamma"}[law]
             prob2 = _make_problem(stats, reduced, specs, weights)
             P2 = _direction_params(prob2, _fit_direction(prob2, init=init))
@@ -762,8 +769,57 @@ def _n_params(m: FrictionModel) -> int:
 
 
 # ---------------------------------------------------------------------- the published SILO4 procedure
-def silo4_published(data: FitData, spectrum=None, *, high_speed: float = 100 * RPM,
-                    constant: Iterable[str] = ("output shaft",), harmonics=None, gear=None,
+def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.DataFrame:
+    """Amplitude, phase and standard error of each line in each segment where it completes
+    ``min_cycles`` cycles: the joint least-squares fit of the lines and a constant on the segment's
+    own samples (what the spectra of :mod:`gearspec.spectrum` measure at declared lines, with white-
+    noise errors).  One row per (segment, line)."""
+    specs = harmonic_specs(harmonics)
+    rows = []
+    for d in (1, -1):
+        sub = data.direction_subset(d)
+        if len(sub) == 0 or not specs:
+            continue
+        st = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
+        for i, sid in enumerate(st.segment):
+            cov = np.linalg.pinv(st.G[i], rcond=1e-12, hermitian=True) * (st.sigma2[i] if np.isfinite(st.sigma2[i])
+                                                                           else np.nan)
+            for k, h in enumerate(specs):
+                if not st.active[i, k]:
+                    continue
+                ia, ic = 1 + 2 * k, 2 + 2 * k
+                a_, c_ = st.beta_hat[i, ia], st.beta_hat[i, ic]
+                A = math.hypot(a_, c_)
+                g = np.array([a_, c_]) / A if A > 0 else np.zeros(2)
+                se = math.sqrt(max(g @ cov[np.ix_([ia, ic], [ia, ic])] @ g, 0.0)) if A > 0 else float("nan")
+                rows.append({"segment": int(sid), "direction": d, "speed": float(st.speed[i]),
+                             "label": h.get("label"), "frequency": h["frequency"], "amplitude": A,
+                             "amplitude_se": se, "phase": math.atan2(c_, a_)})
+    return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
+                                       "amplitude_se", "phase"])
+
+
+def amplitudes_from_spectrum(spectrum, data: FitData, harmonics=None) -> pd.DataFrame:
+    """The declared-line peaks of a :class:`~gearspec.spectrum.SpectrumResult` in the form of
+    :func:`line_amplitudes`, matched to ``data``'s segments (same segmentation)."""
+    specs = harmonic_specs(harmonics, spectrum.gear) if harmonics is None else harmonic_specs(harmonics)
+    rows = []
+    for s in spectrum.segments:
+        sid = _segment_id(data.segments, s)
+        if sid is None:
+            continue
+        for h in specs:
+            p = s.peak(h["label"]) if h.get("label") else None
+            if p is not None and p.amplitude > 0:
+                rows.append({"segment": sid, "direction": s.direction, "speed": s.speed, "label": h["label"],
+                             "frequency": h["frequency"], "amplitude": p.amplitude, "amplitude_se": p.amplitude_se,
+                             "phase": p.phase})
+    return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
+                                       "amplitude_se", "phase"])
+
+
+def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None, high_speed: float = 100 * RPM,
+                    constant: Iterable[str] = ("output shaft",), min_cycles: float = 1.0,
                     holdout: str | None = "segment", folds: int = 5) -> FrictionModel:
     """The SILO4 identification procedure as published (section 3-4; see the module docstring).
 
@@ -771,24 +827,60 @@ def silo4_published(data: FitData, spectrum=None, *, high_speed: float = 100 * R
     ----------
     data : FitData
         Samples in segments (the plateau averages come from it).
-    spectrum : SpectrumResult, optional
-        Per-segment spectra (:func:`gearspec.spectrum.analyze` on the same segmentation) for the
-        amplitudes and phases of the declared lines; without it only eq. 3 is identified.
+    amplitudes : DataFrame or SpectrumResult, optional
+        Per-segment amplitudes and phases of the lines (:func:`line_amplitudes`, or the spectra of
+        :func:`gearspec.spectrum.analyze` on the same segmentation).  Default: measured from
+        ``data`` at the lines of ``harmonics``/``gear``.
+    harmonics, gear
+        The lines (:func:`harmonic_specs`); none: eq. 3 only.
     high_speed : float
         Plateaus above this speed give Coulomb and viscous friction (the paper: 100 rpm, in rad/s
         here); the others static friction and Stribeck velocity.
     constant : labels
         Lines modelled with a constant amplitude (eq. 6): the paper's F1, one joint turn.
     """
+    specs = harmonic_specs(harmonics, gear)
+    if amplitudes is None:
+        amplitudes = line_amplitudes(data, specs, min_cycles=min_cycles)
+    elif not isinstance(amplitudes, pd.DataFrame):
+        if not specs and amplitudes.gear is not None:
+            specs = harmonic_specs(None, amplitudes.gear)
+        amplitudes = amplitudes_from_spectrum(amplitudes, data, specs)
+    model = _published(data, amplitudes, specs, high_speed, set(constant))
+    if holdout:
+        groups = data.groups(holdout)
+        k = min(folds, len(np.unique(groups)))
+        if k >= 2:
+            fold = _folds(data, holdout, k)
+            sse, n = 0.0, 0
+            for f in range(k):
+                test = fold == f
+                if not test.any() or test.all():
+                    continue
+                train = data.subset(~test)
+                amp = amplitudes[amplitudes["segment"].isin(np.unique(train.segment))]
+                try:
+                    r = _published(train, amp, specs, high_speed, set(constant)).residual(data.subset(test))
+                except InputError:
+                    continue
+                r = r[np.isfinite(r)]
+                sse += float(r @ r)
+                n += len(r)
+            model.rmse_holdout = math.sqrt(sse / n) if n else None
+    return model
+
+
+def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, constant) -> FrictionModel:
     plate = data.plateaus()
-    constant = set(constant)
     directions, ni, notes = {}, {}, []
-    lines = []
-    if spectrum is not None:
-        lines = [ln for ln in harmonic_specs(harmonics, gear if gear is not None else spectrum.gear)]
     for d, dname in ((1, "positive"), (-1, "negative")):
         pl = plate[plate["direction"] == d]
         P = {"tau_c": None, "tau_s": None, "v_s": None, "viscous": None, "harmonics": []}
+        if pl.empty:
+            for k in ("tau_c", "tau_s", "v_s", "viscous"):
+                ni[f"{dname}.{k}"] = f"no segment in the {dname} direction"
+            directions[dname] = P
+            continue
         hi = pl[pl["speed"] > high_speed]
         lo = pl[pl["speed"] <= high_speed]
         if len(hi) >= 2:
@@ -819,73 +911,37 @@ def silo4_published(data: FitData, spectrum=None, *, high_speed: float = 100 * R
             else:
                 ni[f"{dname}.v_s"] = ni[f"{dname}.tau_s"] = (f"needs two plateaus below {high_speed:.4g} "
                                                              f"{data.unit}/s above the Coulomb level, has {ok.sum()}")
-        # amplitudes and decays from the spectra (eq. 10)
-        for ln in lines:
-            lab = ln.get("label")
-            rows = []
-            for s in spectrum.segments:
-                if s.direction != d:
-                    continue
-                p = s.peak(lab) if lab else None
-                if p is not None and p.amplitude > 0:
-                    rows.append((s.speed, p.amplitude, p.phase, p.amplitude_se))
-            if not rows:
-                ni[f"{dname}.{lab}"] = "not fitted in any segment of the spectra (too few cycles)"
+        # amplitudes and decays from the per-segment line fits (eq. 10), phases by circular mean
+        for h in specs:
+            lab = h.get("label")
+            rows = amplitudes[(amplitudes["direction"] == d) & np.isclose(amplitudes["frequency"], h["frequency"])]
+            rows = rows[rows["amplitude"] > 0]
+            key = f"{dname}.{lab or h['frequency']}"
+            if rows.empty:
+                ni[key] = "not fitted in any segment (too few cycles)"
                 continue
-            sp, amp, ph, ase = map(np.asarray, zip(*rows))
+            sp, amp, ph = rows["speed"].to_numpy(), rows["amplitude"].to_numpy(), rows["phase"].to_numpy()
             phase = float(np.angle(np.sum(amp * np.exp(1j * ph))))
-            if lab in constant or len(np.unique(sp)) < 2:
-                h = {"frequency": ln["frequency"], "label": lab, "amplitude": float(np.mean(amp)),
-                     "amplitude_se": float(np.std(amp, ddof=1) / math.sqrt(len(amp))) if len(amp) > 1 else float("nan"),
-                     "decay": 0.0, "decay_se": 0.0, "phase": phase, "law": "const"}
+            entry = {"frequency": h["frequency"], "phase": phase}
+            if lab:
+                entry["label"] = lab
+            if lab in constant or len(np.unique(np.round(sp, 9))) < 2:
+                entry.update(amplitude=float(np.mean(amp)), decay=0.0, decay_se=0.0, law="const",
+                             amplitude_se=float(np.std(amp, ddof=1) / math.sqrt(len(amp))) if len(amp) > 1
+                             else float("nan"))
                 if lab not in constant:
-                    ni[f"{dname}.{lab}.decay"] = "the line is in the spectra at one speed only"
+                    ni[key + ".decay"] = "the line is measured at one speed only"
             else:
-                X = np.column_stack([np.ones(len(sp)), sp])
-                coef, se = _ols(X, np.log(amp))
-                h = {"frequency": ln["frequency"], "label": lab, "amplitude": float(math.exp(coef[0])),
-                     "amplitude_se": float(math.exp(coef[0]) * se[0]), "decay": float(-coef[1]),
-                     "decay_se": float(se[1]), "phase": phase}
-            P["harmonics"].append(h)
+                coef, se = _ols(np.column_stack([np.ones(len(sp)), sp]), np.log(amp))
+                entry.update(amplitude=float(math.exp(coef[0])), amplitude_se=float(math.exp(coef[0]) * se[0]),
+                             decay=float(-coef[1]), decay_se=float(se[1]))
+            P["harmonics"].append(entry)
         directions[dname] = P
     model = FrictionModel("silo4", directions["positive"], directions["negative"], unit=data.unit,
                           not_identified=ni, notes=notes, name="SILO4 published procedure",
                           meta={"procedure": "published", "high_speed": high_speed})
     model.rmse = _safe_rmse(model, data)
-    if holdout and spectrum is not None:
-        model.rmse_holdout = _published_holdout(data, spectrum, high_speed, constant, harmonics, gear, holdout, folds)
     return model
-
-
-def _published_holdout(data, spectrum, high_speed, constant, harmonics, gear, by, folds):
-    """Held-out error of the published procedure: per fold, the plateaus and spectra of the other
-    segments (the spectra are per segment already, so only the selection changes)."""
-    import copy as _copy
-
-    groups = data.groups(by)
-    k = min(folds, len(np.unique(groups)))
-    if k < 2:
-        return None
-    fold = _folds(data, by, k)
-    seg_ids = data.segments
-    sse, n = 0.0, 0
-    for f in range(k):
-        test = fold == f
-        if not test.any() or test.all():
-            continue
-        train_segs = set(np.unique(data.segment[~test]))
-        sp = _copy.copy(spectrum)
-        sp.segments = [s for i, s in enumerate(spectrum.segments) if _segment_id(seg_ids, s) in train_segs]
-        try:
-            m = silo4_published(data.subset(~test), sp, high_speed=high_speed, constant=constant,
-                                harmonics=harmonics, gear=gear, holdout=None)
-            r = m.residual(data.subset(test))
-        except InputError:
-            continue
-        r = r[np.isfinite(r)]
-        sse += float(r @ r)
-        n += len(r)
-    return math.sqrt(sse / n) if n else None
 
 
 def _segment_id(segments: pd.DataFrame, seg_spectrum) -> int | None:
@@ -1047,3 +1103,124 @@ def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_e
                                             out.loc[ok, "load"].to_numpy(), ratio)
     out["used"] = out.index.isin(t.index)
     return m, out
+
+
+# ---------------------------------------------------------------------- validation per segment
+def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
+    """Model error per segment, as SILO4 validates its model (eqs. 12-13, Table 3): the mean
+    error ``e`` and its standard deviation ``s_e`` of ``model - data`` (friction magnitudes, so that
+    a model above the data is positive in both directions), the rmse, the mean friction and ``e``
+    in percent of it.  Segments of a direction the model cannot predict are left out."""
+    rows = []
+    for sid in np.unique(data.segment):
+        sub = data.subset(data.segment == sid)
+        d = int(sub.direction[0])
+        try:
+            pred = model.evaluate(**sub.inputs())
+        except InputError:
+            continue
+        err = d * (pred - sub.y)
+        level = float(np.mean(d * sub.y))
+        rows.append({"segment": int(sid), "run": int(sub.run[0]), "direction": d,
+                     "speed": float(np.mean(np.abs(sub.v))), "n": len(sub), "level": level,
+                     "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
+                     "rmse": float(np.sqrt(np.mean(err ** 2))), "e_percent": 100 * float(np.mean(err)) / level})
+    return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------------- a whole recording
+@dataclass
+class FitResult:
+    """What :func:`identify_recording` (``gearspec fit``) produces.
+
+    ``model``: the requested law, fitted jointly; ``models``: it and the models it is compared
+    with (the published procedure for ``silo4``, simpler laws), by name; ``comparison``: rmse and
+    held-out rmse of each on the same data; ``errors``: per-segment errors of each (SILO4 eqs.
+    12-13); ``data``: what they were fitted to; ``amplitudes``: the lines' amplitude, phase and
+    standard error in every segment (:func:`line_amplitudes`).
+    """
+
+    model: FrictionModel
+    models: dict
+    comparison: pd.DataFrame
+    errors: dict
+    data: FitData
+    amplitudes: pd.DataFrame | None = None
+    notes: list = None
+
+    def to_dict(self) -> dict:
+        """The ``gearspec fit --json`` form (CONTRACTS.md section 4) plus the comparison."""
+        d = self.model.to_dict()
+        d["comparison"] = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
+                           for r in self.comparison.to_dict("records")]
+        d["models"] = {name: m.to_dict() for name, m in self.models.items() if m is not self.model}
+        return d
+
+
+#: laws compared with each law by default, and whether they get the same lines
+_COMPARE_WITH = {"silo4": (("stribeck", False), ("coulomb_viscous", True)), "stribeck": (("coulomb_viscous", False),),
+                 "lola11": (("lola8", False),), "lola8": (("lola11", False),), "coulomb_viscous": (), "none": ()}
+
+
+def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None, harmonics=None,
+                       published: bool | None = None, holdout: str = "segment", folds: int = 5,
+                       se: str = "covariance", load_ratio: float | None = None,
+                       compare_with=None) -> FitResult:
+    """Identify ``law`` from a recording, beside the published procedure and simpler laws.
+
+    Parameters
+    ----------
+    rec : Recording
+    law : str
+        A key of :data:`gearspec.model.LAWS`.
+    segmentation, gear
+        Default: found segments, the recording's gear spec.
+    harmonics
+        Lines to fit (:func:`harmonic_specs`); default for ``silo4``: every declared line.
+    published : bool
+        Also run :func:`silo4_published` (default: for ``silo4`` and ``stribeck``).
+    holdout, folds, se
+        As in :func:`fit`.
+    load_ratio : float, optional
+        Subtract ``|load| / load_ratio`` (the load seen at the motor, eq. 12) from the torque;
+        default for the Lola laws: the gear's total ratio when the recording has a load.
+    compare_with : sequence of str, optional
+        Other laws fitted to the same data (default: the simpler ones).
+    """
+    from .segment import find_segments
+
+    gear = load_gear(gear) if gear is not None else rec.gear
+    seg = segmentation if segmentation is not None else find_segments(rec)
+    notes = []
+    if law in ("lola8", "lola11") and load_ratio is None and "load" in rec.data and gear is not None and gear.stages:
+        load_ratio = gear.total_ratio
+        notes.append(f"friction = drive torque - |load| / {load_ratio:g} (Lola eq. 12; the load opposes the motion)")
+    data = FitData.from_recording(rec, seg, load_ratio=load_ratio)
+    if published is None:
+        published = law in ("silo4", "stribeck")
+    lines = harmonic_specs(harmonics, gear) if law == "silo4" else (harmonic_specs(harmonics) if harmonics else [])
+    amplitudes = line_amplitudes(data, lines) if lines else None
+    model = fit(data, law, harmonics=harmonics, gear=gear, holdout=holdout, folds=folds, se=se,
+                name=f"{law} (joint fit)")
+    models = {model.name: model}
+    if published:
+        pm = silo4_published(data, amplitudes, harmonics=lines, holdout=holdout, folds=folds)
+        if law == "stribeck":
+            for p in pm.directions.values():
+                p["harmonics"] = []
+            pm.law = "stribeck"
+            pm.rmse = _safe_rmse(pm, data)
+        models[pm.name] = pm
+    others = _COMPARE_WITH.get(law, ()) if compare_with is None else [(o, True) for o in compare_with]
+    for other, with_lines in others:
+        h = lines if with_lines else []
+        try:
+            m = fit(data, other, harmonics=h, gear=gear, holdout=holdout, folds=folds,
+                    name=other + (" + lines" if h else ""))
+            models[m.name] = m
+        except InputError as exc:
+            notes.append(f"{other} not fitted: {exc}")
+    rows = [{"model": name, "law": m.law, "parameters": _n_params(m), "rmse": m.rmse,
+             "rmse_holdout": m.rmse_holdout} for name, m in models.items()]
+    errors = {name: segment_errors(m, data) for name, m in models.items()}
+    return FitResult(model, models, pd.DataFrame(rows), errors, data, amplitudes, notes)

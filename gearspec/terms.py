@@ -27,7 +27,7 @@ import numpy as np
 from . import laws
 from .errors import InputError
 
-__all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names"]
+__all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "amplitude_law", "AMPLITUDE_LAWS"]
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,7 @@ def evaluate_term(term: dict, **inputs) -> tuple[np.ndarray, bool]:
 
 
 # ---------------------------------------------------------------------- position-locked
-def _amplitude_law(law: str, speed, decay):
+def amplitude_law(law: str, speed, decay):
     """Amplitude factor of a periodic term against speed: SILO4's exponential decay and others."""
     if law == "exp":
         return np.exp(-decay * speed)
@@ -115,7 +115,7 @@ def _periodic(term, *, theta, v, load=None, **_):
         if load is None:
             raise InputError("a periodic term with a load coefficient (SILO4 eq. 14) needs the 'load' channel")
         amp = laws.load_dependent_amplitude(load, amp, k)
-    g = _amplitude_law(term.get("law", "exp"), speed, term.get("decay", 0.0))
+    g = amplitude_law(term.get("law", "exp"), speed, term.get("decay", 0.0))
     return amp * g * np.sin(2 * np.pi * term["frequency"] * np.asarray(theta, dtype=float) + term.get("phase", 0.0))
 
 

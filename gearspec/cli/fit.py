@@ -1,0 +1,79 @@
+"""``gearspec fit``: identify a friction law from a recording (CONTRACTS.md section 4)."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+
+from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+
+LAWS = ("silo4", "stribeck", "lola8", "lola11", "coulomb_viscous")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fit", help="identify a friction law (SILO4 eq. 11, eq. 3, Lola laws 8 and 11)",
+                       description="Identify a friction law per direction from the constant-speed segments of a "
+                                   "recording: the joint weighted least-squares fit beside the published procedure "
+                                   "and simpler laws, with standard errors and held-out errors.")
+    add_recording_options(p)
+    add_segment_options(p)
+    g = p.add_argument_group("fit")
+    g.add_argument("--law", default="silo4", choices=LAWS,
+                   help="silo4: the full model (11) with direction-dependent parameters (default); stribeck: eq. 3; "
+                        "lola8, lola11: the Lola/CROPS laws (need a load channel); coulomb_viscous")
+    g.add_argument("--lines", metavar="F,F,...",
+                   help="frequencies (cycles per unit of theta) of the lines to fit instead of the gear's declared ones")
+    g.add_argument("--holdout", default="segment", choices=("segment", "run"),
+                   help="held-out error leaves out whole segments (default) or runs")
+    g.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    g.add_argument("--se", default="covariance", choices=("covariance", "bootstrap"),
+                   help="standard errors from the fit's covariance (default) or a bootstrap over segments")
+    g.add_argument("--no-published", action="store_true", help="skip the SILO4 published procedure")
+    g.add_argument("--load-ratio", type=float, metavar="N",
+                   help="subtract |load|/N from the torque (default for lola laws: the gear's total ratio)")
+    add_output_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..errors import InputError
+    from ..identify import identify_recording
+
+    t0 = time.perf_counter()
+    if args.folds < 2:
+        raise InputError(f"--folds must be at least 2, got {args.folds}")
+    rec = load_from_args(args)
+    seg = segments_from_args(rec, args)
+    harmonics = None
+    if args.lines:
+        try:
+            harmonics = [float(x) for x in args.lines.split(",") if x.strip()]
+        except ValueError:
+            raise InputError(f"--lines takes frequencies separated by commas, got '{args.lines}'") from None
+    result = identify_recording(rec, args.law, segmentation=seg, harmonics=harmonics,
+                                published=False if args.no_published else None, holdout=args.holdout,
+                                folds=args.folds, se=args.se, load_ratio=args.load_ratio)
+    if args.json:
+        from pathlib import Path
+
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=1))
+    if args.out:
+        from ..report.fit import write_fit_report
+
+        write_fit_report(result, args.out, command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])),
+                         recording_summary=rec.summary())
+    if not args.quiet:
+        print(result.model.describe())
+        print()
+        print(result.comparison.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+        for n in result.notes or []:
+            print(f"note: {n}")
+        print(f"({time.perf_counter() - t0:.1f} s)")
+        if args.out:
+            print(f"report: {args.out}/report.md")
+        if args.json:
+            print(f"json: {args.json}")
+    return 0

@@ -1,0 +1,167 @@
+"""Figures of ``gearspec fit``: Stribeck curve, amplitude against speed with the decay law, model
+against data over position (SILO4 Fig. 9), residuals."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..fitdata import FitData
+from ..model import RPM, FrictionModel
+from ..terms import amplitude_law
+from . import NEG, POS, plt, save
+
+__all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
+
+_DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
+_STYLES = ("-", "--", ":", "-.")
+
+
+def _speed_axis(unit):
+    return ("speed (rpm)", 1 / RPM) if unit == "rad" else (f"speed ({unit}/s)", 1.0)
+
+
+def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path, unit: str = "rad") -> Path:
+    """Plateau friction against speed per direction (error bars: 2 se) with each model's
+    position-averaged friction (SILO4 Fig. 4)."""
+    xl, xs = _speed_axis(unit)
+    tu = "Nm" if unit == "rad" else "N"
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
+    has_load = "load" in plateaus and plateaus["load"].nunique() > 1
+    for ax, (d, name, color, mk) in zip(axes, _DIRS):
+        pl = plateaus[plateaus["direction"] == d]
+        if pl.empty:
+            ax.text(0.5, 0.5, f"no {name} segment", transform=ax.transAxes, ha="center")
+            ax.set_title(f"{name} direction")
+            continue
+        ax.errorbar(pl["speed"] * xs, pl["level"], yerr=2 * pl["level_se"].fillna(0), fmt=mk, color=color, ms=4,
+                    mfc="none", label="plateau averages")
+        grid = np.geomspace(max(pl["speed"].min() / 2, 1e-9), pl["speed"].max() * 1.2, 300)
+        for (label, m), ls in zip(models.items(), _STYLES):
+            try:
+                load = float(pl["load"].median()) if "load" in pl else None
+                y = m.mean_level(grid, d, load=None if load is None else np.full(len(grid), load))
+            except Exception:  # a model that cannot predict this direction
+                continue
+            ax.plot(grid * xs, y, ls, color="k", lw=1.0, label=label + (" (median load)" if has_load else ""))
+        ax.set_xscale("log")
+        ax.set_xlabel(xl)
+        ax.set_title(f"{name} direction")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel(f"mean friction ({tu})")
+    fig.suptitle("Friction against speed (Stribeck curve): data and fitted laws", fontsize=11)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel], path, unit: str = "rad"
+                       ) -> Path | None:
+    """Amplitude of each fitted line against speed per direction (per-segment fits, 95 % bars;
+    :func:`gearspec.identify.line_amplitudes`) with each model's amplitude law ``A g(|v|)``
+    (SILO4 Fig. 7 with eq. 8)."""
+    labels = []
+    for m in models.values():
+        for p in m.directions.values():
+            for h in p["harmonics"]:
+                if h.get("label") and h["label"] not in labels:
+                    labels.append(h["label"])
+    if not labels:
+        return None
+    xl, xs = _speed_axis(unit)
+    tu = "Nm" if unit == "rad" else "N"
+    fig, axes = plt.subplots(1, len(labels), figsize=(5.2 * len(labels), 4.0), squeeze=False)
+    for ax, lab in zip(axes[0], labels):
+        df = amplitudes[amplitudes["label"] == lab]
+        smax = 0.0
+        for d, name, color, mk in _DIRS:
+            if not df.empty:
+                sub = df[df["direction"] == d].sort_values("speed")
+                if len(sub):
+                    smax = max(smax, sub["speed"].max())
+                    ax.errorbar(sub["speed"] * xs, sub["amplitude"], yerr=1.96 * sub["amplitude_se"], fmt=mk,
+                                color=color, ms=4, mfc="none", label=f"{name}: per segment")
+        if smax == 0:
+            smax = 1.0
+        grid = np.linspace(0, smax * 1.1, 200)
+        for (mlabel, m), ls in zip(models.items(), _STYLES):
+            for d, name, color, _ in _DIRS:
+                h = next((h for h in m.harmonics(name) if h.get("label") == lab), None)
+                if h is None:
+                    continue
+                amp = h["amplitude"] * amplitude_law(h.get("law", "exp"), grid, h.get("decay") or 0.0)
+                ax.plot(grid * xs, amp, ls, color=color, lw=1.0, label=f"{name}: {mlabel}")
+        ax.set_title(lab, fontsize=10)
+        ax.set_xlabel(xl)
+        ax.set_ylabel(f"amplitude ({tu})")
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6)
+    fig.suptitle("Ripple amplitude against speed: spectra and fitted amplitude laws", fontsize=11)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int], path, cycles: float = 3.0,
+                       frequency: float | None = None) -> Path:
+    """Friction over position for a few segments: data and model (SILO4 Fig. 9).  Each panel shows
+    ``cycles`` periods of ``frequency`` (default: the slowest fitted line) from the segment start."""
+    n = len(segments)
+    unit = data.unit
+    tu = "Nm" if unit == "rad" else "N"
+    fig, axes = plt.subplots(n, 1, figsize=(11, 2.3 * n + 0.6), squeeze=False)
+    for ax, sid in zip(axes[:, 0], segments):
+        sub = data.subset(data.segment == sid)
+        d = int(sub.direction[0])
+        th = sub.theta
+        f = frequency
+        if f is None:
+            fs = [h["frequency"] for h in model.harmonics(d) if h.get("amplitude")]
+            f = min(fs) if fs else None
+        order = np.argsort(th * d)
+        th, y = th[order], sub.y[order]
+        x = d * (th - th[0])
+        keep = x <= (cycles / f if f else np.inf)
+        pred = model.evaluate(**sub.subset(order[keep]).inputs())
+        ax.plot(x[keep], d * y[keep], ".", ms=1.5, color="0.6", label="data")
+        ax.plot(x[keep], d * pred, "-", color=POS if d > 0 else NEG, lw=1.2, label=model.name)
+        sp = float(np.mean(np.abs(sub.v)))
+        ax.set_title(f"segment {sid}: {'+' if d > 0 else '-'}{sp:.4g} {unit}/s"
+                     + (f" ({sp / RPM:.0f} rpm)" if unit == "rad" else ""), fontsize=9, loc="left")
+        ax.set_ylabel(f"friction ({tu})")
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel(f"travel from the segment start ({unit})")
+    fig.suptitle("Model against data over position", fontsize=11)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> Path:
+    """Per segment: mean error e and rmse of model - data against speed, per model and direction."""
+    xl, xs = _speed_axis(unit)
+    tu = "Nm" if unit == "rad" else "N"
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.0))
+    for (label, df), ls in zip(errors.items(), _STYLES):
+        if df.empty:
+            continue
+        for d, name, color, mk in _DIRS:
+            sub = df[df["direction"] == d].sort_values("speed")
+            if sub.empty:
+                continue
+            axes[0].plot(sub["speed"] * xs, sub["e"], ls, marker=mk, color=color, ms=4, mfc="none",
+                         label=f"{label}, {name}")
+            axes[1].plot(sub["speed"] * xs, sub["rmse"], ls, marker=mk, color=color, ms=4, mfc="none",
+                         label=f"{label}, {name}")
+    axes[0].axhline(0, color="0.6", lw=0.6)
+    axes[0].set_ylabel(f"mean error e = model - data ({tu})")
+    axes[1].set_ylabel(f"rmse per segment ({tu})")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel(xl)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=6)
+    fig.suptitle("Residuals per segment", fontsize=11)
+    fig.tight_layout()
+    return save(fig, path)

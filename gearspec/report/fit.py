@@ -1,0 +1,117 @@
+"""The report of ``gearspec fit``: the identified model in SI and the papers' units, how well it
+and the models beside it predict held-out data, and the figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..identify import FitResult
+from ..model import RPM
+from ..plots import fit as fplots
+from . import markdown_table
+
+__all__ = ["write_fit_report"]
+
+
+def _example_segments(data, per_direction: int = 3) -> list[int]:
+    """A low, a middle and a high speed segment per direction."""
+    out = []
+    seg = data.segments
+    for d in (1, -1):
+        s = seg[seg["direction"] == d].sort_values("speed")
+        if s.empty:
+            continue
+        idx = np.unique(np.linspace(0, len(s) - 1, min(per_direction, len(s))).round().astype(int))
+        out += [int(s.iloc[i]["segment"]) for i in idx]
+    return out
+
+
+def write_fit_report(result: FitResult, out: str | Path, command: str = "", recording_summary: str = "") -> Path:
+    """Write ``report.md``, figures, ``model.json`` and per-segment CSVs into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    m, data = result.model, result.data
+    unit = data.unit
+    tu = "Nm" if unit == "rad" else "N"
+    plate = data.plateaus()
+    figs = {"stribeck": fplots.plot_stribeck(plate, result.models, out / "stribeck.png", unit=unit)}
+    if result.amplitudes is not None and len(result.amplitudes):
+        figs["amplitude"] = fplots.plot_amplitude_fit(result.amplitudes, result.models, out / "amplitude_fit.png",
+                                                      unit=unit)
+        result.amplitudes.to_csv(out / "line_amplitudes.csv", index=False)
+    if any(h.get("amplitude") for p in m.directions.values() for h in p["harmonics"]):
+        figs["position"] = fplots.plot_model_vs_data(data, m, _example_segments(data), out / "model_vs_data.png")
+    figs["residuals"] = fplots.plot_residuals(result.errors, out / "residuals.png", unit=unit)
+    m.to_json(out / "model.json")
+    for name, df in result.errors.items():
+        df.to_csv(out / f"segment_errors_{_slug(name)}.csv", index=False)
+    plate.to_csv(out / "plateaus.csv", index=False)
+
+    md = ["# gearspec fit report", ""]
+    if command:
+        md += [f"Command: `{command}`", ""]
+    if recording_summary:
+        md += ["## Recording", "", "```", recording_summary, "```", ""]
+    md += [f"{len(data)} samples in {data.n_segments} constant-speed segments "
+           f"({int((data.segments['direction'] > 0).sum())} positive, {int((data.segments['direction'] < 0).sum())} "
+           f"negative). " + " ".join(data.notes), ""]
+    md += [f"## Model: {m.name}", "", f"Law: {m.law_spec.description}.", "",
+           "Parameters per direction in SI units with standard errors, and in the SILO4 paper's units "
+           "(mNm, rpm of the motor) where the axis is rotary. `model.json` holds the same in the "
+           "`gearspec fit --json` form.", ""]
+    md += [markdown_table(_table(m)), ""]
+    if m.not_identified:
+        md += ["**Not identified** (left out, not invented):", ""]
+        md += [f"- `{k}`: {why}" for k, why in m.not_identified.items()] + [""]
+    if m.notes:
+        md += [f"- {n}" for n in m.notes] + [""]
+    md += ["## How well the models predict", "",
+           f"rmse over all samples in segments, and held-out rmse from {m.meta.get('fit', {}).get('folds', 5)}-fold "
+           "cross-validation over whole segments (each fold predicted by a model fitted without it), "
+           f"in {tu}.", ""]
+    md += [markdown_table(result.comparison), ""]
+    if result.notes:
+        md += [f"- {n}" for n in result.notes] + [""]
+    md += ["## Stribeck curve", "", "Mean friction of every plateau (error bars: 2 standard errors from block "
+           "means) and each model's friction averaged over position.", "", f"![stribeck]({figs['stribeck'].name})", ""]
+    if figs.get("amplitude") is not None:
+        md += ["## Ripple amplitude against speed", "",
+               "Amplitude of every fitted line in every segment (joint least-squares fit of the lines on the "
+               "segment's samples, as the spectra measure them; 95 % error bars) and each model's "
+               "amplitude law (SILO4 eq. 8: A exp(-b|v|)). The published procedure fits log(amplitude) against "
+               "speed (eq. 10); the joint fit fits the ripple itself.", "",
+               f"![amplitude]({figs['amplitude'].name})", ""]
+    if figs.get("position") is not None:
+        md += ["## Model against data over position", "", f"![model vs data]({figs['position'].name})", ""]
+    md += ["## Residuals", "", "Mean error e and its standard deviation s(e) of model - data per segment "
+           "(SILO4 eqs. 12-13, Table 3), for each model.", "", f"![residuals]({figs['residuals'].name})", ""]
+    errs = result.errors.get(m.name)
+    if errs is not None and not errs.empty:
+        show = errs.copy()
+        if unit == "rad":
+            show.insert(4, "speed (rpm)", show["speed"] / RPM)
+        md += [markdown_table(show.drop(columns=["run"])), ""]
+    md += ["## Method", "",
+           "Joint fit: per direction, weighted nonlinear least squares of every parameter on the samples of all "
+           "segments at once (exactly, through per-segment sufficient statistics), each segment weighted by its "
+           "own residual variance; Stribeck velocity and decay constants by variable projection; standard errors "
+           "from the covariance of the fit. Published procedure (SILO4 sections 3-4): Coulomb and viscous from "
+           "plateaus above 100 rpm, static friction and Stribeck velocity from eq. 4 below, amplitudes and decays "
+           "from the log-linear fit of eq. 10 to the spectra.", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(md))
+    return path
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name).strip("_").lower()
+
+
+def _table(m) -> pd.DataFrame:
+    t = m.table()
+    cols = [c for c in ("parameter", "unit", "positive", "positive_se", "negative", "negative_se", "paper_unit",
+                        "positive_paper", "negative_paper") if c in t]
+    return t[cols]

@@ -1,0 +1,62 @@
+"""``gearspec fit`` as a user meets it: JSON per CONTRACTS.md, report with figures, bad input."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gearspec.cli import main
+from gearspec.model import FrictionModel
+from gearspec.simulate import model_recording
+
+TRUTH = {"tau_c": 0.1, "tau_s": 0.15, "v_s": 2.0, "viscous": 1e-3,
+         "harmonics": [{"frequency": 0.8, "amplitude": 0.01, "decay": 0.01, "phase": 1.0, "label": "stage A"}]}
+NEG = dict(TRUTH, tau_c=0.12, viscous=1.2e-3)
+
+
+@pytest.fixture(scope="module")
+def recording_csv(tmp_path_factory):
+    truth = FrictionModel("silo4", TRUTH, NEG)
+    sp = [0.5, 1, 2, 4, 8, 20, 50, 100]
+    sp = sp + [-s for s in sp]
+    dur = [max(1.5, 3.0 / (0.8 * abs(v))) for v in sp]
+    rec, _ = model_recording(truth, sp, duration=dur, fs=500, noise=1e-3, seed=3)
+    return rec.save(tmp_path_factory.mktemp("fit") / "rec.csv")
+
+
+def test_fit_writes_contract_json_and_report(recording_csv, tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["fit", str(recording_csv), "--law", "silo4", "--lines", "0.8", "--out", str(out),
+                 "--json", str(out / "fit.json"), "--folds", "4"])
+    assert code == 0
+    d = json.loads((out / "fit.json").read_text())
+    assert d["law"] == "silo4" and d["rmse"] > 0 and d["rmse_holdout"] > 0
+    for name, truth in (("positive", TRUTH), ("negative", NEG)):
+        P = d["directions"][name]
+        for k in ("tau_c", "tau_s", "v_s", "viscous"):
+            assert P[k] == pytest.approx(truth[k], rel=0.05) and P[k + "_se"] > 0
+        h = P["harmonics"][0]
+        assert h["frequency"] == 0.8 and h["amplitude"] == pytest.approx(0.01, rel=0.05)
+        assert h["decay"] == pytest.approx(0.01, rel=0.2)     # s/rad
+    names = [r["model"] for r in d["comparison"]]
+    assert "SILO4 published procedure" in names and "stribeck" in names
+    for f in ("report.md", "stribeck.png", "amplitude_fit.png", "model_vs_data.png", "residuals.png", "model.json"):
+        assert (out / f).stat().st_size > 0, f
+    text = (out / "report.md").read_text()
+    assert "held-out" in text and "mNm" in text
+    # the model written can be read back and evaluated
+    m = FrictionModel.from_json(out / "model.json")
+    assert math.isfinite(float(m.evaluate(0.0, 1.0)[0]))
+    assert "rmse_holdout" in capsys.readouterr().out
+
+
+def test_lola_law_without_load_is_exit_2(recording_csv, capsys):
+    assert main(["fit", str(recording_csv), "--law", "lola8", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gearspec: error:") and "load" in err
+
+
+def test_bad_lines_option_is_exit_2(recording_csv, capsys):
+    assert main(["fit", str(recording_csv), "--lines", "0.8,abc", "--quiet"]) == 2
+    assert "--lines" in capsys.readouterr().err
