@@ -1,0 +1,733 @@
+"""Digital twin of the SILO4 leg's joint 3 (Garcia, Gonzalez de Santos, Canudas de Wit, IJRR 2002).
+
+The test bench of the paper, section 2, rebuilt as a simulation whose friction is known:
+
+    PID (position + velocity, quantised encoder) -> PWM voltage -> DC motor (back-EMF, R)
+        -> rotor inertia J -> friction of motor + planetary 14 + worm 20.5 (SILO4 eq. 11)
+    armature current -> 1 kHz 4th-order Bessel filter -> sampled every 4 ms (+ noise)
+
+One *run* is one experiment of the paper: from standstill the controller follows a velocity-
+mode trajectory (acceleration-limited ramp, a held speed, a ramp back to rest); ten repetitions
+per speed, speeds over the paper's range in both directions.  Friction is the full model (11)
+with the values of Table 2 (:func:`table2_model`), or any :class:`~gearspec.model.FrictionModel`
+given as ``truth``, plus the effects of :mod:`gearspec.simulate.effects`.
+
+Units
+-----
+SI throughout: theta and speeds at the MOTOR (rad, rad/s), torques at the motor (Nm), current in
+A.  Table 2's speeds are motor rpm; its omega column is the shaft frequency per radian of MOTOR
+position (3.5e-3 = 1/287, 0.071 = 1/14, 1 = 1/1), so the harmonics are at 1/(2 pi 287),
+1/(2 pi 14) and 1/(2 pi) cycles per motor rad: the output shaft (joint), the worm shaft (=
+planetary output) and the motor shaft -- the preset ``silo4-joint3``'s declared lines.
+
+The unknowns, chosen (the paper does not give them)
+---------------------------------------------------
+* Motor: a 24 V graphite-brush DC motor with ``k_M = 0.0231 Nm/A`` and ``R = 1.6 ohm``.  Chosen so
+  that the top speed of the paper's figures, 6500 rpm, is reachable against Table 2's friction
+  there (7.1 mNm + 0.0134 mNm/rpm x 6500 = 94 mNm, i.e. 4.1 A): ``k_M w + R I = 15.7 V + 6.5 V
+  < 24 V``; and so that the electrical damping ``k_M^2 / R = 3.3e-4 Nm s/rad`` is *below* the
+  velocity-weakening slope of the Stribeck law at standstill, ``(tau_E - tau_C) / v_s = 5.0e-4``
+  (positive) and ``5.4e-4`` (negative): near standstill the drive is negatively damped unless the
+  controller's derivative acts -- which, with a 2000-count encoder, it cannot below a count per
+  derivative interval.  That is the stick-slip of the paper's Fig. 3.  Friction at low speed is
+  then 0.37 A.
+* Inertia at the motor ``J = 2.0e-6 kg m^2``: rotor (about 1.5e-6 for a motor of this size) plus
+  the planetary stage and worm reflected through 14 and 287 (small).
+* Encoder: 500 lines read in quadrature, 2000 counts per revolution (3.1 mrad per count).
+* Controller: a PID on the encoder position error, tuned for a triple closed-loop pole at
+  ``bandwidth = 2 pi 30 Hz`` with the motor model: ``Kd + k_M^2/R = 3 J w``, ``Kp = 3 J w^2``,
+  ``Ki = J w^3`` (in torque units; times ``R / k_M`` in volts).  The derivative is the error
+  difference over a 2 ms derivative interval (as digital motion-control PIDs of the time did),
+  the integral stops while the voltage saturates (anti-windup), the trajectory is acceleration-
+  limited to 2000 rad/s^2 (6500 rpm in 0.34 s).
+* Control and integration rate 4 kHz, not the paper's 16 kHz: the loop's crossover (~30 Hz) and
+  the fastest friction ripple (the motor shaft at 6500 rpm, 108 Hz) are 40-130 times below it, so
+  the closed loop behaves the same (half a 4 kHz sample of delay is 1 degree at 30 Hz) while the
+  simulation is four times cheaper.  The Bessel filter is discretised exactly for a current held
+  over each control period (zero-order hold), which is what a PWM-averaged current is.
+* Measurement: current noise 4 mA (0.09 mNm, about 1 % of the friction: Table 3's model errors
+  of 0.12-0.21 mNm include it) on each 4 ms sample, and a repetition-to-repetition variation of
+  the whole friction of 1 % (lubricant state, temperature), so that repetitions scatter by about
+  1 %, inside the paper's "< 3 %".  Each repetition starts from the same position (the bench
+  returns to its home position), so that the position ripple does not add to the scatter.
+* Stick-slip is handled as such: a motor at rest stays at rest while the net drive torque is
+  below the static friction at its position (the model's friction at zero speed, ripple
+  included); a moving motor whose velocity would change sign within a step stops instead.
+
+Performance: all runs are integrated together, one numpy step per control period over the
+vector of runs (runs that have finished drop out); the default twin (40 speeds x 10 repetitions)
+takes some seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import signal
+
+from ..errors import InputError
+from .. import laws
+from ..gears import GearTrain, load_gear
+from ..model import RPM, FrictionModel
+from ..recording import Recording
+from ..terms import TERMS, evaluate_term
+from .effects import Effect, apply_effects, effect_channels, effects_truth
+
+__all__ = ["PAPER_TABLE2", "table2_model", "twin_gear", "silo4_twin", "stick_slip_run", "TwinTruth",
+           "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold"]
+
+#: planetary and worm ratios, and the total (Table 1)
+RATIO_PLANETARY = 14.0
+RATIO_WORM = 20.5
+RATIO = RATIO_PLANETARY * RATIO_WORM
+
+#: joint speed of the paper's Fig. 3 (stick-slip), rad/s
+FIG3_JOINT_SPEED = 1e-4
+
+#: the bench's unknowns, as chosen (see the module docstring)
+PLANT = {
+    "torque_constant": 0.0231,     # Nm/A
+    "resistance": 1.6,             # ohm
+    "inertia": 2.0e-6,             # kg m^2 at the motor
+    "supply_voltage": 24.0,        # V
+    "counts_per_rev": 2000,        # 500 lines, quadrature
+    "control_rate": 4000.0,        # Hz (the paper: 16 kHz)
+    "bandwidth_hz": 30.0,          # closed-loop triple pole
+    "derivative_interval": 2e-3,   # s
+    "acceleration": 2000.0,        # rad/s^2, trajectory limit
+    "filter_cutoff": 1000.0,       # Hz, 4th-order Bessel (-3 dB)
+    "filter_order": 4,
+    "sample_interval": 4e-3,       # s
+    "current_noise": 4e-3,         # A, standard deviation per sample
+    "repeatability": 0.01,         # relative sd of the friction between repetitions
+    "settle": 0.3,                 # s recorded at rest after each run's ramp down
+    "pause": 1.0,                  # s between runs on the experiment clock
+}
+
+#: motor speeds (rpm) of the default twin, each in both directions: the Stribeck region of
+#: Fig. 4, Table 3's 280 / 560 / 3000 rpm and Fig. 5's 2000 / 4500 / 6500 rpm
+DEFAULT_SPEEDS_RPM = (2, 5, 10, 20, 30, 50, 75, 100, 150, 200, 280, 400, 560, 800, 1000, 1500, 2000, 3000, 4500, 6500)
+
+_PI = math.pi
+
+#: Table 2 as published (paper units: mNm, motor rpm, mNm/rpm, 1/rpm, rad; omega per motor rad)
+PAPER_TABLE2 = {
+    "tau_E": {"unit": "mNm", "positive": 8.58, "negative": 9.41},
+    "tau_C": {"unit": "mNm", "positive": 7.106, "negative": 7.909},
+    "theta_s": {"unit": "rpm", "positive": 28.18, "negative": 26.58},
+    "B": {"unit": "mNm/rpm", "positive": 0.0134, "negative": 0.0138},
+    "A1": {"unit": "mNm", "positive": 0.3, "negative": 0.3},
+    "omega1": {"unit": "per motor rad", "positive": 3.5e-3, "negative": 3.5e-3},
+    "phi1": {"unit": "rad", "positive": _PI / 2, "negative": _PI / 2},
+    "A2": {"unit": "mNm", "positive": 0.576, "negative": 0.526},
+    "b2": {"unit": "1/rpm", "positive": 1.27e-4, "negative": 1.12e-4},
+    "omega2": {"unit": "per motor rad", "positive": 0.071, "negative": 0.071},
+    "phi2": {"unit": "rad", "positive": _PI / 2, "negative": _PI / 2},
+    "A3": {"unit": "mNm", "positive": 0.133, "negative": 0.152},
+    "b3": {"unit": "1/rpm", "positive": 5.28e-5, "negative": 7.49e-6},
+    "omega3": {"unit": "per motor rad", "positive": 1.0, "negative": 1.0},
+    "phi3": {"unit": "rad", "positive": _PI, "negative": _PI},
+}
+
+#: labels of the three harmonics, as the silo4-joint3 preset declares its lines
+_LABELS = {1: "output shaft", 2: "planetary output shaft", 3: "motor shaft"}
+#: exact shaft frequencies per motor rad (the table's rounded omegas are 1/287, 1/14, 1)
+_FREQS = {1: 1.0 / (2 * _PI * RATIO), 2: 1.0 / (2 * _PI * RATIO_PLANETARY), 3: 1.0 / (2 * _PI)}
+
+
+def table2_model() -> FrictionModel:
+    """The full SILO4 model (eq. 11) with Table 2's values, in SI units at the motor.
+
+    ``tau`` in Nm (mNm / 1000), Stribeck velocity ``v_s`` in rad/s of the motor (rpm x 2 pi / 60),
+    viscous in Nm s/rad (mNm/rpm x 1e-3 x 60 / 2 pi), decays in s/rad (1/rpm x 60 / 2 pi), the
+    harmonics at the output shaft (1/(2 pi 287)), worm shaft (1/(2 pi 14)) and motor shaft
+    (1/(2 pi)) cycles per motor rad, labelled as the ``silo4-joint3`` preset labels its lines.
+    The paper uses one Stribeck velocity per direction (28.18 / 26.58 rpm).
+    """
+    dirs = {}
+    for d in ("positive", "negative"):
+        P = {k: v[d] for k, v in PAPER_TABLE2.items()}
+        harmonics = []
+        for k in (1, 2, 3):
+            b = 0.0 if k == 1 else P[f"b{k}"]
+            harmonics.append({"frequency": _FREQS[k], "amplitude": P[f"A{k}"] * 1e-3, "decay": b / RPM,
+                              "phase": P[f"phi{k}"], "label": _LABELS[k]})
+        dirs[d] = {"tau_c": P["tau_C"] * 1e-3, "tau_s": P["tau_E"] * 1e-3, "v_s": P["theta_s"] * RPM,
+                   "viscous": P["B"] * 1e-3 / RPM, "harmonics": harmonics}
+    return FrictionModel("silo4", dirs["positive"], dirs["negative"], name="SILO4 Table 2",
+                         notes=["Garcia et al. 2002, Table 2, converted to SI at the motor"])
+
+
+def twin_gear(torque_constant: float | None = None, inertia: float | None = None) -> GearTrain:
+    """The ``silo4-joint3`` gear train with the twin's torque constant and inertia (what is needed
+    to read its recordings: ``current`` -> torque, and ``J thetadd`` removed as in SILO4 eq. 2)."""
+    g = load_gear("silo4-joint3")
+    return dataclasses.replace(
+        g, name="SILO4 leg, joint 3 (twin)",
+        torque_constant=float(torque_constant if torque_constant is not None else PLANT["torque_constant"]),
+        inertia=float(inertia if inertia is not None else PLANT["inertia"]),
+        description=g.description + " Twin: torque constant and inertia as chosen in gearspec.simulate.silo4.",
+        source="gearspec.simulate.silo4")
+
+
+def default_hold(speed: float) -> float:
+    """Held seconds at a motor speed (rad/s): one output revolution (2 pi 287 rad of travel, so
+    that the joint line completes a cycle) where that takes 3-10 s; 3 s above, 10 s below."""
+    return float(np.clip(2 * _PI * RATIO / max(abs(speed), 1e-9), 3.0, 10.0))
+
+
+# ---------------------------------------------------------------------- truth record
+@dataclass
+class TwinTruth:
+    """What a twin knows and a recording does not.
+
+    Attributes
+    ----------
+    twin : str
+    model : FrictionModel
+        The friction that was simulated (effects applied).
+    gear : GearTrain
+        The spec to read the recording with (torque constant, inertia as the twin's).
+    effects : list of dict
+        Ground truth of the injected effects (:func:`~gearspec.simulate.effects.effects_truth`).
+    runs : DataFrame
+        One row per run (see the twin's docstring).
+    settings : dict
+        Every setting of the bench (plant, controller, sensors, seed).
+    points : DataFrame or None
+        Operating points (the Lola testbed).
+    """
+
+    twin: str
+    model: FrictionModel
+    gear: GearTrain
+    effects: list
+    runs: pd.DataFrame
+    settings: dict
+    points: pd.DataFrame | None = None
+
+    def to_dict(self) -> dict:
+        def table(df):
+            return None if df is None else json.loads(df.to_json(orient="records"))
+
+        return {"twin": self.twin, "model": self.model.to_dict(), "gear": self.gear.to_dict(),
+                "effects": self.effects, "settings": _plain(self.settings), "runs": table(self.runs),
+                "points": table(self.points)}
+
+    def to_json(self, path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), indent=1))
+        return path
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        x = float(obj)
+        return x if math.isfinite(x) else None
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+# ---------------------------------------------------------------------- the friction inside the loop
+_HISTORY = ("hysteresis", "backlash")
+
+
+class _Pointwise:
+    """Evaluation of a model without signed or history terms, fast for small vectors.
+
+    Same numbers as ``model.evaluate`` (a test checks it), with less overhead per call: the
+    base law of both directions on every sample then a select (instead of boolean indexing),
+    and the exponential-decay harmonics of each direction in one broadcast call of
+    :func:`gearspec.laws.meshing_ripple`.  Harmonics of other amplitude laws or with a load
+    coefficient go through the ``periodic`` term as in the model.
+    """
+
+    def __init__(self, model: FrictionModel):
+        self.model = model
+        self.law = model.law_spec
+        params, fast, self.slow = [], [], []
+        for name in ("positive", "negative"):
+            p = model.directions[name]
+            missing = [k for k in self.law.params if p.get(k) is None]
+            if missing:
+                raise InputError(f"the truth model has no {name}-direction value for {', '.join(missing)}")
+            params.append([float(p[k]) for k in self.law.params])
+            hs = [h for h in p["harmonics"] if h.get("amplitude") is not None]
+            fast.append([h for h in hs if h.get("law", "exp") == "exp" and not h.get("load_coefficient")])
+            self.slow.append([h for h in hs if not (h.get("law", "exp") == "exp" and not h.get("load_coefficient"))])
+        # parameters of both directions stacked along a first axis of length 2
+        self.params = [np.array(col)[:, None] for col in zip(*params)] if params[0] else []
+        n_h = max(len(f) for f in fast)
+        self.harm = None
+        if n_h:
+            def stack(key, default):
+                return np.array([[[h.get(key, default)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast], dtype=float)
+            # padding harmonics have zero amplitude
+            self.harm = (stack("amplitude", 0.0), stack("decay", 0.0), stack("frequency", 0.0), stack("phase", 0.0))
+        self.terms = list(model.terms)
+
+    def __call__(self, theta, v, *, load=None, temperature=None, t=None, run=None):
+        speed = np.abs(v)
+        sign = np.sign(v)
+        ld = None if load is None else load[None, :]
+        m = np.asarray(self.law.magnitude(speed[None, :], ld, *self.params), dtype=float)
+        if self.harm is not None:
+            m = m + laws.meshing_ripple(theta[None, None, :], v[None, None, :], *self.harm).sum(axis=1)
+        mag = np.where(sign > 0, m[0], m[-1]) if m.ndim == 2 else np.broadcast_to(m, speed.shape)
+        for d, hs in ((1.0, self.slow[0]), (-1.0, self.slow[1])):
+            for h in hs:
+                mag = mag + (sign == d) * evaluate_term({"kind": "periodic", **h}, theta=theta, v=v, load=load)[0]
+        for term in self.terms:
+            mag = mag + evaluate_term(term, theta=theta, v=v, load=load, temperature=temperature, t=t, acc=None,
+                                      run=run)[0]
+        return sign * mag
+
+
+class _LoopFriction:
+    """A truth model split for step-by-step use in a closed loop.
+
+    * pointwise friction (base law, harmonics, magnitude terms): :class:`_Pointwise` per step;
+    * signed terms (cogging, offset): external torques, ``evaluate_term`` per step;
+    * inertia terms: added to the rotor inertia;
+    * history terms (hysteresis, backlash: they depend on the last reversal): evaluated with the
+      term's own function on two-sample sequences ``[turning point, now]`` per run, the turning
+      point kept as state -- the same numbers as evaluating the whole trajectory at once.
+    """
+
+    def __init__(self, model: FrictionModel):
+        self.model = model
+        pointwise = model.copy()
+        pointwise.terms = [t for t in model.terms if not TERMS[t["kind"]].signed and t["kind"] not in _HISTORY]
+        self.pointwise = _Pointwise(pointwise)
+        self.signed = [t for t in model.terms if TERMS[t["kind"]].signed and t["kind"] != "inertia"]
+        self.history = [t for t in model.terms if t["kind"] in _HISTORY]
+        self.extra_inertia = float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
+
+    def external(self, theta, v, **kw):
+        out = 0.0
+        for term in self.signed:
+            out = out + evaluate_term(term, theta=theta, v=v, **kw)[0]
+        return out
+
+    def friction(self, theta, v, turn_theta, last_sign, **kw):
+        """Signed friction at (theta, v); ``turn_theta``/``last_sign`` per run: the turning point of
+        the last reversal (NaN: none yet) and the last nonzero direction of motion."""
+        f = self.pointwise(theta, v, **kw)
+        if self.history:
+            s = np.sign(v)
+            now_rev = (s != 0) & (last_sign != 0) & (s != last_sign)
+            have = now_rev | np.isfinite(turn_theta)
+            if have.any():
+                idx = np.flatnonzero(have)
+                tt = np.where(now_rev, theta, turn_theta)[idx]
+                # sample 0: the turning point, moving the old way; sample 1: now
+                old = np.where(now_rev, last_sign, -s)[idx]
+                th2 = np.column_stack((tt, theta[idx])).ravel()
+                v2 = np.column_stack((old, s[idx])).ravel()
+                run2 = np.repeat(np.arange(len(idx)), 2)
+                extra = np.zeros(len(idx))
+                for term in self.history:
+                    extra += evaluate_term(term, theta=th2, v=v2, run=run2)[0][1::2]
+                f = f.copy()
+                f[idx] += s[idx] * extra
+        return f
+
+
+def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
+    """The analog Bessel low-pass (-3 dB at ``cutoff_hz``) discretised exactly for an input held
+    over each step (zero-order hold): state-space (A, B, C, D) of the discrete filter."""
+    b, a = signal.bessel(order, 2 * _PI * cutoff_hz, btype="low", analog=True, norm="mag")
+    A, B, C, D = signal.tf2ss(b, a)
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), dt, method="zoh")
+    return Ad, Bd[:, 0], Cd[0], float(Dd[0, 0])
+
+
+def _channel_values(spec, name, t, run, n_rep):
+    """A channel from a scalar, a sequence (one value per repetition, cycled) or callable(t, run)."""
+    if spec is None:
+        return None
+    if callable(spec):
+        return np.asarray(spec(t, run), dtype=float) * np.ones(np.shape(t))
+    if np.ndim(spec) == 0:
+        return np.full(np.shape(t), float(spec))
+    vals = np.asarray(spec, dtype=float)
+    return vals[np.asarray(n_rep) % len(vals)] * np.ones(np.shape(t))
+
+
+def _auto_starts(model: FrictionModel, w_cmd, holds, acc, step: float = 0.05) -> np.ndarray:
+    """Start positions that centre each run's held travel where the model's position ripple
+    (friction minus its position average, at the run's speed) averages to about zero over the
+    travel; searched over one output revolution, the nearest to 0 among the best."""
+    out = np.zeros(len(w_cmd))
+    period = 2 * _PI * RATIO
+    cache: dict = {}
+    for r, (w, hold) in enumerate(zip(w_cmd, holds)):
+        key = (float(w), float(hold))
+        if key not in cache:
+            d = 1.0 if w > 0 else -1.0
+            travel = abs(w) * hold
+            ramp = w * w / (2 * acc)
+            if travel >= period:
+                cache[key] = 0.0
+            else:
+                n_w = max(1, int(round(travel / step)))
+                grid = np.arange(-n_w, int(period / step) + n_w + 1) * step
+                ripple = d * model.friction(grid, np.full(len(grid), w)) - model.mean_level(abs(w), d)[0]
+                c = np.concatenate(([0.0], np.cumsum(ripple)))
+                avg = (c[n_w:] - c[:-n_w]) / n_w  # mean over windows of n_w samples
+                centres = grid[:len(avg)] + 0.5 * n_w * step
+                ok = (centres >= 0) & (centres < period)
+                best = np.min(np.abs(avg[ok]))
+                cand = centres[ok][np.abs(avg[ok]) <= best + 1e-3 * np.std(ripple) + 1e-15]
+                centre = float(cand[np.argmin(np.abs(cand))])
+                cache[key] = centre - d * (ramp + 0.5 * travel)
+        out[r] = cache[key]
+    return out
+
+
+# ---------------------------------------------------------------------- the twin
+def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10, *, truth: FrictionModel | None = None,
+               effects: Iterable[Effect] = (), duration: float | Sequence[float] | Callable | None = None,
+               seed: int | None = 0, load=None, theta0: float | str = "auto", record_velocity: bool = False,
+               sample_interval: float | None = None, current_noise: float | None = None,
+               repeatability: float | None = None, plant: dict | None = None) -> tuple[Recording, TwinTruth]:
+    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition).
+
+    Parameters
+    ----------
+    speeds_rpm : sequence of float, optional
+        Signed motor speeds in rpm, visited in this order, each ``repetitions`` times in a row.
+        Default: :data:`DEFAULT_SPEEDS_RPM`, each forwards then backwards.
+    repetitions : int
+        Runs per speed (the paper: ten).
+    truth : FrictionModel, optional
+        The friction (default :func:`table2_model`); theta at the motor, SI.
+    effects : sequence of Effect
+        Injected into ``truth`` (:func:`~gearspec.simulate.effects.apply_effects`); channels they
+        supply (temperature, load) are fed to the model and recorded.
+    duration : float, sequence (one per speed) or callable(speed rad/s) -> s, optional
+        Seconds held at speed (default :func:`default_hold`).
+    seed : int or None
+        Noise and repetition-to-repetition variation.
+    load : float, sequence (per repetition, cycled) or callable(t, run), optional
+        Output load torque (Nm, the torque the drive delivers to the load, as in the ``load``
+        channel); the drive supplies ``load / 287`` more at the motor.  SILO4 was measured without
+        load; an effect may supply one (``load_meshing(loads=...)``).
+    theta0 : float or "auto"
+        Motor position at the start of every run (rad), the same for every repetition (the bench
+        returns home between repetitions, so that they scatter only by noise and friction
+        variation).  "auto" (default): per speed, the start that centres the held travel where the
+        position ripple of ``truth`` (without effects) averages out over it -- at low speed a
+        10 s plateau covers a fraction of a worm-shaft cycle (88 rad), and its average would
+        otherwise carry the ripple at one position (up to +-0.9 mNm, 10 %), which the Stribeck
+        curve of Fig. 4 does not.
+    record_velocity : bool
+        Add a ``velocity`` column: the true motor velocity at each sample (the bench did not
+        measure it; for plots and checks).
+    sample_interval, current_noise, repeatability : float, optional
+        Override :data:`PLANT`'s 4 ms, 4 mA and 1 %.
+    plant : dict, optional
+        Override any other entry of :data:`PLANT`.
+
+    Returns
+    -------
+    recording : Recording
+        Columns ``t`` (s on the experiment clock: runs follow each other with a pause), ``theta``
+        (motor rad, encoder-quantised to 2 pi / 2000), ``current`` (A, Bessel-filtered, sampled,
+        noisy), ``run``, and ``load`` / ``temperature`` / ``velocity`` where present.  Read it
+        with :func:`twin_gear` (torque constant and inertia).
+    truth : TwinTruth
+        ``runs``: one row per run with ``run, speed_rpm, velocity`` (commanded, rad/s),
+        ``direction, repetition, t_start, t_stop, t0, t1`` (the held part, settled, on the
+        clock), ``scale`` (this repetition's friction factor), ``level`` (the truth model's
+        position-averaged friction at the speed, :meth:`FrictionModel.mean_level`, times
+        ``scale``), ``friction_mean`` (mean of the true friction magnitude over the held samples:
+        what a plateau average measures, position ripple included), ``velocity_mean`` (true
+        mean velocity over the held part), ``stuck_fraction`` (of held samples at rest).
+    """
+    P = dict(PLANT)
+    P.update(plant or {})
+    if sample_interval is not None:
+        P["sample_interval"] = float(sample_interval)
+    if current_noise is not None:
+        P["current_noise"] = float(current_noise)
+    if repeatability is not None:
+        P["repeatability"] = float(repeatability)
+    rng = np.random.default_rng(seed)
+    if speeds_rpm is None:
+        speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
+    speeds_rpm = [float(s) for s in np.atleast_1d(speeds_rpm)]
+    if not speeds_rpm or any(s == 0 or not math.isfinite(s) for s in speeds_rpm):
+        raise InputError("silo4_twin: speeds must be nonzero finite motor speeds in rpm")
+    if int(repetitions) < 1:
+        raise InputError("silo4_twin: repetitions must be at least 1")
+    repetitions = int(repetitions)
+    effects = list(effects or ())
+    base = truth if truth is not None else table2_model()
+    model = apply_effects(base, effects)
+    lf = _LoopFriction(model)
+
+    # ---- runs: (speed, repetition), their profiles and clock
+    n_sp = len(speeds_rpm)
+    w_cmd = np.repeat(np.asarray(speeds_rpm) * RPM, repetitions)
+    rep = np.tile(np.arange(repetitions), n_sp)
+    if duration is None:
+        holds = np.array([default_hold(w) for w in w_cmd])
+    elif callable(duration):
+        holds = np.array([float(duration(abs(w))) for w in w_cmd])
+    elif np.ndim(duration) == 0:
+        holds = np.full(len(w_cmd), float(duration))
+    else:
+        d = np.asarray(duration, dtype=float)
+        if len(d) != n_sp:
+            raise InputError(f"silo4_twin: {len(d)} durations for {n_sp} speeds")
+        holds = np.repeat(d, repetitions)
+    if np.any(holds <= 0):
+        raise InputError("silo4_twin: durations must be positive")
+    R_ = len(w_cmd)
+    acc = float(P["acceleration"])
+    t_acc = np.abs(w_cmd) / acc
+    t_hold_end = t_acc + holds
+    t_end = t_hold_end + t_acc
+    t_stop = t_end + float(P["settle"])
+    dt_s = float(P["sample_interval"])
+    rate = float(P["control_rate"])
+    dt = 1.0 / rate
+    n_sub = max(1, int(round(dt_s * rate)))
+    dt_s = n_sub * dt
+    n_samp = np.floor(t_stop / dt_s).astype(int) + 1
+    t_start = np.concatenate(([0.0], np.cumsum(n_samp * dt_s + float(P["pause"]))[:-1]))
+    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(R_)
+
+    # ---- plant and controller
+    kM, Rw, Vmax = float(P["torque_constant"]), float(P["resistance"]), float(P["supply_voltage"])
+    J = float(P["inertia"]) + lf.extra_inertia
+    b_emf = kM * kM / Rw
+    wc = 2 * _PI * float(P["bandwidth_hz"])
+    Jd = float(P["inertia"])  # the controller is tuned for the nominal inertia
+    Kd = max(3 * Jd * wc - b_emf, 0.0)
+    Kp = 3 * Jd * wc ** 2
+    Ki = Jd * wc ** 3
+    volt = Rw / kM  # V per Nm of commanded torque
+    q = 2 * _PI / float(P["counts_per_rev"])
+    m_der = max(1, int(round(float(P["derivative_interval"]) * rate)))
+    Ad, Bd, Cd, Dd = _bessel_zoh(int(P["filter_order"]), float(P["filter_cutoff"]), dt)
+
+    # channels (load, temperature) per run: constant per run or functions of the clock
+    def channels_at(tl, idx):
+        clock = t_start[idx] + tl
+        ch, rec_names = effect_channels(effects, clock, idx)
+        if load is not None:
+            if "load" in ch:
+                raise InputError("silo4_twin: both the load argument and an effect supply the load")
+            ch["load"] = _channel_values(load, "load", clock, idx, rep[idx])
+            rec_names = rec_names | {"load"}
+        return clock, ch, rec_names
+
+    _, ch0, recorded = channels_at(np.zeros(R_), np.arange(R_))
+    missing = {n for e in effects for n in e.needs} - set(ch0)
+    if missing:
+        raise InputError(f"silo4_twin: an effect needs the {', '.join(sorted(missing))} channel, which this twin "
+                         "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
+    if model.law_spec.needs_load and "load" not in ch0:
+        raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
+    dynamic_ch = callable(load) or any(e.name == "warming" for e in effects)
+    needs_t = any("t" in TERMS[t["kind"]].needs for t in model.terms)
+    needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in model.terms)
+
+    # ---- state, runs ordered by stop time (longest first) so that active runs are a prefix
+    order = np.argsort(-t_stop, kind="stable")
+    inv = np.empty(R_, int)
+    inv[order] = np.arange(R_)
+    W = w_cmd[order]
+    TA, TH, TE, TS = t_acc[order], t_hold_end[order], t_end[order], t_stop[order]
+    SC = scale[order]
+    NS = n_samp[order]
+    run_idx = order.copy()  # run id of each state slot
+    T0 = t_start[order]
+    sw, Wa = np.sign(W), np.abs(W)
+    half_a = 0.5 * acc
+    if isinstance(theta0, str):
+        if theta0 != "auto":
+            raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
+        starts = _auto_starts(base, w_cmd, holds, acc)
+    else:
+        starts = np.full(R_, float(theta0))
+    TH0 = starts[order]
+    theta = TH0.copy()
+    vel = np.zeros(R_)
+    integ = np.zeros(R_)
+    ebuf = np.zeros((m_der, R_))
+    X = np.zeros((R_, len(Bd)))
+    AdT = np.ascontiguousarray(Ad.T)
+    turn_theta = np.full(R_, np.nan)
+    last_sign = np.zeros(R_)
+    f_acc = np.zeros(R_)  # friction summed over the current sample interval
+    ns_max = int(n_samp.max())
+    out_th = np.full((ns_max, R_), np.nan)
+    out_i = np.full((ns_max, R_), np.nan)
+    out_f = np.full((ns_max, R_), np.nan)
+    out_v = np.full((ns_max, R_), np.nan)
+    out_ch = {k: np.full((ns_max, R_), np.nan) for k in ch0}
+    const_ch = {k: v[order] for k, v in ch0.items()}
+    n_steps = int(round(TS.max() * rate)) + 1
+    kp_v, ki_v, kd_v = volt * Kp, volt * Ki, volt * Kd / (m_der * dt)
+    dt_J = dt / J
+    n_act = R_
+    chunk = 1024
+    for k0 in range(0, n_steps, chunk):
+        # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
+        while n_act > 0 and k0 * dt > TS[n_act - 1] + 1e-9:
+            n_act -= 1
+        if n_act == 0:
+            break
+        tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
+        a = slice(0, n_act)
+        t1 = np.minimum(tl_c, TA[a])
+        t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
+        t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
+        ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+        for kk_ in range(len(tl_c)):
+            k = k0 + kk_
+            tl = k * dt
+            if tl > TS[n_act - 1] + 1e-9:
+                while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
+                    n_act -= 1
+                if n_act == 0:
+                    break
+                a = slice(0, n_act)
+            th = theta[a]
+            v = vel[a]
+            # PID on the encoder count (voltage out, anti-windup: no integration while the
+            # voltage saturates in the direction of the error)
+            e = ref_c[kk_, :n_act] - np.floor(th / q) * q
+            j = k % m_der
+            u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
+            ebuf[j, a] = e
+            U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
+            integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
+            current = (U - kM * v) * (1.0 / Rw)
+            # channels, external torques, friction (at rest: the static friction, the model at
+            # 0+ in the direction the drive pushes)
+            kw = {}
+            if const_ch or dynamic_ch:
+                ch = channels_at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
+                    {kk: vv[a] for kk, vv in const_ch.items()}
+                kw = {kk: ch.get(kk) for kk in ("load", "temperature")}
+            else:
+                ch = {}
+            if needs_t:
+                kw["t"] = T0[a] + tl
+            if needs_run:
+                kw["run"] = run_idx[a]
+            drive = kM * current
+            if kw.get("load") is not None:
+                drive = drive - kw["load"] / RATIO
+            if lf.signed:
+                drive = drive - lf.external(th, v, **kw)
+            moving = v != 0
+            v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
+            F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
+            # record the state at the start of the step (filter output up to the previous step)
+            if k % n_sub == 0:
+                i = k // n_sub
+                cols_ = np.flatnonzero(i < NS[a])
+                out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
+                out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
+                out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
+                out_v[i, cols_] = v[cols_]
+                for kk, vv in ch.items():
+                    out_ch[kk][i, cols_] = vv[cols_]
+                f_acc[a] = 0.0
+            # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
+            # that would change sign within the step stops instead
+            v_new = v + (drive - F) * dt_J
+            v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
+            f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
+            if lf.history:
+                s_new = np.sign(v_new)
+                ls = last_sign[a]
+                rev = (s_new != 0) & (ls != 0) & (s_new != ls)
+                turn_theta[a] = np.where(rev, th, turn_theta[a])
+                last_sign[a] = np.where(s_new != 0, s_new, ls)
+            theta[a] = th + v_new * dt
+            vel[a] = v_new
+            X[a] = X[a] @ AdT + current[:, None] * Bd
+
+    # ---- assemble the recording (runs in their own order)
+    noise = float(P["current_noise"])
+    cols = {k: [] for k in ("t", "theta", "current", "run", "velocity", *out_ch)}
+    rows = []
+    for r in range(R_):
+        s = inv[r]
+        n = int(n_samp[r])
+        tl = np.arange(n) * dt_s
+        cur = out_i[:n, s] + (noise * rng.standard_normal(n) if noise else 0.0)
+        cols["t"].append(t_start[r] + tl)
+        cols["theta"].append(out_th[:n, s])
+        cols["current"].append(cur)
+        cols["run"].append(np.full(n, r, np.int64))
+        cols["velocity"].append(out_v[:n, s])
+        for kk in out_ch:
+            cols[kk].append(out_ch[kk][:n, s])
+        held = (tl >= t_acc[r] + 0.25 * min(1.0, holds[r])) & (tl <= t_hold_end[r])
+        if not held.any():
+            held = (tl >= t_acc[r]) & (tl <= t_hold_end[r])
+        d = 1 if w_cmd[r] > 0 else -1
+        f_mag = d * out_f[:n, s][held]
+        v_held = out_v[:n, s][held]
+        stuck = v_held == 0
+        kw_lvl = {}
+        if "load" in out_ch:
+            kw_lvl["load"] = np.array([np.nanmean(out_ch["load"][:n, s][held])])
+        try:
+            lvl = float(model.mean_level(abs(w_cmd[r]), d, **kw_lvl)[0]) * scale[r]
+        except InputError:
+            lvl = float("nan")
+        rows.append({"run": r, "speed_rpm": speeds_rpm[r // repetitions], "velocity": w_cmd[r], "direction": d,
+                     "repetition": int(rep[r]), "theta_start": starts[r], "t_start": t_start[r], "t_stop": t_start[r] + (n - 1) * dt_s,
+                     "t0": t_start[r] + tl[held][0], "t1": t_start[r] + tl[held][-1], "hold": holds[r],
+                     "scale": scale[r], "level": lvl,
+                     "friction_mean": float(np.mean(f_mag)),
+                     "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(stuck)),
+                     "n_held": int(held.sum())})
+    data = {"t": np.concatenate(cols["t"]), "theta": np.concatenate(cols["theta"]),
+            "current": np.concatenate(cols["current"]), "run": np.concatenate(cols["run"])}
+    for kk in out_ch:
+        if kk in recorded:
+            data[kk] = np.concatenate(cols[kk])
+    if record_velocity:
+        data["velocity"] = np.concatenate(cols["velocity"])
+    gear = twin_gear(kM, float(P["inertia"]))
+    rec = Recording.from_arrays(gear=gear, source="silo4 twin", **data)
+    settings = {**P, "Kp": Kp, "Ki": Ki, "Kd": Kd, "electrical_damping": b_emf, "inertia_total": J,
+                "seed": seed, "repetitions": repetitions, "speeds_rpm": speeds_rpm,
+                "theta0": theta0 if not isinstance(theta0, str) else "auto",
+                "load": None if load is None or callable(load) else _plain(np.asarray(load).tolist())}
+    truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
+    return rec, truth_info
+
+
+def stick_slip_run(joint_speed: float = FIG3_JOINT_SPEED, duration: float = 60.0, *, seed: int | None = 0,
+                   sample_interval: float = 4e-3, **kw) -> tuple[Recording, TwinTruth]:
+    """The paper's Fig. 3: one run at a creeping joint speed (default 1e-4 rad/s, 0.029 rad/s or
+    0.27 rpm at the motor), held ``duration`` s, with the true velocity recorded.  Other keywords
+    go to :func:`silo4_twin`."""
+    rpm = joint_speed * RATIO / RPM
+    return silo4_twin([rpm], repetitions=1, duration=duration, seed=seed, record_velocity=True,
+                      sample_interval=sample_interval, **kw)
