@@ -134,7 +134,10 @@ class SegmentStats:
     """Per-segment sufficient statistics of the samples for one direction.
 
     ``G[s]``, ``g[s]``, ``yy[s]``: normal equations of the local model ``[1, sin_k, cos_k]`` on the
-    friction magnitude; ``active[s, k]``: whether harmonic k is fitted in segment s (it completes
+    friction magnitude; ``sampled[s, k]``: harmonic k lies below ``nyquist_fraction`` of the
+    segment's position Nyquist frequency (its columns are in ``G``, whatever the number of cycles:
+    the global model predicts what a partial cycle does to the segment's level); ``active[s, k]``:
+    it can also be measured in the segment on its own (it completes
     at least ``min_cycles`` cycles and lies below ``nyquist_fraction`` of the position Nyquist);
     ``speed``, ``load`` (mean), ``n``, ``sigma2`` (residual variance of the unrestricted local fit).
     """
@@ -147,6 +150,7 @@ class SegmentStats:
     g: np.ndarray          # (S, P)
     yy: np.ndarray         # (S,)
     active: np.ndarray     # (S, K) bool
+    sampled: np.ndarray    # (S, K) bool
     cycles: np.ndarray     # (S, K) cycles of each line in each segment
     sigma2: np.ndarray     # (S,)
     beta_hat: np.ndarray   # (S, P)
@@ -158,8 +162,8 @@ class SegmentStats:
         idx = np.asarray(idx)
         t = lambda a: None if a is None else a[idx]  # noqa: E731
         return SegmentStats(np.arange(len(idx)), t(self.speed), t(self.load), t(self.n), t(self.G), t(self.g),
-                            t(self.yy), t(self.active), t(self.cycles), t(self.sigma2), t(self.beta_hat),
-                            t(self.rss_hat), self.frequencies)
+                            t(self.yy), t(self.active), t(self.sampled), t(self.cycles), t(self.sigma2),
+                            t(self.beta_hat), t(self.rss_hat), self.frequencies)
 
 
 def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: float = 1.0,
@@ -191,6 +195,7 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
     load = stack("load", (0,)) if data.load is not None else None
     return SegmentStats(sids, stack("speed", (0,)), load, stack("n", (0,)).astype(int), stack("G", (0, P, P)),
                         stack("g", (0, P)), stack("yy", (0,)), stack("active", (0, K)).astype(bool),
+                        stack("sampled", (0, K)).astype(bool),
                         stack("cycles", (0, K)), stack("sigma2", (0,)), stack("beta_hat", (0, P)),
                         stack("rss_hat", (0,)), freqs)
 
@@ -202,7 +207,7 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
     y = data.direction[ii] * data.y[ii]
     out = {"n": len(ii), "speed": float(np.mean(np.abs(data.v[ii]))),
            "load": float(np.mean(np.abs(data.load[ii]))) if data.load is not None else 0.0,
-           "active": np.zeros(K, bool), "cycles": np.zeros(K)}
+           "active": np.zeros(K, bool), "sampled": np.zeros(K, bool), "cycles": np.zeros(K)}
     X = np.ones((len(ii), P))
     if K:
         if data.theta is None:
@@ -213,7 +218,8 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
         dth = np.abs(np.diff(np.sort(th))) if len(th) > 2 else np.array([np.inf])
         step = float(np.percentile(dth[dth > 0], 90)) if np.any(dth > 0) else np.inf
         nyq = 0.5 / step if step > 0 else np.inf
-        out["active"] = (out["cycles"] >= min_cycles) & (freqs < nyquist_fraction * nyq)
+        out["sampled"] = freqs < nyquist_fraction * nyq
+        out["active"] = (out["cycles"] >= min_cycles) & out["sampled"]
         # phases from positions centred on the segment (exact in double precision), rotated back
         # to theta = 0: sin(w(th-m) + wm) = sin(w(th-m)) cos(wm) + cos(w(th-m)) sin(wm)
         m = th.mean()
@@ -223,13 +229,13 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
         c, s_ = np.cos(rot), np.sin(rot)
         X[:, 1::2] = sn * c + cs * s_
         X[:, 2::2] = cs * c - sn * s_
-        X[:, 1:][:, np.repeat(~out["active"], 2)] = 0.0
+        X[:, 1:][:, np.repeat(~out["sampled"], 2)] = 0.0
     G = X.T @ X
     g = X.T @ y
     yy = float(y @ y)
     beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
     rss = max(yy - beta @ g, 0.0)
-    dof = len(ii) - (1 + 2 * int(out["active"].sum()))
+    dof = len(ii) - (1 + 2 * int(out["sampled"].sum()))
     out.update(G=G, g=g, yy=yy, beta_hat=beta, rss_hat=rss, sigma2=rss / dof if dof >= 3 else np.nan)
     return out
 
@@ -276,7 +282,7 @@ class _Problem:
         M = np.zeros((S, P, L))
         if nb:
             M[:, 0, :nb] = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
-        fac = self.factors(decays) * st.active
+        fac = self.factors(decays) * st.sampled
         for k in range(self.K):
             M[:, 1 + 2 * k, nb + 2 * k] = fac[:, k]
             M[:, 2 + 2 * k, nb + 2 * k + 1] = fac[:, k]
@@ -476,7 +482,7 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
 
 
 def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",
-        se: str = "covariance", bootstrap: int = 200, min_cycles: float = 1.0, holdout: str | None = "segment",
+        se: str = "covariance", bootstrap: int = 200, min_cycles: float = 0.1, holdout: str | None = "segment",
         folds: int = 5, init: FrictionModel | None = None, seed: int = 0, name: str | None = None) -> FrictionModel:
     """Fit a friction law to samples, jointly per direction (weighted nonlinear least squares).
 
@@ -496,7 +502,10 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
         Standard errors from the covariance of the weighted fit, or from ``bootstrap`` refits on
         segments resampled with replacement (per direction).
     min_cycles : float
-        A harmonic is fitted in a segment where it completes at least this many cycles.
+        A segment counts towards a harmonic where it covers at least this fraction of a cycle;
+        the harmonic is identified when those segments cover at least one cycle together (a line
+        too slow for any one segment, e.g. one joint turn, is fitted from many).  Every segment's
+        level is modelled with the partial cycles of slow lines it contains.
     holdout : {"segment", "run", None}
         Also compute ``rmse_holdout`` by ``folds``-fold cross-validation over whole segments or
         runs (None: skip).
@@ -568,15 +577,15 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     ni: dict[str, str] = {}
     freqs = [h["frequency"] for h in specs]
     stats = segment_stats(sub, freqs, min_cycles=min_cycles)
-    # harmonics that complete min_cycles in no segment cannot be identified: leave them out
-    keep = [k for k in range(len(specs)) if stats.active[:, k].any()]
+    # harmonics that the segments do not cover by one cycle together cannot be identified: left out
+    total = np.where(stats.active, stats.cycles, 0.0).sum(axis=0) if len(specs) else np.zeros(0)
+    keep = [k for k in range(len(specs)) if total[k] >= 1.0]
     for k in range(len(specs)):
         if k not in keep:
             lab = specs[k].get("label") or f"{specs[k]['frequency']:.6g}"
-            need = min_cycles / specs[k]["frequency"]
-            ni[f"{dname}.{lab}"] = (f"completes fewer than {min_cycles:g} cycle(s) in every {dname} segment "
-                                    f"(longest travel {np.max(stats.cycles[:, k]) / specs[k]['frequency']:.4g}, "
-                                    f"needs {need:.4g} {sub.unit})")
+            ni[f"{dname}.{lab}"] = (f"the {dname} segments cover {total[k]:.3g} of its cycles together (segments "
+                                    f"with at least {min_cycles:g} cycle each); one cycle is "
+                                    f"{1 / specs[k]['frequency']:.4g} {sub.unit} of travel")
     if len(keep) < len(specs):
         specs = [specs[k] for k in keep]
         stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
@@ -604,6 +613,10 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     if sol["status"] <= 0:
         raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction")
     P = _direction_params(prob, sol)
+    for h in P["harmonics"]:
+        if np.isfinite(h["amplitude_se"]) and h["amplitude"] < 2 * h["amplitude_se"]:
+            notes.append(f"{dname}: amplitude of {h.get('label') or h['frequency']} not significant "
+                         f"({h['amplitude']:.3g} +- {h['amplitude_se']:.2g})")
     if se == "bootstrap":
         _bootstrap_se(P, stats, law, specs, weights, bootstrap, seed)
     # parameters the data cannot pin down: a Stribeck velocity outside the plateau speeds.  Then
