@@ -15,8 +15,10 @@ Simulations produce recordings and know nothing of the analysis.
 
 from . import effects
 from .effects import apply_effects, effects_truth, parse_effect
+from .lola import MODULES, lola_twin, table3_model, table4_model
 from .silo4 import PAPER_TABLE2, TwinTruth, silo4_twin, stick_slip_run, table2_model, twin_gear
 from .synthetic import Ripple, model_recording, plateau_recording
 
 __all__ = ["Ripple", "plateau_recording", "model_recording", "effects", "apply_effects", "effects_truth",
-           "parse_effect", "PAPER_TABLE2", "TwinTruth", "silo4_twin", "stick_slip_run", "table2_model", "twin_gear"]
+           "parse_effect", "PAPER_TABLE2", "TwinTruth", "silo4_twin", "stick_slip_run", "table2_model", "twin_gear",
+           "MODULES", "lola_twin", "table3_model", "table4_model"]

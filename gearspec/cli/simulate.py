@@ -1,0 +1,186 @@
+"""``gearspec simulate``: twin recordings in the recording format (``CONTRACTS.md`` sections 1, 4).
+
+``gearspec simulate silo4 --out DIR`` runs the SILO4 joint-3 twin, ``gearspec simulate lola
+--module A --out DIR`` the Lola/CROPS testbed twin.  Each writes into DIR:
+
+* the recording (``<name>.csv`` or ``.parquet``/``.npz`` by ``--format``; one file, a ``run``
+  column per experiment),
+* the gear spec to read it with (``<name>_gear.toml``: the preset's stages plus the twin's
+  torque constant and inertia),
+* the truth (``<name>_truth.json``: the friction model simulated, the injected effects with their
+  kind and frequency, one row per run or operating point, every setting),
+* for the testbed, the operating points (``<name>_points.csv``: eqs. 12-13 per point).
+
+so that ``gearspec spectrum DIR/<name>.csv --gear DIR/<name>_gear.toml`` reads it back.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from ..errors import InputError
+
+_FORMATS = ("csv", "parquet", "npz")
+
+
+def register(sub) -> None:
+    sp = sub.add_parser("simulate", help="twin recordings with known friction (SILO4 joint 3, Lola/CROPS testbed)",
+                        description="Simulate a test bench whose friction is known and write its recording in the "
+                                    "recording format, with the gear spec to read it and the truth as JSON.")
+    tw = sp.add_subparsers(dest="twin", metavar="TWIN")
+    tw.required = True
+    s4 = tw.add_parser("silo4", help="SILO4 leg joint 3: closed-loop speed control, stick-slip, ten repetitions per speed",
+                       description="The SILO4 joint-3 bench (Garcia et al. 2002): DC motor, planetary 14, worm 20.5, "
+                                   "PID on a 500-line encoder, current through a 1 kHz Bessel filter sampled every "
+                                   "4 ms; friction = Table 2's full model (11) plus any --effect.")
+    _common(s4, "silo4_twin")
+    s4.add_argument("--speeds-rpm", metavar="LIST", help="signed motor speeds in rpm, e.g. 280,-280,3000 "
+                    "(default: 20 speeds from 2 to 6500 rpm, both directions)")
+    s4.add_argument("--speeds", metavar="LIST", help="signed motor speeds in rad/s (instead of --speeds-rpm)")
+    s4.add_argument("--repetitions", type=int, default=10, help="runs per speed (default 10, as in the paper)")
+    s4.add_argument("--duration", type=float, help="seconds held at each speed (default: one output revolution, "
+                    "3-10 s)")
+    s4.add_argument("--stick-slip", action="store_true",
+                    help="instead, one creeping run at 1e-4 rad/s of the joint (the paper's Fig. 3), 30 s, "
+                         "with the true velocity")
+    s4.set_defaults(func=run_silo4)
+    lo = tw.add_parser("lola", help="Lola/CROPS testbed: quasi-static grid of motor speeds x brake loads",
+                       description="The Lola/CROPS friction testbed: a speed-controlled drive module loaded by a "
+                                   "PI-controlled hysteresis brake, points held several seconds; friction = law (11) "
+                                   "with Table IV's values plus any --effect.")
+    _common(lo, "lola_{module}_twin")
+    lo.add_argument("--module", default="A", type=str.upper, choices=("A", "B", "C"), help="drive module (Table II)")
+    lo.add_argument("--speeds", metavar="LIST", help="signed motor speeds in rad/s (default: 8 per direction over the "
+                    "module's range)")
+    lo.add_argument("--loads", metavar="LIST", help="load torques in Nm at the output (default: 8 from 5 %% to 80 %% "
+                    "of the nominal output torque)")
+    lo.add_argument("--hold", type=float, help="seconds per operating point (default 5)")
+    lo.set_defaults(func=run_lola)
+
+
+def _common(p, default_name: str) -> None:
+    p.add_argument("--out", required=True, metavar="DIR", help="folder to write the recording, gear spec and truth into")
+    p.add_argument("--name", default=default_name, help=f"base name of the files (default {default_name})")
+    p.add_argument("--format", choices=_FORMATS, default="csv", help="recording file format (default csv)")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME:K=V,...",
+                   help="inject an effect the declared model lacks (repeatable), e.g. cogging:count=7,amplitude=2e-4; "
+                        "names: cogging, extra_order, sideband, load_meshing, warming, drift, decay_shape, "
+                        "nonlinear_viscous, asymmetry, hysteresis, backlash, extra_inertia")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no summary on stdout")
+
+
+def _floats(text: str | None, option: str):
+    if text is None:
+        return None
+    try:
+        vals = [float(x) for x in text.replace(";", ",").split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{option}: '{text}' is not a comma-separated list of numbers") from None
+    if not vals:
+        raise InputError(f"{option}: no values given")
+    return vals
+
+
+def gear_toml(gear) -> str:
+    """A gear spec as TOML (CONTRACTS.md section 2)."""
+
+    def q(s):
+        return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+    lines = [f"name = {q(gear.name)}"]
+    if gear.description:
+        lines.append(f"description = {q(gear.description)}")
+    lines += [f"reference = {q(gear.reference)}", f"unit = {q(gear.unit)}"]
+    if gear.torque_constant is not None:
+        lines.append(f"torque_constant = {gear.torque_constant!r}")
+    if gear.inertia is not None:
+        lines.append(f"inertia = {gear.inertia!r}")
+    for s in gear.stages:
+        lines += ["", "[[stages]]", f"name = {q(s.name)}", f"kind = {q(s.kind)}", f"ratio = {float(s.ratio)!r}"]
+        if s.teeth is not None:
+            lines.append(f"teeth = {int(s.teeth)}")
+        if s.lead is not None:
+            lines.append(f"lead = {float(s.lead)!r}")
+    return "\n".join(lines) + "\n"
+
+
+def _write(args, name: str, rec, truth, extra=None) -> dict:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"recording": rec.save(out / f"{name}.{args.format}")}
+    gear_path = out / f"{name}_gear.toml"
+    gear_path.write_text(gear_toml(truth.gear))
+    paths["gear"] = gear_path
+    paths["truth"] = truth.to_json(out / f"{name}_truth.json")
+    for k, (suffix, frame) in (extra or {}).items():
+        p = out / f"{name}_{suffix}"
+        frame.to_csv(p, index=False, float_format="%.10g")
+        paths[k] = p
+    return paths
+
+
+def _effects(args):
+    from ..simulate.effects import parse_effect
+
+    return [parse_effect(e) for e in args.effect]
+
+
+def _report(args, paths, rec, truth, elapsed) -> None:
+    if args.quiet:
+        return
+    n_runs = rec.data["run"].nunique()
+    print(f"{truth.twin} twin: {len(rec)} rows, {n_runs} runs, {rec.data['t'].iloc[-1]:.1f} s of experiment "
+          f"({elapsed:.1f} s to simulate)")
+    for e in truth.effects:
+        f = "" if e["frequency"] is None else f" at {e['frequency']:.6g} cycles/rad"
+        print(f"  effect: {e['kind']}{f}: {e['description']}")
+    for k, p in paths.items():
+        print(f"{k}: {p}")
+    print(f"read it with: gearspec spectrum {paths['recording']} --gear {paths['gear']}")
+
+
+def run_silo4(args) -> int:
+    from ..model import RPM
+    from ..simulate.silo4 import silo4_twin, stick_slip_run
+
+    if args.speeds is not None and args.speeds_rpm is not None:
+        raise InputError("give --speeds (rad/s) or --speeds-rpm, not both")
+    if args.repetitions < 1:
+        raise InputError("--repetitions must be at least 1")
+    speeds = _floats(args.speeds_rpm, "--speeds-rpm")
+    if args.speeds is not None:
+        speeds = [s / RPM for s in _floats(args.speeds, "--speeds")]
+    if speeds is not None and any(s == 0 for s in speeds):
+        raise InputError("--speeds: a speed of 0 is no experiment; give nonzero signed speeds")
+    if args.duration is not None and not args.duration > 0:
+        raise InputError("--duration must be positive (seconds)")
+    effects = _effects(args)
+    t0 = time.perf_counter()
+    if args.stick_slip:
+        rec, truth = stick_slip_run(duration=args.duration or 30.0, seed=args.seed, effects=effects)
+    else:
+        rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
+                                seed=args.seed)
+    elapsed = time.perf_counter() - t0
+    paths = _write(args, args.name, rec, truth)
+    _report(args, paths, rec, truth, elapsed)
+    return 0
+
+
+def run_lola(args) -> int:
+    from ..simulate.lola import lola_twin
+
+    if args.hold is not None and not args.hold > 0:
+        raise InputError("--hold must be positive (seconds)")
+    effects = _effects(args)
+    name = args.name.format(module=args.module)
+    t0 = time.perf_counter()
+    rec, points = lola_twin(args.module, _floats(args.speeds, "--speeds"), _floats(args.loads, "--loads"),
+                            hold=args.hold, effects=effects, seed=args.seed)
+    elapsed = time.perf_counter() - t0
+    truth = points.attrs["truth"]
+    paths = _write(args, name, rec, truth, {"points": ("points.csv", points)})
+    _report(args, paths, rec, truth, elapsed)
+    return 0

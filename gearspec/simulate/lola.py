@@ -1,0 +1,369 @@
+"""Digital twin of the Lola/CROPS friction testbed (section IV of the testbed paper).
+
+The bench: a drive module (BLDC motor with speed control, HarmonicDrive gear) turns at a set
+motor speed while a current-controlled hysteresis brake, behind a torque sensor, loads its output.
+The automatic mode sets a speed, then raises the controlled load torque step by step to its
+maximum, holding each operating point several seconds, before moving on to the next speed.
+Afterwards current and load torque are low-pass filtered and averaged per point; friction and
+efficiency follow from eqs. (12) and (13).
+
+The twin does the same with a known friction: law (11) with Table IV's values
+(:func:`table4_model`), or any :class:`~gearspec.model.FrictionModel` as ``truth``, plus the
+effects of :mod:`gearspec.simulate.effects`.  Everything is at the motor (wave-generator) side in
+SI: theta in motor rad, speeds in rad/s of the motor, load in Nm at the output, friction in Nm at
+the motor with the sign of the velocity (the Lola laws' sign is converted in
+:mod:`gearspec.laws`).
+
+The unknowns, chosen (the paper does not give them)
+---------------------------------------------------
+* Grid: "points equally spaced between maximum and minimum speeds and torques".  Speeds: 8 per
+  direction, from 25 to 400 rad/s of the motor for A and C (0.25-4 times their Stribeck velocity
+  of 100 rad/s, 240-3800 rpm, within the gears' rated input speeds) and from 10 to 290 rad/s for
+  B (Stribeck velocity 31.5 rad/s).  Loads: 8, from 5 % to 80 % of the module's nominal output
+  torque ``k_m I_nom N`` (A 91 Nm, B 72.75 Nm, C 26.25 Nm): the paper's loads reach "the nominal
+  torque".  Each point is held 5 s.
+* Brake: torque ``K_b U`` through a first-order coil lag of 50 ms, 0-24 V, at least 0.092 Nm
+  (the brake's minimum), at most 17 Nm; loads above 17 Nm use the second configuration (the
+  brake behind the 5:1 testbed gear: 0.46-85 Nm).  The two configurations are two campaigns over
+  all speeds, as on the real bench (a mechanical change).  PI control with anti-windup, its zero
+  on the coil pole, closed-loop time constant 0.25 s: settled (2 %) in about 1 s, as in the
+  paper's Fig. 4.
+* Torque sensor: noise 0.05 % of the range in use (0.01 Nm of 20 Nm, 0.1 Nm of 200 Nm).
+  Motor current (the controller's measurement): noise 0.5 % of the nominal current.  Encoder on
+  the motor: 8192 counts per revolution.  Recording at 1 kHz.
+* Motor speed control is taken as ideal (the controller's loops are orders of magnitude faster
+  than a 5 s point): the motor follows the set speed, with 1 s linear ramps between speeds; the
+  current is ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia: A
+  3e-5, B 8e-5, C 1.2e-5 kg m^2 (they only matter on the ramps).
+* Per point: current and load are filtered (2nd-order Butterworth, 2 Hz, forwards and backwards)
+  and averaged over the last 3 s of the point (the brake has settled).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import signal
+
+from .. import laws
+from ..errors import InputError
+from ..gears import GearTrain, load_gear
+from ..model import FrictionModel
+from ..recording import Recording
+from .effects import Effect, apply_effects, effect_channels, effects_truth
+from .silo4 import TwinTruth, _plain
+
+__all__ = ["MODULES", "PAPER_TABLE3", "PAPER_TABLE4", "TESTBED", "table3_model", "table4_model", "lola_twin",
+           "default_speeds", "default_loads", "module_gear"]
+
+#: Table II, with the ratio from the gear's name and the choices of the twin (see the docstring)
+MODULES = {
+    "A": {"name": "Lola adduction", "torque_constant": 0.13, "nominal_current": 7.0, "gear_model": "HFUC-25-100",
+          "gear": "lola-a", "inertia": 3e-5, "speed_range": (25.0, 400.0)},
+    "B": {"name": "Lola flexion", "torque_constant": 0.097, "nominal_current": 15.0, "gear_model": "CSG-32-50",
+          "gear": "lola-b", "inertia": 8e-5, "speed_range": (10.0, 290.0)},
+    "C": {"name": "Crops test", "torque_constant": 0.075, "nominal_current": 3.5, "gear_model": "CSD-20-100",
+          "gear": "lola-c", "inertia": 1.2e-5, "speed_range": (25.0, 400.0)},
+}
+for _m in MODULES.values():
+    _m["ratio"] = float(_m["gear_model"].rsplit("-", 1)[1])
+    _m["nominal_output_torque"] = _m["torque_constant"] * _m["nominal_current"] * _m["ratio"]
+
+#: Table III (law (8) fitted to measured efficiency), SI
+PAPER_TABLE3 = {
+    "A": {"t_f0": 0.098, "mu": 3.10e-3, "b": 2.73e-4, "gamma": 0.0, "rms": 1.11e-2},
+    "B": {"t_f0": 0.456, "mu": 8.60e-3, "b": 7.36e-4, "gamma": 0.0, "rms": 4.99e-2},
+    "C": {"t_f0": 0.067, "mu": 4.4e-3, "b": 2.26e-4, "gamma": 0.0, "rms": 6.4e-3},
+}
+#: Table IV (law (11) fitted to measured efficiency), SI (v_s in rad/s of the motor)
+PAPER_TABLE4 = {
+    "A": {"t_f0": 0.174, "mu": 3.10e-3, "b": 4.41e-5, "t_fs": 0.079, "v_s": 99.98, "rms": 4.6e-3},
+    "B": {"t_f0": 0.479, "mu": 1.20e-2, "b": 4.275e-4, "t_fs": 0.078, "v_s": 31.525, "rms": 1.20e-2},
+    "C": {"t_f0": 0.112, "mu": 4.4e-3, "b": 9.06e-5, "t_fs": 0.057, "v_s": 99.985, "rms": 3.0e-3},
+}
+
+#: the testbed's settings, as chosen (see the module docstring)
+TESTBED = {
+    "fs": 1000.0,                  # Hz, recording and simulation
+    "hold": 5.0,                   # s per operating point
+    "average": 3.0,                # s averaged at the end of each point
+    "ramp": 1.0,                   # s between speeds
+    "brake_max": 17.0,             # Nm, configuration 1
+    "brake_min": 0.092,            # Nm
+    "brake_voltage": 24.0,         # V
+    "brake_time_constant": 0.05,   # s, coil
+    "brake_closed_loop": 0.25,     # s, PI closed-loop time constant (settles in ~1 s)
+    "testbed_gear": 5.0,           # configuration 2
+    "sensor_ranges": (20.0, 200.0),
+    "sensor_noise": 5e-4,          # of the range
+    "current_noise": 5e-3,         # of the nominal current
+    "counts_per_rev": 8192,
+    "filter_cutoff": 2.0,          # Hz, per-point low-pass
+    "filter_order": 2,
+    "n_speeds": 8,
+    "n_loads": 8,
+    "load_range": (0.05, 0.80),    # of the nominal output torque
+}
+
+
+def _module(module: str) -> dict:
+    key = str(module).upper().replace("LOLA-", "")
+    if key not in MODULES:
+        raise InputError(f"unknown Lola/CROPS module '{module}' (A, B or C)")
+    return MODULES[key]
+
+
+def _key(module: str) -> str:
+    return str(module).upper().replace("LOLA-", "")
+
+
+def table4_model(module: str) -> FrictionModel:
+    """Law (11) with Table IV's values for module A, B or C (symmetric; SI at the motor)."""
+    p = {k: v for k, v in PAPER_TABLE4[_key(module)].items() if k != "rms"} if _key(module) in PAPER_TABLE4 else None
+    if p is None:
+        _module(module)
+    return FrictionModel("lola11", p, name=f"Lola/CROPS {_key(module)} Table IV",
+                         notes=["law (11) made odd in velocity (gearspec.laws.lola11)"])
+
+
+def table3_model(module: str) -> FrictionModel:
+    """Law (8) with Table III's values for module A, B or C (symmetric; SI at the motor)."""
+    _module(module)
+    p = {k: v for k, v in PAPER_TABLE3[_key(module)].items() if k != "rms"}
+    return FrictionModel("lola8", p, name=f"Lola/CROPS {_key(module)} Table III")
+
+
+def module_gear(module: str) -> GearTrain:
+    """The module's gear preset (lola-a/-b/-c, with its torque constant) and the twin's inertia."""
+    import dataclasses
+
+    m = _module(module)
+    g = load_gear(m["gear"])
+    if not math.isclose(g.total_ratio, m["ratio"]):
+        raise InputError(f"preset {m['gear']} has ratio {g.total_ratio}, the gear {m['gear_model']} {m['ratio']}")
+    return dataclasses.replace(g, inertia=m["inertia"], source="gearspec.simulate.lola")
+
+
+def default_speeds(module: str) -> list[float]:
+    """The twin's motor speeds (rad/s): ``n_speeds`` equally spaced over the module's range, each
+    forwards then backwards."""
+    lo, hi = _module(module)["speed_range"]
+    return [float(s) * d for s in np.linspace(lo, hi, TESTBED["n_speeds"]) for d in (1, -1)]
+
+
+def default_loads(module: str) -> list[float]:
+    """The twin's load torques (Nm at the output): ``n_loads`` equally spaced from 5 % to 80 % of
+    the nominal output torque."""
+    lo, hi = TESTBED["load_range"]
+    t = _module(module)["nominal_output_torque"]
+    return [float(x) for x in np.linspace(lo * t, hi * t, TESTBED["n_loads"])]
+
+
+# ---------------------------------------------------------------------- brake loop
+def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, kb: float, P: dict,
+           rng: np.random.Generator, sensor_sd: float, t_min: float) -> tuple[np.ndarray, np.ndarray]:
+    """PI-controlled hysteresis brake for a batch of blocks (same load schedule, one per speed).
+
+    Returns the actual brake torque magnitude and the measured one (sensor noise), shape
+    (n_samples, n_blocks).  ``commands``: the load levels of the block (Nm); the block starts
+    with ``n_ramp`` samples at the first command (the speed ramp), then ``n_hold`` per level.
+    """
+    dt = 1.0 / P["fs"]
+    tau_c = P["brake_time_constant"]
+    ki = 1.0 / (kb * P["brake_closed_loop"])
+    kp = tau_c * ki
+    alpha = math.exp(-dt / tau_c)
+    cmd = np.concatenate([np.full(n_ramp, commands[0])] + [np.full(n_hold, c) for c in commands])
+    n, B = len(cmd), len(T_init)
+    T = np.asarray(T_init, dtype=float).copy()
+    integ = T / (kb * ki)  # steady state at the initial torque
+    Umax = P["brake_voltage"]
+    act = np.empty((n, B))
+    meas = np.empty((n, B))
+    noise = sensor_sd * rng.standard_normal((n, B))
+    for k in range(n):
+        Ta = np.maximum(T, t_min)
+        act[k] = Ta
+        meas[k] = Ta + noise[k]
+        e = cmd[k] - meas[k]
+        u = kp * e + ki * integ
+        U = np.clip(u, 0.0, Umax)
+        integ += np.where((U != u) & ((u > Umax) == (e > 0)), 0.0, e * dt)
+        T = alpha * T + (1 - alpha) * kb * U
+    return act, meas
+
+
+# ---------------------------------------------------------------------- the twin
+def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: Sequence[float] | None = None, *,
+              hold: float | None = None, truth: FrictionModel | None = None, effects: Iterable[Effect] = (),
+              seed: int | None = 0, fs: float | None = None, testbed: dict | None = None
+              ) -> tuple[Recording, pd.DataFrame]:
+    """Simulate the testbed's automatic mode for module A, B or C.
+
+    Parameters
+    ----------
+    module : {"A", "B", "C"}
+    speeds : sequence of float, optional
+        Signed motor speeds (rad/s), visited in order (default :func:`default_speeds`).
+    loads : sequence of float, optional
+        Load torque magnitudes (Nm at the output), applied in increasing order at every speed
+        (default :func:`default_loads`); those above 17 Nm in a second campaign with the
+        testbed gear.
+    hold : float, optional
+        Seconds per operating point (default 5; the last 3 s, or the last 60 %, are averaged).
+    truth : FrictionModel, optional
+        The friction (default :func:`table4_model`); needs the load as law (11) does.
+    effects : sequence of Effect
+        Injected into ``truth``; their channels (temperature) are fed to the model and recorded.
+        ``load_meshing`` uses the brake's load (leave its ``loads`` empty).
+    seed : int or None
+    fs : float, optional
+        Sample rate (default 1 kHz).
+    testbed : dict, optional
+        Overrides of :data:`TESTBED`.
+
+    Returns
+    -------
+    recording : Recording
+        ``t`` (s, experiment clock), ``theta`` (motor rad, 8192 counts/rev), ``current`` (A,
+        raw, noisy), ``load`` (Nm at the output, the torque sensor, signed like the velocity:
+        the brake opposes the motion), ``run`` (one per operating point), ``temperature`` where an
+        effect supplies it.  Read it with :func:`module_gear` (torque constant, ratio).
+    points : DataFrame
+        One row per operating point: ``point`` (= run), ``campaign`` (1 or 2), ``speed_cmd``,
+        ``load_cmd``, ``speed`` (mean motor speed from the encoder, rad/s), ``load`` (Nm, signed),
+        ``current`` (A), ``friction`` (eq. 12 at the motor, ``k_m I - T_l / N``, sign of the
+        velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth:
+        ``friction_true`` (mean of the simulated friction over the window), ``load_true``,
+        ``efficiency_true``, ``level_true`` (``truth`` without effects, position-averaged, at the
+        commanded speed and load: law (11) itself for the default truth).
+        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth` (model,
+        effects, settings).
+    """
+    P = dict(TESTBED)
+    P.update(testbed or {})
+    if fs is not None:
+        P["fs"] = float(fs)
+    if hold is not None:
+        P["hold"] = float(hold)
+    mod = _module(module)
+    key = _key(module)
+    N, km = mod["ratio"], mod["torque_constant"]
+    rng = np.random.default_rng(seed)
+    speeds = default_speeds(key) if speeds is None else [float(s) for s in np.atleast_1d(speeds)]
+    loads = default_loads(key) if loads is None else sorted(float(x) for x in np.atleast_1d(loads))
+    if not speeds or any(s == 0 or not math.isfinite(s) for s in speeds):
+        raise InputError("lola_twin: speeds must be nonzero finite motor speeds in rad/s")
+    if not loads or any(x < 0 or not math.isfinite(x) for x in loads):
+        raise InputError("lola_twin: loads must be finite torques >= 0 Nm at the output")
+    gmax = P["brake_max"] * P["testbed_gear"]
+    if max(loads) > gmax:
+        raise InputError(f"lola_twin: loads above {gmax:g} Nm are beyond the testbed's brake (17 Nm x gear 5)")
+    effects = list(effects or ())
+    base = truth if truth is not None else table4_model(key)
+    model = apply_effects(base, effects)
+    gear = module_gear(key)
+    J = mod["inertia"] + float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
+    model_eval = model.copy()
+    model_eval.terms = [t for t in model.terms if t["kind"] != "inertia"]
+
+    fs_ = P["fs"]
+    dt = 1.0 / fs_
+    n_hold = int(round(P["hold"] * fs_))
+    n_ramp = int(round(P["ramp"] * fs_))
+    n_avg = min(int(round(P["average"] * fs_)), int(0.6 * n_hold))
+    if n_hold < 10:
+        raise InputError("lola_twin: hold must be at least 10 samples")
+    campaigns = [(1, [x for x in loads if x <= P["brake_max"]], 1.0, P["sensor_ranges"][0]),
+                 (2, [x for x in loads if x > P["brake_max"]], P["testbed_gear"], P["sensor_ranges"][1])]
+    campaigns = [c for c in campaigns if c[1]]
+
+    # ---- per campaign: the brake of every speed block at once; then blocks one after another
+    pieces = []  # (campaign, block speed, v, T_actual, T_meas, point index per sample)
+    point_rows = []
+    v_prev = 0.0
+    for camp, levels, gear_ratio, rng_sensor in campaigns:
+        kb = P["brake_max"] * gear_ratio / P["brake_voltage"]
+        t_min = P["brake_min"] * gear_ratio
+        B = len(speeds)
+        T_init = np.full(B, max(levels))
+        T_init[0] = 0.0
+        act, meas = _brake(np.asarray(levels), n_hold, n_ramp, T_init, kb, P, rng, P["sensor_noise"] * rng_sensor,
+                           t_min)
+        for b, sp in enumerate(speeds):
+            v = np.concatenate((np.linspace(v_prev, sp, n_ramp, endpoint=False), np.full(n_hold * len(levels), sp)))
+            pt = np.concatenate((np.zeros(n_ramp, int), np.repeat(np.arange(len(levels)), n_hold)))
+            first = len(point_rows)
+            for j, lv in enumerate(levels):
+                point_rows.append({"campaign": camp, "speed_cmd": sp, "load_cmd": lv})
+            pieces.append((v, act[:, b], meas[:, b], pt + first))
+            v_prev = sp
+
+    v = np.concatenate([p[0] for p in pieces])
+    T_act = np.concatenate([p[1] for p in pieces])
+    T_meas = np.concatenate([p[2] for p in pieces])
+    run = np.concatenate([p[3] for p in pieces]).astype(np.int64)
+    n = len(v)
+    t = np.arange(n) * dt
+    theta = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1])) * dt))
+    acc = np.gradient(v, dt)
+    sgn = np.sign(v)
+    load_true = sgn * T_act
+    load_meas = sgn * T_meas
+    ch, recorded = effect_channels(effects, t, run)
+    if "load" in ch:
+        raise InputError("lola_twin: the brake is the load here; give load_meshing no loads")
+    missing = {nm for e in effects for nm in e.needs} - set(ch) - {"load"}
+    if missing:
+        raise InputError(f"lola_twin: an effect needs the {', '.join(sorted(missing))} channel, which no effect supplies")
+    friction = model_eval.evaluate(theta, v, load=load_true, temperature=ch.get("temperature"), t=t, acc=acc, run=run)
+    torque = friction + load_true / N + J * acc
+    noise_i = P["current_noise"] * mod["nominal_current"]
+    current = torque / km + noise_i * rng.standard_normal(n)
+    q = 2 * math.pi / P["counts_per_rev"]
+    theta_meas = np.floor(theta / q) * q
+
+    # ---- per point: low-pass (forwards and backwards) and mean over the settled end
+    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=fs_, output="sos")
+    cur_f = np.empty(n)
+    load_f = np.empty(n)
+    starts = np.concatenate(([0], np.cumsum([len(p[0]) for p in pieces])))
+    for a, b in zip(starts[:-1], starts[1:]):
+        cur_f[a:b] = signal.sosfiltfilt(bq, current[a:b])
+        load_f[a:b] = signal.sosfiltfilt(bq, load_meas[a:b])
+    rows = []
+    ends = np.flatnonzero(np.diff(np.concatenate((run, [-1]))) != 0)  # last sample of each run
+    for pi, row in enumerate(point_rows):
+        e_ = ends[pi] + 1
+        s_ = e_ - n_avg
+        sl = slice(s_, e_)
+        I_m, L_m = float(cur_f[sl].mean()), float(load_f[sl].mean())
+        spd = float((theta_meas[e_ - 1] - theta_meas[s_]) / ((e_ - 1 - s_) * dt))
+        f_true = float(friction[sl].mean())
+        lt = float(load_true[sl].mean())
+        d = 1.0 if row["speed_cmd"] > 0 else -1.0
+        lvl = d * float(base.mean_level(abs(row["speed_cmd"]), d, load=np.array([row["load_cmd"]]))[0])
+        rows.append({"point": pi, "run": pi, **row, "speed": spd, "load": L_m, "current": I_m,
+                     "friction": float(laws.friction_from_load_current(L_m, I_m, N, km)),
+                     "efficiency": float(laws.efficiency(L_m, I_m, N, km)),
+                     "t0": float(t[s_]), "t1": float(t[e_ - 1]), "n": int(e_ - s_),
+                     "friction_true": f_true, "load_true": lt,
+                     "efficiency_true": float(lt / (N * (f_true + lt / N))), "level_true": lvl,
+                     **({"temperature": float(ch["temperature"][sl].mean())} if "temperature" in ch else {})})
+    points = pd.DataFrame(rows)
+    data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run}
+    for k in recorded:
+        data[k] = ch[k]
+    rec = Recording.from_arrays(gear=gear, source=f"lola twin {key}", **data)
+    settings = {**P, "module": key, **{f"module_{k}": v for k, v in mod.items()}, "seed": seed,
+                "speeds": speeds, "loads": loads, "inertia_total": J}
+    truth_info = TwinTruth(f"lola-{key}", model, gear, effects_truth(effects, gear),
+                           points[["point", "campaign", "speed_cmd", "load_cmd", "t0", "t1", "friction_true",
+                                   "load_true", "efficiency_true", "level_true"]].copy(), _plain(settings))
+    points.attrs["truth"] = truth_info
+    return rec, points
+
+
