@@ -46,7 +46,7 @@ from scipy.signal import savgol_filter
 from .errors import InputError
 from .recording import Recording
 
-__all__ = ["Segment", "Segmentation", "find_segments", "derivatives", "friction_torque"]
+__all__ = ["Segment", "Segmentation", "find_segments", "derivatives", "friction_torque", "FrictionTorque"]
 
 _K = 4  # blocks per speed window
 _WINDOW_LADDER = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
@@ -414,3 +414,69 @@ def friction_torque(rec: Recording, inertia: float | None = None, deriv_window: 
     _, acc = derivatives(rec, deriv_window)
     out = rec.tau - J * np.nan_to_num(acc)
     return out
+
+
+class FrictionTorque:
+    """``friction_torque(rec, inertia, deriv_window)[rows]`` on demand, for one stretch of rows at
+    a time (a segment), without the whole-recording arrays.
+
+    The Savitzky-Golay acceleration is computed only over the rows asked for plus one filter
+    length on each side (or up to the piece's edge, where the filter's own edge treatment then
+    applies exactly as on the whole piece): the values are the same as :func:`friction_torque`'s,
+    bit for bit, while the memory is that of the rows asked for, not three copies of the
+    recording.  Pieces whose sampling jitters (resampled to a uniform grid first) are computed
+    whole, once.  Without an inertia the rows of the drive torque are returned (a view).
+    """
+
+    def __init__(self, rec: Recording, inertia: float | None = None, deriv_window: int | None = None):
+        self.rec = rec
+        self.J = inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
+        self.deriv_window = deriv_window
+        self.tau = rec.tau
+        self._pieces = None
+        self._whole = {}
+
+    def _piece_params(self):
+        if self._pieces is None:
+            t = self.rec.t
+            out = []
+            for _, a, b in self.rec.pieces():
+                if b - a < 5:
+                    out.append((a, b, None, None, None))
+                    continue
+                d = np.diff(t[a:b])
+                dt = float(np.median(d))
+                w = self.deriv_window or max(7, int(round(0.02 / dt)) | 1)
+                w = int(w) | 1
+                if w > b - a:
+                    out.append((a, b, None, None, None))
+                    continue
+                np.subtract(d, dt, out=d)
+                uniform = np.max(np.abs(d)) <= 0.01 * dt
+                out.append((a, b, dt, w, uniform))
+            self._pieces = out
+        return self._pieces
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        start, stop, _ = rows.indices(len(self.tau))
+        tau = self.tau[start:stop]
+        if not self.J:
+            return tau
+        piece = next((p for p in self._piece_params() if p[0] <= start and stop <= p[1]), None)
+        if piece is None:  # rows across pieces: the whole-recording computation
+            return friction_torque(self.rec, self.J, self.deriv_window)[start:stop]
+        a, b, dt, w, uniform = piece
+        if dt is None:  # too short for the filter: no acceleration (as friction_torque)
+            return tau.copy()
+        if not uniform:
+            if a not in self._whole:
+                rec = self.rec
+                tt, th = rec.t[a:b], rec.theta[a:b]
+                grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
+                thg = np.interp(grid, tt, th)
+                self._whole[a] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
+            acc = self._whole[a][start - a:stop - a]
+        else:
+            lo, hi = max(a, start - w), min(b, stop + w)
+            acc = savgol_filter(self.rec.theta[lo:hi], w, 2, deriv=2, delta=dt)[start - lo:stop - lo]
+        return tau - self.J * np.nan_to_num(acc)

@@ -17,7 +17,8 @@ magnitude, so that levels and phases mean the same in both directions, as in SIL
    declared line or within three of a stronger peak, none so slow that the nuisance polynomial
    could mimic it (at least 2 cycles, and (degree+1)/pi).
 4. Joint fit of declared and found lines, the found frequencies refined by Gauss-Newton (a phase
-   at theta = 0 needs the frequency far more precisely than a periodogram bin gives it); a found
+   at theta = 0 needs the frequency far more precisely than a periodogram bin gives it; each
+   iteration one pass that computes only the found lines' rows of the equations); a found
    peak whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is
    dropped.  Standard errors are rescaled by the local noise level (honest for coloured noise).
    Without found peaks the whole analysis is one pass over the samples plus one spectrum.
@@ -44,11 +45,16 @@ import pandas as pd
 from ..errors import InputError
 from ..gears import GearTrain, load_gear
 from ..recording import Recording
-from ..segment import Segment, Segmentation, find_segments, friction_torque
-from .fft import hann_sinusoid_dft, hann_spectrum
-from .harmonic import HarmonicFit, NormalEquations, min_degree_for_cycles, refine_frequencies
-from .periodogram import LombScargle, false_alarm_probability, local_noise
-from .resample import resample_over_position
+from ..segment import FrictionTorque, Segment, Segmentation, find_segments
+from .fft import hann_sinusoid_dft, hann_spectrum32
+from .harmonic import (
+    HarmonicFit,
+    NormalEquations,
+    min_degree_for_cycles,
+    refine_frequencies,
+)
+from .periodogram import LombScargle, false_alarm_probability, noise_blocks
+from .resample import resample_uniform
 
 __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "analyze"]
 
@@ -235,13 +241,12 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     if segment is None:
         d = int(np.sign(theta[-1] - theta[0])) or 1
         segment = Segment(run=0, start=0, stop=n, direction=d, speed=float("nan"))
-    span = float(np.ptp(theta)) if n else 0.0
+    lo, hi = (float(theta.min()), float(theta.max())) if n else (0.0, 0.0)
+    span = hi - lo
     if n < 16 or span <= 0:
         return SegmentSpectrum(segment, [], float(np.mean(y)) if n else float("nan"), float("nan"), span,
                                float("nan"), 0, [], None, note="too few samples to analyse")
-    spacing = np.abs(np.diff(theta))
-    moving = spacing[spacing > 0]
-    nyquist = 0.5 / float(np.percentile(moving, 95)) if len(moving) else 0.0
+    nyquist = _position_nyquist(theta)
     f_search_max = 0.5 * (n - 1) / span
     if max_frequency is not None:
         f_search_max = min(f_search_max, float(max_frequency))
@@ -267,65 +272,76 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     # 1. the declared lines: one pass over the samples
     eq = NormalEquations.accumulate(theta, y, declared_f, deg)
     fit0 = eq.fit()
-    # 2. periodogram of the residual, in units where a sinusoid of amplitude A has power n A^2/4
+    # 2. periodogram of the residual, in units where a sinusoid of amplitude A has power n A^2/4,
+    # on the uniform grid freq(i) = f_first + df i (kept as an index map, not an array)
     use_ls = periodogram == "lombscargle" or (periodogram == "auto" and n <= LS_MAX_SAMPLES)
-    out = SegmentSpectrum(segment, [], level=float(np.mean(y)), sigma=fit0.sigma, span=span, nyquist=nyquist,
+    out = SegmentSpectrum(segment, [], level=eq.y0, sigma=fit0.sigma, span=span, nyquist=nyquist,
                           degree=deg, skipped=skipped, fit=fit0)
     if use_ls:
         ls = LombScargle(theta, y - fit0.predict(theta), method=method)
         fmin, df, nf = ls.autogrid(oversample=oversample, fmax=f_search_max)
         power = np.atleast_1d(ls.power_grid(fmin, df, nf))
-        freqs = fmin + df * np.arange(len(power))
+        grid = _Grid(fmin, df, 0, len(power))
         enbw = 1.0
+        del ls
     else:
-        freqs, power, enbw = _fft_residual_power(theta, y, fit0, oversample, f_search_max, out if keep_spectra else None)
+        k_lo, _, df, power, enbw = _fft_residual_power(theta, y, fit0, oversample, f_search_max,
+                                                          out if keep_spectra else None, lo=lo, hi=hi)
+        grid = _Grid(0.0, df, k_lo, len(power))
+    nbin = len(power)
     # the fit removed each declared line's power from its own bin and its neighbours: leave those
     # bins out of the noise level, or it reads low
-    fitted_mask = np.zeros(len(freqs), bool)
+    fitted_mask = np.zeros(nbin, bool)
     for f0 in declared_f:
-        fitted_mask |= np.abs(freqs - f0) < 1.0 / span
-    noise_power, noise_bins = local_noise(power, width=int(100 * oversample), min_width=int(20 * oversample),
-                                          mask=fitted_mask, return_bins=True)
-    noise_bins = noise_bins / enbw  # Hann-windowed bins are correlated: fewer independent ones
-    fallback = float(np.nanmedian(power)) if np.any(np.isfinite(power)) else 1.0
-    noise_power = np.where(np.isfinite(noise_power) & (noise_power > 0), noise_power, fallback)
-    z = power / noise_power
-    m_eff = max(1.0, len(freqs) / oversample)
+        fitted_mask[grid.within(f0, 1.0 / span)] = True
+    noise_model = _LocalNoise(power, width=int(100 * oversample), min_width=int(20 * oversample),
+                              mask=fitted_mask, enbw=enbw)
+    del fitted_mask
+    m_eff = max(1.0, nbin / oversample)
     # 3. peaks no declared line explains: not where the nuisance polynomial could mimic them, and
     # not within 1.5 resolution steps of a declared line (the two could not be told apart)
     guard = _GUARD / span
     f_found_min = max(2.0, min_cycles, (deg + 1) / math.pi) / span
-    near_declared = np.zeros(len(freqs), bool)
-    for f0 in declared_f:
-        near_declared |= np.abs(freqs - f0) < 1.5 / span
     found: list[float] = []
-    if max_peaks > 0 and len(power) >= 3:
-        is_max = np.zeros(len(power), bool)
-        is_max[1:-1] = (power[1:-1] > power[:-2]) & (power[1:-1] >= power[2:])
-        cand = np.flatnonzero(is_max & ~near_declared & (freqs >= f_found_min))
-        fap_c = false_alarm_probability(z[cand], m_eff, noise_bins[cand], oversample)
-        cand, fap_c = cand[fap_c < fap_threshold], fap_c[fap_c < fap_threshold]
-        for i in cand[np.argsort(-z[cand])]:
-            f_pk = _refine(freqs, power, i)
+    if max_peaks > 0 and nbin >= 3:
+        is_max = np.zeros(nbin, bool)
+        np.greater(power[1:-1], power[:-2], out=is_max[1:-1])
+        is_max[1:-1] &= power[1:-1] >= power[2:]
+        for f0 in declared_f:
+            is_max[grid.within(f0, 1.5 / span)] = False
+        is_max[:grid.first_at_least(f_found_min)] = False
+        cand = np.flatnonzero(is_max)
+        del is_max
+        z_c = power[cand] / noise_model.level(cand)
+        # a candidate needs at least the power that a known noise level (the lightest tail) would
+        # call significant; only those get the exact (F-distributed) false-alarm probability
+        keep_c = z_c > _z_floor(fap_threshold, m_eff)
+        cand, z_c = cand[keep_c], z_c[keep_c]
+        fap_c = false_alarm_probability(z_c, m_eff, noise_model.bins(cand), oversample)
+        sig = fap_c < fap_threshold
+        cand, z_c = cand[sig], z_c[sig]
+        for i in cand[np.argsort(-z_c)]:
+            f_pk = _refine(grid, power, i)
             if any(abs(f_pk - f0) < guard for f0 in found):
                 continue
             found.append(f_pk)
             if len(found) >= max_peaks:
                 break
-    # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass, the
-    # last one also the joint fit); a found peak stays only while its fitted amplitude is
+    # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass that
+    # computes only the rows of the found lines -- the declared lines' equations are reused --
+    # the last one also the joint fit); a found peak stays only while its fitted amplitude is
     # significant (a sidelobe of a stronger line is not, once that line is fitted): dropping one
     # is a smaller solve of the same normal equations, not another pass
     if found:
         n_dec = len(declared_f)
         _, _, eq = refine_frequencies(theta, y, declared_f + found, range(n_dec, n_dec + len(found)), degree=deg,
-                                      iterations=3)
+                                      iterations=3, base=eq)
     all_f = eq.frequency
     keep = list(range(len(all_f)))
     while True:
         fit = eq.fit(keep)
-        s_at = np.interp(fit.frequency, freqs, noise_power) if len(keep) else np.array([])
-        k_at = np.interp(fit.frequency, freqs, noise_bins) if len(keep) else np.array([])
+        s_at = grid.interp(fit.frequency, noise_model.level) if len(keep) else np.array([])
+        k_at = grid.interp(fit.frequency, noise_model.bins) if len(keep) else np.array([])
         z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at / enbw, 1e-300)
         is_dec = np.array([j < len(declared_f) for j in keep], bool)
         fap_fit = np.where(is_dec, false_alarm_probability(z_fit, 1.0, k_at, oversample),
@@ -354,59 +370,187 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     out.peaks, out.fit, out.sigma = peaks, fit, fit.sigma
     # 5. spectra for the figures
     if keep_spectra:
+        freqs = grid.frequencies()
         if out.fft_frequency is None:
-            _fft_residual_power(theta, y, fit0, oversample, f_search_max, out)
+            _fft_residual_power(theta, y, fit0, oversample, f_search_max, out, lo=lo, hi=hi)
         ls_sig = LombScargle(theta, y, method=method)
         out.ls_frequency = freqs.astype(np.float32)
         p_sig = ls_sig.power_grid(freqs[0], freqs[1] - freqs[0], len(freqs)) if len(freqs) > 1 else power
         out.ls_amplitude = ls_sig.amplitude(power=p_sig).astype(np.float32)
         out.ls_residual_amplitude = np.sqrt(4.0 * np.maximum(power, 0) / enbw / n).astype(np.float32)
-        out.noise_amplitude = np.sqrt(4.0 * noise_power / enbw / n).astype(np.float32)
+        out.noise_amplitude = np.sqrt(4.0 * noise_model.level(np.arange(nbin)) / enbw / n).astype(np.float32)
     return out
 
 
-def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None):
+def _position_nyquist(theta: np.ndarray) -> float:
+    """Half the inverse of the 95th percentile of the nonzero sample spacings (linear
+    interpolation, as ``np.percentile``), from a selection in single precision: the spacing is
+    rounded to 1e-7 of itself, and the selection takes a third of the time."""
+    sp = np.empty(len(theta) - 1, np.float32)
+    np.subtract(theta[1:], theta[:-1], out=sp, casting="unsafe")
+    np.abs(sp, out=sp)
+    n_zero = len(sp) - int(np.count_nonzero(sp))
+    m = len(sp) - n_zero
+    if m == 0:
+        return 0.0
+    pos = 0.95 * (m - 1)
+    i = int(np.floor(pos))
+    frac = pos - i
+    k = n_zero + i
+    kth = [k, k + 1] if (frac > 0 and k + 1 < len(sp)) else [k]
+    sp.partition(kth)
+    a = float(sp[k])
+    b = float(sp[k + 1]) if len(kth) == 2 else a
+    return 0.5 / (a + (b - a) * frac)
+
+
+def _z_floor(fap_threshold: float, m_eff: float) -> float:
+    """The least power ratio z whose false-alarm probability can be below ``fap_threshold``:
+    that of an exactly known noise level (``exp(-z)`` per frequency), whose tail is the lightest
+    of the F-family; a little below, for rounding."""
+    single = -math.expm1(math.log1p(-min(max(fap_threshold, 1e-300), 1.0)) / max(1.0, m_eff))
+    if single <= 0:
+        return math.inf
+    return -math.log(min(single, 1.0)) * (1 - 1e-9) - 1e-12
+
+
+class _Grid:
+    """The frequencies of a uniform periodogram grid, ``f(i) = base + df (k0 + i)``, computed
+    exactly as the array ``base + df * arange(k0, k0 + n)`` would hold them, but only where
+    needed."""
+
+    def __init__(self, base: float, df: float, k0: int, n: int):
+        self.base, self.df, self.k0, self.n = float(base), float(df), int(k0), int(n)
+
+    def at(self, i):
+        i = np.asarray(i)
+        if self.base == 0.0:
+            return self.df * (self.k0 + i)
+        return self.base + self.df * (self.k0 + i)
+
+    def frequencies(self) -> np.ndarray:
+        return self.at(np.arange(self.n))
+
+    def _index_near(self, f: float) -> int:
+        return int(np.floor((f - self.base) / self.df)) - self.k0
+
+    def within(self, f0: float, width: float) -> slice:
+        """Bins with ``|f - f0| < width`` (a contiguous range)."""
+        a = max(0, self._index_near(f0 - width) - 2)
+        b = min(self.n, self._index_near(f0 + width) + 3)
+        if b <= a:
+            return slice(0, 0)
+        idx = np.arange(a, b)
+        hit = idx[np.abs(self.at(idx) - f0) < width]
+        return slice(int(hit[0]), int(hit[-1]) + 1) if len(hit) else slice(0, 0)
+
+    def first_at_least(self, f: float) -> int:
+        """The first bin with frequency >= f."""
+        i = min(max(0, self._index_near(f) - 2), self.n)
+        while i < self.n and self.at(i) < f:
+            i += 1
+        return i
+
+    def interp(self, f, values_at) -> np.ndarray:
+        """``np.interp(f, frequencies, values)``, with ``values_at(indices)`` giving values only
+        at the bins around each f."""
+        f = np.atleast_1d(np.asarray(f, dtype=float))
+        out = np.empty(len(f))
+        for j, x in enumerate(f):
+            c = self._index_near(x)
+            idx = np.arange(max(0, min(c, self.n - 1) - 2), min(self.n, max(c, 0) + 4))
+            out[j] = np.interp(x, self.at(idx), values_at(idx))
+        return out
+
+
+class _LocalNoise:
+    """:func:`~gearspec.spectrum.periodogram.local_noise` of a power spectrum, evaluated only at
+    the bins asked for (the same values: linear interpolation between block levels, and the
+    median power wherever the level is missing or not positive); ``bins`` is the number of
+    bins averaged, over the window's equivalent noise bandwidth."""
+
+    def __init__(self, power, width, min_width, mask, enbw):
+        self.power = power
+        self.centres, self.levels, self.counts = noise_blocks(power, width=width, min_width=min_width, mask=mask)
+        self.enbw = enbw
+        self._fallback = None
+
+    def fallback(self) -> float:
+        if self._fallback is None:
+            p = self.power
+            self._fallback = float(np.nanmedian(p)) if np.any(np.isfinite(p)) else 1.0
+        return self._fallback
+
+    def level(self, idx) -> np.ndarray:
+        idx = np.asarray(idx)
+        if len(self.centres):
+            v = np.interp(idx, self.centres, self.levels)
+        else:
+            v = np.full(idx.shape, np.nan)
+        bad = ~(np.isfinite(v) & (v > 0))
+        if bad.any():
+            v[bad] = self.fallback()
+        return v
+
+    def bins(self, idx) -> np.ndarray:
+        idx = np.asarray(idx)
+        if len(self.centres):
+            return np.interp(idx, self.centres, self.counts) / self.enbw
+        return np.zeros(idx.shape) / self.enbw
+
+
+def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None,
+                        lo: float | None = None, hi: float | None = None):
     """Power of the residual of ``fit0`` from one Hann-windowed FFT of the signal resampled over
     position: the nuisance polynomial is subtracted on the grid, the fitted lines in closed form
     near their bins (:func:`~gearspec.spectrum.fft.hann_sinusoid_dft`; beyond +-40 bins the
     window's leakage is below 1e-7).  Scaled so that a sinusoid of amplitude A has power
     n A^2 / 4; white noise then has power ``enbw * sigma^2``.
 
+    The resampled signal, once the nuisance is off, is windowed and transformed in single
+    precision (:func:`~gearspec.spectrum.fft.hann_spectrum32`): its rounding (~1e-7 of the
+    signal) is far below any noise floor the search could use, and it halves the FFT's time and
+    memory.
+
     With ``keep_into`` (a SegmentSpectrum) the calibrated amplitude spectrum of the signal (line
     included, nuisance removed) is stored there for the figures.
     """
-    from numpy.polynomial import legendre
-
     n = len(theta)
-    grid, vals = resample_over_position(theta, y)
-    h = grid[1] - grid[0]
-    x = 2.0 * (grid - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
-    vals -= legendre.legval(x, fit0.nuisance)
-    spec, df, wsum, enbw = hann_spectrum(vals, h, pad=oversample)
+    g0, h, vals = resample_uniform(theta, y, lo=lo, hi=hi)
+    m = len(vals)
+    # x of the nuisance's Legendre series on the grid: x_k = a + b k
+    if fit0.hi > fit0.lo:
+        b = 2.0 * h / (fit0.hi - fit0.lo)
+        a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
+    else:
+        a = b = 0.0
+    spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
+    del vals
     nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
     if keep_into is not None:
-        amp = np.abs(spec) * (2.0 / wsum)
         keep_into.fft_frequency = (df * np.arange(len(spec))).astype(np.float32)
-        keep_into.fft_amplitude = amp.astype(np.float32)
-    for f, a, b in zip(fit0.frequency, fit0.coef_cos, fit0.coef_sin):
+        keep_into.fft_amplitude = (np.abs(spec) * np.float32(2.0 / wsum)).astype(np.float32)
+    for f, ca, cb in zip(fit0.frequency, fit0.coef_cos, fit0.coef_sin):
         k0 = int(round(f / df))
         k = np.arange(max(0, k0 - 40), min(len(spec), k0 + 41))
-        spec[k] -= hann_sinusoid_dft(k, nfft, len(vals), grid[0], h, f, a, b)
-    k_lo = max(1, int(np.ceil((1.0 / (np.ptp(theta))) / df)))
+        spec[k] -= hann_sinusoid_dft(k, nfft, m, g0, h, f, ca, cb).astype(spec.dtype)
+    k_lo = max(1, int(np.ceil((1.0 / (np.ptp(theta) if lo is None else hi - lo)) / df)))
     k_hi = min(len(spec) - 1, int(np.floor(f_max / df)))
     sel = spec[k_lo:k_hi + 1]
-    power = (sel.real**2 + sel.imag**2) * (n / wsum**2)
-    return df * np.arange(k_lo, k_hi + 1), power, enbw
+    power = np.square(sel.real)      # single precision, as the spectrum: ~1e-7 of each bin's power
+    power += np.square(sel.imag)
+    power *= np.float32(n / wsum**2)
+    return k_lo, k_hi, df, power, enbw
 
 
-def _refine(freqs, power, i):
+def _refine(grid: _Grid, power, i):
     """Peak frequency by a parabola through the log power of the three bins around bin i."""
     if i <= 0 or i >= len(power) - 1:
-        return float(freqs[i])
-    a, b, c = np.log(np.maximum(power[i - 1:i + 2], 1e-300))
+        return float(grid.at(i))
+    a, b, c = np.log(np.maximum(power[i - 1:i + 2].astype(float), 1e-300))
     den = a - 2 * b + c
     shift = 0.5 * (a - c) / den if den < 0 else 0.0
-    return float(freqs[i] + np.clip(shift, -0.5, 0.5) * (freqs[1] - freqs[0]))
+    return float(grid.at(i) + np.clip(shift, -0.5, 0.5) * (grid.at(1) - grid.at(0)))
 
 
 def _integer_hint(gear: GearTrain, f: float, tol: float) -> str | None:
@@ -431,7 +575,7 @@ def _integer_hint(gear: GearTrain, f: float, tol: float) -> str | None:
 def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = None,
             window: float | str = "auto", rel_tol: float = 0.15, min_speed: float | None = None,
             min_duration: float | None = None, inertia: bool = True, progress: bool | None = None,
-            **options) -> SpectrumResult:
+            workers: int | str = "auto", **options) -> SpectrumResult:
     """Segment a recording and analyse every segment (``gearspec spectrum``).
 
     Parameters
@@ -446,6 +590,12 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
         Subtract ``J * thetadd`` when the gear spec gives an inertia.
     progress : bool, optional
         Show a progress bar (default: when stderr is a terminal and there are many segments).
+    workers : int or "auto"
+        Segments analysed at once, in threads (numpy, the BLAS and the FFT release the GIL for
+        the bulk of the work).  The results are the same whatever the number.  ``"auto"``: two
+        on a machine with two or more CPUs when at least two segments are long (more than
+        ``LS_MAX_SAMPLES`` samples), else one.  Each segment in flight holds its own
+        temporaries, so two workers need about twice the memory of one.
     **options
         Passed to :func:`analyze_segment` (``max_frequency``, ``min_cycles``, ``harmonics``,
         ``degree``, ``fap_threshold``, ``max_peaks``, ``oversample``, ``noise``, ``method``,
@@ -459,22 +609,53 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     if len(seg) == 0:
         raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found "
                          f"(rows: {dict(seg.excluded)}); try a larger --rel-tol or a fixed --window")
-    tau = friction_torque(rec) if inertia else rec.tau
+    J = gear.inertia if (inertia and gear is not None) else None
+    # the friction torque segment by segment (tau - J thetadd), never the whole recording at once
+    tau = FrictionTorque(rec, inertia=J) if J else rec.tau
     theta = rec.theta
     notes = list(rec.notes)
-    if inertia and gear is not None and gear.inertia:
-        notes.append(f"inertia removed: tau - {gear.inertia:g} x thetadd (Savitzky-Golay derivative)")
+    if J:
+        notes.append(f"inertia removed: tau - {J:g} x thetadd (Savitzky-Golay derivative)")
     if progress is None:
         progress = sys.stderr.isatty() and len(seg) > 5
-    iterator = seg.segments
-    if progress:
-        from tqdm import tqdm
+    n_workers = _n_workers(workers, seg)
 
-        iterator = tqdm(iterator, desc="segments", unit="seg", file=sys.stderr)
-    results = []
-    for s in iterator:
-        y = s.direction * tau[s.rows]
-        results.append(analyze_segment(theta[s.rows], y, gear, segment=s, **options))
+    def one(s: Segment) -> SegmentSpectrum:
+        y = tau[s.rows] * s.direction  # a new array: the friction magnitude of this segment
+        return analyze_segment(theta[s.rows], y, gear, segment=s, **options)
+
+    if n_workers > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=n_workers, thread_name_prefix="gearspec-segment") as pool:
+            it = pool.map(one, seg.segments)
+            if progress:
+                from tqdm import tqdm
+
+                it = tqdm(it, total=len(seg), desc="segments", unit="seg", file=sys.stderr)
+            results = list(it)
+    else:
+        iterator = seg.segments
+        if progress:
+            from tqdm import tqdm
+
+            iterator = tqdm(iterator, desc="segments", unit="seg", file=sys.stderr)
+        results = [one(s) for s in iterator]
     excluded = Counter(rec.excluded) + Counter(seg.excluded)
     return SpectrumResult(results, excluded, rec.n_read, rec.unit, gear, notes,
                           settings={**seg.settings, **options, "inertia": inertia})
+
+
+def _n_workers(workers, seg: Segmentation) -> int:
+    if workers == "auto":
+        import os
+
+        long_ = sum(s.n > LS_MAX_SAMPLES for s in seg)
+        return 2 if (os.cpu_count() or 1) >= 2 and long_ >= 2 else 1
+    try:
+        n = int(workers)
+    except (TypeError, ValueError):
+        raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}") from None
+    if n < 1:
+        raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}")
+    return min(n, max(1, len(seg)))

@@ -30,7 +30,7 @@ import warnings
 
 import numpy as np
 
-__all__ = ["LombScargle", "local_noise", "false_alarm_probability", "METHODS"]
+__all__ = ["LombScargle", "local_noise", "noise_blocks", "false_alarm_probability", "METHODS"]
 
 METHODS = ("auto", "nifty", "astropy", "scipy")
 
@@ -138,11 +138,33 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
     With ``return_bins`` also returns, per bin, how many bins its block averaged (for the
     estimation error of the level; see :func:`false_alarm_probability`).
     """
-    p = np.asarray(power, dtype=float)
+    n = len(power)
+    centres, levels, counts = noise_blocks(power, width=width, mask=mask, min_width=min_width, relative=relative)
+    if not len(centres):
+        out = np.full(n, np.nan)
+        return (out, np.zeros(n)) if return_bins else out
+    idx = np.arange(n)
+    out = np.interp(idx, centres, levels)
+    if return_bins:
+        return out, np.interp(idx, centres, counts)
+    return out
+
+
+def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = None, min_width: int = 40,
+                 relative: float = 0.3):
+    """The blocks of :func:`local_noise`: ``(centres, levels, counts)`` of every block with a
+    finite level (bin index of its centre, mean noise power, bins averaged).  ``local_noise`` is
+    their linear interpolation at every bin; evaluating it only where needed saves the work.
+    A single-precision spectrum is worked on in single precision."""
+    p = np.asarray(power)
+    if p.dtype != np.float32:
+        p = p.astype(float, copy=False)
     n = len(p)
     width = max(int(min_width), int(width))
     if mask is not None:
-        p = np.where(mask, np.nan, p)
+        mask = np.asarray(mask, dtype=bool)
+        if not mask.any():
+            mask = None
     # growing blocks first (a few), then blocks of the full width (vectorised)
     edges = [0]
     while edges[-1] < n and relative * edges[-1] < width:
@@ -161,36 +183,53 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
     levels = np.empty(len(edges) - 1)
     counts = np.empty(len(edges) - 1)
 
-    def block_levels(blocks):  # rows of equal width, NaN for masked bins
-        ref = np.nanmedian(blocks, axis=1, keepdims=True) / math.log(2)
-        kept = np.where(blocks < 10 * ref, blocks, np.nan)
-        cnt = np.sum(np.isfinite(kept), axis=1)
+    def block_levels(blocks, masked=True):  # rows of equal width, NaN for masked bins
+        if masked:
+            ref = np.nanmedian(blocks, axis=1, keepdims=True) / math.log(2)
+        else:  # no NaN: the same median, from a (vectorised) sort rather than nanmedian's masked one
+            s = np.sort(blocks, axis=1)
+            w = s.shape[1]
+            med = s[:, w // 2] if w % 2 else (s[:, w // 2 - 1] + s[:, w // 2]) / 2
+            ref = med[:, None] / math.log(2)
+        below = blocks < 10 * ref
+        cnt = np.sum(below, axis=1)
         with np.errstate(invalid="ignore"):
-            lev = np.nansum(kept, axis=1) / np.maximum(cnt, 1)
+            lev = np.sum(np.where(below, blocks, 0.0), axis=1) / np.maximum(cnt, 1)
         lev = np.where(cnt > 0, lev, ref[:, 0])
         return lev, cnt
+
+    def piece(a, b):
+        if mask is None or not mask[a:b].any():
+            return p[None, a:b], False
+        return np.where(mask[None, a:b], np.nan, p[None, a:b]), True
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN (masked) blocks
         n_grow = int(np.searchsorted(edges, start))
         for k in range(n_grow):
-            lev, cnt = block_levels(p[None, edges[k]:edges[k + 1]])
+            lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
             levels[k], counts[k] = lev[0], cnt[0]
         if n_full:
-            lev, cnt = block_levels(p[start:start + n_full * width].reshape(n_full, width))
+            stop = start + n_full * width
+            rows = p[start:stop].reshape(n_full, width)
+            dirty = (mask[start:stop].reshape(n_full, width).any(axis=1) if mask is not None
+                     else np.zeros(n_full, bool))
+            lev = np.empty(n_full)
+            cnt = np.empty(n_full)
+            clean = ~dirty
+            if not dirty.any():
+                lev, cnt = block_levels(rows, masked=False)
+            elif clean.any():
+                lev[clean], cnt[clean] = block_levels(rows[clean], masked=False)
+            if dirty.any():
+                mrows = np.where(mask[start:stop].reshape(n_full, width)[dirty], np.nan, rows[dirty])
+                lev[dirty], cnt[dirty] = block_levels(mrows)
             levels[n_grow:n_grow + n_full], counts[n_grow:n_grow + n_full] = lev, cnt
         for k in range(n_grow + n_full, len(edges) - 1):
-            lev, cnt = block_levels(p[None, edges[k]:edges[k + 1]])
+            lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
             levels[k], counts[k] = lev[0], cnt[0]
     good = np.isfinite(levels)
-    if not good.any():
-        out = np.full(n, np.nan)
-        return (out, np.zeros(n)) if return_bins else out
-    idx = np.arange(n)
-    out = np.interp(idx, centres[good], levels[good])
-    if return_bins:
-        return out, np.interp(idx, centres[good], counts[good])
-    return out
+    return centres[good], levels[good], counts[good]
 
 
 def false_alarm_probability(z, n_independent: float = 1.0, noise_bins=None, oversample: float = 1.0):

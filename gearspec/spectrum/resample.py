@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import resample_poly
 
-__all__ = ["resample_over_position"]
+__all__ = ["resample_over_position", "resample_uniform"]
 
 
 def resample_over_position(theta: np.ndarray, y: np.ndarray, spacing: float | None = None,
@@ -38,26 +38,56 @@ def resample_over_position(theta: np.ndarray, y: np.ndarray, spacing: float | No
     """
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
-    n = len(theta)
-    if n < 4:
-        raise ValueError("at least four samples are needed to resample over position")
-    lo, hi = float(theta.min()), float(theta.max())
-    span = hi - lo
-    if span <= 0:
-        raise ValueError("position does not change: nothing to resample over")
-    h = span / (n - 1) if spacing is None else float(spacing)
-    m = int(np.floor(span / h)) + 1
-    cell = np.minimum(((theta - lo) / h + 0.5).astype(np.int64), m - 1)
-    counts = np.bincount(cell, minlength=m)
-    filled = counts > 0
-    cnt = counts[filled]
-    xs = np.bincount(cell, weights=theta, minlength=m)[filled] / cnt
-    ys = np.bincount(cell, weights=y, minlength=m)[filled] / cnt
-    grid = lo + h * np.arange(m)
-    values = np.interp(grid, xs, ys)
+    lo, h, values = resample_uniform(theta, y, spacing)
+    grid = lo + h * np.arange(len(values))
     if max_frequency is not None and max_frequency > 0:
         q = int(np.floor(1.0 / (2.5 * max_frequency * 2 * h)))
         if q >= 2:
             values = resample_poly(values, 1, q, padtype="line")
             grid = lo + h * q * np.arange(len(values))
     return grid, values
+
+
+def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = None, lo: float | None = None,
+                     hi: float | None = None, chunk: int = 1 << 16) -> tuple[float, float, np.ndarray]:
+    """The cell averaging and interpolation of :func:`resample_over_position` (no decimation),
+    returned as ``(first grid position, spacing, values)`` without the grid itself; ``lo`` and
+    ``hi`` (the extremes of theta) may be given when known.  Temporaries are freed as soon as
+    they are used and the grid is made in chunks: the peak memory is about four arrays of the
+    samples' length."""
+    theta = np.asarray(theta, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n = len(theta)
+    if n < 4:
+        raise ValueError("at least four samples are needed to resample over position")
+    lo = float(theta.min()) if lo is None else float(lo)
+    hi = float(theta.max()) if hi is None else float(hi)
+    span = hi - lo
+    if span <= 0:
+        raise ValueError("position does not change: nothing to resample over")
+    h = span / (n - 1) if spacing is None else float(spacing)
+    m = int(np.floor(span / h)) + 1
+    t = np.subtract(theta, lo)
+    t /= h
+    t += 0.5
+    cell = t.astype(np.intp)
+    del t
+    np.minimum(cell, m - 1, out=cell)
+    counts = np.bincount(cell, minlength=m)
+    xs = np.bincount(cell, weights=theta, minlength=m)
+    ys = np.bincount(cell, weights=y, minlength=m)
+    del cell
+    filled = counts > 0
+    if filled.all():
+        xs /= counts
+        ys /= counts
+    else:
+        cnt = counts[filled]
+        xs = xs[filled] / cnt
+        ys = ys[filled] / cnt
+    del counts, filled
+    values = np.empty(m)
+    for i in range(0, m, chunk):
+        j = min(m, i + chunk)
+        values[i:j] = np.interp(lo + h * np.arange(i, j), xs, ys)
+    return lo, h, values
