@@ -331,9 +331,11 @@ class _LoopFriction:
             out = out + evaluate_term(term, theta=theta, v=v, **kw)[0]
         return out
 
-    def friction(self, theta, v, turn_theta, last_sign, **kw):
+    def friction(self, theta, v, turn_theta, last_sign, prev_theta=None, **kw):
         """Signed friction at (theta, v); ``turn_theta``/``last_sign`` per run: the turning point of
-        the last reversal (NaN: none yet) and the last nonzero direction of motion."""
+        the last reversal (NaN: none yet) and the last nonzero direction of motion; ``prev_theta``:
+        the position one step before (the turning point if the motion reverses now; default
+        theta, as in the twin, where a reversing motor always stops for a step first)."""
         f = self.pointwise(theta, v, **kw)
         if self.history:
             s = np.sign(v)
@@ -341,7 +343,7 @@ class _LoopFriction:
             have = now_rev | np.isfinite(turn_theta)
             if have.any():
                 idx = np.flatnonzero(have)
-                tt = np.where(now_rev, theta, turn_theta)[idx]
+                tt = np.where(now_rev, theta if prev_theta is None else prev_theta, turn_theta)[idx]
                 # sample 0: the turning point, moving the old way; sample 1: now
                 old = np.where(now_rev, last_sign, -s)[idx]
                 th2 = np.column_stack((tt, theta[idx])).ravel()
