@@ -354,16 +354,26 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         for k, h in enumerate(init.get("harmonics", [])[:prob.K]):
             if h.get("decay") is not None and prob.decay_free[k]:
                 dec0[k] = float(h["decay"])
-    best = None
+    costs = []
     for vs in grid_vs:
         nl = [] if vs is None else [vs]
         _, r = prob.solve_linear(nl, dec0)
-        c = float(r @ r)
-        if best is None or c < best[0]:
-            best = (c, nl)
+        costs.append(float(r @ r))
+    # starts: every local minimum of the grid cost (the best three), not only the lowest grid
+    # point -- a sharp minimum (noiseless or precise points) can fall between two grid points and
+    # cost more there than a broad local minimum elsewhere does
+    costs = np.asarray(costs)
+    if nb_nl and len(costs) > 2:
+        order = np.argsort(np.asarray(grid_vs, dtype=float), kind="stable")
+        c_o = costs[order]
+        is_min = np.r_[c_o[0] <= c_o[1], (c_o[1:-1] <= c_o[:-2]) & (c_o[1:-1] <= c_o[2:]), c_o[-1] <= c_o[-2]]
+        mins = order[is_min]
+        starts = [[float(grid_vs[i])] for i in mins[np.argsort(costs[mins], kind="stable")][:3]]
+    else:
+        starts = [[] if grid_vs[int(np.argmin(costs))] is None else [float(grid_vs[int(np.argmin(costs))])]]
     # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
     sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
-    x0 = np.concatenate([np.log(best[1]) if nb_nl else [], dec0[free] / sscale])
+    x0 = np.concatenate([np.log(starts[0]) if nb_nl else [], dec0[free] / sscale])
 
     def unpack(x):
         nl = list(np.exp(x[:nb_nl])) if nb_nl else []
@@ -380,8 +390,12 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
             warnings.simplefilter("ignore", RuntimeWarning)
             lb = np.concatenate([[vs_bounds[0]] * nb_nl, np.full(len(free), -np.inf)])
             ub = np.concatenate([[vs_bounds[1]] * nb_nl, np.full(len(free), np.inf)])
-            x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-            res = optimize.least_squares(proj, x0, bounds=(lb, ub), method="trf", x_scale="jac", max_nfev=400)
+            res = None
+            for st_ in starts:
+                x0 = np.clip(np.concatenate([np.log(st_) if nb_nl else [], dec0[free] / sscale]), lb + 1e-9, ub - 1e-9)
+                r_ = optimize.least_squares(proj, x0, bounds=(lb, ub), method="trf", x_scale="jac", max_nfev=400)
+                if res is None or (np.all(np.isfinite(r_.x)) and r_.cost < res.cost):
+                    res = r_
         if not np.all(np.isfinite(res.x)):
             raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
         x_opt = res.x
