@@ -40,7 +40,6 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.signal import savgol_filter
 
 from .errors import InputError
@@ -149,8 +148,9 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
         tried = []
         noise = _position_noise(theta[a:b]) if min_speed is None else None
+        dt = float(np.median(np.diff(t[a:min(b, a + 100_000)]))) if b - a >= 2 else None  # once per piece
         for w in ladder:
-            res = _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise)
+            res = _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise, dt)
             if res is not None:
                 tried.append((sum(e - s for s, e, *_ in res[0]), w, res))
         if not tried:  # piece too short for any window
@@ -173,12 +173,41 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
 
 
 def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
-    """Least-squares slope of thb against tb over every window of k consecutive blocks."""
-    tw = sliding_window_view(tb, k)
-    yw = sliding_window_view(thb, k)
-    tc = tw - tw.mean(axis=1, keepdims=True)
-    yc = yw - yw.mean(axis=1, keepdims=True)
-    return (tc * yc).sum(axis=1) / (tc * tc).sum(axis=1)
+    """Least-squares slope of thb against tb over every window of k consecutive blocks.
+
+    Written as k shifted slices (in-place operations on arrays of the number of windows) rather
+    than reductions over a sliding-window view, whose rows of k elements numpy reduces slowly."""
+    m = len(tb) - k + 1
+    if m <= 0:
+        return np.empty(0)
+    mt = tb[:m].copy()
+    my = thb[:m].copy()
+    for j in range(1, k):
+        mt += tb[j:j + m]
+        my += thb[j:j + m]
+    mt /= k
+    my /= k
+    num = np.zeros(m)
+    den = np.zeros(m)
+    tc = np.empty(m)
+    yc = np.empty(m)
+    for j in range(k):
+        np.subtract(tb[j:j + m], mt, out=tc)
+        np.subtract(thb[j:j + m], my, out=yc)
+        yc *= tc
+        num += yc
+        tc *= tc
+        den += tc
+    num /= den
+    return num
+
+
+def _block_means(x: np.ndarray, m: int, b: int) -> np.ndarray:
+    """Means of m consecutive blocks of b samples (einsum: several times faster than
+    ``reshape(m, b).mean(axis=1)`` for short blocks)."""
+    out = np.einsum("ij->i", x[: m * b].reshape(m, b))
+    out /= b
+    return out
 
 
 def _position_noise(theta: np.ndarray, chunks: int = 20, size: int = 5000) -> float:
@@ -197,11 +226,12 @@ def _position_noise(theta: np.ndarray, chunks: int = 20, size: int = 5000) -> fl
     return max(float(sigma), q / math.sqrt(12))
 
 
-def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise=None):
+def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise=None, dt=None):
     n = len(t)
     if n < 2:
         return None
-    dt = float(np.median(np.diff(t[: min(n, 100_000)])))
+    if dt is None:
+        dt = float(np.median(np.diff(t[: min(n, 100_000)])))
     if dt <= 0:
         return None
     b = int(round(window / _K / dt))
@@ -209,8 +239,8 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
         return None
     m = n // b
     used = m * b
-    tb = t[:used].reshape(m, b).mean(axis=1)
-    thb = theta[:used].reshape(m, b).mean(axis=1)
+    tb = _block_means(t, m, b)
+    thb = _block_means(theta, m, b)
     # slope over K blocks: v_win[i] covers blocks i .. i+K-1
     v_win = _block_slopes(tb - tb[0], thb - thb[0], _K)
     # per block j: the window ending at j ("before") and the window starting at j ("after"); near
@@ -308,14 +338,23 @@ def _trim_to_line(t, theta, a, z, b):
     mid = slice(m // 5, m - m // 5)
     tt, th = tt_all[mid], th_all[mid]
     t0 = tt.mean()
-    dtt = tt - t0
-    v = float(dtt @ (th - th.mean()) / (dtt @ dtt))
     c = float(th.mean())
-    band = 1.5 * np.max(np.abs(th - (c + v * dtt))) + 1e-12
-    out = np.abs(th_all - (c + v * (tt_all - t0))) > band
+    dtt = tt - t0
+    # sums rather than BLAS dot products: OpenBLAS splits long ones across threads, which costs
+    # more than it gains here, and a great deal on a busy machine
+    v = float(np.sum(dtt * (th - c)) / np.sum(dtt * dtt))
+    dev = th - c
+    dev -= v * dtt
+    band = 1.5 * float(np.max(np.abs(dev))) + 1e-12
+    del dtt, dev
     edge = m // 5
-    head = np.flatnonzero(out[:edge])
-    tail = np.flatnonzero(out[m - edge:])
+
+    def off_line(sl):  # only the two edges can be trimmed: the middle is never looked at again
+        d = th_all[sl] - (c + v * (tt_all[sl] - t0))
+        return np.abs(d) > band
+
+    head = np.flatnonzero(off_line(slice(0, edge)))
+    tail = np.flatnonzero(off_line(slice(m - edge, m)))
     new_a = a + (head[-1] + 1) * stride if len(head) else a
     new_z = a + (m - edge + tail[0]) * stride if len(tail) else z
     # whole blocks, so that the ledger stays block-exact
