@@ -193,6 +193,32 @@ class GearTrain:
         out["stages"] = [{k: v for k, v in vars(s).items() if v is not None} for s in self.stages]
         return out
 
+    def to_toml(self, path: str | Path | None = None) -> str:
+        """The spec as TOML (``CONTRACTS.md`` section 2), which :meth:`from_toml` reads back; also
+        written to ``path`` when given (e.g. beside a twin recording, to read it with)."""
+
+        def q(s):
+            return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+        lines = [f"name = {q(self.name)}"]
+        if self.description:
+            lines.append(f"description = {q(self.description)}")
+        lines += [f"reference = {q(self.reference)}", f"unit = {q(self.unit)}"]
+        if self.torque_constant is not None:
+            lines.append(f"torque_constant = {float(self.torque_constant)!r}")
+        if self.inertia is not None:
+            lines.append(f"inertia = {float(self.inertia)!r}")
+        for s in self.stages:
+            lines += ["", "[[stages]]", f"name = {q(s.name)}", f"kind = {q(s.kind)}", f"ratio = {float(s.ratio)!r}"]
+            if s.teeth is not None:
+                lines.append(f"teeth = {int(s.teeth)}")
+            if s.lead is not None:
+                lines.append(f"lead = {float(s.lead)!r}")
+        text = "\n".join(lines) + "\n"
+        if path is not None:
+            Path(path).write_text(text)
+        return text
+
     # ------------------------------------------------------------------ kinematics
     @property
     def total_ratio(self) -> float:
