@@ -732,7 +732,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     return rec, truth_info
 
 
-def stick_slip_run(joint_speed: float = FIG3_JOINT_SPEED, duration: float = 60.0, *, seed: int | None = 0,
+def stick_slip_run(joint_speed: float = FIG3_JOINT_SPEED, duration: float = 30.0, *, seed: int | None = 0,
                    sample_interval: float = 4e-3, **kw) -> tuple[Recording, TwinTruth]:
     """The paper's Fig. 3: one run at a creeping joint speed (default 1e-4 rad/s, 0.029 rad/s or
     0.27 rpm at the motor), held ``duration`` s, with the true velocity recorded.  Other keywords
