@@ -83,35 +83,12 @@ def _floats(text: str | None, option: str):
     return vals
 
 
-def gear_toml(gear) -> str:
-    """A gear spec as TOML (CONTRACTS.md section 2)."""
-
-    def q(s):
-        return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-    lines = [f"name = {q(gear.name)}"]
-    if gear.description:
-        lines.append(f"description = {q(gear.description)}")
-    lines += [f"reference = {q(gear.reference)}", f"unit = {q(gear.unit)}"]
-    if gear.torque_constant is not None:
-        lines.append(f"torque_constant = {gear.torque_constant!r}")
-    if gear.inertia is not None:
-        lines.append(f"inertia = {gear.inertia!r}")
-    for s in gear.stages:
-        lines += ["", "[[stages]]", f"name = {q(s.name)}", f"kind = {q(s.kind)}", f"ratio = {float(s.ratio)!r}"]
-        if s.teeth is not None:
-            lines.append(f"teeth = {int(s.teeth)}")
-        if s.lead is not None:
-            lines.append(f"lead = {float(s.lead)!r}")
-    return "\n".join(lines) + "\n"
-
-
 def _write(args, name: str, rec, truth, extra=None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"recording": rec.save(out / f"{name}.{args.format}")}
     gear_path = out / f"{name}_gear.toml"
-    gear_path.write_text(gear_toml(truth.gear))
+    truth.gear.to_toml(gear_path)
     paths["gear"] = gear_path
     paths["truth"] = truth.to_json(out / f"{name}_truth.json")
     for k, (suffix, frame) in (extra or {}).items():
