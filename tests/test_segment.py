@@ -119,3 +119,25 @@ def test_emps_plateaus_both_directions(data_dir):
             near = [v for v in speeds if abs(v - target) < 0.2 * target]
             assert len(near) >= 4, (d, target, speeds)   # four cycles of the profile
     seg.check_ledger()
+
+
+def test_friction_torque_by_segment_equals_the_whole_recording():
+    from gearspec.segment import FrictionTorque
+
+    fs = 1000
+    t = np.arange(0, 12, 1 / fs)
+    theta = 3 * t + 0.2 * np.sin(2 * np.pi * 2 * t) + 0.01 * t**2
+    tau = 0.5 + np.random.default_rng(0).normal(0, 0.01, t.size)
+    run = (t > 6).astype(int)
+    rec = Recording.from_arrays(t=t, theta=theta, torque=tau, run=run, gear={"name": "g", "inertia": 0.01})
+    whole = friction_torque(rec)
+    ft = FrictionTorque(rec)
+    for a, b in [(0, 100), (50, 5000), (5990, 6000), (6000, 6010), (6000, 12000), (7345, 9000), (11995, 12000)]:
+        assert np.array_equal(ft[a:b], whole[a:b]), (a, b)
+    # sampling that jitters: the piece is resampled to a uniform grid first, as friction_torque does
+    t2 = t + np.random.default_rng(1).uniform(0, 0.3 / fs, t.size)
+    rec2 = Recording.from_arrays(t=t2, theta=theta, torque=tau, gear={"name": "g", "inertia": 0.01})
+    assert np.array_equal(FrictionTorque(rec2)[100:5000], friction_torque(rec2)[100:5000])
+    # no inertia: the drive torque itself
+    rec3 = Recording.from_arrays(t=t, theta=theta, torque=tau)
+    assert np.array_equal(FrictionTorque(rec3)[10:20], tau[10:20])

@@ -256,3 +256,115 @@ def test_result_json_contract_and_row_ledger(tmp_path):
         for p in s["peaks"]:
             assert set(p) >= {"frequency", "amplitude", "amplitude_se", "phase", "phase_se", "fap", "order", "label"}
         assert any(p["label"] == "motor shaft" for p in s["peaks"])
+
+
+# ---------------------------------------------------------------------- the fast paths are exact
+def _reference_fit(theta, y, freq, degree):
+    """Joint least squares in double precision with a full design matrix (the slow reference)."""
+    from numpy.polynomial import legendre
+
+    lo, hi = theta.min(), theta.max()
+    x = 2 * (theta - lo) / (hi - lo) - 1
+    ph = np.multiply.outer(theta, freq)
+    ph = 2 * np.pi * (ph - np.floor(ph))
+    X = np.hstack([legendre.legvander(x, degree), np.cos(ph), np.sin(ph)])
+    beta = np.linalg.lstsq(X, y, rcond=None)[0]
+    a, b = beta[degree + 1:degree + 1 + len(freq)], beta[degree + 1 + len(freq):]
+    return np.hypot(a, b), np.arctan2(a, b)
+
+
+def test_single_precision_normal_equations_match_double_precision_far_from_zero():
+    # 200 000 samples around theta = 1e5 (a long run at speed), lines up to 0.4 of the Nyquist
+    rng = np.random.default_rng(21)
+    theta = 1e5 + np.cumsum(rng.uniform(0.05, 0.15, 200_000))
+    freq = np.array([0.0123, 0.15915, 0.4321, 2.0])
+    y = 0.4 + sum(a * np.sin(2 * np.pi * f * theta + p) for a, f, p in zip([0.03, 0.01, 0.005, 0.002], freq,
+                                                                               [0.7, -1.1, 2.0, 0.3]))
+    y = y + rng.normal(0, 0.05, theta.size)
+    amp, ph = _reference_fit(theta, y, freq, 3)
+    fit = harmonic_fit(theta, y, freq, degree=3)
+    # rounding errors far below the statistical ones (phase s.e. here 0.003 .. 0.08 rad)
+    assert np.allclose(fit.amplitude, amp, rtol=1e-4)
+    assert np.max(np.abs(wrap(fit.phase - ph))) < 5e-5
+    assert np.all(np.abs(wrap(fit.phase - ph)) < 1e-3 * fit.phase_se)
+    r = y - fit.predict(theta)
+    assert abs(np.std(r) - fit.sigma) < 1e-3 * fit.sigma
+
+
+def test_extended_equations_equal_a_full_pass():
+    from gearspec.spectrum.harmonic import NormalEquations, refine_frequencies
+
+    rng = np.random.default_rng(22)
+    theta = np.cumsum(rng.uniform(0.05, 0.15, 50_000))
+    dec, found = [0.01, 0.15915], [0.0893, 0.3183]
+    y = (1 + 0.02 * np.sin(2 * np.pi * 0.01 * theta) + 0.01 * np.sin(2 * np.pi * 0.15915 * theta + 1)
+         + 0.005 * np.sin(2 * np.pi * 0.08931 * theta - 2) + 0.004 * np.sin(2 * np.pi * 0.31831 * theta + 0.3)
+         + rng.normal(0, 0.02, theta.size))
+    base = NormalEquations.accumulate(theta, y, dec, 2)
+    ext = base.extend(theta, y, found)
+    full = NormalEquations.accumulate(theta, y, dec + found, 2, free=[2, 3])
+    scale = np.sqrt(np.outer(np.diag(full.G), np.diag(full.G)))
+    assert np.max(np.abs(ext.G - full.G) / scale) < 1e-6
+    assert np.allclose(ext.frequency_step()[0], full.frequency_step()[0], rtol=1e-4, atol=1e-12)
+    f1, se1, eq1 = refine_frequencies(theta, y, dec + found, [2, 3], degree=2, base=base)
+    f2, se2, eq2 = refine_frequencies(theta, y, dec + found, [2, 3], degree=2)
+    assert np.allclose(f1, f2, rtol=1e-9) and np.allclose(eq1.fit().amplitude, eq2.fit().amplitude, rtol=1e-5)
+    assert f1[2] == pytest.approx(0.08931, abs=2e-5) and f1[3] == pytest.approx(0.31831, abs=2e-5)
+
+
+def test_single_precision_search_spectrum_matches_double_precision():
+    from scipy.signal import get_window
+
+    from gearspec.spectrum.fft import hann_spectrum, hann_spectrum32
+
+    for n in (4, 17, 1000):
+        w = get_window("hann", n, fftbins=False)
+        _, _, wsum, enbw = hann_spectrum32(np.ones(n), 1.0)
+        assert wsum == pytest.approx(w.sum(), rel=1e-12) and enbw == pytest.approx(n * (w @ w) / w.sum()**2, rel=1e-12)
+    rng = np.random.default_rng(23)
+    n = 20001
+    m = np.arange(n)
+    coef = np.array([0.4, 0.003, -0.002])
+    a, b = -1.0, 2.0 / (n - 1)
+    from numpy.polynomial import legendre
+
+    v = legendre.legval(a + b * m, coef) + 0.01 * np.sin(2 * np.pi * 0.0123 * m) + rng.normal(0, 0.05, n)
+    s64, df, ws, en = hann_spectrum(v - legendre.legval(a + b * m, coef), 1.0)
+    s32, df2, ws2, en2 = hann_spectrum32(v, 1.0, legendre=(coef, a, b))
+    assert df == df2 and ws == pytest.approx(ws2) and en == pytest.approx(en2)
+    p64, p32 = np.abs(s64) ** 2, np.abs(s32.astype(complex)) ** 2
+    noise = np.median(p64)
+    assert np.max(np.abs(p32 - p64)) < 1e-3 * noise + 1e-5 * p64.max()
+
+
+def test_resampling_fast_path_equals_cell_averages():
+    rng = np.random.default_rng(24)
+    from gearspec.spectrum.resample import resample_uniform
+
+    for jitter in (0.3, 0.8):  # within 0.49 of a cell of the grid (fast path), and beyond
+        n = 50_000
+        theta = 5.0 + (np.arange(n) + rng.uniform(-jitter, jitter, n)) * 0.01
+        theta.sort()
+        y = np.sin(theta) + rng.normal(0, 0.1, n)
+        for th, yy in ((theta, y), (theta[::-1], y[::-1])):
+            lo, h, v = resample_uniform(th, yy)
+            # the general method, spelt out: cell means, then linear interpolation at the grid
+            m = int(np.floor((th.max() - lo) / h)) + 1
+            cell = np.minimum(((th - lo) / h + 0.5).astype(int), m - 1)
+            cnt = np.bincount(cell, minlength=m)
+            ok = cnt > 0
+            xs = np.bincount(cell, th, m)[ok] / cnt[ok]
+            ys = np.bincount(cell, yy, m)[ok] / cnt[ok]
+            assert np.array_equal(v, np.interp(lo + h * np.arange(m), xs, ys))
+
+
+def test_segments_in_threads_give_the_same_result():
+    rec, _ = plateau_recording([40, -40, 80, -80], ripples=[Ripple(F_MOTOR, 1e-3, 0.5), Ripple(1.234, 5e-4, 0.1)],
+                               level=0.01, duration=3, fs=1000, noise=1e-4, gear=SILO4, seed=3)
+    one = analyze(rec, periodogram="fft", workers=1)
+    two = analyze(rec, periodogram="fft", workers=2, keep_spectra=True)
+    assert len(one.segments) == 4
+    import json
+
+    assert json.dumps(one.to_dict(), default=float) == json.dumps(
+        {**two.to_dict(), "settings": one.to_dict()["settings"]}, default=float)

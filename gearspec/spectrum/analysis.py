@@ -35,6 +35,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import threading
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -278,7 +279,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     out = SegmentSpectrum(segment, [], level=eq.y0, sigma=fit0.sigma, span=span, nyquist=nyquist,
                           degree=deg, skipped=skipped, fit=fit0)
     if use_ls:
-        ls = LombScargle(theta, y - fit0.predict(theta), method=method)
+        ls = LombScargle(theta, y - fit0.predict(theta), method=method, nthreads=_ls_threads())
         fmin, df, nf = ls.autogrid(oversample=oversample, fmax=f_search_max)
         power = np.atleast_1d(ls.power_grid(fmin, df, nf))
         grid = _Grid(fmin, df, 0, len(power))
@@ -373,13 +374,22 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         freqs = grid.frequencies()
         if out.fft_frequency is None:
             _fft_residual_power(theta, y, fit0, oversample, f_search_max, out, lo=lo, hi=hi)
-        ls_sig = LombScargle(theta, y, method=method)
+        ls_sig = LombScargle(theta, y, method=method, nthreads=_ls_threads())
         out.ls_frequency = freqs.astype(np.float32)
         p_sig = ls_sig.power_grid(freqs[0], freqs[1] - freqs[0], len(freqs)) if len(freqs) > 1 else power
         out.ls_amplitude = ls_sig.amplitude(power=p_sig).astype(np.float32)
         out.ls_residual_amplitude = np.sqrt(4.0 * np.maximum(power, 0) / enbw / n).astype(np.float32)
         out.noise_amplitude = np.sqrt(4.0 * noise_model.level(np.arange(nbin)) / enbw / n).astype(np.float32)
     return out
+
+
+_local = threading.local()  # .in_pool: this thread analyses one segment of several at once
+
+
+def _ls_threads() -> int | None:
+    """finufft's threads for a periodogram: one inside analyze's worker threads (the workers
+    already share the CPUs; OpenMP teams on top would oversubscribe them), else its default."""
+    return 1 if getattr(_local, "in_pool", False) else None
 
 
 def _position_nyquist(theta: np.ndarray) -> float:
@@ -624,11 +634,18 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
         y = tau[s.rows] * s.direction  # a new array: the friction magnitude of this segment
         return analyze_segment(theta[s.rows], y, gear, segment=s, **options)
 
+    def one_in_pool(s: Segment) -> SegmentSpectrum:
+        _local.in_pool = True
+        try:
+            return one(s)
+        finally:
+            _local.in_pool = False
+
     if n_workers > 1:
         from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(max_workers=n_workers, thread_name_prefix="gearspec-segment") as pool:
-            it = pool.map(one, seg.segments)
+            it = pool.map(one_in_pool, seg.segments)
             if progress:
                 from tqdm import tqdm
 

@@ -45,9 +45,12 @@ class LombScargle:
     y : ndarray
         Values, shape (N,) or (B, N) for a batch of signals sampled at the same positions.
     method : {"auto", "nifty", "astropy", "scipy"}
+    nthreads : int, optional
+        Threads of the nifty (finufft) back end; default: all (OpenMP's choice).  One when
+        periodograms are computed in several threads at once.
     """
 
-    def __init__(self, theta, y, method: str = "auto"):
+    def __init__(self, theta, y, method: str = "auto", nthreads: int | None = None):
         if method not in METHODS:
             raise ValueError(f"unknown periodogram method '{method}' (choose from {', '.join(METHODS)})")
         theta = np.asarray(theta, dtype=float)
@@ -61,6 +64,7 @@ class LombScargle:
         self.theta = theta
         self.y = y
         self.method = method
+        self.nthreads = nthreads
         self.n = theta.shape[0]
 
     # ------------------------------------------------------------------ grids
@@ -90,7 +94,7 @@ class LombScargle:
 
             res = nifty_ls.lombscargle(self.theta, self.y, fmin=fmin, fmax=fmin + df * (nf - 1), Nf=nf,
                                        normalization="psd", backend="finufft", assume_sorted_t=True,
-                                       finufft_kwargs={"eps": 1e-7})
+                                       nthreads=self.nthreads, finufft_kwargs={"eps": 1e-7})
             return np.asarray(res.power)
         return self.power(fmin + df * np.arange(nf), method=method)
 
