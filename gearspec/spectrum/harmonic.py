@@ -213,15 +213,18 @@ class _Design:
         r = self.rows
         nb = -(-m // r)
         full = nb * r
-        T = self.T64[:nb]
-        flat = T.reshape(-1)
-        flat[:m] = theta
-        if full > m:
-            flat[m:] = theta[-1]
-        ref = T[:, 0].copy()
-        np.subtract(T, ref[:, None], out=T)
         U = self.U[:nb]
-        np.copyto(U, T, casting="same_kind")
+        if full == m:  # a whole number of sub-blocks: straight from theta
+            T = theta.reshape(nb, r)
+            ref = T[:, 0].copy()
+            np.subtract(T, ref[:, None], out=U, casting="same_kind")
+        else:  # the last, partial chunk: padded with its last position
+            T = self.T64[:nb]
+            flat = T.reshape(-1)
+            flat[:m] = theta
+            flat[m:] = theta[-1]
+            ref = T[:, 0].copy()
+            np.subtract(T, ref[:, None], out=U, casting="same_kind")
         D = self.D[:nb]
         d = self.degree
         # Legendre polynomials of x = 2 (theta - lo) / (hi - lo) - 1, Bonnet recurrence
@@ -257,9 +260,12 @@ class _Design:
                 np.multiply(D[:, ss], W, out=D[:, col + 1])
                 col += 2
         if y is not None:
-            Y = self.U.reshape(-1)  # U is used up: its buffer takes y - y0 on its way into column q
-            np.subtract(y, y0, out=Y[:m], casting="unsafe")
-            D[:, self.q] = Y[:full].reshape(nb, r)
+            if full == m:
+                np.subtract(y.reshape(nb, r), y0, out=D[:, self.q], casting="same_kind")
+            else:
+                Y = self.U.reshape(-1)  # U is used up: its buffer takes y - y0 on its way into column q
+                np.subtract(y, y0, out=Y[:m], casting="same_kind")
+                D[:, self.q] = Y[:full].reshape(nb, r)
         if full > m:
             D[nb - 1, :, m - (nb - 1) * r:] = 0.0
         return nb
