@@ -37,7 +37,7 @@ from typing import Iterable
 
 from .errors import InputError, warn
 
-__all__ = ["Stage", "Line", "GearTrain", "KINDS", "presets", "load_gear"]
+__all__ = ["Stage", "Line", "GearTrain", "KINDS", "presets", "load_gear", "integer_hint"]
 
 KINDS = ("planetary", "worm", "spur", "helical", "harmonic", "cycloidal", "ballscrew", "belt", "other")
 _CARRIER_KINDS = ("planetary", "harmonic", "cycloidal")
@@ -423,3 +423,27 @@ def load_gear(spec: "str | Path | GearTrain | dict | None") -> GearTrain | None:
     if path.exists():
         return GearTrain.from_toml(path)
     raise InputError(f"gear spec '{text}': no such file and no such preset (presets: {', '.join(known)})")
+
+
+def integer_hint(gear: GearTrain | None, frequency: float, tol: float, max_multiple: int = 64) -> str | None:
+    """'7x motor shaft' when ``frequency`` sits within ``tol`` of an integer multiple (>= 2) of a
+    shaft line of ``gear``; None otherwise.
+
+    Not a label (a label is what the declared lines explain, :meth:`GearTrain.label`): a motor
+    pole-pair, slot or commutator count, or a cogging order shows up this way.  A high multiple
+    of a slow shaft matches almost anything, so only multiples up to ``max_multiple`` are tried,
+    fastest shaft (smallest multiple) first, and only shafts whose frequency is ten times the
+    tolerance (so that neighbouring multiples can be told apart).
+
+    (The same rule as the ``hint`` of :mod:`gearspec.spectrum`'s unexplained peaks.)
+    """
+    if gear is None or not (frequency > 0):
+        return None
+    shafts = sorted((ln for ln in gear.declared_lines() if ln.kind == "shaft"), key=lambda x: -x.frequency)
+    for ln in shafts:
+        if tol > 0.1 * ln.frequency:  # neighbouring multiples cannot be told apart
+            continue
+        m = round(frequency / ln.frequency)
+        if 2 <= m <= max_multiple and abs(frequency - m * ln.frequency) <= tol:
+            return f"{m}x {ln.label}"
+    return None

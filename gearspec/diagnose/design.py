@@ -1,0 +1,823 @@
+"""A friction model as a linear design: blocks of columns, fitted jointly by least squares.
+
+Every model the loop handles -- a base law per direction (or shared), position-locked harmonics and
+additive terms -- is *linear* in most of its parameters once its few nonlinear ones are fixed
+(Stribeck velocity, decay constants, exponents, the travel of a presliding curve, a frequency):
+
+    drive torque = sum_blocks  X_block(theta, v, load, temperature, t, acc, travel; nonlinear) @ coef_block
+
+A :class:`Block` makes its columns from the data and writes its fitted coefficients back into a
+:class:`~gearspec.model.FrictionModel`; a :class:`State` is a list of blocks.  The closed loop
+refits the whole state jointly (ordinary least squares: the held-out error it is judged by is an
+unweighted rmse) whenever a term is added, so that a new term and the base law share the data
+honestly (a nonlinear viscous term and the linear viscous coefficient are refitted together, not
+one on the other's residual).  Nonlinear parameters are chosen by each candidate's own search
+(:mod:`.candidates`) on the data it is fitted to.
+
+Columns are torques *with the sign of the motion* for friction (a magnitude ``m`` contributes
+``sign(v) m``) and as they are for signed terms (inertia, offset).  Per-group normal equations
+(:class:`Grams`) make fits on any union of held-out groups cheap: one pass over the samples per
+set of columns, then sums over groups.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..errors import InputError
+from ..model import DIRECTIONS, LAWS, FrictionModel
+from ..terms import TERMS, amplitude_law, evaluate_term
+from .data import DiagnoseData
+
+__all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "Grams", "FittedState", "fit_state",
+           "state_from_model", "LINEAR", "solve_normal", "predict_model", "polish", "nonlinear_parameters"]
+
+_TWO_PI = 2.0 * math.pi
+_DNAME = {1: "positive", -1: "negative"}
+
+#: linear and nonlinear parameters of every base law (the magnitude is linear in the first
+#: given the second)
+LINEAR = {"none": ((), ()), "coulomb_viscous": (("tau_c", "viscous"), ()),
+          "stribeck": (("tau_c", "tau_s", "viscous"), ("v_s",)), "silo4": (("tau_c", "tau_s", "viscous"), ("v_s",)),
+          "lola8": (("t_f0", "mu", "b", "gamma"), ()), "lola11": (("t_f0", "mu", "b", "t_fs"), ("v_s",))}
+#: what a law degrades to when its Stribeck part is not identified
+_DEGRADED = {"stribeck": ("tau_c", "viscous"), "silo4": ("tau_c", "viscous"), "lola11": ("t_f0", "mu", "b")}
+
+
+def _inputs(dd: DiagnoseData) -> dict:
+    return dd.fit.inputs()
+
+
+def _sign(dd: DiagnoseData) -> np.ndarray:
+    return np.sign(dd.fit.v)
+
+
+# ---------------------------------------------------------------------- blocks
+_UID = itertools.count(1)
+_CACHE_SIZE = 96
+
+
+@dataclass(frozen=True, eq=False)
+class Block:
+    """A group of columns with the parameters they carry.  Subclasses define ``_raw(dd)`` (the
+    columns over the samples of ``dd.fit``, before any reduction), ``names`` and
+    ``write(model, coef, se)``.  ``uid`` identifies a block through changes of its nonlinear
+    parameters (``dataclasses.replace`` keeps it)."""
+
+    key: str = ""
+    uid: int = field(default_factory=lambda: next(_UID))
+    #: the block's present linear coefficients (for the Taylor columns of its nonlinear parameters)
+    coef: tuple = ()
+
+    def columns(self, dd: DiagnoseData, taylor: bool = False) -> np.ndarray:
+        """Columns at the observations of ``dd`` (reduced when the data are); with ``taylor`` also
+        one first-order column per nonlinear parameter (:meth:`taylor_columns`).  The last few
+        computed are cached on the data."""
+        cache = dd.cache.setdefault("columns", OrderedDict())
+        ck = (id(self), bool(taylor))
+        hit = cache.get(ck)
+        if hit is not None and hit[0] is self:
+            cache.move_to_end(ck)
+            return hit[1]
+        if taylor:
+            plain = self.columns(dd)
+            T = self.taylor_columns(dd)
+            cols = np.column_stack([plain, T]) if T.shape[1] else plain
+        else:
+            raw = np.asarray(self._raw(dd), dtype=float).reshape(len(dd.fit), -1)
+            cols = raw if dd.reduce is None else (np.column_stack([dd.R(raw[:, j]) for j in range(raw.shape[1])])
+                                                  if raw.shape[1] else np.zeros((len(dd), 0)))
+        cache[ck] = (self, cols)
+        while len(cache) > _CACHE_SIZE:
+            cache.popitem(last=False)
+        return cols
+
+    def taylor_columns(self, dd: DiagnoseData) -> np.ndarray:
+        """First-order columns of the nonlinear parameters: for each, the derivative of the
+        block's present contribution (``columns @ coef``) with respect to it.  A linear refit with
+        them moves the nonlinear parameters too (one Gauss-Newton step), so that every fit of the
+        held-out test -- before and after a candidate alike -- refits them on its own data."""
+        if not self.coef:
+            return np.zeros((len(dd), 0))
+        c = np.asarray(self.coef, dtype=float)
+        out = []
+        for key, val, lo, hi, log in nonlinear_parameters(self, dd):
+            h = 1e-4 * (abs(val) if log or val != 0 else 1.0) if key[0] != "frequency" else 1e-7 * abs(val)
+            if key[0] == "decay" and val == 0:
+                h = 1e-4 / max(float(np.max(np.abs(dd.fit.v))), 1e-12)
+            up = with_parameter(self, key, val + h)._raw(dd)
+            dn = with_parameter(self, key, val - h)._raw(dd)
+            d = (np.asarray(up, float).reshape(len(dd.fit), -1) - np.asarray(dn, float).reshape(len(dd.fit), -1)) \
+                @ c / (2 * h)
+            out.append(dd.R(d))
+        return np.column_stack(out) if out else np.zeros((len(dd), 0))
+
+    def n_taylor(self, dd: DiagnoseData) -> int:
+        return len(nonlinear_parameters(self, dd)) if self.coef else 0
+
+    @property
+    def names(self) -> list[str]:
+        raise NotImplementedError
+
+    def _raw(self, dd):
+        raise NotImplementedError
+
+    def write(self, model: FrictionModel, coef: np.ndarray, se: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        return self.key
+
+
+@dataclass(frozen=True, eq=False)
+class BaseBlock(Block):
+    """The base law: per direction (``dirs`` = (1, -1) or the directions with data) or shared by
+    both (``symmetric``).  ``nonlin[d]``: the law's nonlinear parameters of direction d (e.g.
+    ``{"v_s": ...}``); ``lin[d]``: the linear parameters fitted (the law's, or its degraded
+    Coulomb + viscous part when the Stribeck part is not identified)."""
+
+    law: str = "coulomb_viscous"
+    dirs: tuple = (1, -1)
+    symmetric: bool = False
+    lin: tuple = ()
+    nonlin: tuple = ()     # ((d, {name: value}), ...)
+
+    @property
+    def names(self):
+        if self.symmetric:
+            return [f"{p}" for p in self._lin(0)]
+        return [f"{p}[{_DNAME[d][:3]}]" for d in self.dirs for p in self._lin(d)]
+
+    def _lin(self, d):
+        return dict(self.lin)[d if not self.symmetric else 0]
+
+    def _nonlin(self, d):
+        return dict(self.nonlin).get(d if not self.symmetric else 0, {})
+
+    def _raw(self, dd):
+        f = dd.fit
+        speed = np.abs(f.v)
+        sgn = np.sign(f.v)
+        law = LAWS[self.law]
+        load = f.load if f.load is not None else (np.zeros(len(f)) if law.needs_load else None)
+        cols = []
+        groups = [(0, np.ones(len(f), bool))] if self.symmetric else [(d, f.direction == d) for d in self.dirs]
+        for d, sel in groups:
+            nl = self._nonlin(d)
+            for p in self._lin(d):
+                params = {k: 0.0 for k in law.params}
+                params.update({k: None for k in law.optional})
+                for k in LINEAR[self.law][1]:
+                    params[k] = nl.get(k)
+                for k in self._lin(d):
+                    params[k] = 1.0 if k == p else 0.0
+                mag = np.asarray(law.magnitude(speed, load, *[params[k] for k in law.params]), dtype=float)
+                cols.append(np.where(sel, sgn * np.broadcast_to(mag, speed.shape), 0.0))
+        return np.column_stack(cols) if cols else np.zeros((len(f), 0))
+
+    def write(self, model, coef, se):
+        i = 0
+        targets = [(0, DIRECTIONS)] if self.symmetric else [(d, (_DNAME[d],)) for d in self.dirs]
+        for d, names in targets:
+            for p in self._lin(d):
+                for nm in names:
+                    model.directions[nm][p] = float(coef[i])
+                    model.directions[nm][p + "_se"] = float(se[i])
+                i += 1
+            for nm in names:
+                for k, val in self._nonlin(d).items():
+                    model.directions[nm][k] = val
+                full = LINEAR[self.law][0]
+                for k in full:
+                    if k not in self._lin(d):
+                        model.directions[nm][k] = None
+                        model.directions[nm][k + "_se"] = None
+                if self.law in _DEGRADED and tuple(self._lin(d)) == _DEGRADED[self.law]:
+                    for k in LINEAR[self.law][1]:
+                        model.directions[nm][k] = None
+
+    def describe(self):
+        return f"{self.law} ({'symmetric' if self.symmetric else 'per direction'})"
+
+
+@dataclass(frozen=True, eq=False)
+class HarmonicBlock(Block):
+    """A position-locked line ``g(|v|) (a sin + c cos)(2 pi f theta)`` in the friction magnitude,
+    per direction (or shared), with amplitude law ``g`` (exp, const, rational, power) and decay
+    per direction; with ``load_phase`` (per direction) also the SILO4 eq. 14 column
+    ``load^2 g sin(2 pi f theta + phase)`` (the load coefficient)."""
+
+    frequency: float = 1.0
+    label: str | None = None
+    dirs: tuple = (1, -1)
+    symmetric: bool = False
+    law: tuple = ()          # ((d, law), ...)
+    decay: tuple = ()        # ((d, decay), ...)
+    load_phase: tuple = ()   # ((d, phase), ...): eq. 14 column in these directions
+    extra: tuple = ()        # ((d, {key: value}), ...) carried into the model's harmonic (e.g. evidence)
+    found: bool = False      # added by the loop (else part of the model it started from)
+
+    def _g(self, d, speed):
+        lw = dict(self.law).get(d, "exp")
+        return amplitude_law(lw, speed, float(dict(self.decay).get(d, 0.0)))
+
+    def _groups(self, f):
+        if self.symmetric:
+            return [(0, np.ones(len(f), bool))]
+        return [(d, f.direction == d) for d in self.dirs]
+
+    @property
+    def names(self):
+        lab = self.label or f"{self.frequency:.6g}"
+        out = []
+        for d in ((0,) if self.symmetric else self.dirs):
+            tag = "" if d == 0 else f"[{_DNAME[d][:3]}]"
+            out += [f"{lab} sin{tag}", f"{lab} cos{tag}"]
+            if d in dict(self.load_phase):
+                out.append(f"{lab} load^2{tag}")
+        return out
+
+    def _raw(self, dd):
+        f = dd.fit
+        if f.theta is None:
+            raise InputError("a position-locked line needs positions (theta)")
+        speed = np.abs(f.v)
+        sgn = np.sign(f.v)
+        trig = dd.cache.setdefault("trig", OrderedDict())
+        hit = trig.get(self.frequency)
+        if hit is None:
+            x = _TWO_PI * self.frequency * f.theta
+            hit = trig[self.frequency] = (np.sin(x), np.cos(x))
+            while len(trig) > 16:
+                trig.popitem(last=False)
+        sn, cs = hit
+        x = None
+        cols = []
+        lp = dict(self.load_phase)
+        for d, sel in self._groups(f):
+            g = np.where(sel, sgn * self._g(d, speed), 0.0)
+            cols += [g * sn, g * cs]
+            if d in lp:
+                if f.load is None:
+                    raise InputError("a load-dependent line (SILO4 eq. 14) needs the 'load' channel")
+                cols.append(g * f.load ** 2 * (sn * math.cos(lp[d]) + cs * math.sin(lp[d])))
+        return np.column_stack(cols)
+
+    def write(self, model, coef, se):
+        i = 0
+        lp = dict(self.load_phase)
+        ex = dict(self.extra)
+        targets = [(0, DIRECTIONS)] if self.symmetric else [(d, (_DNAME[d],)) for d in self.dirs]
+        for d, names in targets:
+            a, c = coef[i], coef[i + 1]
+            sa, sc = se[i], se[i + 1]
+            i += 2
+            A = math.hypot(a, c)
+            phi = math.atan2(c, a)
+            A_se = math.sqrt((a * sa) ** 2 + (c * sc) ** 2) / A if A > 0 else float("nan")
+            p_se = math.sqrt((c * sa) ** 2 + (a * sc) ** 2) / A ** 2 if A > 0 else float("nan")
+            h = {"frequency": float(self.frequency), "amplitude": float(A), "amplitude_se": float(A_se),
+                 "phase": float(phi), "phase_se": float(p_se), "law": dict(self.law).get(d, "exp"),
+                 "decay": float(dict(self.decay).get(d, 0.0))}
+            if self.label:
+                h["label"] = self.label
+            if d in lp:
+                k = coef[i]
+                # the load column carries its own phase; the model's term shares the line's phase
+                h["load_coefficient"] = float(k * math.cos(lp[d] - phi)) if A > 0 else float(k)
+                h["load_coefficient_se"] = float(se[i])
+                i += 1
+            h.update(ex.get(d, ex.get(0, {})))
+            for nm in names:
+                hs = model.directions[nm]["harmonics"]
+                hs[:] = [x for x in hs if not math.isclose(x["frequency"], self.frequency, rel_tol=1e-12)]
+                hs.append(dict(h))
+
+    def with_(self, **kw) -> "HarmonicBlock":
+        return replace(self, **kw)
+
+    def describe(self):
+        laws = ", ".join(f"{_DNAME.get(d, 'both')}: {lw} (decay {dict(self.decay).get(d, 0.0):.3g})"
+                         for d, lw in self.law)
+        return f"line {self.label or ''} at {self.frequency:.6g} cycles/unit; {laws}"
+
+
+#: linear parameter of every term kind the loop fits ("trig": amplitude and phase as sin/cos)
+TERM_LINEAR = {"viscous_power": "coefficient", "stribeck_extra": "amplitude", "load_coulomb": "mu",
+               "load_viscous": "gamma", "temperature": "coefficient", "drift": "coefficient", "inertia": "inertia",
+               "offset": "offset", "hysteresis": "scale", "backlash": "scale", "periodic": "trig", "cogging": "trig"}
+
+
+@dataclass(frozen=True, eq=False)
+class TermBlock(Block):
+    """An additive term of :mod:`gearspec.terms` with its nonlinear parameters fixed (``fixed``)
+    and its linear one fitted; ``direction`` 1/-1 for a term acting in one direction only.
+    Presliding (``hysteresis``) and ``backlash`` use the travel since the last reversal of the
+    whole recording (``DiagnoseData.travel``)."""
+
+    kind: str = "offset"
+    fixed: tuple = ()         # ((name, value), ...)
+    direction: int = 0
+    label: str | None = None
+    effect_kind: str | None = None
+
+    @property
+    def names(self):
+        tag = "" if not self.direction else f"[{_DNAME[self.direction][:3]}]"
+        lin = TERM_LINEAR[self.kind]
+        if lin == "trig":
+            return [f"{self.kind} sin{tag}", f"{self.kind} cos{tag}"]
+        return [f"{self.kind}.{lin}{tag}"]
+
+    def term(self, **lin) -> dict:
+        t = {"kind": self.kind, **dict(self.fixed), **lin}
+        if self.direction:
+            t["direction"] = int(self.direction)
+        if self.label:
+            t["label"] = self.label
+        return t
+
+    def _raw(self, dd):
+        f = dd.fit
+        sgn = np.sign(f.v)
+        signed = TERMS[self.kind].signed
+        if self.kind in ("hysteresis", "backlash"):
+            if dd.travel is None:
+                raise InputError(f"a {self.kind} term needs the travel since the last reversal")
+            tr = dd.travel
+            fx = dict(self.fixed)
+            if self.kind == "hysteresis":
+                prof = -np.exp(-tr / fx["length"])
+            else:
+                prof = -(tr < fx["gap"]).astype(float)
+            col = sgn * np.where(np.isfinite(tr), prof, 0.0)
+            if self.direction:
+                col = np.where(f.direction == self.direction, col, 0.0)
+            return col[:, None]
+        lin = TERM_LINEAR[self.kind]
+        inputs = _inputs(dd)
+        if lin == "trig":
+            outs = []
+            for ph in (0.0, math.pi / 2):
+                c, _ = evaluate_term(self.term(amplitude=1.0, phase=ph), **inputs)
+                outs.append(c if signed else sgn * c)
+            return np.column_stack(outs)
+        c, _ = evaluate_term(self.term(**{lin: 1.0}), **inputs)
+        return (c if signed else sgn * c)[:, None]
+
+    def write(self, model, coef, se):
+        lin = TERM_LINEAR[self.kind]
+        if lin == "trig":
+            a, c = coef[0], coef[1]
+            A = math.hypot(a, c)
+            t = self.term(amplitude=float(A), phase=float(math.atan2(c, a)))
+            t["amplitude_se"] = float(math.sqrt((a * se[0]) ** 2 + (c * se[1]) ** 2) / A) if A > 0 else None
+        else:
+            t = self.term(**{lin: float(coef[0])})
+            t[lin + "_se"] = float(se[0])
+        if self.effect_kind:
+            t["effect_kind"] = self.effect_kind
+        model.terms.append(t)
+
+    def describe(self):
+        fx = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in self.fixed)
+        d = "" if not self.direction else f", {_DNAME[self.direction]} direction only"
+        return f"{self.kind}({fx}){d}"
+
+
+# ---------------------------------------------------------------------- state
+@dataclass
+class State:
+    """The blocks of a model, and the model it came from (law, unit, name, notes)."""
+
+    blocks: list
+    template: FrictionModel
+    symmetric: bool = False
+
+    def design(self, dd: DiagnoseData, taylor: bool = False) -> np.ndarray:
+        cols = [b.columns(dd, taylor) for b in self.blocks]
+        return np.column_stack(cols) if cols else np.zeros((len(dd), 0))
+
+    def spans(self, dd: DiagnoseData | None = None, taylor: bool = False) -> list[tuple[int, int]]:
+        out, i = [], 0
+        for b in self.blocks:
+            k = len(b.names) + (b.n_taylor(dd) if taylor else 0)
+            out.append((i, i + k))
+            i += k
+        return out
+
+    def refreshed(self, coef: np.ndarray) -> "State":
+        """The same blocks carrying the coefficients ``coef`` (of the plain design)."""
+        blocks = [replace(b, coef=tuple(float(x) for x in coef[a:z])) for b, (a, z) in zip(self.blocks, self.spans())]
+        return State(blocks, self.template, self.symmetric)
+
+    @property
+    def names(self) -> list[str]:
+        return [n for b in self.blocks for n in b.names]
+
+    def replaced(self, drop=(), add=()) -> "State":
+        """A state without the blocks whose uid is in ``drop`` (blocks or uids), with ``add``."""
+        uids = {getattr(d, "uid", d) for d in drop}
+        blocks = [b for b in self.blocks if b.uid not in uids] + list(add)
+        return State(blocks, self.template, self.symmetric)
+
+    def block(self, uid: int) -> Block | None:
+        return next((b for b in self.blocks if b.uid == uid), None)
+
+
+@dataclass
+class Grams:
+    """Per-group normal equations of columns ``X`` and observations ``y`` (groups of ``dd``)."""
+
+    G: np.ndarray    # (ng, p, p)
+    b: np.ndarray    # (ng, p)
+    yy: np.ndarray   # (ng,)
+    n: np.ndarray    # (ng,)
+
+    @classmethod
+    def of(cls, X: np.ndarray, y: np.ndarray, dd: DiagnoseData) -> "Grams":
+        ng, p = dd.n_groups, X.shape[1]
+        G = np.empty((ng, p, p))
+        b = np.empty((ng, p))
+        yy = np.empty(ng)
+        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+            Xg = X[a:z]
+            G[g] = Xg.T @ Xg
+            b[g] = Xg.T @ y[a:z]
+            yy[g] = float(y[a:z] @ y[a:z])
+        return cls(G, b, yy, (dd.stops - dd.starts).astype(float))
+
+    @staticmethod
+    def cross(X: np.ndarray, C: np.ndarray, dd: DiagnoseData) -> np.ndarray:
+        """Per-group ``X_g^T C_g``: (ng, p, q)."""
+        out = np.empty((dd.n_groups, X.shape[1], C.shape[1]))
+        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+            out[g] = X[a:z].T @ C[a:z]
+        return out
+
+
+def solve_normal(G: np.ndarray, b: np.ndarray, rcond: float = 1e-10, reference: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """Least-squares coefficients from normal equations, columns scaled to unit norm first;
+    directions the data do not determine get 0 (pseudo-inverse).  A column that is (nearly) zero
+    in these data -- below 1e-12 of the largest, or below 1e-6 of its size in ``reference`` (the
+    diagonal of the normal equations of all data: a fold that lacks what the column describes) --
+    gets coefficient 0 rather than a huge one that would explode where the column is not zero."""
+    d = np.sqrt(np.clip(np.diag(G), 0, None))
+    ok = d > 1e-12 * (d.max() if len(d) else 0.0)
+    if reference is not None:
+        ok &= d > 1e-6 * np.sqrt(np.clip(reference, 0, None))
+    beta = np.zeros(len(b))
+    if not ok.any():
+        return beta
+    s = d[ok]
+    Gs = G[np.ix_(ok, ok)] / np.outer(s, s)
+    bs = b[ok] / s
+    lam, U = np.linalg.eigh(Gs)
+    keep = lam > rcond * max(lam.max(), 1e-300)
+    inv = (U[:, keep] / lam[keep]) @ U[:, keep].T
+    beta[ok] = (inv @ bs) / s
+    return beta
+
+
+def _cov(G: np.ndarray, s2: float, rcond: float = 1e-10) -> np.ndarray:
+    d = np.sqrt(np.clip(np.diag(G), 0, None))
+    ok = d > 0
+    C = np.full(G.shape, np.nan)
+    if not ok.any():
+        return C
+    s = d[ok]
+    Gs = G[np.ix_(ok, ok)] / np.outer(s, s)
+    lam, U = np.linalg.eigh(Gs)
+    keep = lam > rcond * max(lam.max(), 1e-300)
+    inv = (U[:, keep] / lam[keep]) @ U[:, keep].T
+    C[np.ix_(ok, ok)] = inv / np.outer(s, s) * s2
+    return C
+
+
+@dataclass
+class FittedState:
+    """A state fitted to all observations: coefficients, standard errors, residual."""
+
+    state: State
+    coef: np.ndarray
+    se: np.ndarray
+    residual: np.ndarray
+    rmse: float
+    prediction: np.ndarray = field(repr=False, default=None)
+
+    def model(self, name: str | None = None, rmse_holdout: float | None = None) -> FrictionModel:
+        """The fitted state as a FrictionModel (base parameters, harmonics and terms, with
+        standard errors)."""
+        tmpl = self.state.template
+        m = FrictionModel(tmpl.law, copy.deepcopy(tmpl.directions["positive"]),
+                          copy.deepcopy(tmpl.directions["negative"]), unit=tmpl.unit,
+                          name=name or tmpl.name, notes=list(tmpl.notes), meta=dict(tmpl.meta),
+                          not_identified=dict(tmpl.not_identified))
+        for p in m.directions.values():
+            p["harmonics"] = []
+        m.terms = []
+        for blk, (a, z) in zip(self.state.blocks, self.state.spans()):
+            blk.write(m, self.coef[a:z], self.se[a:z])
+        m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
+        m.rmse = self.rmse
+        m.rmse_holdout = rmse_holdout
+        return m
+
+
+def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) -> FittedState:
+    """Ordinary least squares of every block's linear parameters on all observations; standard
+    errors from the covariance with the residual variance (white noise: the residual's colour is
+    not accounted for -- the loop's acceptance does not rely on them)."""
+    X = state.design(dd) if X is None else X
+    G = X.T @ X
+    beta = solve_normal(G, X.T @ dd.y)
+    pred = X @ beta
+    r = dd.y - pred
+    n, p = X.shape
+    s2 = float(r @ r) / max(n - p, 1)
+    se = np.sqrt(np.clip(np.diag(_cov(G, s2)), 0, None))
+    return FittedState(state, beta, se, r, float(np.sqrt(np.mean(r * r))), pred)
+
+
+# ---------------------------------------------------------------------- from a model
+def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool | None = None) -> State:
+    """The blocks of a FrictionModel: its base law (per direction, or shared when the model is
+    symmetric), every harmonic (paired across directions by frequency) and every term of a kind
+    the loop fits (:data:`TERM_LINEAR`); nonlinear parameters as the model has them."""
+    law = model.law
+    if law not in LINEAR:
+        raise InputError(f"the closed loop cannot refit law '{law}'")
+    present = dd.directions()
+    if symmetric is None:
+        symmetric = model.symmetric and len(present) == 2
+    blocks: list[Block] = []
+    lin_names, nonlin_names = LINEAR[law]
+
+    def lin_of(p):
+        if any(p.get(k) is None for k in nonlin_names) and law in _DEGRADED:
+            return _DEGRADED[law]
+        return lin_names
+
+    if law != "none":
+        if symmetric:
+            p = model.directions["positive"]
+            blocks.append(BaseBlock(key="base", law=law, dirs=tuple(present), symmetric=True,
+                                    lin=((0, lin_of(p)),), nonlin=((0, {k: p.get(k) for k in nonlin_names}),)))
+        else:
+            dirs = tuple(d for d in present if all(model.params(d).get(k) is not None
+                                                   for k in LINEAR[law][0] if k in lin_of(model.params(d))))
+            blocks.append(BaseBlock(key="base", law=law, dirs=dirs, symmetric=False,
+                                    lin=tuple((d, lin_of(model.params(d))) for d in dirs),
+                                    nonlin=tuple((d, {k: model.params(d).get(k) for k in nonlin_names})
+                                                 for d in dirs)))
+    # harmonics, paired by frequency
+    freqs = []
+    for d in present:
+        for h in model.harmonics(d):
+            if h.get("amplitude") is None:
+                continue
+            if not any(math.isclose(h["frequency"], f, rel_tol=1e-9) for f in freqs):
+                freqs.append(float(h["frequency"]))
+    for f in freqs:
+        per = {}
+        for d in present:
+            for h in model.harmonics(d):
+                if h.get("amplitude") is not None and math.isclose(h["frequency"], f, rel_tol=1e-9):
+                    per[d] = h
+        dirs = tuple(sorted(per, reverse=True))
+        any_h = next(iter(per.values()))
+        load_phase = tuple((d, float(per[d].get("phase", 0.0))) for d in dirs if per[d].get("load_coefficient"))
+        if symmetric:
+            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.get("label"), dirs=dirs,
+                                        symmetric=True, law=((0, any_h.get("law", "exp")),),
+                                        decay=((0, float(any_h.get("decay", 0.0) or 0.0)),),
+                                        load_phase=((0, load_phase[0][1]),) if load_phase else ()))
+        else:
+            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.get("label"), dirs=dirs,
+                                        law=tuple((d, per[d].get("law", "exp")) for d in dirs),
+                                        decay=tuple((d, float(per[d].get("decay", 0.0) or 0.0)) for d in dirs),
+                                        load_phase=load_phase))
+    for t in model.terms:
+        kind = t["kind"]
+        if kind not in TERM_LINEAR:
+            raise InputError(f"the closed loop cannot refit a '{kind}' term")
+        lin = TERM_LINEAR[kind]
+        drop = {"kind", "direction", "label", "effect_kind"} | ({"amplitude", "phase"} if lin == "trig" else {lin})
+        fixed = tuple((k, v) for k, v in t.items() if k not in drop and not k.endswith("_se"))
+        blocks.append(TermBlock(key=f"term {kind}", kind=kind, fixed=fixed, direction=int(t.get("direction", 0) or 0),
+                                label=t.get("label"), effect_kind=t.get("effect_kind")))
+    return State(blocks, model, symmetric)
+
+
+def predict_model(model: FrictionModel, dd: DiagnoseData) -> np.ndarray:
+    """A model's drive torque at the observations of ``dd`` (evaluated per sample, reduced like
+    the data; presliding and backlash from the travel since the last reversal)."""
+    st = state_from_model(model, dd, symmetric=False)
+    # coefficients as the model has them: fit nothing, read them back
+    cols = []
+    coefs = []
+    for blk in st.blocks:
+        X = blk.columns(dd)
+        cols.append(X)
+        coefs.append(_model_coefs(blk, model))
+    if not cols:
+        return np.zeros(len(dd))
+    return np.column_stack(cols) @ np.concatenate(coefs)
+
+
+def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
+    if isinstance(blk, BaseBlock):
+        out = []
+        for d in blk.dirs:
+            p = model.params(d)
+            out += [float(p[k]) for k in blk._lin(d)]
+        return np.array(out)
+    if isinstance(blk, HarmonicBlock):
+        out = []
+        for d in blk.dirs:
+            h = next(h for h in model.harmonics(d) if math.isclose(h["frequency"], blk.frequency, rel_tol=1e-9))
+            A, ph = float(h["amplitude"]), float(h.get("phase", 0.0))
+            out += [A * math.cos(ph), A * math.sin(ph)]
+            if d in dict(blk.load_phase):
+                out.append(float(h.get("load_coefficient", 0.0)))
+        return np.array(out)
+    t = next(t for t in model.terms if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == blk.direction
+             and all(t.get(k) == v for k, v in blk.fixed))
+    lin = TERM_LINEAR[blk.kind]
+    if lin == "trig":
+        A, ph = float(t["amplitude"]), float(t.get("phase", 0.0))
+        return np.array([A * math.cos(ph), A * math.sin(ph)])
+    return np.array([float(t[lin])])
+
+
+# ---------------------------------------------------------------------- nonlinear parameters
+def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
+    """The nonlinear parameters of a block the polish refines: ``(key, value, lo, hi, log)``.
+
+    Base law: every Stribeck velocity (within a factor 4); lines: decay constants (their own law,
+    in units of the top speed) and, for lines the loop found, the frequency (within half a
+    resolution step); terms: exponent, Stribeck velocity and presliding length.
+    """
+    out = []
+    sp = np.abs(dd.fit.v)
+    top = float(np.max(sp)) if len(sp) else 1.0
+    top = top if top > 0 else 1.0
+    low = float(np.min(sp[sp > 0])) if np.any(sp > 0) else top / 100
+    # speed-like parameters stay within a decade below the slowest and three times the fastest speed
+    s_lo, s_hi = low / 10, 3 * top
+    if isinstance(blk, BaseBlock):
+        for d, nl in blk.nonlin:
+            for k, v in nl.items():
+                if v is not None and v > 0:
+                    out.append((("base", d, k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
+    elif isinstance(blk, HarmonicBlock):
+        for d, law in blk.law:
+            dec = float(dict(blk.decay).get(d, 0.0))
+            if law == "exp":
+                out.append((("decay", d), dec, min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top, False))
+            elif law == "rational":
+                out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 10.0 / top, False))
+            elif law == "power":
+                out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 6.0, False))
+        if blk.found and dd.fit.theta is not None:
+            span = float(np.ptp(dd.fit.theta)) or 1.0
+            f = blk.frequency
+            out.append((("frequency",), f, f - 0.5 / span, f + 0.5 / span, False))
+    elif isinstance(blk, TermBlock):
+        for k, v in blk.fixed:
+            if k == "exponent":
+                out.append((("fixed", k), float(v), 0.05, 4.0, False))
+            elif k == "v_s" and v > 0:
+                out.append((("fixed", k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
+            elif k == "length" and v > 0 and dd.travel is not None:
+                tr = dd.travel[np.isfinite(dd.travel) & (dd.travel > 0)]
+                if len(tr):
+                    t_lo, t_hi = float(np.min(tr)) / 3, float(np.max(tr)) * 3
+                    out.append((("fixed", k), float(v), max(v / 4, t_lo), min(v * 4, t_hi), True))
+    return out
+
+
+def with_parameter(blk: Block, key: tuple, value: float) -> Block:
+    """A copy of ``blk`` (same uid) with one nonlinear parameter changed."""
+    if key[0] == "base":
+        _, d, k = key
+        nl = tuple((dd_, {**x, k: value} if dd_ == d else x) for dd_, x in blk.nonlin)
+        return replace(blk, nonlin=nl)
+    if key[0] == "decay":
+        d = key[1]
+        return replace(blk, decay=tuple((k, value if k == d else v) for k, v in blk.decay))
+    if key[0] == "frequency":
+        return replace(blk, frequency=float(value))
+    if key[0] == "fixed":
+        k = key[1]
+        return replace(blk, fixed=tuple((kk, value if kk == k else v) for kk, v in blk.fixed))
+    raise KeyError(key)
+
+
+def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> State:
+    """Refine the nonlinear parameters of the blocks (:func:`nonlinear_parameters`) by bounded
+    one-dimensional searches of the least-squares error, every linear parameter refitted at each
+    trial, block by block, ``sweeps`` times (``only``: uids of the blocks to refine).  The linear
+    refits of the loop hold nonlinear parameters fixed; this keeps them where the present model
+    wants them (the baseline's Stribeck velocity was fitted without the effects found since)."""
+    from scipy.optimize import minimize_scalar
+
+    blocks = list(state.blocks)
+    y = dd.y
+    yy = float(y @ y)
+    for _ in range(sweeps):
+        for i in range(len(blocks)):
+            blk = blocks[i]
+            if only is not None and blk.uid not in only:
+                continue
+            params = nonlinear_parameters(blk, dd)
+            if not params:
+                continue
+            others = [b.columns(dd) for j, b in enumerate(blocks) if j != i]
+            Xo = np.column_stack(others) if others else np.zeros((len(dd), 0))
+            Goo = Xo.T @ Xo
+            bo = Xo.T @ y
+            for key, val, lo, hi, log in params:
+                cur = blocks[i]
+
+                def rss(x, cur=cur, key=key, log=log):
+                    b = with_parameter(cur, key, math.exp(x) if log else x)
+                    C = b.columns(dd)
+                    G = np.block([[Goo, Xo.T @ C], [C.T @ Xo, C.T @ C]])
+                    rhs = np.concatenate([bo, C.T @ y])
+                    beta = solve_normal(G, rhs)
+                    return yy - float(beta @ rhs)
+
+                if not hi > lo:
+                    continue
+                val = min(max(val, lo), hi)
+                a, z, x0 = (math.log(lo), math.log(hi), math.log(val)) if log else (lo, hi, val)
+                r0 = rss(x0)
+                res = minimize_scalar(rss, bounds=(a, z), method="bounded",
+                                      options={"xatol": 2e-3 * (abs(z - a)), "maxiter": 25})
+                if res.fun < r0:
+                    blocks[i] = with_parameter(cur, key, math.exp(res.x) if log else float(res.x))
+    return State(blocks, state.template, state.symmetric)
+
+
+def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> State:
+    """A few Gauss-Newton steps on the nonlinear parameters of the blocks ``only`` (uids; all
+    by default): each step is one least-squares fit of the plain columns and the Taylor columns
+    (:meth:`Block.taylor_columns`), whose coefficients are the steps (clipped to a factor 2 for
+    scale parameters and to the bounds; halved while the error does not fall).  A cheap
+    :func:`polish` for the held-out test, where every candidate needs one."""
+    y = dd.y
+
+    def sse(st):
+        X = st.design(dd)
+        beta = solve_normal(X.T @ X, X.T @ y)
+        r = y - X @ beta
+        return float(r @ r), beta
+
+    cur, (best, beta) = state, sse(state)
+    for _ in range(steps):
+        cur = cur.refreshed(beta)
+        blocks = list(cur.blocks)
+        cols, moves = [], []
+        for i, b in enumerate(blocks):
+            cols.append(b.columns(dd))
+            if (only is None or b.uid in only) and b.coef:
+                T = b.taylor_columns(dd)
+                for j, par in enumerate(nonlinear_parameters(b, dd)):
+                    cols.append(T[:, j:j + 1])
+                    moves.append((i, par))
+        if not moves:
+            return cur
+        X = np.column_stack(cols)
+        sol = solve_normal(X.T @ X, X.T @ y)
+        # the Taylor coefficients sit right after each block's plain columns
+        k, taylor = 0, []
+        for i, b in enumerate(blocks):
+            k += len(b.names)
+            n_t = sum(1 for (ii, _) in moves if ii == i)
+            taylor += list(sol[k:k + n_t])
+            k += n_t
+        improved = False
+        for scale in (1.0, 0.5, 0.25):
+            trial = list(blocks)
+            for (i, (key, val, lo, hi, log)), dlt in zip(moves, taylor):
+                new = val + scale * dlt
+                if log:
+                    new = min(max(new, val / 2), val * 2)
+                new = min(max(new, lo), hi)
+                trial[i] = with_parameter(trial[i], key, new)
+            st = State(trial, cur.template, cur.symmetric)
+            e, b2 = sse(st)
+            if e < best:
+                cur, best, beta, improved = st, e, b2, True
+                break
+        if not improved:
+            break
+    return cur.refreshed(beta)

@@ -1,0 +1,849 @@
+"""The closed loop: residual -> detectors -> candidate terms -> held-out acceptance -> refit,
+until nothing more is accepted.
+
+Acceptance (why a term goes in)
+-------------------------------
+The data are split into ``folds`` folds of whole held-out groups (segments, runs or moves; dealt
+round-robin by direction and speed so that every fold spans the speeds).  For a candidate, in
+every fold: the model as it stands is fitted on the other folds (prediction ``p0``), the
+candidate's procedure runs on the other folds too (it searches its own frequency, law, shape
+there) and the extended model is fitted on them (``p1``).  On the held-out fold, with
+``r0 = y - p0``, ``r1 = y - p1`` and ``Delta = p1 - p0``:
+
+* the held-out sum of squares falls: ``D = |r0|^2 - |r1|^2 = 2 <r0, Delta> - |Delta|^2``;
+* the statistic ``Z = sum_g <r0_g, Delta_g> / sqrt(sum_g V_g)`` over all held-out groups ``g``
+  is large: it is the correlation of the held-out residual with the correction the candidate
+  predicts, in units of its noise.  With a useless term, ``Delta`` comes from the training noise
+  and is independent of the held-out noise, so ``Z`` is centred on 0; with a real effect of size
+  ``delta`` it grows like ``|delta| / sigma``.  ``V_g`` is a cluster-robust variance: the larger
+  of ``<r1_g, Delta_g>^2`` (the whole group as one cluster: a random level per segment counts)
+  and the sum of the same over 8 consecutive blocks of the group (coloured noise within it);
+* three conditions, all required: ``Z`` above the one-sided t quantile with (groups - 1)
+  degrees of freedom at ``alpha / (number of candidates of the round)`` (Bonferroni: the round
+  tests many candidates); sign consistency -- the folds in which the term lowers the held-out
+  error carry at least 90 % of the total change; and a practical margin -- the held-out rmse
+  falls by at least ``min_gain`` (relative).
+
+Of the candidates that pass, the one with the largest held-out drop is added, the model is
+refitted on all data (the candidate's procedure then runs on all of it), and the loop repeats.
+Every candidate of every round is kept with its evidence and its numbers, accepted or not.
+
+The false-discovery rate of this rule on recordings whose model is complete is measured by the
+test suite (``tests/test_diagnose.py``) and stated in the README.
+
+An independent recording (``validation``, e.g. the EMPS cross-test) is the final judge: every
+accepted term must also lower the error there, by the same Z test on its groups and the same
+margin; a term that helps on the estimation data but not there is removed again (one at a time,
+the weakest first), and the report says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from ..errors import InputError
+from ..fitdata import FitData
+from ..model import FrictionModel
+from ..recording import Recording
+from .candidates import Candidate, FixedCandidate, PeriodicCandidate, Proposal, term_candidates, train_fit
+from .data import DiagnoseData
+from .design import FittedState, Grams, HarmonicBlock, State, fit_state, polish, refine, solve_normal, state_from_model
+from .residual import (acceleration_analysis, channel_analysis, magnitude_residual, position_spectra,
+                       reversal_analysis, speed_analysis)
+
+__all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "folds_of", "baseline_model",
+           "KINDS", "relative_error"]
+
+#: effect kinds of CONTRACTS.md section 4
+KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
+
+
+def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
+    """Fold of every held-out group: groups sorted by direction and speed, dealt round-robin per
+    direction (every fold spans the speed range of both directions)."""
+    gt = dd.group_table()
+    k = max(2, min(folds, len(gt)))
+    out = np.zeros(len(gt), int)
+    for d in (1, -1):
+        sel = gt[gt["direction"] == d].sort_values(["speed", "group"])
+        out[sel["group"].to_numpy()] = np.arange(len(sel)) % k
+    # directions with few groups: rotate so that both directions do not always start in fold 0
+    neg = gt[gt["direction"] == -1].sort_values(["speed", "group"])
+    if len(neg):
+        off = len(gt[gt["direction"] == 1]) % k
+        out[neg["group"].to_numpy()] = (np.arange(len(neg)) + off) % k
+    return out
+
+
+def relative_error(y, prediction) -> float:
+    """``100 ||y - prediction|| / ||y||`` (percent), the EMPS benchmark's figure of merit."""
+    y = np.asarray(y, float)
+    return float(100 * np.linalg.norm(y - np.asarray(prediction, float)) / np.linalg.norm(y))
+
+
+# ---------------------------------------------------------------------- one round
+class Round:
+    """The model as it stands, fitted on all data and on the training part of every fold."""
+
+    def __init__(self, dd: DiagnoseData, state: State, folds: np.ndarray):
+        self.dd = dd
+        fitted = fit_state(state, dd)
+        self.state = state.refreshed(fitted.coef)
+        self.fitted = FittedState(self.state, fitted.coef, fitted.se, fitted.residual, fitted.rmse,
+                                  fitted.prediction)
+        # the held-out fits use the Taylor columns of every nonlinear parameter as well
+        self.X = self.state.design(dd, taylor=True)
+        self.grams = Grams.of(self.X, dd.y, dd)
+        self.ref_diag = np.diag(self.grams.G.sum(0)).copy()
+        self.fold = folds
+        self.K = int(folds.max()) + 1
+        self._sums = {}
+        self._beta = {}
+
+    def key(self, train):
+        return np.packbits(train).tobytes()
+
+    def train_sums(self, train):
+        k = self.key(train)
+        if k not in self._sums:
+            g = self.grams
+            self._sums[k] = (g.G[train].sum(0), g.b[train].sum(0), float(g.yy[train].sum()))
+        return self._sums[k]
+
+    def beta(self, train):
+        k = self.key(train)
+        if k not in self._beta:
+            G, b, _ = self.train_sums(train)
+            self._beta[k] = solve_normal(G, b, reference=self.ref_diag)
+        return self._beta[k]
+
+    def rows(self, train_groups: np.ndarray) -> np.ndarray:
+        return train_groups[self.dd.group]
+
+    def keep_mask(self, drop) -> np.ndarray:
+        keep = np.ones(self.X.shape[1], bool)
+        uids = {getattr(d, "uid", d) for d in drop}
+        for blk, (a, z) in zip(self.state.blocks, self.state.spans(self.dd, taylor=True)):
+            if blk.uid in uids:
+                keep[a:z] = False
+        return keep
+
+    def line_phases(self, blk: HarmonicBlock) -> tuple:
+        i = next(i for i, b in enumerate(self.state.blocks) if b.uid == blk.uid)
+        a, _ = self.state.spans()[i]
+        coef = self.fitted.coef
+        out, j = [], a
+        for d in ((0,) if blk.symmetric else blk.dirs):
+            out.append((d, float(math.atan2(coef[j + 1], coef[j]))))
+            j += 2 + (1 if d in dict(blk.load_phase) else 0)
+        return tuple(out)
+
+    def all_groups(self) -> np.ndarray:
+        return np.ones(self.dd.n_groups, bool)
+
+    def baseline_holdout(self) -> dict:
+        """Held-out sums of squares of the model as it stands, per group."""
+        dd = self.dd
+        sse = np.zeros(dd.n_groups)
+        pred = np.zeros(len(dd))
+        for f in range(self.K):
+            train = self.fold != f
+            beta = self.beta(train)
+            rows = ~self.rows(train)
+            pred[rows] = self.X[rows] @ beta
+        r = dd.y - pred
+        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+            sse[g] = float(r[a:z] @ r[a:z])
+        return {"sse": sse, "prediction": pred}
+
+
+@dataclass
+class Evaluation:
+    """What the held-out test measured for one candidate in one round."""
+
+    z: float
+    z_crit: float
+    drop: float                  # held-out SSE drop, all folds
+    fold_drops: np.ndarray
+    consistency: float           # share of the absolute change carried by improving folds
+    rmse_holdout_before: float
+    rmse_holdout_after: float
+    gain: float                  # relative held-out rmse drop
+    n_params: int
+    passed: bool
+    reason: str
+    group_sse_before: np.ndarray = field(repr=False, default=None)
+    group_sse_after: np.ndarray = field(repr=False, default=None)
+
+
+def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: float,
+                       consistency: float = 0.9, repolish: bool = True) -> Evaluation:
+    """The held-out test of the module docstring for one candidate.
+
+    With ``repolish`` (all but periodic candidates), the model the candidate extends is the
+    present one with its nonlinear parameters refined *together with the candidate* on all data
+    (the baseline's Stribeck velocity was fitted while the effect was missing, and a term that
+    changes levels needs it elsewhere); the comparison is then between the best model without and
+    the best model with the candidate.  Both sides refit their nonlinear parameters in every fold
+    through their Taylor columns."""
+    dd = rnd.dd
+    ext = rnd
+    if repolish and not isinstance(cand, PeriodicCandidate):
+        prop_all = cand.propose(rnd, rnd.all_groups())
+        if prop_all is not None:
+            movable = [b.uid for b in rnd.state.blocks if b.n_taylor(dd)] + [b.uid for b in prop_all.add]
+            st = refine(rnd.state.replaced(prop_all.drop, prop_all.add), dd, only=set(movable))
+            st_base = st.replaced([b.uid for b in prop_all.add], prop_all.drop)
+            ext = Round(dd, st_base, rnd.fold)
+    ng = dd.n_groups
+    sse0 = np.zeros(ng)
+    sse1 = np.zeros(ng)
+    num = 0.0
+    var = 0.0
+    fold_d = np.zeros(rnd.K)
+    n_par = 0
+    for f in range(rnd.K):
+        train = rnd.fold != f
+        if not train.any() or train.all():
+            continue
+        prop = cand.propose(ext, train)
+        rows = np.flatnonzero(~rnd.rows(train))
+        beta0 = rnd.beta(train)
+        p0 = rnd.X[rows] @ beta0
+        if prop is None:
+            p1 = p0
+        else:
+            keep = ext.keep_mask(prop.drop)
+            beta1, _ = train_fit(ext, keep, prop, train)
+            n_par = prop.n_params(ext)
+            p1 = np.column_stack([ext.X[rows][:, keep], prop.columns(dd)[rows]]) @ beta1
+        y = dd.y[rows]
+        r0, r1, delta = y - p0, y - p1, p1 - p0
+        grp = dd.group[rows]
+        for g in np.unique(grp):
+            m = grp == g
+            a0, a1, dl = r0[m], r1[m], delta[m]
+            sse0[g] = float(a0 @ a0)
+            sse1[g] = float(a1 @ a1)
+            num += float(a0 @ dl)
+            whole = float(a1 @ dl) ** 2
+            blocks = sum(float(b1 @ b2) ** 2 for b1, b2 in zip(np.array_split(a1, 8), np.array_split(dl, 8)))
+            var += max(whole, blocks)
+            fold_d[f] += sse0[g] - sse1[g]
+    N = len(dd)
+    drop = float(sse0.sum() - sse1.sum())
+    z = num / math.sqrt(var) if var > 0 else (math.inf if num > 0 else 0.0)
+    tot = float(np.abs(fold_d).sum())
+    cons = float(np.clip(fold_d, 0, None).sum() / tot) if tot > 0 else 0.0
+    hb = math.sqrt(sse0.sum() / N)
+    ha = math.sqrt(sse1.sum() / N)
+    gain = (hb - ha) / hb if hb > 0 else 0.0
+    reasons = []
+    if not z >= z_crit:
+        reasons.append(f"held-out Z {z:.2f} below {z_crit:.2f} (what noise alone gives at this level)")
+    if not cons >= consistency:
+        reasons.append(f"improves in folds carrying only {100 * cons:.0f} % of the change (needs {100 * consistency:.0f} %)")
+    if not gain >= min_gain:
+        reasons.append(f"held-out rmse changes by {-100 * gain:+.2f} % (needs a fall of {100 * min_gain:.2g} %)")
+    passed = not reasons
+    reason = "accepted: " + (f"held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed else "") \
+        if passed else "; ".join(reasons)
+    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, n_par, passed, reason, sse0, sse1)
+
+
+# ---------------------------------------------------------------------- residual analyses
+def analyse(rnd: Round, *, fap: float = 0.01, per_segment: bool = True) -> dict:
+    """Every residual analysis of :mod:`.residual` on the round's residual."""
+    dd = rnd.dd
+    r = rnd.fitted.residual
+    out = {"spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment) if dd.at("theta") is not None
+           else {"pooled": [], "segments": []}}
+    base_params = max((len(b.names) // max(len(dd.directions()), 1) for b in rnd.state.blocks if b.key == "base"),
+                      default=0)
+    out["speed"] = speed_analysis(dd, r, n_params=base_params)
+    ld = channel_analysis(dd, r, "load", transform=np.abs)
+    if ld is not None:
+        out["load"] = ld
+    tp = channel_analysis(dd, r, "temperature")
+    if tp is not None:
+        out["temperature"] = tp
+    tt = channel_analysis(dd, r, "t")
+    if tt is not None:
+        out["t"] = tt
+    ac = acceleration_analysis(dd, r)
+    if ac is not None:
+        out["acc"] = ac
+    rv = reversal_analysis(dd, r)
+    if rv is not None:
+        out["reversal"] = rv
+    if dd.at("load") is not None and np.ptp(dd.at("load")) > 0:
+        out["load_lines"] = _load_line_analysis(rnd, r)
+    return out
+
+
+def _load_line_analysis(rnd: Round, r: np.ndarray) -> dict:
+    """Per line of the model: the residual projected on the line's own shape (its phase, its
+    amplitude law) per group, regressed on the group's mean load^2 (SILO4 eq. 14)."""
+    dd = rnd.dd
+    out = {}
+    theta = dd.at("theta")
+    load = dd.at("load")
+    m = magnitude_residual(dd, r)
+    s = np.abs(dd.at("v"))
+    d = dd.at("direction")
+    for blk in [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock) and not b.load_phase]:
+        phases = dict(rnd.line_phases(blk))
+        xs, ys, ws = [], [], []
+        for a, z in zip(dd.starts, dd.stops):
+            dirn = int(d[a])
+            key = 0 if blk.symmetric else dirn
+            if key not in phases:
+                continue
+            g = blk._g(key, s[a:z])
+            shape = g * np.sin(2 * np.pi * blk.frequency * theta[a:z] + phases[key])
+            shape = shape - shape.mean()
+            den = float(shape @ shape)
+            mm = m[a:z] - m[a:z].mean()
+            if den <= 0:
+                continue
+            coef = float(shape @ mm) / den
+            var = float(np.var(mm - coef * shape))
+            xs.append(float(np.mean(load[a:z] ** 2)))
+            ys.append(coef)
+            ws.append(den / var if var > 0 else 0.0)
+        xs, ys, ws = map(np.asarray, (xs, ys, ws))
+        if len(xs) >= 4 and np.ptp(xs) > 0 and np.all(ws > 0):
+            # weighted least squares of the in-phase amplitude error on load^2 (weights: precision)
+            A = np.column_stack([np.ones(len(xs)), xs]) * np.sqrt(ws)[:, None]
+            beta, *_ = np.linalg.lstsq(A, ys * np.sqrt(ws), rcond=None)
+            res = ys * np.sqrt(ws) - A @ beta
+            s2 = float(res @ res) / max(len(xs) - 2, 1)
+            cov = np.linalg.pinv(A.T @ A) * max(s2, 1.0)
+            t = beta[1] / math.sqrt(cov[1, 1]) if cov[1, 1] > 0 else 0.0
+            p = float(2 * stats.t.sf(abs(t), max(len(xs) - 2, 1)))
+            out[blk.key] = {"t": float(t), "p": p, "slope": float(beta[1]), "x": xs.tolist(), "y": ys.tolist()}
+    return out
+
+
+def _periodic_candidates(rnd: Round, analyses: dict, *, max_candidates: int = 6) -> list[Candidate]:
+    """Lines in the pooled residual spectra that no line of the model explains, merged across
+    speed groups and directions (within two resolution steps), strongest first."""
+    dd = rnd.dd
+    model_f = [b.frequency for b in rnd.state.blocks if isinstance(b, HarmonicBlock)]
+    peaks = []
+    for sp in analyses["spectra"]["pooled"]:
+        for _, p in sp.peaks.iterrows():
+            peaks.append((float(p["z"]), float(p["frequency"]), float(p["resolution"]), float(p["fap"]), sp))
+    peaks.sort(key=lambda x: -x[0])
+    chosen: list = []
+    for z, f, res, fp, sp in peaks:
+        if any(abs(f - fm) <= 2 * res for fm in model_f):
+            continue
+        hit = next((c for c in chosen if abs(c["f"] - f) <= 2 * max(res, c["res"])), None)
+        if hit is not None:
+            hit["seen"].append((sp, z, fp))
+            continue
+        chosen.append({"f": f, "res": res, "z": z, "fap": fp, "sp": sp, "seen": [(sp, z, fp)]})
+        if len(chosen) >= max_candidates:
+            break
+    out = []
+    for c in chosen:
+        unit = "m" if dd.unit == "m" else "rad"
+        seen = "; ".join(f"{sp.label}: {z:.1f} x noise, FAP {fp:.1e}" for sp, z, fp in c["seen"][:4])
+        ev = f"residual spectrum peak at {c['f']:.6g} cycles/{unit} ({seen})"
+        cand = PeriodicCandidate(c["f"], c["res"], gear=dd.gear, evidence=ev, unit=unit,
+                                 detail={"analysis": "spectrum", "spectrum": c["sp"], "frequency": c["f"]},
+                                 gate_p=c["fap"])
+        out.append(cand)
+    return out
+
+
+# ---------------------------------------------------------------------- results
+@dataclass
+class Effect:
+    """One candidate of the loop with its evidence and held-out numbers (``CONTRACTS.md``
+    section 4 ``effects`` entry, plus details)."""
+
+    kind: str
+    name: str
+    accepted: bool
+    evidence: str
+    rmse_holdout_before: float
+    rmse_holdout_after: float
+    frequency: float | None = None
+    label: str | None = None
+    hint: str | None = None
+    order: float | None = None
+    z: float = float("nan")
+    z_crit: float = float("nan")
+    gain: float = float("nan")
+    consistency: float = float("nan")
+    n_params: int = 0
+    round: int = 0
+    decision: str = ""
+    parameters: str = ""
+    terms: list = field(default_factory=list)
+    detail: dict = field(default_factory=dict, repr=False)
+    validation: dict | None = None
+
+    def to_dict(self) -> dict:
+        f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
+        d = {"kind": self.kind, "accepted": bool(self.accepted), "frequency": f(self.frequency), "label": self.label,
+             "evidence": self.evidence, "rmse_holdout_before": f(self.rmse_holdout_before),
+             "rmse_holdout_after": f(self.rmse_holdout_after), "name": self.name, "hint": self.hint,
+             "order": f(self.order), "z": f(self.z), "z_crit": f(self.z_crit), "gain": f(self.gain),
+             "consistency": f(self.consistency), "parameters_added": self.n_params, "round": self.round,
+             "decision": self.decision, "fitted": self.parameters, "terms": self.terms}
+        if self.validation is not None:
+            d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
+        return d
+
+
+@dataclass
+class Diagnosis:
+    """What :func:`diagnose` finds: the baseline and final models (fitted), every candidate
+    (``effects``, in the order they were last evaluated), the rounds, and per-group errors."""
+
+    data: DiagnoseData
+    baseline: FittedState
+    final: FittedState
+    baseline_model: FrictionModel
+    final_model: FrictionModel
+    effects: list
+    rounds: list
+    folds: np.ndarray
+    baseline_holdout: dict
+    final_holdout: dict
+    analyses: dict = field(repr=False, default_factory=dict)     # of the baseline residual
+    final_analyses: dict = field(repr=False, default_factory=dict)
+    settings: dict = field(default_factory=dict)
+    validation: dict | None = None
+    notes: list = field(default_factory=list)
+    trace: pd.DataFrame = field(repr=False, default=None)   # every evaluation of every round
+
+    @property
+    def accepted(self) -> list:
+        return [e for e in self.effects if e.accepted]
+
+    def summary_table(self) -> pd.DataFrame:
+        """Before/after: rmse (in-sample) and held-out rmse, and on validation data when given."""
+        rows = [{"model": "baseline", "name": self.baseline_model.name, "parameters": len(self.baseline.coef),
+                 "rmse": self.baseline.rmse, "rmse_holdout": self.baseline_model.rmse_holdout},
+                {"model": "final", "name": self.final_model.name, "parameters": len(self.final.coef),
+                 "rmse": self.final.rmse, "rmse_holdout": self.final_model.rmse_holdout}]
+        if self.validation:
+            rows[0]["rmse_validation"] = self.validation["baseline_rmse"]
+            rows[1]["rmse_validation"] = self.validation["final_rmse"]
+        return pd.DataFrame(rows)
+
+    def segment_table(self) -> pd.DataFrame:
+        """Per held-out group: in-sample and held-out rmse of the baseline and the final model."""
+        dd = self.data
+        gt = dd.group_table()
+        n = gt["n"].to_numpy()
+        rb, rf = self.baseline.residual, self.final.residual
+        gt["rmse_before"] = [float(np.sqrt(np.mean(rb[a:z] ** 2))) for a, z in zip(dd.starts, dd.stops)]
+        gt["rmse_after"] = [float(np.sqrt(np.mean(rf[a:z] ** 2))) for a, z in zip(dd.starts, dd.stops)]
+        gt["rmse_holdout_before"] = np.sqrt(self.baseline_holdout["sse"] / n)
+        gt["rmse_holdout_after"] = np.sqrt(self.final_holdout["sse"] / n)
+        gt["fold"] = self.folds
+        return gt
+
+    def to_dict(self) -> dict:
+        """The ``gearspec diagnose --json`` form (CONTRACTS.md section 4) plus details."""
+        f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)  # noqa: E731
+        out = {"baseline": {"model": self.baseline_model.name, "rmse": f(self.baseline.rmse),
+                            "rmse_holdout": f(self.baseline_model.rmse_holdout),
+                            "parameters": len(self.baseline.coef), "friction_model": self.baseline_model.to_dict()},
+               "effects": [e.to_dict() for e in self.effects],
+               "final": {"model": self.final_model.name, "rmse": f(self.final.rmse),
+                         "rmse_holdout": f(self.final_model.rmse_holdout), "parameters": len(self.final.coef),
+                         "friction_model": self.final_model.to_dict()},
+               "settings": self.settings, "rounds": self.rounds, "notes": self.notes,
+               "held_out": f"whole {'moves' if self.data.kind == 'trajectory' else self.data.by + 's'}, "
+                           f"{int(self.folds.max()) + 1} folds",
+               "unit": self.data.unit}
+        if self.validation:
+            out["validation"] = {k: (f(v) if isinstance(v, (float, np.floating)) else v)
+                                 for k, v in self.validation.items() if k != "data"}
+        return out
+
+
+# ---------------------------------------------------------------------- the loop
+def baseline_model(dd: DiagnoseData, law: str = "silo4", *, gear=None, harmonics=None, symmetric: bool = False,
+                   terms=()) -> FrictionModel:
+    """The model to start from when none is given: ``law`` fitted by :func:`gearspec.identify.fit`
+    (its nonlinear parameters -- Stribeck velocity, decays -- are then kept by the loop's linear
+    refits), with the declared lines of ``gear`` for ``silo4``; ``symmetric``: one parameter set
+    for both directions (fitted on the friction magnitudes of both directions together).
+    Whole-trajectory data take laws without nonlinear parameters (the loop fits them linearly)."""
+    from .. import identify
+
+    fd = dd.fit
+    if dd.kind == "trajectory":
+        if law not in ("coulomb_viscous", "none", "lola8"):
+            raise InputError(f"whole-trajectory data: start from a law without nonlinear parameters "
+                             f"(coulomb_viscous), not '{law}'; the loop adds a Stribeck term if the data want one")
+        from ..model import LAWS
+        P = {k: 0.0 for k in LAWS[law].params}
+        m = FrictionModel(law, P, P if symmetric else dict(P), unit=fd.unit, terms=list(terms),
+                          name=f"{law} ({'symmetric' if symmetric else 'per direction'})")
+        return m
+    if symmetric:
+        mag = fd.direction * fd.y
+        folded = FitData(theta=fd.theta, v=np.abs(fd.v), y=mag, acc=fd.acc, load=fd.load,
+                         temperature=fd.temperature, t=fd.t, run=fd.run, segment=fd.segment,
+                         direction=np.ones(len(fd), np.int8), unit=fd.unit, segments=fd.segments.assign(direction=1),
+                         notes=list(fd.notes))
+        m = identify.fit(folded, law, harmonics=harmonics, gear=gear, holdout=None)
+        p = m.directions["positive"]
+        m = FrictionModel(m.law, p, p, unit=m.unit, terms=list(terms), not_identified=m.not_identified,
+                          notes=m.notes + ["symmetric: one parameter set for both directions"],
+                          name=f"{law} (symmetric)", meta=m.meta)
+        return m
+    m = identify.fit(fd, law, harmonics=harmonics, gear=gear, holdout=None)
+    if terms:
+        m = m.with_terms(*terms)
+    m.name = f"{law} (joint fit)"
+    return m
+
+
+def _as_data(data, by: str | None, gear=None) -> DiagnoseData:
+    if isinstance(data, DiagnoseData):
+        return data
+    if isinstance(data, Recording):
+        return DiagnoseData.from_recording(data, by=by or "segment")
+    if isinstance(data, FitData):
+        return DiagnoseData.from_fitdata(data, by=by or "segment", gear=gear)
+    raise InputError("diagnose takes a Recording, a FitData or a DiagnoseData")
+
+
+def _contribution(rnd_dd: DiagnoseData, state: State, fitted: FittedState, uids) -> np.ndarray:
+    """What the blocks ``uids`` add to the prediction (torque, at the observations)."""
+    out = np.zeros(len(rnd_dd))
+    for blk, (a, z) in zip(state.blocks, state.spans()):
+        if blk.uid in set(uids):
+            out += blk.columns(rnd_dd) @ fitted.coef[a:z]
+    return out
+
+
+def _holdout(rnd: Round) -> tuple[float, dict]:
+    h = rnd.baseline_holdout()
+    return float(math.sqrt(h["sse"].sum() / len(rnd.dd))), h
+
+
+def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", gear=None, harmonics=None,
+             symmetric: bool = False, folds: int = 5, by: str | None = None, alpha: float = 0.01,
+             min_gain: float = 0.005, max_rounds: int = 8, gate: float = 0.01, fap: float = 0.01,
+             kinds=None, validation=None, per_segment_spectra: bool = True, progress=None) -> Diagnosis:
+    """Run the closed loop on ``data`` from ``model`` (or from ``law`` fitted to it).
+
+    Parameters
+    ----------
+    data : Recording, FitData or DiagnoseData
+        Recordings are cut into constant-speed segments (:meth:`DiagnoseData.from_recording`);
+        whole trajectories come from :func:`~gearspec.diagnose.trajectory_data`.
+    model : FrictionModel, optional
+        The model the user believes in (its law, lines and terms; nonlinear parameters kept,
+        linear ones refitted).  Default: :func:`baseline_model` with ``law``, ``gear``,
+        ``harmonics``, ``symmetric``.
+    folds, by
+        Held-out folds over whole groups (``by``: "segment" or "run"; trajectories: moves).
+    alpha : float
+        Family-wise level of the held-out test per round (Bonferroni over the round's candidates).
+    min_gain : float
+        Smallest relative fall of the held-out rmse worth a term.
+    max_rounds : int
+        At most this many terms are added.
+    gate : float
+        A detector proposes its candidates only when its evidence reaches p < gate (periodic: a
+        residual-spectrum peak with false-alarm probability below ``fap``).
+    kinds : iterable of str, optional
+        Only these effect kinds (default: all).
+    validation : Recording, FitData or DiagnoseData, optional
+        Independent data (the same preparation): every accepted term must also lower the error
+        there, or it is removed again.
+    progress : callable, optional
+        Called with one line of text per round.
+
+    Notes
+    -----
+    The loop works on many small matrices: BLAS runs single-threaded inside it (thread start-up
+    costs more than it saves at these sizes, and badly so on a busy machine).
+    """
+    with _single_thread_blas():
+        return _diagnose(data, model, law=law, gear=gear, harmonics=harmonics, symmetric=symmetric, folds=folds,
+                         by=by, alpha=alpha, min_gain=min_gain, max_rounds=max_rounds, gate=gate, fap=fap,
+                         kinds=kinds, validation=validation, per_segment_spectra=per_segment_spectra,
+                         progress=progress)
+
+
+class _single_thread_blas:
+    def __enter__(self):
+        try:
+            from threadpoolctl import threadpool_limits
+            self._ctx = threadpool_limits(limits=1, user_api="blas")
+        except Exception:  # threadpoolctl absent: run as is
+            self._ctx = None
+        return self
+
+    def __exit__(self, *exc):
+        if self._ctx is not None:
+            self._ctx.restore_original_limits()
+        return False
+
+
+def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,
+              kinds, validation, per_segment_spectra, progress) -> Diagnosis:
+    dd = _as_data(data, by, gear)
+    if gear is not None and dd.gear is None:
+        from ..gears import load_gear
+        dd.gear = load_gear(gear)
+    if model is None:
+        model = baseline_model(dd, law, gear=gear if gear is not None else dd.gear, harmonics=harmonics,
+                               symmetric=symmetric)
+    kinds = set(KINDS if kinds is None else kinds)
+    bad = kinds - set(KINDS)
+    if bad:
+        raise InputError(f"unknown effect kind(s) {sorted(bad)} (known: {', '.join(KINDS)})")
+    if dd.n_groups < 3:
+        raise InputError(f"the data hold {dd.n_groups} held-out group(s) ({dd.by}s); the loop needs at least 3 "
+                         "to hold whole groups out")
+    fold = folds_of(dd, folds)
+    state = _settle(state_from_model(model, dd, symmetric=symmetric if symmetric else None), dd)
+    rnd = Round(dd, state, fold)
+    base_fit = rnd.fitted
+    base_ho, base_h = _holdout(rnd)
+    baseline = base_fit.model(name=f"baseline: {model.name}", rmse_holdout=base_ho)
+    effects: dict[str, Effect] = {}
+    rounds = []
+    trace = []
+    first_analyses = None
+    say = progress or (lambda s: None)
+    for k in range(1, max_rounds + 1):
+        analyses = analyse(rnd, fap=fap, per_segment=per_segment_spectra and k == 1)
+        if first_analyses is None:
+            first_analyses = analyses
+        cands = []
+        if "periodic" in kinds:
+            cands += _periodic_candidates(rnd, analyses)
+        cands += [c for c in term_candidates(rnd, analyses, gate=gate) if c.kind in kinds]
+        if not cands:
+            rounds.append({"round": k, "candidates": 0, "accepted": None})
+            break
+        G = dd.n_groups
+        z_crit = float(stats.t.isf(alpha / len(cands), max(G - 1, 1)))
+        evals = []
+        for c in cands:
+            ev = evaluate_candidate(rnd, c, z_crit=z_crit, min_gain=min_gain)
+            evals.append((c, ev))
+            _record(effects, c, ev, k, rnd)
+            trace.append({"round": k, "candidate": c.name, "kind": c.kind, "z": ev.z, "z_crit": z_crit,
+                          "gain": ev.gain, "consistency": ev.consistency, "passed": ev.passed})
+        passing = [(c, ev) for c, ev in evals if ev.passed]
+        if not passing:
+            rounds.append({"round": k, "candidates": len(cands), "accepted": None, "z_crit": z_crit})
+            say(f"round {k}: {len(cands)} candidates, none accepted")
+            break
+        c, ev = max(passing, key=lambda x: x[1].drop)
+        prop = c.propose(rnd, rnd.all_groups())
+        if prop is None:
+            break
+        new_state = _settle(rnd.state.replaced(prop.drop, prop.add), dd)
+        rnd = Round(dd, new_state, fold)
+        e = effects[_key(c)]
+        e.accepted = True
+        e.decision = ev.reason
+        e.detail["blocks"] = [b.uid for b in prop.add]
+        e.detail["dropped"] = [b for b in prop.drop]
+        added = [new_state.block(u) for u in e.detail["blocks"]]
+        e.parameters = "; ".join(b.describe() for b in added if b is not None)
+        if isinstance(c, PeriodicCandidate):
+            f_fit = added[0].frequency
+            c.relabel(f_fit)
+            e.frequency, e.label, e.hint = f_fit, c.label, c.hint
+            e.order = dd.gear.order(f_fit) if dd.gear is not None else None
+        e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
+        e.detail["residual_before"] = ev.group_sse_before
+        removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
+        if removed:
+            rnd = removed
+        rounds.append({"round": k, "candidates": len(cands), "accepted": e.name, "z_crit": z_crit,
+                       "rmse": rnd.fitted.rmse})
+        say(f"round {k}: {len(cands)} candidates, accepted {e.name} (held-out rmse {ev.rmse_holdout_before:.4g} -> "
+            f"{ev.rmse_holdout_after:.4g})")
+    final_fit = rnd.fitted
+    final_ho, final_h = _holdout(rnd)
+    name = "final: " + model.name + "".join(f" + {e.name}" for e in effects.values() if e.accepted)
+    final = final_fit.model(name=name, rmse_holdout=final_ho)
+    for e in effects.values():
+        if e.accepted:
+            e.terms = _written_terms(e, rnd)
+    diag = Diagnosis(dd, base_fit, final_fit, baseline, final, list(effects.values()), rounds, fold, base_h, final_h,
+                     first_analyses or {}, {},
+                     {"alpha": alpha, "min_gain": min_gain, "folds": int(fold.max()) + 1, "gate": gate, "fap": fap,
+                      "max_rounds": max_rounds, "kinds": sorted(kinds), "symmetric": bool(state.symmetric)})
+    diag.trace = pd.DataFrame(trace)
+    if validation is not None:
+        _validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain)
+    diag.final_analyses = analyse(Round(dd, diag.final.state, fold), fap=fap, per_segment=False)
+    return diag
+
+
+def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_gain: float, round_no: int):
+    """Backward elimination: once a term is added, every term accepted before it must still pass
+    the held-out test against the model without it; the first that does not is removed (and the
+    check repeats).  Returns the new round, or None when nothing was removed."""
+    dd = rnd.dd
+    changed = None
+    while True:
+        weakest = None
+        for e in [x for x in effects.values() if x.accepted and x is not newest]:
+            uids = e.detail.get("blocks", [])
+            blocks = [rnd.state.block(u) for u in uids]
+            if not blocks or any(b is None for b in blocks):
+                continue
+            st_wo = _settle(rnd.state.replaced(uids, e.detail.get("dropped", [])), dd)
+            rnd_wo = Round(dd, st_wo, rnd.fold)
+            cand = FixedCandidate(e.kind, e.name, blocks, [b for b in e.detail.get("dropped", [])])
+            ev = evaluate_candidate(rnd_wo, cand, z_crit=z_crit, min_gain=min_gain, repolish=False)
+            if not ev.passed and (weakest is None or ev.z < weakest[1].z):
+                weakest = (e, ev, rnd_wo)
+        if weakest is None:
+            return changed
+        e, ev, rnd_wo = weakest
+        e.accepted = False
+        e.decision = (f"removed in round {round_no}: once '{newest.name}' was added it no longer lowers the held-out "
+                      f"error enough ({ev.reason})")
+        e.z, e.gain = ev.z, ev.gain
+        rnd = changed = rnd_wo
+
+
+def _settle(state: State, dd: DiagnoseData) -> State:
+    """Nonlinear parameters of a state where all data want them: coordinate searches
+    (:func:`~gearspec.diagnose.design.polish`), then Gauss-Newton steps to convergence
+    (:func:`~gearspec.diagnose.design.refine`), so that a candidate's held-out gain is its own and
+    not that of a better-tuned base law."""
+    return refine(polish(state, dd), dd, steps=8)
+
+
+def _key(c: Candidate) -> str:
+    if isinstance(c, PeriodicCandidate):
+        return f"periodic {c.f0:.4g}"
+    return f"{c.kind}: {c.name}"
+
+
+def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> None:
+    key = _key(c)
+    if isinstance(c, PeriodicCandidate):  # the same line seen again in a later round
+        key = next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
+                    and abs(e.frequency - c.f0) <= 2 * c.resolution), key)
+    prev = effects.get(key)
+    if prev is not None and prev.accepted:
+        return
+    dd = rnd.dd
+    e = Effect(kind=c.kind, name=c.name, accepted=False, evidence=c.evidence,
+               rmse_holdout_before=ev.rmse_holdout_before, rmse_holdout_after=ev.rmse_holdout_after,
+               frequency=c.frequency, label=c.label, hint=c.hint,
+               order=(dd.gear.order(c.frequency) if (dd.gear is not None and c.frequency) else None),
+               z=ev.z, z_crit=ev.z_crit, gain=ev.gain, consistency=ev.consistency, n_params=ev.n_params, round=k,
+               decision=("passes the test (another candidate went first this round)" if ev.passed else
+                         "rejected: " + ev.reason), detail=dict(c.detail))
+    effects[key] = e
+
+
+def _written_terms(e: Effect, rnd: Round) -> list:
+    """The model entries an accepted effect added (terms and harmonics, with standard errors)."""
+    blocks = [rnd.state.block(u) for u in e.detail.get("blocks", [])]
+    m = rnd.fitted.model()
+    out = []
+    for blk in [b for b in blocks if b is not None]:
+        if isinstance(blk, HarmonicBlock):
+            for dname, p in m.directions.items():
+                for h in p["harmonics"]:
+                    if math.isclose(h["frequency"], blk.frequency, rel_tol=1e-12):
+                        out.append({"direction": dname, "harmonic": h})
+        elif hasattr(blk, "kind"):
+            for t in m.terms:
+                if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == getattr(blk, "direction", 0) and all(
+                        t.get(k) == v for k, v in getattr(blk, "fixed", ())):
+                    out.append({"term": t})
+        else:
+            out.append({"note": blk.describe()})
+    return out
+
+
+def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, min_gain: float) -> None:
+    """Check every accepted term on independent data; remove those that do not help there."""
+    dd = diag.data
+    accepted = [e for e in diag.effects if e.accepted]
+    state = rnd.state
+    removed = []
+
+    def pred(st):
+        f = fit_state(st, dd)
+        return f, st.design(vd) @ f.coef
+
+    while True:
+        full_fit, p_full = pred(state)
+        worst = None
+        for e in accepted:
+            if e in removed:
+                continue
+            # without the effect: its blocks out, the blocks it replaced (an old amplitude law) back
+            st_wo = state.replaced(e.detail.get("blocks", []), e.detail.get("dropped", []))
+            _, p_wo = pred(st_wo)
+            r0 = vd.y - p_wo
+            r1 = vd.y - p_full
+            delta = p_full - p_wo
+            num, var = 0.0, 0.0
+            for a, z in zip(vd.starts, vd.stops):
+                num += float(r0[a:z] @ delta[a:z])
+                whole = float(r1[a:z] @ delta[a:z]) ** 2
+                blk = sum(float(b1 @ b2) ** 2 for b1, b2 in zip(np.array_split(r1[a:z], 8),
+                                                                 np.array_split(delta[a:z], 8)))
+                var += max(whole, blk)
+            zv = num / math.sqrt(var) if var > 0 else 0.0
+            rm0 = float(np.sqrt(np.mean(r0 ** 2)))
+            rm1 = float(np.sqrt(np.mean(r1 ** 2)))
+            gain = (rm0 - rm1) / rm0 if rm0 > 0 else 0.0
+            zc = float(stats.t.isf(alpha / max(len(accepted), 1), max(vd.n_groups - 1, 1)))
+            ok = zv >= zc and gain >= min_gain
+            e.validation = {"z": zv, "z_crit": zc, "rmse_without": rm0, "rmse_with": rm1, "gain": gain,
+                            "relative_error_without": relative_error(vd.y, p_wo),
+                            "relative_error_with": relative_error(vd.y, p_full), "confirmed": bool(ok)}
+            if not ok and (worst is None or zv < worst[0]):
+                worst = (zv, e, st_wo)
+        if worst is None:
+            break
+        _, e, st_wo = worst
+        e.accepted = False
+        v = e.validation
+        e.decision = (f"rejected by the validation data: helps on the estimation data (held-out rmse "
+                      f"{e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g}) but not on the independent "
+                      f"recording (rmse {v['rmse_without']:.4g} -> {v['rmse_with']:.4g}, relative error "
+                      f"{v['relative_error_without']:.3f} % -> {v['relative_error_with']:.3f} %, Z {v['z']:.2f} "
+                      f"< {v['z_crit']:.2f} or gain below {100 * min_gain:.2g} %)")
+        removed.append(e)
+        state = st_wo
+    if removed:
+        rnd2 = Round(dd, state, diag.folds)
+        ho, h = _holdout(rnd2)
+        name = "final: " + diag.baseline_model.name.replace("baseline: ", "") + "".join(
+            f" + {e.name}" for e in diag.effects if e.accepted)
+        diag.final = rnd2.fitted
+        diag.final_model = rnd2.fitted.model(name=name, rmse_holdout=ho)
+        diag.final_holdout = h
+    # numbers on the validation data, baseline and final (both fitted on the estimation data)
+    pb = diag.baseline.state.design(vd) @ diag.baseline.coef
+    pf = diag.final.state.design(vd) @ diag.final.coef
+    diag.validation = {"name": vd.name, "baseline_rmse": float(np.sqrt(np.mean((vd.y - pb) ** 2))),
+                       "final_rmse": float(np.sqrt(np.mean((vd.y - pf) ** 2))),
+                       "baseline_relative_error": relative_error(vd.y, pb),
+                       "final_relative_error": relative_error(vd.y, pf),
+                       "removed": [e.name for e in removed], "groups": vd.n_groups, "data": vd}
