@@ -1,0 +1,39 @@
+"""Sparse-regression explorer for alternative friction laws (``gearspec discover``).
+
+The papers each propose one law; the explorer asks which laws the data support.  It searches a
+library of physically meaningful candidate terms with sparse regression (pysindy's optimisers)
+and hands back a short list of readable laws, ranked by how well they predict data they were not
+fitted on, against how complex they are.
+
+Pipeline (one module each):
+
+``moments``  exact reduction of the samples: per segment, the Gram matrix of a few sample bases
+             (1, |load|, temperature, acceleration, sin/cos of each ripple line) as K pseudo rows;
+             every library column is a per-segment multiplier times one basis, so the normal
+             equations of any library -- and any value of its nonlinear parameters -- follow
+             exactly from these, whatever the number of samples.
+``library``  the candidate terms (:class:`Library` of :class:`Term`): sign, viscous, power laws,
+             Stribeck (exponential, Gaussian, rational as in Lola's law (11)) on a grid of
+             Stribeck velocities, load-coupled Coulomb and viscous, temperature, ripple at every
+             declared and discovered line times an amplitude law (constant, exponential or
+             rational decay on a grid), each symmetric and direction-dependent; names print as
+             equations.
+``search``   pysindy's STLSQ or SR3 over a path of thresholds on standardised columns; a
+             bootstrap over whole segments for inclusion probabilities.
+``law``      each support of the path becomes a structure, fitted with its nonlinear
+             parameters refined by least squares (variable projection), scored by
+             cross-validation over whole segments or runs, printed, exported as a FrictionModel.
+``explorer`` :func:`discover`: the path, refinement, held-out selection (simplest law within
+             one paired standard error of the best held-out error, with AIC/BIC beside), a local
+             search around the selected law, and the papers' laws refitted by
+             :func:`gearspec.identify.fit` on the same folds.
+"""
+
+from .explorer import PAPER_LAWS, Candidate, DiscoveryResult, Reference, discover, spectrum_lines
+from .law import LawFit, Part, fit_law, fold_ids
+from .library import FAMILIES, Family, Library, Term, default_library
+from .moments import Moments, moments
+
+__all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS", "Library",
+           "Term", "Family", "FAMILIES", "default_library", "Moments", "moments", "Part", "LawFit", "fit_law",
+           "fold_ids"]

@@ -1,0 +1,489 @@
+"""Candidate laws: a structure (which terms, which are direction-dependent), fitted with its
+nonlinear parameters free, scored on held-out segments, printed as an equation, exported as a
+:class:`~gearspec.model.FrictionModel`.
+
+A structure is a tuple of :class:`Part`: a library family, its ripple frequency, whether it is
+direction-dependent (``split``: its own coefficients -- and nonlinear parameter -- per direction)
+and a start value of its nonlinear parameter (the library grid value the sparse regression
+picked).  :func:`fit_law` solves the linear coefficients in closed form for given nonlinear
+parameters and refines those by ``scipy.optimize.least_squares`` (variable projection), on the
+exact per-segment pseudo rows of :mod:`.moments` -- so a refit costs microseconds, independent of
+the number of samples, and cross-validation refits every fold completely.
+
+Standard errors: cluster-robust (sandwich) covariance with the segments as clusters, from the
+Jacobian of all parameters jointly: honest when residuals are correlated within a segment (they
+are: unmodelled ripple, coloured noise).  With fewer segments than parameters + 2 the ordinary
+covariance (i.i.d. samples) is used instead and the law says so.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+
+from ..model import FrictionModel
+from .library import FAMILIES, _g
+from .moments import Moments
+
+__all__ = ["Part", "LawFit", "fit_law", "fold_ids", "canonical", "complexity"]
+
+_ORDER = list(FAMILIES)
+
+
+@dataclass(frozen=True)
+class Part:
+    """One term of a candidate law."""
+
+    family: str
+    freq: int | None = None
+    split: bool = False
+    param0: float | None = None
+
+    @property
+    def fam(self):
+        return FAMILIES[self.family]
+
+    def slots(self) -> tuple[int, ...]:
+        """0: both directions alike; (+1, -1): one set of values per direction."""
+        if self.fam.basis == "acc":
+            return (0,)
+        return (1, -1) if self.split else (0,)
+
+    def n_linear(self) -> int:
+        return 2 if self.fam.basis == "ripple" else 1
+
+    @property
+    def free(self) -> bool:
+        """Has a nonlinear parameter that is refined."""
+        return bool(self.fam.param) and self.fam.refine
+
+    def n_params(self) -> int:
+        return (self.n_linear() + (1 if self.free else 0)) * len(self.slots())
+
+    def label(self, frequencies=None) -> str:
+        s = self.family
+        if self.freq is not None:
+            f = frequencies[self.freq] if frequencies is not None else self.freq
+            s += f"@{_g(float(f), 6)}"
+        return s + ("[dir]" if self.split else "")
+
+
+def canonical(parts) -> tuple:
+    """Structures compare equal whatever order their parts came in."""
+    return tuple(sorted(parts, key=lambda p: (_ORDER.index(p.family), -1 if p.freq is None else p.freq,
+                                              p.param0 or 0.0, p.split)))
+
+
+def complexity(parts) -> int:
+    """Number of free parameters (linear coefficients and nonlinear parameters)."""
+    return int(sum(p.n_params() for p in parts))
+
+
+def fold_ids(m: Moments, by: str = "segment", folds: int = 5) -> np.ndarray:
+    """Fold of every segment: groups (segments or runs) sorted by direction and speed and dealt
+    round robin within each direction, so that every fold spans the speed range of both
+    directions (the rule of :func:`gearspec.identify.holdout_rmse`)."""
+    g = m.groups(by)
+    ug = np.unique(g)
+    k = max(2, min(folds, len(ug)))
+    key = sorted((int(np.sign(np.sum(m.direction[g == u] * m.n[g == u]))),
+                  float(np.average(m.speed[g == u], weights=m.n[g == u])), int(u)) for u in ug)
+    fold_of, count = {}, {}
+    for d, _, u in key:
+        c = count.get(d, 0)
+        fold_of[u] = c % k
+        count[d] = c + 1
+    return np.array([fold_of[int(u)] for u in g])
+
+
+# ---------------------------------------------------------------------- design
+@dataclass
+class _Layout:
+    cols: list            # (part index, slot, basis name)
+    nl: list              # (part index, slot): the nonlinear parameters, in z order
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def _layout(parts, m: Moments) -> _Layout:
+    cols, nl, lo, hi = [], [], [], []
+    speeds = m.speed[m.speed > 0]
+    vlo, vhi = (float(np.min(speeds)), float(np.max(speeds))) if len(speeds) else (1.0, 1.0)
+    for i, p in enumerate(parts):
+        fam = p.fam
+        names = [f"sin{p.freq}", f"cos{p.freq}"] if fam.basis == "ripple" else [fam.basis]
+        for sl in p.slots():
+            for b in names:
+                cols.append((i, sl, b))
+            if p.free:
+                a, b_ = fam.bounds(vlo, vhi)
+                nl.append((i, sl))
+                lo.append(math.log(a))
+                hi.append(math.log(b_))
+    return _Layout(cols, nl, np.array(lo), np.array(hi))
+
+
+def _multipliers(parts, lay: _Layout, m: Moments, z: np.ndarray, deriv: bool = False):
+    """(S, p) per-segment multipliers of the law's columns for nonlinear parameters exp(z); with
+    ``deriv`` also their derivatives with respect to each z (a list of (columns, (S, n)) pairs)."""
+    par = {key: math.exp(v) for key, v in zip(lay.nl, z)}
+    A = np.empty((m.S, len(lay.cols)))
+    dA = {}
+    done = {}
+    d = m.direction.astype(float)
+    for j, (i, sl, _) in enumerate(lay.cols):
+        key = (i, sl)
+        if key not in done:
+            p = parts[i]
+            pv = par.get(key) if p.free else p.param0
+            if p.fam.basis == "acc":
+                sgn = np.ones(m.S)
+            elif sl == 0:
+                sgn = d
+            else:
+                sgn = sl * (m.direction == sl)
+            col = sgn * p.fam.magnitude(m.speed, pv)
+            dcol = None
+            if deriv and p.free:
+                h = 1e-6
+                dcol = sgn * (p.fam.magnitude(m.speed, pv * math.exp(h))
+                              - p.fam.magnitude(m.speed, pv * math.exp(-h))) / (2 * h)
+            done[key] = (col, dcol)
+        col, dcol = done[key]
+        A[:, j] = col
+        if dcol is not None:
+            dA.setdefault(key, []).append((j, dcol))
+    if not deriv:
+        return A
+    return A, [dA[key] for key in lay.nl]
+
+
+def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
+    return np.array([m.index(b) for _, _, b in lay.cols], dtype=int)
+
+
+def _design(parts, lay, m: Moments, z) -> np.ndarray:
+    A = _multipliers(parts, lay, m, z)
+    k = _basis_index(lay, m)
+    return (A[:, None, :] * m.P[:, :, k]).reshape(m.S * m.K, len(lay.cols))
+
+
+def _solve(X, y):
+    """Least squares by SVD of the column-scaled design: coefficients, and the orthonormal basis
+    of the column space (for the variable-projection Jacobian).  Directions the data do not
+    determine (a column absent from the data, exact collinearity) get the minimum-norm answer."""
+    nrm = np.sqrt(np.sum(X * X, axis=0))
+    nrm[nrm == 0] = 1.0
+    Xn = X / nrm
+    if X.shape[0] >= X.shape[1]:
+        Q, R = np.linalg.qr(Xn)
+        d = np.abs(np.diag(R))
+        if len(d) and d.min() > 1e-8 * d.max():
+            return np.linalg.solve(R, Q.T @ y) / nrm, Q
+    U, sv, Vt = np.linalg.svd(Xn, full_matrices=False)
+    keep = sv > (sv[0] if len(sv) else 0.0) * 1e-10
+    U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
+    w = (Vt.T @ ((U.T @ y) / sv)) / nrm
+    return w, U
+
+
+def _lstsq(X, y):
+    return _solve(X, y)[0]
+
+
+# ---------------------------------------------------------------------- fit
+@dataclass
+class LawFit:
+    """A structure fitted to (part of) the data.
+
+    ``z``: log of the nonlinear parameters (layout order); ``w``: linear coefficients; ``sse``:
+    residual sum of squares per segment of the data it was fitted to (exact, in torque units^2).
+    """
+
+    parts: tuple
+    z: np.ndarray
+    w: np.ndarray
+    sse: np.ndarray
+    n: int
+    converged: bool = True
+    cov: np.ndarray | None = None
+    se_method: str = ""
+    layout: _Layout | None = field(default=None, repr=False)
+
+    @property
+    def rmse(self) -> float:
+        return math.sqrt(float(np.sum(self.sse)) / max(self.n, 1))
+
+    @property
+    def complexity(self) -> int:
+        return complexity(self.parts)
+
+    def predict_sse(self, m: Moments) -> np.ndarray:
+        """Per-segment residual sum of squares on other data (e.g. held-out segments)."""
+        return m.sse(_design(self.parts, self.layout, m, self.z), self.w)
+
+    def values(self) -> list[dict]:
+        """Every parameter with its standard error: ``part, slot, name, value, se``."""
+        lay = self.layout
+        nlin = len(lay.cols)
+        se = np.sqrt(np.clip(np.diag(self.cov), 0, None)) if self.cov is not None else np.full(nlin + len(self.z),
+                                                                                                 np.nan)
+        out = []
+        for j, (i, sl, b) in enumerate(lay.cols):
+            out.append({"part": i, "slot": sl, "kind": "linear", "name": b, "value": float(self.w[j]),
+                        "se": float(se[j])})
+        for k, (i, sl) in enumerate(lay.nl):
+            v = math.exp(self.z[k])
+            out.append({"part": i, "slot": sl, "kind": "nonlinear", "name": self.parts[i].fam.param, "value": v,
+                        "se": float(v * se[nlin + k])})
+        return out
+
+
+def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False, max_nfev: int = 200) -> LawFit:
+    """Least-squares fit of the structure ``parts`` to the segments of ``m``.
+
+    Linear coefficients in closed form, nonlinear parameters (Stribeck velocities, decay
+    constants, exponents) by bounded ``scipy.optimize.least_squares`` on their logarithms from
+    ``z0`` (default: the parts' grid values), when ``refine``.
+    """
+    parts = tuple(parts)
+    lay = _layout(parts, m)
+    if z0 is None:
+        z0 = np.array([math.log(parts[i].param0) for i, _ in lay.nl])
+    z = np.clip(np.asarray(z0, dtype=float), lay.lo + 1e-9, lay.hi - 1e-9) if len(lay.nl) else np.zeros(0)
+    q = m.q.reshape(-1)
+    converged = True
+    kidx = _basis_index(lay, m)
+    Pk = m.P[:, :, kidx]                     # (S, K, p)
+    cache = {}
+
+    def state(zz):
+        key = zz.tobytes()
+        if key not in cache:
+            cache.clear()
+            A, dA = _multipliers(parts, lay, m, zz, deriv=True)
+            X = (A[:, None, :] * Pk).reshape(-1, len(lay.cols))
+            w, U = _solve(X, q)
+            cache[key] = (X, w, U, dA)
+        return cache[key]
+
+    def resid(zz):
+        X, w, U, _ = state(zz)
+        return q - X @ w
+
+    def jac(zz):
+        # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w
+        X, w, U, dA = state(zz)
+        J = np.empty((len(q), len(zz)))
+        for k, cols in enumerate(dA):
+            v = np.zeros((m.S, m.K))
+            for j, d in cols:
+                v += (d * w[j])[:, None] * Pk[:, :, j]
+            v = v.reshape(-1)
+            J[:, k] = -(v - U @ (U.T @ v))
+        return J
+
+    if refine and len(z):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            sol = optimize.least_squares(resid, z, jac=jac, bounds=(lay.lo, lay.hi), method="trf",
+                                         max_nfev=max_nfev, x_scale=1.0)
+        z = sol.x
+        converged = sol.status > 0
+    X = _design(parts, lay, m, z)
+    w = _lstsq(X, q)
+    fit = LawFit(parts, z, w, m.sse(X, w), m.N, converged, layout=lay)
+    if se:
+        _covariance(fit, m, X)
+    return fit
+
+
+def _covariance(fit: LawFit, m: Moments, X: np.ndarray) -> None:
+    """Cluster-robust (segments) covariance of all parameters, in ``fit.cov`` (linear, then log
+    nonlinear: :meth:`LawFit.values` converts)."""
+    parts, lay = fit.parts, fit.layout
+    q = m.q.reshape(-1)
+    r = q - X @ fit.w
+    cols = [-X]
+    for k in range(len(fit.z)):
+        h = 1e-5
+        zp, zm = fit.z.copy(), fit.z.copy()
+        zp[k] += h
+        zm[k] -= h
+        dX = (_design(parts, lay, m, zp) - _design(parts, lay, m, zm)) / (2 * h)
+        cols.append(-(dX @ fit.w)[:, None])
+    J = np.hstack(cols)
+    p = J.shape[1]
+    bread = np.linalg.pinv(J.T @ J, rcond=1e-12, hermitian=True)
+    S = m.S
+    if S >= p + 2:
+        g = np.einsum("skp,sk->sp", J.reshape(S, m.K, p), r.reshape(S, m.K))
+        meat = g.T @ g
+        fit.cov = bread @ meat @ bread * (S / (S - p))
+        fit.se_method = f"cluster-robust over {S} segments"
+    else:
+        dof = max(m.N - p, 1)
+        fit.cov = bread * float(np.sum(fit.sse)) / dof
+        fit.se_method = (f"ordinary covariance (only {S} segments for {p} parameters: assumes independent samples, "
+                         "so likely too small)")
+
+
+def cross_validate(m: Moments, parts, fold: np.ndarray, *, z0=None, refine: bool = True):
+    """Held-out residual sum of squares of every segment, each fold predicted by the structure
+    refitted (all parameters) on the other folds; and the held-out predictions (S, K) on the
+    segments' pseudo rows (for comparing two laws' predictions)."""
+    out = np.zeros(m.S)
+    pred = np.zeros((m.S, m.K))
+    for f in np.unique(fold):
+        test = fold == f
+        tr = m.take(np.flatnonzero(~test))
+        fit = fit_law(tr, parts, z0=z0, refine=refine, max_nfev=40)
+        mt = m.take(np.flatnonzero(test))
+        X = _design(fit.parts, fit.layout, mt, fit.z)
+        pred[test] = (X @ fit.w).reshape(mt.S, mt.K)
+        out[test] = mt.sse(X, fit.w)
+    return out, pred
+
+
+def cross_validate_linear(m: Moments, fit: LawFit, fold: np.ndarray) -> np.ndarray:
+    """Held-out residual sum of squares of every segment with the nonlinear parameters held at
+    ``fit``'s values and only the linear coefficients refitted per fold: a fast screen (slightly
+    optimistic for laws with nonlinear parameters) used while searching; the laws reported are
+    scored with :func:`cross_validate`."""
+    X = _design(fit.parts, fit.layout, m, fit.z)
+    Xs = X.reshape(m.S, m.K, -1)
+    out = np.zeros(m.S)
+    pred = np.zeros((m.S, m.K))
+    for f in np.unique(fold):
+        test = fold == f
+        w = _lstsq(Xs[~test].reshape(-1, X.shape[1]), m.q[~test].reshape(-1))
+        pred[test] = np.einsum("skp,p->sk", Xs[test], w)
+        r = m.q[test] - pred[test]
+        out[test] = np.sum(r * r, axis=1) + m.rest[test]
+    return out, pred
+
+
+# ---------------------------------------------------------------------- reading a fitted law
+def _slot_values(fit: LawFit, i: int):
+    """{slot: {"lin": [(value, se)...], "param": (value, se) or None}} of part i."""
+    out = {}
+    for v in fit.values():
+        if v["part"] != i:
+            continue
+        d = out.setdefault(v["slot"], {"lin": [], "param": None})
+        if v["kind"] == "nonlinear":
+            d["param"] = (v["value"], v["se"])
+        else:
+            d["lin"].append((v["value"], v["se"]))
+    p = fit.parts[i]
+    if p.fam.param and not p.free:          # a fixed grid value (power-law exponent)
+        for d in out.values():
+            d["param"] = (p.param0, 0.0)
+    return out
+
+
+def _pair(vals: dict, fmt) -> str:
+    """'x' for a symmetric value, '(x+ | x-)' for a direction-dependent one."""
+    if 0 in vals:
+        return fmt(vals[0])
+    return f"({fmt(vals[1])} | {fmt(vals[-1])})"
+
+
+def equation(fit: LawFit, frequencies, t_ref=None, unit: str = "rad") -> str:
+    """The fitted law as one readable line (SI units; ``(a | b)``: positive | negative direction)."""
+    friction, signed = [], []
+    for i, p in enumerate(fit.parts):
+        sv = _slot_values(fit, i)
+        fam = p.fam
+        par = {s: d["param"][0] for s, d in sv.items() if d["param"] is not None}
+        if fam.basis == "ripple":
+            amp = {s: math.hypot(d["lin"][0][0], d["lin"][1][0]) for s, d in sv.items()}
+            ph = {s: math.atan2(d["lin"][1][0], d["lin"][0][0]) for s, d in sv.items()}
+            f = _g(float(frequencies[p.freq]), 6)
+            a = _pair(amp, _g)
+            if fam.name == "ripple_exp":
+                a += f"*exp(-{_pair(par, _g)}|v|)"
+            elif fam.name == "ripple_rational":
+                a += f"/(1+({_pair(par, _g)}|v|)^2)"
+            friction.append(f"{a}*sin(2pi*{f}*theta + {_pair(ph, lambda x: _g(x, 3))})")
+            continue
+        c = _pair({s: d["lin"][0][0] for s, d in sv.items()}, _g)
+        if fam.basis == "acc":
+            signed.append(f"{c}*a")
+            continue
+        if fam.param:
+            pp = _pair(par, _g)
+            fac = {"power": f"|v|^{pp}", "stribeck_exp": f"exp(-|v|/{pp})", "stribeck_gauss": f"exp(-(|v|/{pp})^2)",
+                   "stribeck_rational": f"/(1+(|v|/{pp})^2)"}[fam.name]
+            friction.append(c + fac if fam.name == "stribeck_rational" else f"{c}*{fac}")
+        else:
+            fac = fam.factor(None, None)
+            if t_ref is not None:
+                fac = fac.replace("T_ref", _g(t_ref))
+            friction.append(c if fac == "1" else f"{c}*{fac}")
+    body = " + ".join(friction) if friction else "0"
+    s = f"tau = sign(v)*[{body}]"
+    if signed:
+        s += " + " + " + ".join(signed)
+    return s.replace("+ -", "- ")
+
+
+def to_model(fit: LawFit, frequencies, labels=None, t_ref=None, unit: str = "rad", name: str = "discovered",
+             rmse=None, rmse_holdout=None) -> FrictionModel:
+    """The fitted law as a :class:`FrictionModel` (base law coulomb_viscous per direction, ripple as
+    harmonics per direction, other parts as :mod:`gearspec.terms`), which evaluates identically."""
+    dirs = {1: {"tau_c": 0.0, "viscous": 0.0, "harmonics": []}, -1: {"tau_c": 0.0, "viscous": 0.0, "harmonics": []}}
+    terms = []
+    for i, p in enumerate(fit.parts):
+        sv = _slot_values(fit, i)
+        fam = p.fam
+        for sl, d in sv.items():
+            targets = (1, -1) if sl == 0 else (sl,)
+            lin = d["lin"]
+            par, par_se = d["param"] if d["param"] is not None else (None, None)
+            if fam.basis == "ripple":
+                (cs, cs_se), (cc, cc_se) = lin
+                A = math.hypot(cs, cc)
+                ph = math.atan2(cc, cs)
+                A_se = math.sqrt((cs * cs_se) ** 2 + (cc * cc_se) ** 2) / A if A > 0 else float("nan")
+                ph_se = math.sqrt((cc * cs_se) ** 2 + (cs * cc_se) ** 2) / (A * A) if A > 0 else float("nan")
+                law = {"ripple_const": "const", "ripple_exp": "exp", "ripple_rational": "rational"}[fam.name]
+                h = {"frequency": float(frequencies[p.freq]), "amplitude": A, "amplitude_se": A_se, "phase": ph,
+                     "phase_se": ph_se, "decay": par if par is not None else 0.0,
+                     "decay_se": par_se if par is not None else None, "law": law,
+                     "label": (labels[p.freq] if labels is not None else None)}
+                for t in targets:
+                    dirs[t]["harmonics"].append(dict(h))
+                continue
+            c, c_se = lin[0]
+            direction = {} if sl == 0 else {"direction": sl}
+            if fam.name == "coulomb":
+                for t in targets:
+                    dirs[t]["tau_c"] += c
+                    dirs[t]["tau_c_se"] = c_se
+            elif fam.name == "viscous":
+                for t in targets:
+                    dirs[t]["viscous"] += c
+                    dirs[t]["viscous_se"] = c_se
+            elif fam.name == "power":
+                terms.append({"kind": "viscous_power", "coefficient": c, "coefficient_se": c_se, "exponent": par,
+                              "exponent_se": par_se, **direction})
+            elif fam.name.startswith("stribeck_"):
+                terms.append({"kind": "stribeck_extra", "amplitude": c, "amplitude_se": c_se, "v_s": par,
+                              "v_s_se": par_se, "shape": fam.name.split("_")[1], **direction})
+            elif fam.name == "load_coulomb":
+                terms.append({"kind": "load_coulomb", "mu": c, "mu_se": c_se, **direction})
+            elif fam.name == "load_viscous":
+                terms.append({"kind": "load_viscous", "gamma": c, "gamma_se": c_se, **direction})
+            elif fam.name == "temperature":
+                terms.append({"kind": "temperature", "coefficient": c, "coefficient_se": c_se,
+                              "reference": float(t_ref), **direction})
+            elif fam.name == "inertia":
+                terms.append({"kind": "inertia", "inertia": c, "inertia_se": c_se})
+    return FrictionModel("coulomb_viscous", dirs[1], dirs[-1], terms=terms, unit=unit, name=name, rmse=rmse,
+                         rmse_holdout=rmse_holdout,
+                         notes=[f"found by gearspec discover; standard errors: {fit.se_method or 'not computed'}"])

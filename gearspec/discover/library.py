@@ -1,0 +1,344 @@
+"""The candidate library: physically meaningful friction terms, each printed as its equation.
+
+A library is a list of :class:`Term` objects; it knows nothing of the optimiser (as in pysindy,
+library and optimiser are separate, composable objects).  A term is a *family* (Coulomb, viscous,
+power law, Stribeck of three shapes, load- and temperature-coupled terms, a position-locked ripple
+with an amplitude law, inertia), the value of the family's nonlinear parameter on a grid
+(Stribeck velocity, decay constant, exponent), a ripple frequency where it has one, and a
+*variant*:
+
+``sym``
+    the friction form ``sign(v) * m(|v|)``: the same magnitude in both directions;
+``asym``
+    the even form ``m(|v|)`` (no sign): added to ``sym`` it makes the magnitude direction-
+    dependent, ``m_i = (c_sym + i c_asym) m`` for direction ``i`` = +1/-1.  So sparsity in the
+    asym columns *is* the question "does this term depend on the direction?".  (The asym Coulomb
+    column is the constant 1, i.e. also an offset such as gravity; constant-speed data cannot
+    tell the two apart.)
+``signed``
+    a torque that is not friction and does not reverse with the motion (inertia).
+
+Ripple terms have two columns (sin and cos of ``2 pi f theta``: amplitude and phase).  Every column
+is ``multiplier(speed_s, direction_s) * basis_k(sample)`` (see :mod:`.moments`), which is what makes
+the exact per-segment reduction possible.
+
+Units: SI (velocity rad/s or m/s, load Nm, temperature degC, theta rad or m); the names print the
+numbers in those units, e.g. ``sign(v)*exp(-|v|/2.95)`` or ``exp(-0.0012|v|)*sin(2pi*0.159*theta)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..errors import InputError
+from .moments import Moments
+
+__all__ = ["Family", "FAMILIES", "Term", "Library", "default_library", "GROUPS"]
+
+
+def _g(x: float, digits: int = 4) -> str:
+    return f"{x:.{digits}g}"
+
+
+@dataclass(frozen=True)
+class Family:
+    """A family of terms: magnitude ``m(speed, p)``, the sample basis it multiplies and how it prints.
+
+    ``param``: name of the nonlinear parameter (None: none), with ``bounds(lo_speed, hi_speed)``
+    for its refinement; ``factor(p, f)``: the readable factor (``f`` the ripple frequency).
+    """
+
+    name: str
+    basis: str                         # "1", "load", "temperature", "acc" or "ripple"
+    magnitude: Callable
+    factor: Callable
+    param: str | None = None
+    bounds: Callable | None = None
+    group: str = ""                    # slot of mutually exclusive shapes (see GROUPS)
+    description: str = ""
+    refine: bool = True                # the parameter is refined by nonlinear least squares
+
+
+def _ripple_factor(amp: str) -> Callable:
+    def f(p, freq):
+        s = f"sin(2pi*{_g(freq, 6)}*theta)"
+        return s if not amp else amp.format(p=_g(p)) + "*" + s
+    return f
+
+
+def _VS_BOUNDS(lo, hi):
+    """Stribeck velocities the plateaus can identify: below lo/5 the term has vanished at every
+    plateau, above hi/2 it is a straight line over the measured speeds (and the refinement would
+    trade it against Coulomb and viscous friction with huge cancelling coefficients)."""
+    return (lo / 5, hi / 2)
+
+
+def _DECAY_BOUNDS(lo, hi):
+    """Decay constants from a 5 % fall over the speed range to a fall by e^-20."""
+    return (0.05 / hi, 20.0 / hi)
+
+
+FAMILIES: dict[str, Family] = {f.name: f for f in [
+    Family("coulomb", "1", lambda u, p: np.ones_like(u), lambda p, f: "1", group="coulomb",
+           description="Coulomb friction"),
+    Family("viscous", "1", lambda u, p: u, lambda p, f: "|v|", group="viscous", description="viscous friction"),
+    # exponents stay at their grid values: a free exponent mimics Coulomb (p -> 0) or viscous (p -> 1)
+    # friction and turns every law into a power law
+    Family("power", "1", lambda u, p: u ** p, lambda p, f: f"|v|^{_g(p, 3)}", "exponent",
+           lambda lo, hi: (0.05, 4.0), group="power", description="power law |v|^p (sqrt: p = 0.5, |v|v: p = 2)",
+           refine=False),
+    Family("stribeck_exp", "1", lambda u, p: np.exp(-u / p), lambda p, f: f"exp(-|v|/{_g(p)})", "v_s",
+           _VS_BOUNDS, group="stribeck", description="Stribeck, exponential (SILO4 eq. 3)"),
+    Family("stribeck_gauss", "1", lambda u, p: np.exp(-(u / p) ** 2), lambda p, f: f"exp(-(|v|/{_g(p)})^2)", "v_s",
+           _VS_BOUNDS, group="stribeck", description="Stribeck, Gaussian"),
+    Family("stribeck_rational", "1", lambda u, p: 1.0 / (1.0 + (u / p) ** 2), lambda p, f: f"1/(1+(|v|/{_g(p)})^2)",
+           "v_s", _VS_BOUNDS, group="stribeck",
+           description="Stribeck, rational (Lola law (11))"),
+    Family("load_coulomb", "load", lambda u, p: np.ones_like(u), lambda p, f: "|T_l|", group="load_coulomb",
+           description="load-dependent Coulomb (Lola law (8))"),
+    Family("load_viscous", "load", lambda u, p: u, lambda p, f: "|T_l|*|v|", group="load_viscous",
+           description="load-speed coupling (Lola law (8))"),
+    Family("temperature", "temperature", lambda u, p: np.ones_like(u), lambda p, f: "(T-T_ref)", group="temperature",
+           description="friction level changing with temperature"),
+    Family("inertia", "acc", lambda u, p: np.ones_like(u), lambda p, f: "a", group="inertia",
+           description="residual inertia (acceleration; not friction)"),
+    Family("ripple_const", "ripple", lambda u, p: np.ones_like(u), _ripple_factor(""), group="ripple",
+           description="position ripple of constant amplitude (SILO4 eq. 6)"),
+    Family("ripple_exp", "ripple", lambda u, p: np.exp(-p * u), _ripple_factor("exp(-{p}|v|)"), "decay",
+           _DECAY_BOUNDS, group="ripple", description="meshing ripple decaying exponentially with speed (SILO4 eq. 8)"),
+    Family("ripple_rational", "ripple", lambda u, p: 1.0 / (1.0 + (p * u) ** 2), _ripple_factor("1/(1+({p}|v|)^2)"),
+           "decay", _DECAY_BOUNDS, group="ripple",
+           description="ripple decaying as a Lorentzian of speed"),
+]}
+
+#: slots of families that describe the same effect in different shapes (one is enough in a law)
+GROUPS = {"stribeck": ("stribeck_exp", "stribeck_gauss", "stribeck_rational"),
+          "ripple": ("ripple_const", "ripple_exp", "ripple_rational"), "power": ("power",)}
+
+
+@dataclass(frozen=True)
+class Term:
+    """One entry of the library: family, nonlinear parameter (grid value), ripple frequency index,
+    variant (``sym``, ``asym`` or ``signed``)."""
+
+    family: str
+    param: float | None = None
+    freq: int | None = None
+    variant: str = "sym"
+
+    @property
+    def fam(self) -> Family:
+        return FAMILIES[self.family]
+
+    @property
+    def key(self) -> tuple:
+        """The term without its variant (what direction dependence is a property of)."""
+        return (self.family, self.param, self.freq)
+
+    def parts(self) -> tuple[str, ...]:
+        return ("sin", "cos") if self.fam.basis == "ripple" else ("",)
+
+    def basis_names(self) -> list[str]:
+        if self.fam.basis == "ripple":
+            return [f"sin{self.freq}", f"cos{self.freq}"]
+        return [self.fam.basis]
+
+    def names(self, frequencies, t_ref=None) -> list[str]:
+        """The columns' equations."""
+        f = None if self.freq is None else float(frequencies[self.freq])
+        fac = self.fam.factor(self.param, f)
+        if t_ref is not None:
+            fac = fac.replace("T_ref", _g(t_ref))
+        out = []
+        for part in self.parts():
+            x = fac.replace("sin(", "cos(") if part == "cos" else fac
+            if self.variant == "sym":
+                out.append("sign(v)" if x == "1" else f"sign(v)*{x}")
+            else:
+                out.append(x)
+        return out
+
+    def multiplier(self, speed, direction, param=None) -> np.ndarray:
+        """Per-segment multiplier of the term's basis column(s)."""
+        p = self.param if param is None else param
+        m = self.fam.magnitude(np.asarray(speed, dtype=float), p)
+        if self.variant == "sym":
+            return direction * m
+        return np.asarray(m, dtype=float)
+
+
+class Library:
+    """An ordered set of candidate terms; its columns are what sparse regression selects from.
+
+    Parameters
+    ----------
+    terms : sequence of Term
+    frequencies : sequence of float
+        Ripple frequencies the terms' ``freq`` indices refer to (cycles per unit of theta).
+    t_ref : float, optional
+        Reference temperature printed in temperature terms.
+    """
+
+    def __init__(self, terms, frequencies=(), t_ref=None):
+        self.terms = list(dict.fromkeys(terms))
+        self.frequencies = np.asarray(frequencies, dtype=float)
+        self.t_ref = t_ref
+        for t in self.terms:
+            if t.family not in FAMILIES:
+                raise InputError(f"unknown library family '{t.family}' (known: {', '.join(FAMILIES)})")
+            if (t.fam.param is None) != (t.param is None):
+                raise InputError(f"library term {t.family} needs {'a ' + t.fam.param if t.fam.param else 'no'} "
+                                 "parameter")
+            if t.fam.basis == "ripple" and (t.freq is None or not 0 <= t.freq < len(self.frequencies)):
+                raise InputError(f"ripple term {t.family} refers to frequency {t.freq}, the library has "
+                                 f"{len(self.frequencies)}")
+        self.columns: list[tuple[int, str, str]] = []      # (term index, part, basis name)
+        for i, t in enumerate(self.terms):
+            for part, b in zip(t.parts(), t.basis_names()):
+                self.columns.append((i, part, b))
+
+    def __len__(self) -> int:
+        return len(self.columns)
+
+    @property
+    def names(self) -> list[str]:
+        out = []
+        for t in self.terms:
+            out += t.names(self.frequencies, self.t_ref)
+        return out
+
+    def column_terms(self) -> np.ndarray:
+        return np.array([c[0] for c in self.columns], dtype=int)
+
+    def multipliers(self, m: Moments) -> np.ndarray:
+        """(S, p): the per-segment multiplier of every column."""
+        A = np.empty((m.S, len(self.columns)))
+        cache = {}
+        for j, (i, part, b) in enumerate(self.columns):
+            if i not in cache:
+                cache[i] = self.terms[i].multiplier(m.speed, m.direction)
+            A[:, j] = cache[i]
+        return A
+
+    def basis_index(self, m: Moments) -> np.ndarray:
+        missing = sorted({b for _, _, b in self.columns if b not in m.basis})
+        if missing:
+            raise InputError(f"the library needs sample bases {missing} that the data does not have "
+                             f"(it has {list(m.basis)})")
+        return np.array([m.index(b) for _, _, b in self.columns], dtype=int)
+
+    def design(self, m: Moments) -> np.ndarray:
+        """(S*K, p): the library's columns on the pseudo rows of ``m`` (exact normal equations)."""
+        A = self.multipliers(m)
+        k = self.basis_index(m)
+        return (A[:, None, :] * m.P[:, :, k]).reshape(m.S * m.K, len(self.columns))
+
+    def evaluate(self, data, m: Moments) -> np.ndarray:
+        """(N, p): the columns at every sample of ``data`` (dense; for checks and baselines -- the
+        search itself never builds this).  Rows in the order of ``data``."""
+        from .moments import _TWO_PI
+
+        sid_of = {int(s): i for i, s in enumerate(m.segment)}
+        seg_idx = np.array([sid_of[int(s)] for s in data.segment])
+        A = self.multipliers(m)[seg_idx]
+        X = np.empty((len(data), len(self.columns)))
+        bases = {"1": np.ones(len(data))}
+        if "load" in m.basis:
+            bases["load"] = np.abs(np.asarray(data.load, dtype=float))
+        if "temperature" in m.basis:
+            bases["temperature"] = np.asarray(data.temperature, dtype=float) - m.t_ref
+        if "acc" in m.basis:
+            bases["acc"] = np.asarray(data.acc, dtype=float)
+        for i, f in enumerate(m.frequencies):
+            ph = _TWO_PI * f * np.asarray(data.theta, dtype=float)
+            bases[f"sin{i}"], bases[f"cos{i}"] = np.sin(ph), np.cos(ph)
+        for j, (_, _, b) in enumerate(self.columns):
+            X[:, j] = A[:, j] * bases[b]
+        return X
+
+    def describe(self) -> str:
+        fams: dict[str, int] = {}
+        for t in self.terms:
+            fams[t.family] = fams.get(t.family, 0) + len(t.parts())
+        return (f"{len(self.columns)} columns from {len(self.terms)} terms: "
+                + ", ".join(f"{k} {v}" for k, v in fams.items()))
+
+
+def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: int = 3,
+                    exponents=(0.5, 2.0), directions: str = "auto", ripple_laws=("const", "exp", "rational"),
+                    min_cycles: float = 1.0) -> Library:
+    """The standard library for the data summarised in ``m``.
+
+    Parameters
+    ----------
+    m : Moments
+    families : sequence of str, optional
+        Families to include (default: every family the data's bases allow).
+    n_stribeck : int
+        Stribeck velocities on a log grid from half the lowest to half the highest plateau speed,
+        for each of the three shapes.
+    n_decay : int
+        Decay constants of the ripple amplitude laws on a log grid, ``b * v_max`` from 0.5 to 4.5.
+    exponents : sequence of float
+        Power-law exponents (0.5: sqrt-type, 2: |v|v).
+    directions : {"auto", "sym"}
+        "auto": a direction-dependent (asym) version of every friction term when the data has both
+        directions; "sym": symmetric terms only.
+    ripple_laws : sequence of {"const", "exp", "rational"}
+        Amplitude laws of the ripple terms.
+    min_cycles : float
+        A ripple frequency enters the library only if it completes at least this many cycles in
+        some segment (otherwise it cannot be told from the friction level).
+    """
+    speeds = m.speed[m.speed > 0]
+    if len(speeds) == 0:
+        raise InputError("fit data: every segment is at standstill; nothing to explore")
+    lo, hi = float(np.min(speeds)), float(np.max(speeds))
+    distinct = len(np.unique(np.round(speeds / hi, 6)))
+    allowed = {"coulomb", "viscous", "power", "stribeck_exp", "stribeck_gauss", "stribeck_rational"}
+    if m.has("load"):
+        allowed |= {"load_coulomb", "load_viscous"}
+    if m.has("temperature"):
+        allowed.add("temperature")
+    if m.has("acc"):
+        allowed.add("inertia")
+    ripple = {f"ripple_{law}" for law in ripple_laws}
+    unknown = ripple - set(FAMILIES)
+    if unknown:
+        raise InputError(f"unknown ripple amplitude law(s) {sorted(unknown)} (const, exp, rational)")
+    allowed |= ripple
+    fams = [f for f in (families or FAMILIES) if f in allowed]
+    bad = [f for f in (families or ()) if f not in FAMILIES]
+    if bad:
+        raise InputError(f"unknown library families {bad} (known: {', '.join(FAMILIES)})")
+    if distinct < 2:
+        fams = [f for f in fams if f in ("coulomb", "load_coulomb", "temperature", "inertia", "ripple_const")]
+    both = len(m.directions) == 2 and directions == "auto"
+    variants = ("sym", "asym") if both else ("sym",)
+    vs_grid = np.geomspace(lo / 2, hi / 2, n_stribeck) if n_stribeck > 0 and hi > lo else np.array([])
+    decay_grid = np.geomspace(0.5, 4.5, n_decay) / hi if n_decay > 0 else np.array([])
+    # frequencies that complete enough cycles somewhere
+    freqs = [i for i in range(len(m.frequencies)) if np.any(m.cycles[:, i] >= min_cycles)]
+    terms: list[Term] = []
+    for f in fams:
+        fam = FAMILIES[f]
+        if fam.basis == "acc":
+            terms.append(Term(f, None, None, "signed"))
+            continue
+        if fam.param == "v_s":
+            grid = vs_grid
+        elif fam.param == "decay":
+            grid = decay_grid
+        elif fam.param == "exponent":
+            grid = np.asarray(exponents, dtype=float)
+        else:
+            grid = [None]
+        idx = freqs if fam.basis == "ripple" else [None]
+        for fi in idx:
+            for p in grid:
+                for var in variants:
+                    terms.append(Term(f, None if p is None else float(p), fi, var))
+    return Library(terms, m.frequencies, m.t_ref)

@@ -1,0 +1,136 @@
+"""Sparse regression over the library: pysindy's optimisers on the exact pseudo rows.
+
+The least-squares objective of the N samples equals, up to a constant, that of the S*K pseudo rows
+of :mod:`.moments` (``||y - Xw||^2 = ||q - X~w||^2 + rest``).  So pysindy's optimisers, which are
+scikit-learn regressors with ``fit(X, y)`` and ``coef_``, run unchanged on the pseudo rows and
+give exactly the result they would give on the samples, at a cost independent of N.
+
+Columns are scaled to unit RMS over the samples and the friction to unit RMS before regression, so
+a threshold reads as "the smallest term worth keeping, as a fraction of the friction's RMS".
+
+Inclusion probabilities come from a bootstrap over *whole segments* (or runs): the segments are
+resampled with replacement, their pseudo rows stacked, the optimiser run again.  pysindy's
+``EnsembleOptimizer(bagging=True)`` draws individual rows instead, which on the pseudo rows would
+split a segment's rows apart (meaningless) and on the samples would leak interleaved samples
+between replicates; so the bootstrap is done here, around the same optimiser.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["make_optimizer", "OPTIMIZERS", "Scaled", "scale", "path", "bootstrap_inclusion"]
+
+OPTIMIZERS = ("stlsq", "sr3")
+
+
+def make_optimizer(method: str, threshold: float, alpha: float, n_rows: float, free=None):
+    """A pysindy optimiser for one threshold on standardised columns.
+
+    ``stlsq``: sequentially thresholded ridge regression (ridge weight ``alpha * n_rows``, i.e.
+    ``alpha`` relative to the squared norm of a standardised column); ``sr3``: SR3 with an L0
+    penalty equivalent to hard thresholding at ``threshold``.  ``free``: boolean mask of the
+    columns that are thresholded (the others are always kept, unpenalised); None: all.
+    """
+    import pysindy as ps
+
+    if method == "stlsq":
+        sparse_ind = None if free is None or np.all(free) else [int(i) for i in np.flatnonzero(free)]
+        return ps.STLSQ(threshold=threshold, alpha=alpha * n_rows, max_iter=25, unbias=False, sparse_ind=sparse_ind)
+    if method == "sr3":
+        nu = 1.0
+        lam = ps.SR3.calculate_l0_weight(threshold, nu)
+        if free is None or np.all(free):
+            return ps.SR3(reg_weight_lam=lam, relax_coeff_nu=nu, regularizer="L0", max_iter=200, unbias=False)
+        return ps.SR3(reg_weight_lam=np.where(free, lam, 0.0)[None, :], relax_coeff_nu=nu, regularizer="weighted_l0",
+                      max_iter=200, unbias=False)
+    raise InputError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got '{method}'")
+
+
+class Scaled:
+    """Pseudo rows with columns and target scaled to unit RMS over the samples."""
+
+    def __init__(self, X: np.ndarray, q: np.ndarray, N: float, yy: float):
+        self.N = float(N)
+        self.col_rms = np.sqrt(np.sum(X * X, axis=0) / self.N)
+        self.live = self.col_rms > 1e-12 * max(float(np.max(self.col_rms)) if len(self.col_rms) else 1.0, 1e-300)
+        self.y_rms = np.sqrt(yy / self.N) if yy > 0 else 1.0
+        cr = np.where(self.live, self.col_rms, 1.0)
+        self.X = X / cr
+        self.X[:, ~self.live] = 0.0
+        self.q = q / self.y_rms
+
+    def unscale(self, w: np.ndarray) -> np.ndarray:
+        return np.where(self.live, w * self.y_rms / np.where(self.live, self.col_rms, 1.0), 0.0)
+
+
+def scale(X, q, N, yy) -> Scaled:
+    return Scaled(X, q, N, yy)
+
+
+def _fit(method, threshold, alpha, sc: Scaled, free=None) -> np.ndarray:
+    """Standardised coefficients of one optimiser run (dead columns excluded)."""
+    X = sc.X[:, sc.live]
+    opt = make_optimizer(method, threshold, alpha, sc.N, None if free is None else np.asarray(free)[sc.live])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        opt.fit(X, sc.q)
+    w_live = np.zeros(X.shape[1])
+    sparse_ind = getattr(opt, "sparse_ind", None)
+    if sparse_ind is not None:
+        # pysindy's STLSQ returns the thresholded columns in coef_, the others apart
+        w_live[sparse_ind] = np.asarray(opt.coef_).reshape(-1)
+        rest = np.setxor1d(sparse_ind, np.arange(X.shape[1]))
+        w_live[rest] = np.asarray(opt.optvar_non_sparse_).reshape(-1)
+    else:
+        w_live[:] = np.asarray(opt.coef_).reshape(-1)
+    w = np.zeros(sc.X.shape[1])
+    w[sc.live] = w_live
+    return w
+
+
+def path(sc: Scaled, thresholds, method: str = "stlsq", alpha: float = 1e-4, free=None,
+         max_columns: int | None = None) -> list[np.ndarray]:
+    """Standardised coefficients at every threshold (from the largest down); stops early once two
+    thresholds in a row select more than ``max_columns`` columns (the path only gets denser)."""
+    out = []
+    dense = 0
+    for t in thresholds:
+        w = _fit(method, float(t), alpha, sc, free)
+        out.append(w)
+        if max_columns is not None and np.count_nonzero(w) > max_columns:
+            dense += 1
+            if dense >= 2:
+                break
+    return out
+
+
+def bootstrap_inclusion(X: np.ndarray, m, threshold: float, *, by: str = "segment", n_models: int = 50,
+                        method: str = "stlsq", alpha: float = 1e-4, seed: int = 0, free=None) -> np.ndarray:
+    """Fraction of segment-bootstrap replicates in which each column is selected.
+
+    ``X``: the library design on the pseudo rows of ``m`` (S*K, p).  Groups (segments or runs)
+    are drawn with replacement; each replicate is scaled afresh and fitted at ``threshold``.
+    """
+    rng = np.random.default_rng(seed)
+    g = m.groups(by)
+    ug = np.unique(g)
+    members = [np.flatnonzero(g == u) for u in ug]
+    S, K = m.S, m.K
+    Xs = X.reshape(S, K, -1)
+    qs = m.q
+    hits = np.zeros(X.shape[1])
+    done = 0
+    for _ in range(n_models):
+        pick = np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))])
+        Xb = Xs[pick].reshape(len(pick) * K, -1)
+        qb = qs[pick].reshape(-1)
+        sc = Scaled(Xb, qb, float(np.sum(m.n[pick])), float(np.sum(m.yy[pick])))
+        w = _fit(method, threshold, alpha, sc, free)
+        hits += w != 0
+        done += 1
+    return hits / max(done, 1)
