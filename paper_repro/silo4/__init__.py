@@ -226,8 +226,11 @@ def run(out, seed: int = 0, *, speeds_rpm=None, repetitions: int = 10, stick_sli
     spectrum.to_json(out / "spectrum.json")
     t0 = tick("gearspec spectrum (segments, spectra)", t0)
 
-    # ---- 3. gearspec fit --law silo4 (joint fit, published procedure, simpler laws)
-    fitted = identify.identify_recording(rec, "silo4", segmentation=seg)
+    # ---- 3. gearspec fit --law silo4 (joint fit, published procedure, simpler laws), with eq. 11's
+    # structure: the joint-turn line F1 of constant amplitude (eq. 6), F2 and F3 decaying (eq. 8)
+    specs = [dict(h, decay=False) if h["label"] == figs.LABELS[1] else h
+             for h in identify.harmonic_specs(None, rec.gear)]
+    fitted = identify.identify_recording(rec, "silo4", segmentation=seg, harmonics=specs)
     joint = fitted.model
     published = next(m for name, m in fitted.models.items() if "published" in name)
     (out / "fit").mkdir(exist_ok=True)
@@ -238,7 +241,6 @@ def run(out, seed: int = 0, *, speeds_rpm=None, repetitions: int = 10, stick_sli
     t0 = tick("gearspec fit (joint fit, published procedure, simpler laws)", t0)
 
     # ---- 4. the published procedure with eq. 4 on the very slowest plateaus only
-    specs = identify.harmonic_specs(None, rec.gear)
     low_cut = 20.0
     keep = (np.abs(data.v) <= low_cut * RPM * 1.02) | (np.abs(data.v) > 100 * RPM)
     published_low = None
@@ -251,7 +253,7 @@ def run(out, seed: int = 0, *, speeds_rpm=None, repetitions: int = 10, stick_sli
     transfer = _chain_transfer(seed, control_repetitions) if control_repetitions else pd.DataFrame()
     passband = _passband(transfer) if len(transfer) else 560.0
     band = data.subset(np.abs(data.v) <= passband * RPM * 1.02)
-    joint_band = identify.fit(band, "silo4", gear=rec.gear, holdout=None, name=f"joint fit <= {passband:g} rpm")
+    joint_band = identify.fit(band, "silo4", harmonics=specs, holdout=None, name=f"joint fit <= {passband:g} rpm")
     t0 = tick("control run and band-limited fit", t0)
 
     # ---- 6. what the realised repetitions imply for the Stribeck curve (twin truth)
@@ -401,7 +403,9 @@ def _report(out: Path, v: dict) -> Path:
           f"- `gearspec fit data/{v['path'].name} --gear data/{v['gear_path'].name} --law silo4 --out fit/`: the "
           "joint fit of eq. 11 per direction, the published procedure (sections 3-4: Coulomb and viscous above "
           "100 rpm, eq. 4 below, eq. 10 on the spectra's amplitudes) and simpler laws, with held-out errors -> "
-          "[fit/report.md](fit/report.md).", "",
+          "[fit/report.md](fit/report.md). As in eq. 11, the joint-turn line F1 has a constant amplitude (eq. 6) "
+          "and F2, F3 decay (eq. 8): `identify_recording(..., harmonics=[..., {\"label\": \"output shaft\", "
+          "\"decay\": False}, ...])` (the command line fits a decay for every line; it has no option for this).", "",
           markdown_table(fitted.comparison.assign(rmse=lambda d: 1e3 * d["rmse"],
                                                   rmse_holdout=lambda d: 1e3 * d["rmse_holdout"])
                          .rename(columns={"rmse": "rmse (mNm)", "rmse_holdout": "held-out rmse (mNm)"})), ""]
