@@ -1,0 +1,156 @@
+"""``gearspec diagnose``: the closed loop -- baseline model, residual, effects found, terms added,
+error before and after on held-out data (CONTRACTS.md section 4)."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+
+from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+
+LAWS = ("silo4", "stribeck", "coulomb_viscous", "lola8", "lola11")
+KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("diagnose", help="find what the model misses: residual -> effect -> new term -> held-out error",
+                       description="Fit the model you believe in, look for structure in its residual (over position, "
+                                   "against speed, load, temperature, time, acceleration and near reversals), add a "
+                                   "term for an effect only when it lowers the error on held-out data (whole segments "
+                                   "or runs) by more than noise would, and repeat until nothing more is accepted.")
+    add_recording_options(p)
+    add_segment_options(p)
+    g = p.add_argument_group("model")
+    g.add_argument("--law", default="silo4", choices=LAWS,
+                   help="base law of the baseline model (default silo4: eq. 11 with the gear's declared lines)")
+    g.add_argument("--model", metavar="MODEL.json",
+                   help="start from this model instead (the `gearspec fit --json` form): its law, lines and terms")
+    g.add_argument("--lines", metavar="F,F,...",
+                   help="frequencies (cycles per unit of theta) of the lines the baseline fits instead of the declared ones")
+    g.add_argument("--symmetric", action="store_true",
+                   help="one parameter set for both directions (the loop then tests whether the data want two)")
+    g.add_argument("--trajectory", action="store_true",
+                   help="use every sample of the whole trajectory (inverse dynamic model: filtered position, central "
+                        "differences, decimation) instead of the constant-speed segments; the baseline is then "
+                        "--law coulomb_viscous with an inertia term")
+    g.add_argument("--cutoff", type=float, default=100.0, help="--trajectory: Butterworth cut-off, Hz (default 100)")
+    g.add_argument("--decimate", type=int, default=10, help="--trajectory: decimation factor (default 10)")
+    g.add_argument("--offset", action="store_true", help="--trajectory: the baseline has a constant force offset too")
+    a = p.add_argument_group("acceptance")
+    a.add_argument("--holdout", default="segment", choices=("segment", "run"),
+                   help="held-out unit: whole segments (default) or runs (trajectories: whole moves)")
+    a.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    a.add_argument("--alpha", type=float, default=0.01,
+                   help="family-wise level of the held-out test per round (default 0.01)")
+    a.add_argument("--min-gain", type=float, default=0.005,
+                   help="smallest relative fall of the held-out rmse worth a term (default 0.005)")
+    a.add_argument("--max-rounds", type=int, default=8, help="at most this many terms are added (default 8)")
+    a.add_argument("--kinds", metavar="K,K,...", help=f"only these effect kinds ({', '.join(KINDS)})")
+    a.add_argument("--validate", metavar="RECORDING", nargs="+",
+                   help="independent recording(s), read with the same column options: every accepted term must also "
+                        "lower the error there, or it is removed again")
+    add_output_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..errors import InputError
+
+    t0 = time.perf_counter()
+    if args.folds < 2:
+        raise InputError(f"--folds must be at least 2, got {args.folds}")
+    if not 0 < args.alpha < 1:
+        raise InputError(f"--alpha must lie between 0 and 1, got {args.alpha}")
+    if args.max_rounds < 0:
+        raise InputError(f"--max-rounds must be 0 or more, got {args.max_rounds}")
+    if args.decimate < 1:
+        raise InputError(f"--decimate must be 1 or more, got {args.decimate}")
+    kinds = None
+    if args.kinds:
+        kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+        bad = [k for k in kinds if k not in KINDS]
+        if bad:
+            raise InputError(f"--kinds: unknown kind(s) {', '.join(bad)} (known: {', '.join(KINDS)})")
+    harmonics = None
+    if args.lines:
+        try:
+            harmonics = [float(x) for x in args.lines.split(",") if x.strip()]
+        except ValueError:
+            raise InputError(f"--lines takes frequencies separated by commas, got '{args.lines}'") from None
+    from .. import diagnose as dg
+    from ..model import FrictionModel
+
+    rec = load_from_args(args)
+    validation = None
+    if args.trajectory:
+        data = dg.trajectory_data(rec, cutoff=args.cutoff, decimate_by=args.decimate)
+        if args.validate:
+            validation = dg.trajectory_data(_load_other(args, args.validate), cutoff=args.cutoff,
+                                            decimate_by=args.decimate)
+    else:
+        seg = segments_from_args(rec, args)
+        data = dg.DiagnoseData.from_recording(rec, seg, by=args.holdout, inertia=not args.no_inertia)
+        if args.validate:
+            other = _load_other(args, args.validate)
+            validation = dg.DiagnoseData.from_recording(other, segments_from_args(other, args), by=args.holdout,
+                                                        inertia=not args.no_inertia)
+    model = None
+    if args.model:
+        model = FrictionModel.from_json(args.model)
+        if model.unit != data.unit:
+            raise InputError(f"{args.model}: the model is for theta in {model.unit}, the recording has {data.unit}")
+    elif args.trajectory:
+        if args.law not in ("coulomb_viscous",):
+            args.law = "coulomb_viscous"
+        terms = [{"kind": "inertia", "inertia": 0.0}] + ([{"kind": "offset", "offset": 0.0}] if args.offset else [])
+        model = dg.baseline_model(data, "coulomb_viscous", symmetric=args.symmetric, terms=terms)
+    diag = dg.diagnose(data, model, law=args.law, harmonics=harmonics, symmetric=True if args.symmetric else None,
+                       folds=args.folds, alpha=args.alpha, min_gain=args.min_gain, max_rounds=args.max_rounds,
+                       kinds=kinds, validation=validation,
+                       progress=None if args.quiet else (lambda s: print(s, flush=True)))
+    if args.json:
+        from pathlib import Path
+
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(diag.to_dict(), indent=1, default=_json_default))
+    if args.out:
+        from ..report.diagnose import write_diagnose_report
+
+        write_diagnose_report(diag, args.out, command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])),
+                              recording_summary=rec.summary())
+    if not args.quiet:
+        print()
+        print(diag.summary_table().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+        for e in diag.effects:
+            mark = "ACCEPTED" if e.accepted else "rejected"
+            f = "" if e.frequency is None else f" at {e.frequency:.6g} cycles/{data.unit}"
+            lab = f" ({e.label})" if e.label else (f" (unknown order; {e.hint})" if e.hint else "")
+            print(f"{mark:8s} {e.kind:11s} {e.name}{f}{lab}: held-out rmse {e.rmse_holdout_before:.4g} -> "
+                  f"{e.rmse_holdout_after:.4g}, Z {e.z:.1f}")
+        print(f"({time.perf_counter() - t0:.1f} s)")
+        if args.out:
+            print(f"report: {args.out}/report.md")
+        if args.json:
+            print(f"json: {args.json}")
+    return 0
+
+
+def _load_other(args, paths):
+    from ..recording import load_recording
+
+    return load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
+                          header=not args.no_header, names=args.names, signal=args.signal)
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return None if not np.isfinite(o) else float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
