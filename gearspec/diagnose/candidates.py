@@ -36,7 +36,7 @@ from ..gears import integer_hint
 from ..model import LAWS
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
-from .design import LINEAR, BaseBlock, Block, Grams, HarmonicBlock, TermBlock, solve_normal
+from .design import BaseBlock, Block, Grams, HarmonicBlock, TermBlock, solve_normal, travel_range
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate", "AsymmetryBlock"]
 
@@ -498,10 +498,11 @@ def term_candidates(rnd, analyses: dict, *, gate: float) -> list[Candidate]:
     rv = analyses.get("reversal")
     if rv is not None:
         st = rv[1]
+        t_lo, t_hi = travel_range(dd)
         tr = dd.at("travel")
         fin = tr[np.isfinite(tr) & (tr > 0)]
-        lo, hi = np.quantile(fin, [0.01, 0.9])
-        grid = np.geomspace(max(lo / 2, 1e-12), max(hi, lo), 10)
+        hi = float(np.quantile(fin, 0.9))
+        grid = np.geomspace(t_lo, max(hi, 2 * t_lo), 10)
         ev = (f"residual against travel since the last reversal: presliding profile of length {st['length']:.3g} "
               f"(t {st['t']:.1f}, p {st['p']:.2g})")
         if "hysteresis" not in has:

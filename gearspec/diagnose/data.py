@@ -339,7 +339,8 @@ class DiagnoseData:
 
 # ---------------------------------------------------------------------- whole trajectories
 def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, decimate_by: int = 10,
-                    border: int = 49, min_speed: float | None = None, name: str = "") -> DiagnoseData:
+                    border: int = 49, min_speed: float | None = None, fs: float | None = None,
+                    name: str = "") -> DiagnoseData:
     """Every sample of a whole trajectory, prepared as the inverse dynamic identification model
     (IDIM) is: the position low-pass filtered (``order``-order Butterworth at ``cutoff`` Hz,
     zero-phase), velocity and acceleration by central differences, the first ``border`` samples
@@ -348,7 +349,9 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
     relative errors are those of the reference procedure (EMPS: 4.08 %, 3.11 %).
 
     Held-out unit: the *moves* (:func:`moves`), one motion between standstills or reversals each.
-    ``t`` must be uniform within a run.  ``decimate_by=1`` keeps every sample.
+    ``t`` must be uniform within a run; ``fs`` (Hz) gives the nominal sample rate the filter and
+    the differences use (default: from the median time step; EMPS's clock steps are 1.00002 ms,
+    its reference procedure uses 1 ms).  ``decimate_by=1`` keeps every sample.
     """
     pieces = rec.pieces()
     if not pieces:
@@ -363,8 +366,9 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
         if np.max(np.abs(np.diff(t) - dt)) > 0.01 * dt:
             raise InputError(f"run {run}: the sample times are not uniform; a whole-trajectory (IDIM) analysis "
                              "needs uniform sampling")
-        fs = 1.0 / dt
-        qf = butter_filtfilt(rec.theta[a:b], cutoff, fs, order)
+        if fs is not None:
+            dt = 1.0 / float(fs)
+        qf = butter_filtfilt(rec.theta[a:b], cutoff, 1.0 / dt, order)
         dq = central_difference(qf, dt)
         ddq = central_difference(dq, dt)
         sl = slice(border, None)

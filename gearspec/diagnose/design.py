@@ -697,11 +697,25 @@ def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
             elif k == "v_s" and v > 0:
                 out.append((("fixed", k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
             elif k == "length" and v > 0 and dd.travel is not None:
-                tr = dd.travel[np.isfinite(dd.travel) & (dd.travel > 0)]
-                if len(tr):
-                    t_lo, t_hi = float(np.min(tr)) / 3, float(np.max(tr)) * 3
+                t_lo, t_hi = travel_range(dd)
+                if t_hi > t_lo:
                     out.append((("fixed", k), float(v), max(v / 4, t_lo), min(v * 4, t_hi), True))
     return out
+
+
+def travel_range(dd: DiagnoseData) -> tuple[float, float]:
+    """Presliding lengths the data can resolve: from the median step between consecutive
+    observations of a moving segment (shorter is a spike at one sample) to the longest travel
+    after a reversal."""
+    tr = dd.at("travel")
+    fin = tr[np.isfinite(tr) & (tr > 0)] if tr is not None else np.zeros(0)
+    if not len(fin):
+        return 0.0, 0.0
+    th = dd.at("theta")
+    steps = np.concatenate([np.abs(np.diff(th[a:z])) for a, z in zip(dd.starts, dd.stops) if z - a > 2] or [np.zeros(0)])
+    steps = steps[steps > 0]
+    lo = float(np.median(steps)) if len(steps) else float(np.min(fin))
+    return lo, float(np.max(fin))
 
 
 def with_parameter(blk: Block, key: tuple, value: float) -> Block:

@@ -179,6 +179,7 @@ class Evaluation:
     reason: str
     group_sse_before: np.ndarray = field(repr=False, default=None)
     group_sse_after: np.ndarray = field(repr=False, default=None)
+    contribution: np.ndarray = field(repr=False, default=None)   # all-data fit with the candidate minus without
 
 
 def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: float,
@@ -193,13 +194,20 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
     through their Taylor columns."""
     dd = rnd.dd
     ext = rnd
-    if repolish and not isinstance(cand, PeriodicCandidate):
-        prop_all = cand.propose(rnd, rnd.all_groups())
-        if prop_all is not None:
+    prop_all = cand.propose(rnd, rnd.all_groups())
+    contribution = None
+    if prop_all is not None:
+        if repolish and not isinstance(cand, PeriodicCandidate):
             movable = [b.uid for b in rnd.state.blocks if b.n_taylor(dd)] + [b.uid for b in prop_all.add]
             st = refine(rnd.state.replaced(prop_all.drop, prop_all.add), dd, only=set(movable))
             st_base = st.replaced([b.uid for b in prop_all.add], prop_all.drop)
             ext = Round(dd, st_base, rnd.fold)
+        # what the candidate adds when fitted on all data (for the report's figure)
+        p_ext = prop_all if ext is rnd else cand.propose(ext, ext.all_groups())
+        if p_ext is not None:
+            keep = ext.keep_mask(p_ext.drop)
+            beta, _ = train_fit(ext, keep, p_ext, ext.all_groups())
+            contribution = np.column_stack([ext.X[:, keep], p_ext.columns(dd)]) @ beta - rnd.fitted.prediction
     ng = dd.n_groups
     sse0 = np.zeros(ng)
     sse1 = np.zeros(ng)
@@ -253,7 +261,7 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
     passed = not reasons
     reason = "accepted: " + (f"held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed else "") \
         if passed else "; ".join(reasons)
-    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, n_par, passed, reason, sse0, sse1)
+    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, n_par, passed, reason, sse0, sse1, contribution)
 
 
 # ---------------------------------------------------------------------- residual analyses
@@ -390,6 +398,7 @@ class Effect:
     terms: list = field(default_factory=list)
     detail: dict = field(default_factory=dict, repr=False)
     validation: dict | None = None
+    history: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
@@ -398,7 +407,7 @@ class Effect:
              "rmse_holdout_after": f(self.rmse_holdout_after), "name": self.name, "hint": self.hint,
              "order": f(self.order), "z": f(self.z), "z_crit": f(self.z_crit), "gain": f(self.gain),
              "consistency": f(self.consistency), "parameters_added": self.n_params, "round": self.round,
-             "decision": self.decision, "fitted": self.parameters, "terms": self.terms}
+             "decision": self.decision, "fitted": self.parameters, "terms": self.terms, "history": self.history}
         if self.validation is not None:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
         return d
@@ -538,7 +547,7 @@ def _holdout(rnd: Round) -> tuple[float, dict]:
 
 
 def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", gear=None, harmonics=None,
-             symmetric: bool = False, folds: int = 5, by: str | None = None, alpha: float = 0.01,
+             symmetric: bool | None = None, folds: int = 5, by: str | None = None, alpha: float = 0.01,
              min_gain: float = 0.005, max_rounds: int = 8, gate: float = 0.01, fap: float = 0.01,
              kinds=None, validation=None, per_segment_spectra: bool = True, progress=None) -> Diagnosis:
     """Run the closed loop on ``data`` from ``model`` (or from ``law`` fitted to it).
@@ -552,6 +561,9 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
         The model the user believes in (its law, lines and terms; nonlinear parameters kept,
         linear ones refitted).  Default: :func:`baseline_model` with ``law``, ``gear``,
         ``harmonics``, ``symmetric``.
+    symmetric : bool, optional
+        One parameter set for both directions (the asymmetry candidates then test whether the
+        data want two); default: as ``model`` is (its two directions equal), else per direction.
     folds, by
         Held-out folds over whole groups (``by``: "segment" or "run"; trajectories: moves).
     alpha : float
@@ -606,7 +618,9 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         dd.gear = load_gear(gear)
     if model is None:
         model = baseline_model(dd, law, gear=gear if gear is not None else dd.gear, harmonics=harmonics,
-                               symmetric=symmetric)
+                               symmetric=bool(symmetric))
+    if symmetric is None:
+        symmetric = model.symmetric
     kinds = set(KINDS if kinds is None else kinds)
     bad = kinds - set(KINDS)
     if bad:
@@ -615,7 +629,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         raise InputError(f"the data hold {dd.n_groups} held-out group(s) ({dd.by}s); the loop needs at least 3 "
                          "to hold whole groups out")
     fold = folds_of(dd, folds)
-    state = _settle(state_from_model(model, dd, symmetric=symmetric if symmetric else None), dd)
+    state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
     base_ho, base_h = _holdout(rnd)
@@ -659,6 +673,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         e = effects[_key(c)]
         e.accepted = True
         e.decision = ev.reason
+        e.history.append(f"round {k}: accepted")
         e.detail["blocks"] = [b.uid for b in prop.add]
         e.detail["dropped"] = [b for b in prop.drop]
         added = [new_state.block(u) for u in e.detail["blocks"]]
@@ -667,9 +682,9 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             f_fit = added[0].frequency
             c.relabel(f_fit)
             e.frequency, e.label, e.hint = f_fit, c.label, c.hint
+            e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
             e.order = dd.gear.order(f_fit) if dd.gear is not None else None
         e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
-        e.detail["residual_before"] = ev.group_sse_before
         removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
         if removed:
             rnd = removed
@@ -691,6 +706,14 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     diag.trace = pd.DataFrame(trace)
     if validation is not None:
         _validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain)
+    # what each accepted term explains in the final model: its contribution, and the partial
+    # residual (data minus the rest of the final model) it is fitted to
+    for e in diag.effects:
+        if e.accepted:
+            con = _contribution(dd, diag.final.state, diag.final, e.detail.get("blocks", []))
+            e.detail["contribution"] = con
+            e.detail["residual"] = diag.final.residual + con
+            e.detail["partial"] = True
     diag.final_analyses = analyse(Round(dd, diag.final.state, fold), fap=fap, per_segment=False)
     return diag
 
@@ -720,6 +743,7 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
         e.accepted = False
         e.decision = (f"removed in round {round_no}: once '{newest.name}' was added it no longer lowers the held-out "
                       f"error enough ({ev.reason})")
+        e.history.append(e.decision)
         e.z, e.gain = ev.z, ev.gain
         rnd = changed = rnd_wo
 
@@ -746,6 +770,7 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
     prev = effects.get(key)
     if prev is not None and prev.accepted:
         return
+    history = list(prev.history) if prev is not None else []
     dd = rnd.dd
     e = Effect(kind=c.kind, name=c.name, accepted=False, evidence=c.evidence,
                rmse_holdout_before=ev.rmse_holdout_before, rmse_holdout_after=ev.rmse_holdout_after,
@@ -753,7 +778,11 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
                order=(dd.gear.order(c.frequency) if (dd.gear is not None and c.frequency) else None),
                z=ev.z, z_crit=ev.z_crit, gain=ev.gain, consistency=ev.consistency, n_params=ev.n_params, round=k,
                decision=("passes the test (another candidate went first this round)" if ev.passed else
-                         "rejected: " + ev.reason), detail=dict(c.detail))
+                         "rejected: " + ev.reason), detail=dict(c.detail), history=history)
+    e.detail["residual"] = rnd.fitted.residual
+    e.detail["contribution"] = ev.contribution
+    e.history.append(f"round {k}: Z {ev.z:.2f} (needs {ev.z_crit:.2f}), held-out rmse {ev.rmse_holdout_before:.4g} -> "
+                     f"{ev.rmse_holdout_after:.4g}: " + ("passes" if ev.passed else "fails"))
     effects[key] = e
 
 
@@ -829,6 +858,7 @@ def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, mi
                       f"recording (rmse {v['rmse_without']:.4g} -> {v['rmse_with']:.4g}, relative error "
                       f"{v['relative_error_without']:.3f} % -> {v['relative_error_with']:.3f} %, Z {v['z']:.2f} "
                       f"< {v['z_crit']:.2f} or gain below {100 * min_gain:.2g} %)")
+        e.history.append(e.decision)
         removed.append(e)
         state = st_wo
     if removed:

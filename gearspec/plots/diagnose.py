@@ -1,0 +1,261 @@
+"""Figures of ``gearspec diagnose``: the residual spectra with every candidate line marked, one
+figure per effect showing the structure it explains (the residual before it was added against the
+variable of its kind, with what the term predicts), and the held-out error per segment before and
+after."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import NEG, POS, plt, save
+
+__all__ = ["plot_spectra", "plot_effect", "plot_segment_errors", "plot_time_series", "effect_curve"]
+
+_DIRS = ((1, "positive", POS), (-1, "negative", NEG))
+
+
+def _speed_label(dd):
+    return f"speed ({dd.unit}/s)"
+
+
+def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torque_unit: str = "Nm",
+                 title: str = "Residual spectra over position (baseline model)") -> Path:
+    """The pooled residual periodograms of each direction (all speeds), with their local noise
+    level, every candidate line marked (accepted: green, rejected: grey)."""
+    pooled = [s for s in spectra if s.pooled]
+    per_dir = {}
+    for s in pooled:  # the all-speed pool of each direction: the one with most segments
+        if s.direction not in per_dir or len(s.segments) > len(per_dir[s.direction].segments):
+            per_dir[s.direction] = s
+    rows = [per_dir[d] for d in (1, -1) if d in per_dir]
+    fig, axes = plt.subplots(max(len(rows), 1), 1, figsize=(11, 3.4 * max(len(rows), 1)), squeeze=False)
+    for ax, s in zip(axes[:, 0], rows):
+        color = POS if s.direction > 0 else NEG
+        ax.semilogy(s.frequency, np.maximum(s.amplitude, 1e-300), color=color, lw=0.6, label="residual")
+        ax.semilogy(s.frequency, np.maximum(s.noise, 1e-300), color="k", lw=0.8, ls="--", label="local noise level")
+        for e in effects:
+            if e.kind != "periodic" or e.frequency is None:
+                continue
+            if not (s.frequency[0] <= e.frequency <= s.frequency[-1]):
+                continue
+            c = "tab:green" if e.accepted else "0.55"
+            ax.axvline(e.frequency, color=c, lw=1.0, alpha=0.8, zorder=0)
+            lab = e.label or e.hint or "unknown order"
+            ax.annotate(f"{e.frequency:.5g}\n{lab}", (e.frequency, np.max(s.amplitude)), fontsize=7, color=c,
+                        rotation=90, va="top", ha="right")
+        ax.set_xscale("log")
+        ax.set_ylabel(f"amplitude ({torque_unit})")
+        ax.set_title(s.label, fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="lower left")
+    if not rows:
+        axes[0, 0].text(0.5, 0.5, "no residual spectrum (no positions, or segments too short)", ha="center",
+                        transform=axes[0, 0].transAxes)
+    axes[-1, 0].set_xlabel(f"frequency (cycles/{unit})")
+    fig.suptitle(title + " -- candidate lines: green accepted, grey rejected", fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
+    """What the figure of an effect shows: the x variable of its kind and, per direction, the
+    binned (or per-segment) means of the residual before the term was added and of the term's
+    contribution (both in the friction magnitude, except inertia: drive torque)."""
+    d = dd.at("direction")
+    signed = kind == "inertia"
+    m_res = residual if signed else d * residual
+    m_con = contribution if signed else d * contribution
+    if kind in ("speed_law", "asymmetry"):
+        x, xl, per_group = np.abs(dd.at("v")), _speed_label(dd), dd.kind == "plateaus"
+    elif kind == "load":
+        x, xl, per_group = np.abs(dd.at("load")), f"|load| (N{'m' if dd.unit == 'rad' else ''})", True
+    elif kind == "temperature":
+        x, xl, per_group = dd.at("temperature"), "temperature (degC)", True
+    elif kind == "drift":
+        x, xl, per_group = dd.at("t"), "time (s)", True
+    elif kind == "inertia":
+        x, xl, per_group = dd.at("acc"), f"acceleration ({dd.unit}/s^2)", False
+    elif kind == "hysteresis":
+        x, xl, per_group = dd.at("travel"), f"travel since the last reversal ({dd.unit})", False
+    else:
+        return {}
+    out = {"xlabel": xl, "series": []}
+    for direction, name, color in _DIRS:
+        sel = d == direction
+        if kind == "inertia":
+            sel = np.ones(len(d), bool) if direction == 1 else np.zeros(len(d), bool)
+        if not sel.any():
+            continue
+        if per_group:
+            rows = []
+            for a, z in zip(dd.starts, dd.stops):
+                if sel[a:z].mean() < 0.5:
+                    continue
+                rows.append((float(np.mean(x[a:z])), float(np.mean(m_res[a:z])), float(np.mean(m_con[a:z])),
+                             float(np.std(m_res[a:z]) / math.sqrt(max(z - a, 1)))))
+            if not rows:
+                continue
+            xs, rs, cs, se = map(np.array, zip(*sorted(rows)))
+        else:
+            xx = x[sel]
+            fin = np.isfinite(xx)
+            if fin.sum() < 8:
+                continue
+            if kind == "hysteresis":
+                edges = np.geomspace(max(np.min(xx[fin & (xx > 0)]), 1e-12), np.max(xx[fin]), 16)
+            else:
+                edges = np.quantile(xx[fin], np.linspace(0, 1, 16))
+            which = np.clip(np.searchsorted(edges, xx, side="right") - 1, 0, len(edges) - 2)
+            xs, rs, cs, se = [], [], [], []
+            rr, cc = m_res[sel], m_con[sel]
+            for k in range(len(edges) - 1):
+                b = fin & (which == k)
+                if b.sum() < 3:
+                    continue
+                xs.append(float(np.mean(xx[b])))
+                rs.append(float(np.mean(rr[b])))
+                cs.append(float(np.mean(cc[b])))
+                se.append(float(np.std(rr[b]) / math.sqrt(b.sum())))
+            xs, rs, cs, se = map(np.array, (xs, rs, cs, se))
+        out["series"].append({"direction": direction if kind != "inertia" else 0, "name": name if kind != "inertia"
+                              else "both directions", "color": color if kind != "inertia" else "k",
+                              "x": xs, "residual": rs, "contribution": cs, "se": se})
+    return out
+
+
+def _line_amplitudes(dd, residual, contribution, frequency):
+    """Amplitude of a line in each segment: in the residual before it was added, and in what the
+    term predicts (least squares of sin/cos at the frequency, each segment's mean removed)."""
+    theta = dd.at("theta")
+    d = dd.at("direction")
+    s = np.abs(dd.at("v"))
+    rows = []
+    for a, z in zip(dd.starts, dd.stops):
+        th = theta[a:z]
+        if np.ptp(th) * frequency < 1.0:
+            continue
+        X = np.column_stack([np.ones(z - a), np.sin(2 * np.pi * frequency * th), np.cos(2 * np.pi * frequency * th)])
+        out = []
+        for y in (d[a:z] * residual[a:z], d[a:z] * contribution[a:z]):
+            beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+            out.append(math.hypot(beta[1], beta[2]))
+        r = d[a:z] * residual[a:z] - X @ np.linalg.lstsq(X, d[a:z] * residual[a:z], rcond=None)[0]
+        se = float(np.std(r) * math.sqrt(2.0 / (z - a)))
+        rows.append({"direction": int(d[a]), "speed": float(np.mean(s[a:z])), "amplitude": out[0],
+                     "model": out[1], "se": se})
+    return pd.DataFrame(rows)
+
+
+def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> Path | None:
+    """The figure of one effect: the residual it is fitted to (for an accepted term: the partial
+    residual, data minus the rest of the final model; otherwise the residual of the model it was
+    tested against) and what the term predicts."""
+    tu = dd.torque_unit
+    what = "data - rest of final model" if effect.detail.get("partial") else "residual"
+    if effect.kind == "periodic" or (effect.kind == "speed_law" and effect.detail.get("analysis") == "spectrum"):
+        f = effect.frequency or effect.detail.get("frequency")
+        if f is None:
+            return None
+        fig, axes = plt.subplots(1, 2, figsize=(13, 4.2))
+        ax = axes[0]
+        if spectrum is not None:
+            ax.semilogy(spectrum.frequency, np.maximum(spectrum.amplitude, 1e-300), lw=0.6,
+                        color=POS if spectrum.direction > 0 else NEG, label="residual")
+            ax.semilogy(spectrum.frequency, np.maximum(spectrum.noise, 1e-300), "k--", lw=0.8, label="local noise")
+            ax.axvline(f, color="tab:green" if effect.accepted else "0.5", lw=1.2, zorder=0,
+                       label=f"{f:.6g} cycles/{dd.unit}")
+            lo, hi = max(spectrum.frequency[0], f / 4), min(spectrum.frequency[-1], f * 4)
+            ax.set_xlim(lo, hi)
+            ax.set_xscale("log")
+            ax.set_title(f"residual spectrum of the baseline: {spectrum.label}", fontsize=9)
+        ax.set_xlabel(f"frequency (cycles/{dd.unit})")
+        ax.set_ylabel(f"amplitude ({tu})")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+        ax = axes[1]
+        amp = _line_amplitudes(dd, residual, contribution, f)
+        for direction, name, color in _DIRS:
+            a = amp[amp["direction"] == direction] if len(amp) else amp
+            if a is None or not len(a):
+                continue
+            a = a.sort_values("speed")
+            ax.errorbar(a["speed"], a["amplitude"], yerr=2 * a["se"], fmt="o", color=color, mfc="none", ms=4,
+                        label=f"{name}: {what}")
+            ax.plot(a["speed"], a["model"], "-", color=color, lw=1.2, label=f"{name}: the term")
+        ax.set_xlabel(_speed_label(dd))
+        ax.set_ylabel(f"amplitude of the line ({tu})")
+        ax.set_title("amplitude against speed, per segment (95 % bars)", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        lab = effect.label or (f"unknown order, {effect.hint}" if effect.hint else "unknown order")
+        fig.suptitle(f"{effect.name} ({lab}): {'accepted' if effect.accepted else 'rejected'}", fontsize=10)
+        fig.tight_layout()
+        return save(fig, path)
+    cur = effect_curve(dd, residual, contribution, effect.kind, effect)
+    if not cur or not cur["series"]:
+        return None
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for s in cur["series"]:
+        ax.errorbar(s["x"], s["residual"], yerr=2 * np.nan_to_num(s["se"]), fmt="o", ms=4, mfc="none",
+                    color=s["color"], label=f"{s['name']}: {what}")
+        ax.plot(s["x"], s["contribution"], "-", color=s["color"], lw=1.3, label=f"{s['name']}: the term")
+    if effect.kind == "hysteresis" or (effect.kind in ("speed_law", "asymmetry") and dd.kind == "plateaus"):
+        ax.set_xscale("log")
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_xlabel(cur["xlabel"])
+    ax.set_ylabel(f"{'drive torque' if effect.kind == 'inertia' else 'friction'} ({tu})")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    ax.set_title(f"{effect.kind}: {effect.name} -- {'accepted' if effect.accepted else 'rejected'}", fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", unit: str = "rad") -> Path:
+    """Held-out rmse of every group before and after (and in-sample), against speed per direction."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+    for ax, (direction, name, color) in zip(axes, _DIRS):
+        t = table[table["direction"] == direction].sort_values("speed")
+        if t.empty:
+            ax.text(0.5, 0.5, f"no {name} segment", ha="center", transform=ax.transAxes)
+            ax.set_title(f"{name} direction")
+            continue
+        ax.plot(t["speed"], t["rmse_holdout_before"], "o--", color="0.5", mfc="none", label="held-out, before")
+        ax.plot(t["speed"], t["rmse_holdout_after"], "o-", color=color, label="held-out, after")
+        ax.plot(t["speed"], t["rmse_after"], "x", color=color, label="in-sample, after")
+        ax.set_xscale("log")
+        ax.set_xlabel(f"speed ({unit}/s)")
+        ax.set_title(f"{name} direction", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel(f"rmse ({torque_unit})")
+    fig.suptitle("Error per held-out group, before and after the loop", fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def plot_time_series(t, y, before, after, path, *, torque_unit: str = "N", title: str = "", window=None,
+                     labels=("measured", "baseline", "final")) -> Path:
+    """Measured drive torque against time with two models' predictions and their errors."""
+    t = np.asarray(t)
+    sel = np.ones(len(t), bool) if window is None else (t >= window[0]) & (t <= window[1])
+    fig, axes = plt.subplots(2, 1, figsize=(12, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    axes[0].plot(t[sel], y[sel], "k", lw=1.0, label=labels[0])
+    axes[0].plot(t[sel], before[sel], color="0.55", lw=1.0, ls="--", label=labels[1])
+    axes[0].plot(t[sel], after[sel], color="tab:green", lw=1.0, label=labels[2])
+    axes[0].set_ylabel(f"force / torque ({torque_unit})")
+    axes[0].legend(fontsize=8)
+    axes[0].grid(alpha=0.3)
+    axes[1].plot(t[sel], (y - before)[sel], color="0.55", lw=0.8, label=f"error, {labels[1]}")
+    axes[1].plot(t[sel], (y - after)[sel], color="tab:green", lw=0.8, label=f"error, {labels[2]}")
+    axes[1].set_xlabel("time (s)")
+    axes[1].set_ylabel(f"error ({torque_unit})")
+    axes[1].legend(fontsize=8)
+    axes[1].grid(alpha=0.3)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)

@@ -1,0 +1,276 @@
+"""The report of ``gearspec diagnose``: the baseline model, one section per effect with the figure
+that shows it and the terms added (parameters and standard errors), every candidate that was not
+accepted with its evidence and the reason, and the error before and after -- in-sample, on held-out
+data and per segment (and on an independent recording when one was given)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..diagnose import Diagnosis
+from ..plots import diagnose as dplots
+from . import markdown_table
+
+__all__ = ["write_diagnose_report", "effect_table", "interpretation"]
+
+
+def _f(x, fmt=".4g"):
+    return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def effect_table(diag: Diagnosis) -> pd.DataFrame:
+    """One row per candidate: kind, name, frequency, label (or integer hint), accepted, Z and the
+    threshold, held-out rmse before and after, and the decision."""
+    rows = []
+    for e in diag.effects:
+        rows.append({"kind": e.kind, "effect": e.name, "accepted": "yes" if e.accepted else "no",
+                     "frequency": e.frequency, "label": e.label or (f"({e.hint})" if e.hint else ""),
+                     "Z": e.z, "Z needed": e.z_crit, "held-out before": e.rmse_holdout_before,
+                     "held-out after": e.rmse_holdout_after, "round": e.round})
+    return pd.DataFrame(rows)
+
+
+def interpretation(diag: Diagnosis, e) -> list[str]:
+    """Plain sentences on what an effect is physically (labels, integer relations, amplitude law,
+    lead of a screw)."""
+    dd = diag.data
+    unit = dd.unit
+    out = []
+    if e.kind == "periodic" and e.frequency:
+        f = e.frequency
+        period = 1.0 / f
+        if e.label:
+            out.append(f"The line is explained by the declared gear train: **{e.label}**"
+                       + (f" (order {e.order:.4g} per output revolution)." if e.order else "."))
+        elif e.hint:
+            out.append(f"No declared line explains it: an **unknown order**; it sits at **{e.hint}** "
+                       f"(order {e.order:.4g} per output revolution) -- a motor pole-pair, slot or commutation "
+                       f"order, or cogging, shows up this way." if e.order else
+                       f"No declared line explains it: an **unknown order**, at {e.hint}.")
+        else:
+            out.append("No declared line explains it and it is no integer multiple of a declared shaft: an "
+                       "**unknown order**.")
+        if unit == "m":
+            out.append(f"One cycle every {1e3 * period:.4g} mm of travel. On a ball-screw axis of unknown lead, a "
+                       f"once-per-turn ripple would mean a lead of {1e3 * period:.4g} mm (a k-th harmonic: k x "
+                       f"{1e3 * period:.4g} mm).")
+        else:
+            out.append(f"One cycle every {period:.4g} rad ({360 * period / (2 * math.pi):.4g} deg) of theta.")
+        laws = []
+        for t in e.terms:
+            h = t.get("harmonic")
+            if h:
+                law = h.get("law", "exp")
+                if law == "const":
+                    laws.append(f"{t['direction']}: constant amplitude {h['amplitude']:.3g}")
+                else:
+                    grow = h.get("decay", 0) < 0
+                    laws.append(f"{t['direction']}: amplitude {h['amplitude']:.3g} x {law} law, decay "
+                                f"{h.get('decay', 0):.3g} ({'grows' if grow else 'falls'} with speed)")
+        if laws:
+            out.append("Amplitude against speed (chosen by the data): " + "; ".join(laws) + ".")
+    if e.kind == "speed_law":
+        out.append("The speed dependence of the friction (or of a line's amplitude) has another shape than the "
+                   "model's law: " + (e.parameters or e.name) + ".")
+    if e.kind == "load":
+        out.append("Friction depends on the output load: " + (e.parameters or e.name) + ".")
+    if e.kind == "hysteresis":
+        out.append("Friction near reversals differs from the steady law (presliding / backlash): "
+                   + (e.parameters or e.name) + ".")
+    return out
+
+
+def _figure_for(diag: Diagnosis, e, out: Path, i: int):
+    res = e.detail.get("residual")
+    con = e.detail.get("contribution")
+    if res is None:
+        res = diag.baseline.residual
+    if con is None:
+        con = np.zeros(len(res))
+    spec = e.detail.get("spectrum")
+    if spec is None and (e.frequency or e.detail.get("frequency")):
+        f = e.frequency or e.detail.get("frequency")
+        cands = [s for s in diag.analyses.get("spectra", {}).get("pooled", [])
+                 if s.frequency[0] <= f <= s.frequency[-1]]
+        spec = max(cands, key=lambda s: s.power_z(f)) if cands else None
+    try:
+        return dplots.plot_effect(diag.data, e, res, con, out / f"effect_{i:02d}.png", spectrum=spec)
+    except Exception as exc:  # a figure must not cost the report; say what happened
+        e.history.append(f"(figure not drawn: {exc})")
+        return None
+
+
+def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", recording_summary: str = "",
+                          title: str = "gearspec diagnose report") -> Path:
+    """Write ``report.md``, the figures, ``baseline_model.json``, ``final_model.json`` and
+    ``effects.csv`` / ``segments.csv`` into ``out``; returns the path of the report."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    dd = diag.data
+    tu = dd.torque_unit
+    unit = dd.unit
+    diag.baseline_model.to_json(out / "baseline_model.json")
+    diag.final_model.to_json(out / "final_model.json")
+    et = effect_table(diag)
+    et.to_csv(out / "effects.csv", index=False)
+    seg = diag.segment_table()
+    seg.to_csv(out / "segments.csv", index=False)
+    spectra = diag.analyses.get("spectra", {}).get("pooled", [])
+    fig_spec = dplots.plot_spectra(spectra, diag.effects, out / "residual_spectra.png", unit=unit, torque_unit=tu)
+    final_spec = diag.final_analyses.get("spectra", {}).get("pooled", []) if diag.final_analyses else []
+    fig_final = dplots.plot_spectra(final_spec, [e for e in diag.effects if e.accepted], out / "final_spectra.png",
+                                    unit=unit, torque_unit=tu, title="Residual spectra over position (final model)") \
+        if final_spec else None
+    fig_seg = dplots.plot_segment_errors(seg, out / "segment_errors.png", torque_unit=tu, unit=unit)
+
+    held = "moves" if dd.kind == "trajectory" else f"{dd.by}s"
+    k = diag.settings.get("folds")
+    md = [f"# {title}", ""]
+    if command:
+        md += [f"Command: `{command}`", ""]
+    if recording_summary:
+        md += ["## Recording", "", "```", recording_summary, "```", ""]
+    md += [f"{len(dd)} observations in {dd.n_groups} held-out groups (whole {held}); {k}-fold cross-validation "
+           "over whole groups, never interleaved samples. " + " ".join(dd.notes), ""]
+    # ---- summary
+    acc = [e for e in diag.effects if e.accepted]
+    md += ["## Summary", ""]
+    if acc:
+        md += [f"{len(acc)} effect(s) accepted, {len(diag.effects) - len(acc)} candidate(s) rejected:", ""]
+        md += [f"- **{e.kind}**: {e.name}" + (f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else "")
+               + (f" ({e.label})" if e.label else (f" (unknown order, {e.hint})" if e.hint else ""))
+               + f" -- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu}" for e in acc]
+        md.append("")
+    else:
+        md += [f"Nothing was accepted: no candidate lowered the held-out error by more than noise would "
+               f"({len(diag.effects)} candidate(s) tested).", ""]
+    st = diag.summary_table()
+    md += ["Before and after (rmse in-sample, and on held-out groups: each fold predicted by a model fitted "
+           f"without it), in {tu}:", "", markdown_table(st), ""]
+    if diag.validation:
+        v = diag.validation
+        md += [f"On the independent recording `{v['name']}` ({v['groups']} groups; models fitted on the estimation "
+               f"data only): rmse {v['baseline_rmse']:.4g} -> {v['final_rmse']:.4g} {tu}, relative error "
+               f"{v['baseline_relative_error']:.3f} % -> {v['final_relative_error']:.3f} %.", ""]
+        if v.get("removed"):
+            md += ["Removed because they did not help there: " + ", ".join(v["removed"]) + ".", ""]
+    # ---- baseline
+    bm = diag.baseline_model
+    md += ["## Baseline model", "", f"`{bm.name}` -- law {bm.law} ({bm.law_spec.description}); nonlinear "
+           "parameters (Stribeck velocity, decays) refined by least squares, linear ones refitted jointly by "
+           "ordinary least squares, as every model of the loop is.", "", markdown_table(_param_table(bm)), ""]
+    if bm.terms:
+        md += ["Terms: " + "; ".join(_term_text(t) for t in bm.terms), ""]
+    md += ["## Residual spectra", "", "Residual of the baseline model over position, pooled over the segments of each "
+           "direction (each segment's mean removed), with the local noise level; the lines the loop tested are "
+           "marked (green: accepted, grey: rejected).", "", f"![spectra]({fig_spec.name})", ""]
+    # ---- effects
+    md += ["## Effects accepted", ""]
+    if not acc:
+        md += ["_(none)_", ""]
+    for i, e in enumerate(diag.effects):
+        if not e.accepted:
+            continue
+        fig = _figure_for(diag, e, out, i)
+        md += [f"### {e.kind}: {e.name}", ""]
+        md += [f"- evidence: {e.evidence}", f"- held-out test: {e.decision}",
+               f"- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu} "
+               f"({-100 * e.gain:+.2f} %), {e.n_params} parameter(s) added", f"- fitted: {e.parameters}"]
+        if e.validation:
+            v = e.validation
+            md.append(f"- independent recording: rmse {v['rmse_without']:.4g} -> {v['rmse_with']:.4g} {tu}, "
+                      f"relative error {v['relative_error_without']:.3f} % -> {v['relative_error_with']:.3f} % "
+                      f"(Z {v['z']:.2f}, needs {v['z_crit']:.2f}): confirmed")
+        md.append("")
+        md += interpretation(diag, e) + [""] if interpretation(diag, e) else []
+        if e.terms:
+            md += ["Terms added (SI, with standard errors):", ""]
+            md += [f"- {_term_text(t.get('term') or t.get('harmonic'), t.get('direction'))}" for t in e.terms] + [""]
+        if fig is not None:
+            md += [f"![{e.name}]({fig.name})", ""]
+    # ---- rejected
+    rej = [e for e in diag.effects if not e.accepted]
+    md += ["## Candidates not accepted", "", "Every candidate the detectors proposed, with its evidence and why it was "
+           "not accepted (Z: the held-out correlation of the residual with what the candidate predicts, in units of "
+           "its noise; needed: the one-sided t quantile at the round's Bonferroni level).", ""]
+    if not rej:
+        md += ["_(none)_", ""]
+    for i, e in enumerate(diag.effects):
+        if e.accepted:
+            continue
+        f = f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else ""
+        lab = f" ({e.label})" if e.label else (f" (unknown order, {e.hint})" if e.hint else "")
+        md += [f"- **{e.kind}: {e.name}**{f}{lab} -- evidence: {e.evidence}. Held-out rmse "
+               f"{e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu}, Z {_f(e.z, '.2f')} (needs "
+               f"{_f(e.z_crit, '.2f')}). Decision: {e.decision}"]
+        if len(e.history) > 1:
+            md.append("  - history: " + "; ".join(e.history))
+    md.append("")
+    shown = [(i, e) for i, e in enumerate(diag.effects) if not e.accepted and (e.validation or e.z >= 2)]
+    for i, e in shown[:6]:
+        fig = _figure_for(diag, e, out, i)
+        if fig is not None:
+            md += [f"Figure for the rejected candidate *{e.name}*:", "", f"![{e.name}]({fig.name})", ""]
+    # ---- final model
+    fm = diag.final_model
+    md += ["## Final model", "", f"`{fm.name}`", "", markdown_table(_param_table(fm)), ""]
+    if fm.terms:
+        md += ["Terms: " + "; ".join(_term_text(t) for t in fm.terms), ""]
+    md += ["`final_model.json` holds it in the `gearspec fit --json` form (terms included); "
+           "`baseline_model.json` the baseline.", ""]
+    if fig_final is not None:
+        md += [f"![final spectra]({fig_final.name})", ""]
+    md += ["## Error per held-out group", "", f"![segments]({fig_seg.name})", "",
+           markdown_table(seg[["group", "direction", "speed", "n", "rmse_before", "rmse_after", "rmse_holdout_before",
+                               "rmse_holdout_after"]]), ""]
+    md += ["## Method", "",
+           "Residual analyses (gearspec.diagnose.residual): Lomb-Scargle periodograms of the residual over position "
+           "per segment and pooled over segments of one direction and similar speed, with local noise and "
+           "false-alarm probabilities; residual means against speed per direction (lack of fit), against load, "
+           "temperature and time per group; against acceleration; against the travel since the last reversal. "
+           "Each detector turns what it sees into candidate terms (a line at the found frequency with its "
+           "amplitude law chosen by the data, other speed laws, load terms and SILO4 eq. 14, temperature, drift, "
+           "direction asymmetry, inertia, presliding and backlash).", "",
+           "Acceptance (gearspec.diagnose.loop): in every fold the candidate searches its own frequency or shape on "
+           "the training groups only and is fitted jointly with the model; on the held-out groups the statistic "
+           "Z = sum <r0, Delta> / sqrt(sum V) (r0: held-out residual without the candidate, Delta: the change the "
+           "candidate predicts, V: cluster-robust variance per group) must exceed the one-sided t quantile at "
+           f"alpha = {diag.settings.get('alpha')} / (candidates of the round), the improving folds must carry 90 % of "
+           f"the change, and the held-out rmse must fall by {100 * diag.settings.get('min_gain', 0):.2g} % at least. "
+           "The best passing candidate is added, nonlinear parameters are refined, terms accepted earlier are "
+           "checked again (backward elimination), and the loop repeats until nothing passes.", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(md))
+    return path
+
+
+def _param_table(m) -> pd.DataFrame:
+    t = m.table()
+    cols = [c for c in ("parameter", "unit", "positive", "positive_se", "negative", "negative_se") if c in t]
+    return t[cols]
+
+
+def _term_text(t, direction=None) -> str:
+    if t is None:
+        return ""
+    if "kind" not in t:  # a harmonic
+        s = (f"line {t.get('label') or ''} at {t['frequency']:.6g}: amplitude {t['amplitude']:.4g} "
+             f"(+- {_f(t.get('amplitude_se'), '.2g')}), phase {t.get('phase', 0):.3f} (+- {_f(t.get('phase_se'), '.2g')}), "
+             f"{t.get('law', 'exp')} law, decay {t.get('decay', 0):.4g}")
+        if t.get("load_coefficient"):
+            s += f", load coefficient {t['load_coefficient']:.4g} (+- {_f(t.get('load_coefficient_se'), '.2g')})"
+        return (f"{direction}: " if direction else "") + s
+    parts = []
+    for k, v in t.items():
+        if k in ("kind", "effect_kind") or k.endswith("_se"):
+            continue
+        if isinstance(v, float):
+            se = t.get(k + "_se")
+            parts.append(f"{k} {v:.4g}" + (f" (+- {se:.2g})" if isinstance(se, float) and math.isfinite(se) else ""))
+        else:
+            parts.append(f"{k} {v}")
+    return f"{t['kind']}: " + ", ".join(parts)
