@@ -424,8 +424,9 @@ def _report(out: Path, v: dict) -> Path:
     if len(bad):
         md += ["**Outside tolerance, and why:**", ""]
         for _, r in bad.iterrows():
+            note = str(r["note"]) if isinstance(r["note"], str) else ""
             md.append(f"- `{r['quantity']}`: {_fmt(r['gearspec'])} against {_fmt(r['paper'])} "
-                      f"(rel. diff. {_fmt(r['rel_diff'], '+.2f')}). {r['note']}")
+                      f"(rel. diff. {_fmt(r['rel_diff'], '+.2f')}). {note[:1].upper() + note[1:]}.")
         md.append("")
     notes_other = main[(main["tolerance"].isna()) & (main["note"].astype(str).str.len() > 0)
                        & ~main["quantity"].str.startswith("omega")]
