@@ -20,7 +20,7 @@ from ..errors import GearspecWarning, InputError
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
-COMMANDS = ("spectrum", "fit", "diagnose", "simulate", "repro", "gears", "data", "demo")
+COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo")
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

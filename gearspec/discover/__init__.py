@@ -33,7 +33,8 @@ from .explorer import PAPER_LAWS, Candidate, DiscoveryResult, Reference, discove
 from .law import LawFit, Part, fit_law, fold_ids
 from .library import FAMILIES, Family, Library, Term, default_library
 from .moments import Moments, moments
+from .published import published_models
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS", "Library",
            "Term", "Family", "FAMILIES", "default_library", "Moments", "moments", "Part", "LawFit", "fit_law",
-           "fold_ids"]
+           "fold_ids", "published_models"]

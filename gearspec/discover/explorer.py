@@ -99,6 +99,8 @@ class DiscoveryResult:
     settings: dict
     notes: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    #: mean friction of every segment (data, the selected law and each reference), for plots
+    levels: dict = field(default_factory=dict)
 
     @property
     def best(self) -> Candidate:
@@ -225,26 +227,32 @@ def _clean(obj):
 def spectrum_lines(result, *, max_fap: float = 1e-3, min_segments: int = 2, rel_tol: float = 0.01) -> list[dict]:
     """Frequencies a spectrum analysis found that the gear spec does not declare (harmonics,
     sidebands, unlabelled lines) with ``fap <= max_fap`` in at least ``min_segments`` segments
-    (all segments if there are fewer): ``[{"frequency", "label"}]``, frequencies the median of a
-    cluster within ``rel_tol``."""
+    (all segments if there are fewer): ``[{"frequency", "label"}]``, each the median of a cluster of
+    peaks closer than ``rel_tol`` or than the frequency resolution of a typical segment (one cycle
+    over its travel) -- two lines a segment cannot resolve are one line to a regression."""
     t = result.peaks_table()
     if t.empty:
         return []
     t = t[(~t["declared"].astype(bool)) & (t["fap"] <= max_fap)].sort_values("frequency")
     need = min(min_segments, len(result.segments))
+    spans = [s.span for s in result.segments if s.span and s.span > 0]
+    resolution = 1.0 / float(np.median(spans)) if spans else 0.0
+    declared = [float(ln.frequency) for ln in (result.gear.declared_lines() if result.gear is not None else [])]
     out = []
     f = t["frequency"].to_numpy()
     i = 0
     while i < len(f):
         j = i + 1
-        while j < len(f) and f[j] <= f[i] * (1 + rel_tol):
+        while j < len(f) and f[j] - f[j - 1] <= max(f[j - 1] * rel_tol, resolution):
             j += 1
         grp = t.iloc[i:j]
-        if grp["segment"].nunique() >= need:
+        fc = float(np.median(grp["frequency"]))
+        near_declared = any(abs(fc - fd) <= max(fd * rel_tol, resolution) for fd in declared)
+        if grp["segment"].nunique() >= need and not near_declared:
             lab = grp["label"].dropna()
             hint = grp["hint"].dropna() if "hint" in grp else pd.Series([], dtype=object)
             label = (lab.mode().iloc[0] if len(lab) else (hint.mode().iloc[0] if len(hint) else None))
-            out.append({"frequency": float(np.median(grp["frequency"])),
+            out.append({"frequency": fc, "source": "found",
                         "label": f"found: {label}" if label else f"found in {grp['segment'].nunique()} segments"})
         i = j
     return out
@@ -255,11 +263,12 @@ def _frequency_specs(frequencies, gear, spectrum) -> list[dict]:
     if gear is not None:
         from ..identify import harmonic_specs
 
-        specs += harmonic_specs(None, gear)
+        specs += [{**h, "source": "declared"} for h in harmonic_specs(None, gear)]
     if spectrum is not None:
         specs += spectrum_lines(spectrum)
     for f in frequencies or ():
-        specs.append(dict(f) if isinstance(f, Mapping) else {"frequency": float(f), "label": None})
+        specs.append({"source": "given", **dict(f)} if isinstance(f, Mapping)
+                     else {"frequency": float(f), "label": None, "source": "given"})
     out: list[dict] = []
     for s in specs:
         f = float(s["frequency"])
@@ -267,7 +276,7 @@ def _frequency_specs(frequencies, gear, spectrum) -> list[dict]:
             raise InputError(f"ripple frequency must be a positive number (cycles per unit of theta), got {f}")
         if any(abs(f - o["frequency"]) <= 1e-6 * f for o in out):
             continue
-        out.append({"frequency": f, "label": s.get("label")})
+        out.append({"frequency": f, "label": s.get("label"), "source": s.get("source", "given")})
     return out
 
 
@@ -802,9 +811,34 @@ def _discover(data, *, frequencies, gear, spectrum, library, library_options, op
     for name, model in (published or {}).items():
         refs.append(_published(data, M, name, model))
     timings["references"] = time.perf_counter() - t0
+    levels = {"data": M.c[:, 0] / M.n, "selected": _mean_prediction(cand_list[selected].fit, M)}
+    for r in refs:
+        if r.model is not None:
+            try:
+                levels[r.name] = _segment_mean(data, r.model, M)
+            except InputError:
+                pass
     timings["total"] = time.perf_counter() - t_start
     settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
-    return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, fold, settings, notes, timings)
+    return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, fold, settings, notes, timings, levels)
+
+
+def _mean_prediction(fit: LawFit, M: Moments) -> np.ndarray:
+    """Mean of a fitted law's prediction over each segment's samples (exact: the first row of
+    each segment's Gram matrix holds the sums of the bases)."""
+    from .law import _multipliers
+
+    A = _multipliers(fit.parts, fit.layout, M, fit.z)
+    k = np.array([M.index(b) for _, _, b in fit.layout.cols], dtype=int)
+    sums = M.B[:, 0, :][:, k]
+    return np.sum(A * sums * fit.w[None, :], axis=1) / M.n
+
+
+def _segment_mean(data: FitData, model: FrictionModel, M: Moments) -> np.ndarray:
+    pred = model.evaluate(**data.inputs())
+    pos = {int(s): i for i, s in enumerate(M.segment)}
+    idx = np.array([pos[int(s)] for s in data.segment], dtype=int)
+    return np.bincount(idx, weights=np.nan_to_num(pred), minlength=M.S) / M.n
 
 
 def _fixed_columns(M: Moments, keep, parts, z) -> np.ndarray:
@@ -908,7 +942,10 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold, by) -> Referenc
              "lola8": "Lola law (8)", "lola11": "Lola law (11)"}.get(law, law)
     if law in ("lola8", "lola11") and data.load is None:
         return Reference(label, "paper law", None, None, None, None, note="needs the load channel; not fitted")
-    harmonics = [{"frequency": s["frequency"], "label": s.get("label")} for s in specs] if law == "silo4" else None
+    # SILO4 eq. 11 with the lines the user declared or gave (not those the spectrum found: the
+    # paper's law is about the gear train's own lines)
+    harmonics = ([{"frequency": s["frequency"], "label": s.get("label")} for s in specs
+                  if s.get("source") != "found"] if law == "silo4" else None)
     if law == "silo4" and not harmonics:
         return Reference(label, "paper law", None, None, None, None, note="no ripple line declared; same as eq. 3")
     kw = {"harmonics": harmonics, "weights": "uniform", "holdout": None}
@@ -916,6 +953,9 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold, by) -> Referenc
         model = identify.fit(data, law, **kw)
     except InputError as exc:
         return Reference(label, "paper law", None, None, None, None, note=f"not fitted: {exc}")
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a comparison is never worth a crash
+        return Reference(label, "paper law", None, None, None, None,
+                         note=f"identify.fit failed ({type(exc).__name__}: {exc})")
     seg_fold = dict(zip(M.segment.tolist(), fold.tolist()))
     sample_fold = np.array([seg_fold[int(s)] for s in data.segment])
     cv = np.zeros(M.S)
@@ -925,7 +965,7 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold, by) -> Referenc
         try:
             mf = identify.fit(data.subset(~test), law, **kw)
             cv += _segment_sse(data, mf, M, test)
-        except InputError:
+        except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError):
             failed += 1
             cv[fold == f] = np.nan
     ok = np.isfinite(cv)
