@@ -616,12 +616,14 @@ def _figure_texts(v) -> list[str]:
            f"Plateau averages of all {len(pl)} segments with Table 2's eq. 3, the joint fit and the published "
            "procedure (with eq. 4 on every plateau below 100 rpm, and on those <= 20 rpm only). The curve has the "
            "shape of the paper's Fig. 4: a minimum near 40 rpm, static friction above Coulomb, viscous slope above "
-           "100 rpm. The published procedure's Stribeck part is visibly too slow (audit, item 4).", ""]
+           "100 rpm. The published procedure's Stribeck part is visibly too slow (audit: the published Stribeck step).", ""]
     s5 = [figs._segment_at(v["spectrum"], r, 1) for r in FIG5_RPM]
     md += ["### Fig. 5: friction against joint position and its spectrum at 2000 / 4500 / 6500 rpm", "",
            "![fig5](fig5_position_spectra.png)", "",
            "Paper: three spectral components, F1 = 0.159, F2 = 3.26, F3 = 45.6 cycles/rad (joint), F1 of constant "
-           "amplitude, F2 and F3 smaller at higher speed. Twin: the same three lines; F2 amplitude "
+           "amplitude, F2 and F3 smaller at higher speed. Twin: the same three lines -- F1 as the slow bow of the "
+           "friction over one joint turn (at 2000 and 4500 rpm a plateau covers about one turn and the spectrum's "
+           "detrending takes it; at 6500 rpm it is a peak) -- and F2 of "
            + ", ".join(f"{1e3 * s.peak(figs.LABELS[2]).amplitude:.3f}" if s is not None and s.peak(figs.LABELS[2])
                        else "n/a" for s in s5)
            + " mNm at 2000/4500/6500 rpm (Table 2: "
@@ -637,7 +639,7 @@ def _figure_texts(v) -> list[str]:
            "Paper: \"more than 25 percent\" at F2 and 4 % at F3 at low speed, decreasing exponentially with speed, "
            f"different forwards and backwards. Twin: at most {v['twin_pct'][(2, 'positive')]:.1f} % (forwards) and "
            f"{v['twin_pct'][(2, 'negative')]:.1f} % (backwards) at F2, {v['twin_pct'][(3, 'positive')]:.1f} % / "
-           f"{v['twin_pct'][(3, 'negative')]:.1f} % at F3 -- which is what Table 2 implies (audit, item 1). The "
+           f"{v['twin_pct'][(3, 'negative')]:.1f} % at F3 -- which is what Table 2 implies (audit: the 25 % at F2). The "
            "decrease with speed and the asymmetry are reproduced; the 25 % is not, because Table 2 cannot produce it. "
            "(F2 is fitted only where a plateau covers a full worm-shaft turn, 88 motor rad: from 100 rpm up.)", ""]
     md += ["### Fig. 9: model against data at 280 / 560 / 3000 rpm", "", "![fig9](fig9_model_vs_data.png)", "",
