@@ -198,8 +198,9 @@ def run(out, seed: int = 0, *, modules=("A", "B", "C"), n_speeds: int | None = N
             {"module": m, "quantity": f"law (8) RMS, {m}: misfit in friction torque (Nm), same grid",
              "paper": p8, "gearspec": r["misfit8_torque"].rmse, "note": "if RMS were of friction torque"},
             {"module": m, "quantity": f"RMS of efficiency, Table III law - Table IV law, {m}, twin's grid",
-             "paper": math.hypot(p8, p11), "gearspec": r["paper_models_rms"],
-             "note": "paper column: what two fits of one data set could differ by at most, sqrt(RMS8^2 + RMS11^2)"},
+             "paper": p8 + p11, "gearspec": r["paper_models_rms"],
+             "note": "paper column: the most two fits of one data set can differ by there, RMS8 + RMS11 (triangle "
+                     "inequality)"},
         ]
     table3 = comparison_table(rows3)
     table4 = comparison_table(rows4)
