@@ -36,7 +36,7 @@ from ..gears import integer_hint
 from ..model import LAWS
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
-from .design import BaseBlock, Block, Grams, HarmonicBlock, TermBlock, solve_normal, travel_range
+from .design import LINEAR, BaseBlock, Block, Grams, HarmonicBlock, TermBlock, solve_normal, travel_range
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate", "AsymmetryBlock"]
 
@@ -193,6 +193,8 @@ class AsymmetryBlock(Block):
         params = {k: 0.0 for k in law.params}
         params.update({k: None for k in law.optional})
         params.update(dict(self.nonlin))
+        if all(v is not None for v in dict(self.nonlin).values()):
+            params.update({k: 0.0 for k in LINEAR[self.law][0]})
         params[self.param] = 1.0
         load = f.load if f.load is not None else (np.zeros(len(f)) if law.needs_load else None)
         mag = np.broadcast_to(np.asarray(law.magnitude(speed, load, *[params[k] for k in law.params]), float),
@@ -282,12 +284,17 @@ class PeriodicCandidate(Candidate):
         self.frequency = self.f0
         self.relabel(self.f0)
 
-    def relabel(self, f: float) -> None:
+    def relabel(self, f: float, se: float | None = None) -> None:
+        """Label (or integer hint) of frequency ``f``: within three standard errors of it (or a
+        tenth of a resolution step before it is fitted), and at least 0.2 % of it (0.5 % for an
+        integer hint)."""
         self.frequency = float(f)
-        tol = max(0.1 * self.resolution, 2e-3 * f)
+        tol = max(3 * se if se is not None and np.isfinite(se) else 0.1 * self.resolution, 2e-3 * f)
         ln = self.gear.label(f, tol) if self.gear is not None else None
         self.label = None if ln is None else ln.label
-        self.hint = None if (self.gear is None or ln is not None) else integer_hint(self.gear, f, tol)
+        # an integer relation to a shaft is looser: a filtered or delayed signal shifts a fitted
+        # frequency by a few tenths of a percent, and neighbouring multiples (6x, 8x) are far apart
+        self.hint = None if (self.gear is None or ln is not None) else integer_hint(self.gear, f, max(tol, 5e-3 * f))
 
     def propose(self, rnd, train):
         dd = rnd.dd

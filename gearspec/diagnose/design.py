@@ -260,6 +260,12 @@ class HarmonicBlock(Block):
         x = None
         cols = []
         lp = dict(self.load_phase)
+        # segments whose position sampling cannot carry the line (above 0.8 of their position
+        # Nyquist frequency) do not get it: an aliased sinusoid would fit noise there
+        if dd.reduce is None:
+            ok = resolved(dd, self.frequency)
+            if not ok.all():
+                sn, cs = np.where(ok, sn, 0.0), np.where(ok, cs, 0.0)
         for d, sel in self._groups(f):
             g = np.where(sel, sgn * self._g(d, speed), 0.0)
             cols += [g * sn, g * cs]
@@ -511,6 +517,8 @@ class FittedState:
     residual: np.ndarray
     rmse: float
     prediction: np.ndarray = field(repr=False, default=None)
+    #: standard errors of the nonlinear parameters, ``{uid: {key: se}}`` (from their Taylor columns)
+    nonlinear_se: dict = field(default_factory=dict)
 
     def model(self, name: str | None = None, rmse_holdout: float | None = None) -> FrictionModel:
         """The fitted state as a FrictionModel (base parameters, harmonics and terms, with
@@ -524,11 +532,53 @@ class FittedState:
             p["harmonics"] = []
         m.terms = []
         for blk, (a, z) in zip(self.state.blocks, self.state.spans()):
+            n_terms = len(m.terms)
             blk.write(m, self.coef[a:z], self.se[a:z])
+            _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
         m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
         m.rmse = self.rmse
         m.rmse_holdout = rmse_holdout
         return m
+
+
+def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list) -> None:
+    for key, se in ses.items():
+        se = float(se)
+        if key[0] == "base":
+            _, d, k = key
+            for nm in (DIRECTIONS if d == 0 else (_DNAME[d],)):
+                m.directions[nm][k + "_se"] = se
+        elif key[0] in ("decay", "frequency"):
+            names = DIRECTIONS if (key[0] == "frequency" or key[1] == 0) else (_DNAME[key[1]],)
+            for nm in names:
+                for h in m.directions[nm]["harmonics"]:
+                    if math.isclose(h["frequency"], blk.frequency, rel_tol=1e-12):
+                        h[key[0] + "_se"] = se
+        elif key[0] == "fixed":
+            for t in new_terms:
+                t[key[1] + "_se"] = se
+
+
+def nonlinear_standard_errors(state: State, dd: DiagnoseData, X: np.ndarray | None = None,
+                              G: np.ndarray | None = None) -> dict:
+    """Standard errors of the nonlinear parameters (Stribeck velocities, decays, frequencies,
+    exponents, lengths): those of the coefficients of their Taylor columns in the joint least-
+    squares fit of all data, ``{uid: {key: se}}`` (white-noise errors, like the linear ones)."""
+    X = state.design(dd, taylor=True) if X is None else X
+    G = X.T @ X if G is None else G
+    beta = solve_normal(G, X.T @ dd.y)
+    r = dd.y - X @ beta
+    s2 = float(r @ r) / max(len(r) - X.shape[1], 1)
+    cov = _cov(G, s2)
+    out = {}
+    for blk, (a, z) in zip(state.blocks, state.spans(dd, taylor=True)):
+        keys = [p[0] for p in nonlinear_parameters(blk, dd)] if blk.coef else []
+        if not keys:
+            continue
+        k0 = a + len(blk.names)
+        out[blk.uid] = {key: float(np.sqrt(max(cov[k0 + j, k0 + j], 0.0))) for j, key in enumerate(keys)
+                        if np.isfinite(cov[k0 + j, k0 + j])}
+    return out
 
 
 def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) -> FittedState:
@@ -657,6 +707,32 @@ def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
     return np.array([float(t[lin])])
 
 
+def segment_nyquist(dd: DiagnoseData) -> np.ndarray:
+    """Position Nyquist frequency of the segment of every sample (half the inverse of the 90th
+    percentile of the position steps in the segment), cached on the data."""
+    hit = dd.cache.get("nyquist")
+    if hit is not None:
+        return hit
+    f = dd.fit
+    out = np.full(len(f), np.inf)
+    if f.theta is not None:
+        seg = f.segment
+        bounds = np.flatnonzero(np.diff(seg) != 0) + 1
+        for a, z in zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [len(seg)]))):
+            st = np.abs(np.diff(f.theta[a:z]))
+            st = st[st > 0]
+            if len(st):
+                out[a:z] = 0.5 / float(np.percentile(st, 90))
+    dd.cache["nyquist"] = out
+    return out
+
+
+def resolved(dd: DiagnoseData, frequency: float, fraction: float = 0.8) -> np.ndarray:
+    """Samples whose segment resolves a line at ``frequency`` (below ``fraction`` of its position
+    Nyquist frequency)."""
+    return frequency < fraction * segment_nyquist(dd)
+
+
 # ---------------------------------------------------------------------- nonlinear parameters
 def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
     """The nonlinear parameters of a block the polish refines: ``(key, value, lo, hi, log)``.
@@ -687,7 +763,8 @@ def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
             elif law == "power":
                 out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 6.0, False))
         if blk.found and dd.fit.theta is not None:
-            span = float(np.ptp(dd.fit.theta)) or 1.0
+            th = dd.at("theta")
+            span = max((float(np.ptp(th[a:z])) for a, z in zip(dd.starts, dd.stops)), default=0.0) or 1.0
             f = blk.frequency
             out.append((("frequency",), f, f - 0.5 / span, f + 0.5 / span, False))
     elif isinstance(blk, TermBlock):

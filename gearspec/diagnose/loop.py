@@ -52,7 +52,8 @@ from ..model import FrictionModel
 from ..recording import Recording
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, Proposal, term_candidates, train_fit
 from .data import DiagnoseData
-from .design import FittedState, Grams, HarmonicBlock, State, fit_state, polish, refine, solve_normal, state_from_model
+from .design import (FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, polish, refine,
+                     solve_normal, state_from_model)
 from .residual import (acceleration_analysis, channel_analysis, magnitude_residual, position_spectra,
                        reversal_analysis, speed_analysis)
 
@@ -99,7 +100,9 @@ class Round:
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         self.X = self.state.design(dd, taylor=True)
         self.grams = Grams.of(self.X, dd.y, dd)
-        self.ref_diag = np.diag(self.grams.G.sum(0)).copy()
+        G_all = self.grams.G.sum(0)
+        self.ref_diag = np.diag(G_all).copy()
+        self.fitted.nonlinear_se = nonlinear_standard_errors(self.state, dd, self.X, G_all)
         self.fold = folds
         self.K = int(folds.max()) + 1
         self._sums = {}
@@ -182,9 +185,19 @@ class Evaluation:
     contribution: np.ndarray = field(repr=False, default=None)   # all-data fit with the candidate minus without
 
 
-def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: float,
-                       consistency: float = 0.9, repolish: bool = True) -> Evaluation:
-    """The held-out test of the module docstring for one candidate.
+@dataclass
+class _Folds:
+    """What one candidate did in every fold (pass 1 of a round)."""
+
+    r0: np.ndarray              # held-out residual without the candidate, every observation
+    p1: np.ndarray              # held-out prediction with it
+    proposals: list             # per fold: (keep mask over the round's columns, Proposal) or None
+    contribution: np.ndarray | None
+    n_par: int
+
+
+def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
+    """Run a candidate's procedure in every fold: held-out predictions with and without it.
 
     With ``repolish`` (all but periodic candidates), the model the candidate extends is the
     present one with its nonlinear parameters refined *together with the candidate* on all data
@@ -208,41 +221,55 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
             keep = ext.keep_mask(p_ext.drop)
             beta, _ = train_fit(ext, keep, p_ext, ext.all_groups())
             contribution = np.column_stack([ext.X[:, keep], p_ext.columns(dd)]) @ beta - rnd.fitted.prediction
+    r0 = np.zeros(len(dd))
+    p1 = np.zeros(len(dd))
+    props = []
+    n_par = 0
+    for f in range(rnd.K):
+        train = rnd.fold != f
+        rows = np.flatnonzero(~rnd.rows(train))
+        beta0 = rnd.beta(train)
+        p0 = rnd.X[rows] @ beta0
+        r0[rows] = dd.y[rows] - p0
+        prop = cand.propose(ext, train) if (train.any() and not train.all()) else None
+        if prop is None:
+            p1[rows] = p0
+            props.append(None)
+            continue
+        keep = ext.keep_mask(prop.drop)
+        beta1, _ = train_fit(ext, keep, prop, train)
+        n_par = prop.n_params(ext)
+        p1[rows] = np.column_stack([ext.X[rows][:, keep], prop.columns(dd)[rows]]) @ beta1
+        props.append((rnd.keep_mask(prop.drop), prop))
+    return _Folds(r0, p1, props, contribution, n_par)
+
+
+def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, min_gain: float,
+            consistency: float = 0.9) -> Evaluation:
+    """The three conditions of the module docstring.  ``noise``: the held-out residual the
+    variance of Z is estimated from (default: the candidate's own, ``y - p1``)."""
+    dd = rnd.dd
+    y = dd.y
+    r0 = fr.r0
+    r1 = y - fr.p1
+    delta = fr.p1 - (y - r0)
+    rn = r1 if noise is None else noise
     ng = dd.n_groups
     sse0 = np.zeros(ng)
     sse1 = np.zeros(ng)
     num = 0.0
     var = 0.0
     fold_d = np.zeros(rnd.K)
-    n_par = 0
-    for f in range(rnd.K):
-        train = rnd.fold != f
-        if not train.any() or train.all():
-            continue
-        prop = cand.propose(ext, train)
-        rows = np.flatnonzero(~rnd.rows(train))
-        beta0 = rnd.beta(train)
-        p0 = rnd.X[rows] @ beta0
-        if prop is None:
-            p1 = p0
-        else:
-            keep = ext.keep_mask(prop.drop)
-            beta1, _ = train_fit(ext, keep, prop, train)
-            n_par = prop.n_params(ext)
-            p1 = np.column_stack([ext.X[rows][:, keep], prop.columns(dd)[rows]]) @ beta1
-        y = dd.y[rows]
-        r0, r1, delta = y - p0, y - p1, p1 - p0
-        grp = dd.group[rows]
-        for g in np.unique(grp):
-            m = grp == g
-            a0, a1, dl = r0[m], r1[m], delta[m]
-            sse0[g] = float(a0 @ a0)
-            sse1[g] = float(a1 @ a1)
-            num += float(a0 @ dl)
-            whole = float(a1 @ dl) ** 2
-            blocks = sum(float(b1 @ b2) ** 2 for b1, b2 in zip(np.array_split(a1, 8), np.array_split(dl, 8)))
-            var += max(whole, blocks)
-            fold_d[f] += sse0[g] - sse1[g]
+    fold_of_group = rnd.fold
+    for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+        a0, a1, dl, an = r0[a:z], r1[a:z], delta[a:z], rn[a:z]
+        sse0[g] = float(a0 @ a0)
+        sse1[g] = float(a1 @ a1)
+        num += float(a0 @ dl)
+        whole = float(an @ dl) ** 2
+        blocks = sum(float(b1 @ b2) ** 2 for b1, b2 in zip(np.array_split(an, 8), np.array_split(dl, 8)))
+        var += max(whole, blocks)
+        fold_d[fold_of_group[g]] += sse0[g] - sse1[g]
     N = len(dd)
     drop = float(sse0.sum() - sse1.sum())
     z = num / math.sqrt(var) if var > 0 else (math.inf if num > 0 else 0.0)
@@ -259,9 +286,45 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
     if not gain >= min_gain:
         reasons.append(f"held-out rmse changes by {-100 * gain:+.2f} % (needs a fall of {100 * min_gain:.2g} %)")
     passed = not reasons
-    reason = "accepted: " + (f"held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed else "") \
-        if passed else "; ".join(reasons)
-    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, n_par, passed, reason, sse0, sse1, contribution)
+    reason = (f"accepted: held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed
+              else "; ".join(reasons))
+    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, sse0, sse1,
+                      fr.contribution)
+
+
+def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: float,
+                       consistency: float = 0.9, repolish: bool = True) -> Evaluation:
+    """The held-out test of the module docstring for one candidate on its own (its own held-out
+    residual estimates the noise)."""
+    fr = _run_folds(rnd, cand, repolish=repolish)
+    return _decide(rnd, fr, None, z_crit=z_crit, min_gain=min_gain, consistency=consistency)
+
+
+def _full_residual(rnd: Round, runs: list) -> np.ndarray:
+    """Held-out residual of the richest model of the round: the present one with every promising
+    candidate at once (each with the nonlinear parameters it chose in that fold), fitted on the
+    training folds."""
+    dd = rnd.dd
+    out = np.zeros(len(dd))
+    for f in range(rnd.K):
+        train = rnd.fold != f
+        tr_rows = rnd.rows(train)
+        rows = np.flatnonzero(~tr_rows)
+        keep = np.ones(rnd.X.shape[1], bool)
+        cols = []
+        for fr in runs:
+            item = fr.proposals[f]
+            if item is None:
+                continue
+            k, prop = item
+            keep &= k
+            cols.append(prop.columns(dd))
+        X = np.column_stack([rnd.X[:, keep]] + cols)
+        Xt = X[tr_rows]
+        G = Xt.T @ Xt
+        beta = solve_normal(G, Xt.T @ dd.y[tr_rows], reference=np.einsum("ij,ij->j", X, X))
+        out[rows] = dd.y[rows] - X[rows] @ beta
+    return out
 
 
 # ---------------------------------------------------------------------- residual analyses
@@ -511,7 +574,8 @@ def baseline_model(dd: DiagnoseData, law: str = "silo4", *, gear=None, harmonics
                          notes=list(fd.notes))
         m = identify.fit(folded, law, harmonics=harmonics, gear=gear, holdout=None)
         p = m.directions["positive"]
-        m = FrictionModel(m.law, p, p, unit=m.unit, terms=list(terms), not_identified=m.not_identified,
+        ni = {k.replace("positive.", "both."): v for k, v in m.not_identified.items() if not k.startswith("negative.")}
+        m = FrictionModel(m.law, p, p, unit=m.unit, terms=list(terms), not_identified=ni,
                           notes=m.notes + ["symmetric: one parameter set for both directions"],
                           name=f"{law} (symmetric)", meta=m.meta)
         return m
@@ -652,10 +716,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             break
         G = dd.n_groups
         z_crit = float(stats.t.isf(alpha / len(cands), max(G - 1, 1)))
-        evals = []
-        for c in cands:
-            ev = evaluate_candidate(rnd, c, z_crit=z_crit, min_gain=min_gain)
-            evals.append((c, ev))
+        evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
+        for c, ev in evals:
             _record(effects, c, ev, k, rnd)
             trace.append({"round": k, "candidate": c.name, "kind": c.kind, "z": ev.z, "z_crit": z_crit,
                           "gain": ev.gain, "consistency": ev.consistency, "passed": ev.passed})
@@ -680,7 +742,9 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         e.parameters = "; ".join(b.describe() for b in added if b is not None)
         if isinstance(c, PeriodicCandidate):
             f_fit = added[0].frequency
-            c.relabel(f_fit)
+            f_se = rnd.fitted.nonlinear_se.get(added[0].uid, {}).get(("frequency",))
+            c.relabel(f_fit, f_se)
+            e.detail["frequency_se"] = f_se
             e.frequency, e.label, e.hint = f_fit, c.label, c.hint
             e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
             e.order = dd.gear.order(f_fit) if dd.gear is not None else None
@@ -716,6 +780,33 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             e.detail["partial"] = True
     diag.final_analyses = analyse(Round(dd, diag.final.state, fold), fap=fap, per_segment=False)
     return diag
+
+
+def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) -> list:
+    """Every candidate of a round through the held-out test.  The noise of Z comes from the
+    held-out residual of the richest model the round supports -- the present one with every
+    candidate that lowers the held-out error in most folds, all at once -- as forward stepwise
+    regression estimates its error variance from the full model: effects present together do not
+    pass for each other's noise (a drift, a presliding curve and a nonlinear viscous law in one
+    recording each look like noise to a test of the others)."""
+    runs = [_run_folds(rnd, c) for c in cands]
+    first = [_decide(rnd, fr, None, z_crit=z_crit, min_gain=min_gain) for fr in runs]
+    # the richest model: the best promising candidate of every kind (members of one family, e.g.
+    # three shapes of Stribeck term, would only fit each other's noise)
+    best: dict = {}
+    for c, fr, ev in zip(cands, runs, first):
+        if ev.drop > 0 and ev.consistency >= 0.9 and (c.kind not in best or ev.drop > best[c.kind][1].drop):
+            best[c.kind] = (fr, ev)
+    if len(best) < 2:
+        return list(zip(cands, first))
+    noise = _full_residual(rnd, [fr for fr, _ in best.values()])
+    out = []
+    for c, fr, ev in zip(cands, runs, first):
+        ev2 = _decide(rnd, fr, noise, z_crit=z_crit, min_gain=min_gain)
+        # the noise estimate is the smaller of the two: the richest model can extrapolate worse
+        # than the candidate alone on a few groups
+        out.append((c, ev2 if ev2.z > ev.z else ev))
+    return out
 
 
 def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_gain: float, round_no: int):

@@ -1,0 +1,323 @@
+"""The closed loop (gearspec.diagnose): undeclared effects are found, accepted and explain the data;
+complete models get nothing added.
+
+Test data: 20 constant-speed plateaus (10 speeds per direction, 0.5-16 rad/s, in shuffled order,
+alternating directions, one run -- so that time, temperature and reversals are not tied to speed),
+friction from a known FrictionModel (SILO4 eq. 3 per direction, a motor-shaft line and a tooth-mesh
+line) plus white noise of sigma = 1 mNm, with one undeclared effect of gearspec.simulate.effects
+injected at a time.  The noise floor is the held-out rmse of the *true* structure fitted the same
+way (``diagnose(rec, model=truth, max_rounds=0)``), which for white noise is sigma within 1 %.
+
+Tolerances: a found line within 1 % of the true frequency (the fitted frequency's standard error
+is ~1e-4 relative here); the final held-out rmse within 15 % of the floor (a correct term leaves
+sigma * sqrt(1 + p/n) ~ 1.002 sigma; 15 % is what an effect left out or mis-shaped costs).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import gearspec.diagnose as dg
+from gearspec.cli import main
+from gearspec.gears import GearTrain, integer_hint, load_gear
+from gearspec.model import FrictionModel
+from gearspec.recording import Recording
+from gearspec.simulate import effects as fx
+from gearspec.simulate import model_recording, silo4_twin, table2_model, twin_gear
+
+SIGMA = 1e-3
+GEAR = GearTrain.from_dict({"name": "test drive", "reference": "motor", "unit": "rad",
+                            "stages": [{"name": "spur", "kind": "spur", "ratio": 10, "teeth": 17}]})
+F_MOTOR = 1 / (2 * np.pi)
+_mag = np.geomspace(0.5, 16, 10)
+_rng = np.random.default_rng(7)
+SPEEDS = [x for a, b in zip(_rng.permutation(_mag), _rng.permutation(_mag)) for x in (a, -b)]
+
+
+def truth(symmetric: bool = False, amp: float = 5e-3) -> FrictionModel:
+    def lines(a, ph):
+        return [{"frequency": F_MOTOR, "amplitude": a, "decay": 0.05, "phase": ph, "label": "motor shaft"},
+                {"frequency": 17 * F_MOTOR, "amplitude": 0.6 * a, "decay": 0.15, "phase": ph + 1,
+                 "label": "spur tooth mesh"}]
+    pos = {"tau_c": 0.05, "tau_s": 0.08, "v_s": 1.5, "viscous": 2e-3, "harmonics": lines(amp, 0.3)}
+    neg = dict(pos) if symmetric else {"tau_c": 0.055, "tau_s": 0.085, "v_s": 1.5, "viscous": 2.2e-3,
+                                       "harmonics": lines(0.8 * amp, 1.0)}
+    return FrictionModel("silo4", pos, neg, name="truth")
+
+
+def recording(effects=(), *, seed=0, symmetric=False, amp=5e-3, **kw):
+    model = fx.apply_effects(truth(symmetric, amp), effects)
+    rec, _ = model_recording(model, SPEEDS, noise=SIGMA, gear=GEAR, seed=seed, duration=1.5, fs=500.0,
+                             one_run_per_plateau=False, **kw)
+    return rec, model
+
+
+def exact_recording(model, *, ripple=0.02, ripple_hz=3.0, seed=0):
+    """Plateaus with a speed oscillation in time and exact kinematics (theta, velocity and
+    acceleration analytic): for the inertia effect, which needs accelerations the position agrees
+    with to the last digit."""
+    rng = np.random.default_rng(seed)
+    cols = {"t": [], "theta": [], "v": [], "acc": [], "run": []}
+    for k, v in enumerate(SPEEDS):
+        t = np.arange(750) / 500.0
+        w = 2 * np.pi * ripple_hz
+        ph = rng.uniform(0, 2 * np.pi)
+        cols["t"].append(t)
+        cols["theta"].append(v * t + ripple * abs(v) / w * (np.sin(w * t + ph) - np.sin(ph)) + rng.uniform(0, 6))
+        cols["v"].append(v + ripple * abs(v) * np.cos(w * t + ph))
+        cols["acc"].append(-ripple * abs(v) * w * np.sin(w * t + ph))
+        cols["run"].append(np.full(len(t), k))
+    t, th, v, a, run = (np.concatenate(cols[c]) for c in ("t", "theta", "v", "acc", "run"))
+    tau = model.evaluate(th, v, t=t, acc=a, run=run) + rng.normal(0, SIGMA, len(t))
+    return Recording.from_arrays(t=t, theta=th, torque=tau, run=run, gear=GEAR, source="synthetic")
+
+
+def floor(rec, model, **kw) -> float:
+    """Held-out rmse of the true structure, fitted as the loop fits everything."""
+    return dg.diagnose(rec, model=model, max_rounds=0, **kw).baseline_model.rmse_holdout
+
+
+def check(d, kind, model, rec, *, frequency=None, symmetric=None):
+    found = [e for e in d.accepted if e.kind == kind]
+    assert found, f"no accepted {kind} effect; trace:\n{d.trace.to_string()}"
+    if frequency is not None:
+        assert any(e.frequency and abs(e.frequency / frequency - 1) < 0.01 for e in found), \
+            [e.frequency for e in found]
+    fl = floor(rec, model, symmetric=symmetric)
+    assert fl == pytest.approx(SIGMA, rel=0.05)
+    assert d.final_model.rmse_holdout <= 1.15 * fl, (d.final_model.rmse_holdout, fl)
+    assert d.baseline_model.rmse_holdout > d.final_model.rmse_holdout
+    return found
+
+
+# ---------------------------------------------------------------------- one effect kind at a time
+def test_periodic_cogging_unknown_order_with_integer_hint():
+    rec, model = recording([fx.cogging(count=7, amplitude=1e-3)])
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "periodic", model, rec, frequency=7 * F_MOTOR)
+    assert e.label is None and e.hint == "7x motor shaft"          # unknown order, integer relation suggested
+    # a signed cogging torque shows in the friction magnitude with opposite phases in the two directions
+    h = {t["direction"]: t["harmonic"] for t in e.terms}
+    assert abs(abs(np.angle(np.exp(1j * (h["positive"]["phase"] - h["negative"]["phase"])))) - np.pi) < 0.1
+    assert all(hh["law"] == "const" for hh in h.values())
+
+
+def test_periodic_decaying_line_gets_its_amplitude_law_from_the_data():
+    rec, model = recording([fx.extra_order(frequency=0.7, amplitude=3e-3, decay=0.15, law="exp")])
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "periodic", model, rec, frequency=0.7)
+    for t in e.terms:
+        h = t["harmonic"]
+        assert h["law"] in ("exp", "rational", "power") and h["decay"] > 0     # a decaying law, not a constant
+        assert h["amplitude"] == pytest.approx(3e-3, rel=0.1)
+
+
+def test_speed_law_nonlinear_viscous():
+    rec, model = recording([fx.nonlinear_viscous(coefficient=8e-3, exponent=0.5)])
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    check(d, "speed_law", model, rec)
+    assert {e.kind for e in d.accepted} == {"speed_law"}
+
+
+def test_speed_law_amplitude_decay_of_a_declared_line():
+    rec, model = recording([fx.decay_shape(target="spur tooth mesh", law="rational", decay=0.25, direction=1)],
+                           amp=1.5e-2)
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "speed_law", model, rec)
+    assert "spur tooth mesh" in e.name and "positive" in e.name
+    h = next(t["harmonic"] for t in e.terms if t["direction"] == "positive" and t["harmonic"].get("label") ==
+             "spur tooth mesh")
+    assert h["law"] == "rational" and h["decay"] == pytest.approx(0.25, rel=0.1)
+
+
+def test_load_meshing_amplitude_eq14():
+    loads = [0, 5, 10, 15, 20] * 4
+    rec, model = recording([fx.load_meshing(target="motor shaft", coefficient=5e-5)], load=loads)
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "load", model, rec)
+    k = [t["harmonic"]["load_coefficient"] for t in e.terms]
+    assert k == pytest.approx([5e-5, 5e-5], rel=0.05)
+
+
+def test_temperature():
+    eff = [fx.warming(coefficient=-4e-4, rise=15, time_constant=10.0)]
+    rec, model = recording(eff, temperature=fx.channel_function(eff, "temperature"))
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "temperature", model, rec)
+    assert e.terms[0]["term"]["coefficient"] == pytest.approx(-4e-4, rel=0.05)
+    drift = [x for x in d.effects if x.kind == "drift"]
+    assert not any(x.accepted for x in drift)         # the recorded temperature explains it, not time
+
+
+def test_drift():
+    rec, model = recording([fx.drift(coefficient=2e-4)])
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "drift", model, rec)
+    assert e.terms[0]["term"]["coefficient"] == pytest.approx(2e-4, rel=0.05)
+
+
+def test_asymmetry_of_a_symmetric_model():
+    rec, model = recording([fx.asymmetry(parameter="tau_c", factor=1.15, direction=-1)], symmetric=True)
+    d = dg.diagnose(rec, law="silo4", gear=GEAR, symmetric=True)
+    (e,) = check(d, "asymmetry", model, rec, symmetric=False)
+    assert "tau_c" in e.name
+    p, n = d.final_model.directions["positive"], d.final_model.directions["negative"]
+    assert n["tau_c"] - p["tau_c"] == pytest.approx(0.15 * 0.05, rel=0.05)
+
+
+def test_inertia():
+    model = fx.apply_effects(truth(), [fx.extra_inertia(inertia=2e-3)])
+    rec = exact_recording(model)
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    (e,) = check(d, "inertia", model, rec)
+    assert e.terms[0]["term"]["inertia"] == pytest.approx(2e-3, rel=0.02)
+
+
+@pytest.mark.parametrize("effect,param", [(fx.hysteresis(scale=8e-3, length=1.0), ("length", 1.0)),
+                                          (fx.backlash(scale=4e-3, gap=0.4), ("gap", 0.4))],
+                         ids=["presliding", "backlash"])
+def test_hysteresis_near_reversals(effect, param):
+    rec, model = recording([effect])
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    found = check(d, "hysteresis", model, rec)
+    terms = [t["term"] for e in found for t in e.terms]
+    assert any(t["kind"] == effect.apply(truth()).terms[-1]["kind"] and
+               t[param[0]] == pytest.approx(param[1], rel=0.1) for t in terms), terms
+
+
+def test_twin_cogging_found_in_the_closed_loop_silo4_twin():
+    """The SILO4 joint-3 twin (closed-loop speed control, encoder, Bessel-filtered and sampled
+    current, 1 % friction scatter between repetitions) with undeclared cogging: found within 1 %
+    of 7 per motor turn, hinted as such, and the held-out error at (or below) that of the true
+    structure."""
+    speeds = [s * d for s in (200, 500, 1200, 3000, 6000) for d in (1, -1)]
+    eff = [fx.cogging(count=7, amplitude=3e-4)]
+    rec, _ = silo4_twin(speeds, repetitions=2, effects=eff, duration=2.0, seed=1)
+    rec.gear = twin_gear()
+    d = dg.diagnose(rec, law="silo4", gear=twin_gear())
+    per = [e for e in d.accepted if e.kind == "periodic"]
+    assert per and abs(per[0].frequency / (7 * F_MOTOR) - 1) < 0.01
+    assert per[0].hint == "7x motor shaft"
+    fl = floor(rec, fx.apply_effects(table2_model(), eff))
+    assert d.final_model.rmse_holdout <= 1.15 * fl
+
+
+# ---------------------------------------------------------------------- several at once
+def test_several_effects_in_one_recording_are_all_found():
+    eff = [fx.cogging(count=7, amplitude=1e-3), fx.drift(coefficient=1e-4), fx.hysteresis(scale=5e-3, length=1.0)]
+    rec, model = recording(eff)
+    d = dg.diagnose(rec, law="silo4", gear=GEAR)
+    kinds = sorted(e.kind for e in d.accepted)
+    assert kinds == ["drift", "hysteresis", "periodic"], d.trace.to_string()
+    per = next(e for e in d.accepted if e.kind == "periodic")
+    assert abs(per.frequency / (7 * F_MOTOR) - 1) < 0.01
+    assert d.final_model.rmse_holdout <= 1.15 * floor(rec, model)
+
+
+# ---------------------------------------------------------------------- no false discoveries
+FDR_SEEDS = 16
+
+
+def test_complete_models_get_nothing_added_over_many_seeds():
+    """False-discovery rate: on recordings whose model is complete (the baseline law is the truth's
+    law, every line declared), over FDR_SEEDS seeds; the rule is calibrated at alpha = 1 % per round
+    (family-wise over the round's candidates).  A longer run (README: 0 of 70 seeds) is in the
+    design notes; here at most one acceptance is allowed among the seeds (binomial: at a true rate
+    of 1 %, P(>= 2 of 16) = 1.1 %)."""
+    accepted = []
+    for seed in range(1000, 1000 + FDR_SEEDS):
+        rec, _ = recording([], seed=seed)
+        d = dg.diagnose(rec, law="silo4", gear=GEAR, per_segment_spectra=False)
+        accepted.append([e.name for e in d.accepted])
+        assert d.final_model.rmse_holdout <= d.baseline_model.rmse_holdout * 1.0001
+    n_false = sum(1 for a in accepted if a)
+    print(f"false discoveries: {n_false} of {FDR_SEEDS} seeds ({accepted})")
+    assert n_false <= 1, accepted
+
+
+def test_nothing_added_when_the_effect_is_declared():
+    """The same recording as the cogging test, with the cogging declared in the model: nothing."""
+    rec, model = recording([fx.cogging(count=7, amplitude=1e-3)])
+    d = dg.diagnose(rec, model=model)
+    assert not d.accepted, d.trace.to_string()
+
+
+# ---------------------------------------------------------------------- pieces
+def test_travel_since_reversal_and_moves():
+    theta = np.array([0, 1, 2, 3, 2.5, 2, 1, 1.5, 2.0])
+    v = np.array([1, 1, 1, 1, -1, -1, -1, 1, 1])
+    tr = dg.travel_since_reversal(theta, v)
+    assert np.all(np.isinf(tr[:4]))
+    assert tr[4:7] == pytest.approx([0.5, 1.0, 2.0])      # from the turning point at 3
+    assert tr[7:] == pytest.approx([0.5, 1.0])             # from the turning point at 1
+    mv = dg.moves(np.array([0, 1, 1, 0, 0, 1, 1, 0, -1, -1]), min_speed=0.5)
+    assert list(mv) == [0, 0, 0, 0, 0, 1, 1, 1, 2, 2]
+
+
+def test_decimate_matches_matlab_alignment():
+    idx = dg.decimation_index(24792, 10)
+    assert idx[0] == 1 and idx[-1] == 24791                # MATLAB keeps the last sample
+    x = np.sin(np.linspace(0, 20, 2000))   # far below the cut-off: passes within the Chebyshev ripple
+    # (0.05 dB each way of filtfilt: 1.2 %); the exact numbers are checked against EMPS's reference
+    assert dg.decimate(x, 10) == pytest.approx(x[dg.decimation_index(2000, 10)], abs=0.02)
+
+
+def test_integer_hint_is_public_and_conservative():
+    g = load_gear("kinova-gen3-joint7")
+    assert integer_hint(g, 700 / (2 * np.pi), 0.05).startswith("7x motor shaft")
+    assert integer_hint(g, 707 / (2 * np.pi), 0.05) is None
+
+
+def test_json_contract_and_model_round_trip(tmp_path):
+    rec, model = recording([fx.cogging(count=7, amplitude=1e-3)])
+    d = dg.diagnose(rec, law="silo4", gear=GEAR, max_rounds=1)
+    out = d.to_dict()
+    json.dumps(out, default=float)
+    assert set(out["baseline"]) >= {"model", "rmse", "rmse_holdout"}
+    assert set(out["final"]) >= {"model", "rmse", "rmse_holdout"}
+    for e in out["effects"]:
+        assert set(e) >= {"kind", "accepted", "frequency", "label", "evidence", "rmse_holdout_before",
+                          "rmse_holdout_after"}
+        assert e["kind"] in dg.KINDS
+    # the final model evaluates as the loop fitted it
+    m = FrictionModel.from_json(d.final_model.to_json(tmp_path / "m.json"))
+    pred = dg.predict_model(m, d.data)
+    assert np.sqrt(np.mean((d.data.y - pred) ** 2)) == pytest.approx(d.final.rmse, rel=1e-6)
+
+
+# ---------------------------------------------------------------------- command line
+def test_cli_diagnose_writes_report_and_json(tmp_path, capsys):
+    rec, _ = recording([fx.cogging(count=7, amplitude=1e-3)])
+    path = rec.save(tmp_path / "run.csv")
+    spec = tmp_path / "drive.toml"
+    spec.write_text('name = "test drive"\nreference = "motor"\nunit = "rad"\n[[stages]]\nname = "spur"\n'
+                    'kind = "spur"\nratio = 10\nteeth = 17\n')
+    rc = main(["diagnose", str(path), "--gear", str(spec), "--out", str(tmp_path / "rep"), "--json",
+               str(tmp_path / "d.json"), "--max-rounds", "2"])
+    assert rc == 0
+    d = json.loads((tmp_path / "d.json").read_text())
+    per = [e for e in d["effects"] if e["accepted"] and e["kind"] == "periodic"]
+    assert per and abs(per[0]["frequency"] / (7 * F_MOTOR) - 1) < 0.01 and per[0]["label"] is None
+    assert d["final"]["rmse_holdout"] < d["baseline"]["rmse_holdout"]
+    report = (tmp_path / "rep" / "report.md").read_text()
+    assert "7x motor shaft" in report and "## Candidates not accepted" in report
+    for png in ("residual_spectra.png", "segment_errors.png"):
+        assert (tmp_path / "rep" / png).stat().st_size > 10_000
+    assert "ACCEPTED periodic" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--folds", "1"], "--folds"),
+    (["--kinds", "periodic,magic"], "unknown kind"),
+    (["--model", "nonexistent.json"], "not a friction model"),
+])
+def test_cli_bad_input_exits_2_with_one_message(tmp_path, capsys, args, needle):
+    rec, _ = recording([])
+    path = rec.save(tmp_path / "run.csv")
+    rc = main(["diagnose", str(path), "--gear", "silo4-joint3", "--quiet"] + args)
+    err = capsys.readouterr().err
+    assert rc == 2 and needle in err and err.count("\n") == 1
