@@ -42,7 +42,7 @@ class Candidate:
     rmse_holdout: float
     origin: str
     threshold: float | None
-    cv_pred: np.ndarray | None = None   # held-out predictions on the pseudo rows (S, K)
+    cv_pred: np.ndarray | None = None   # held-out predictions as coefficients of the sample bases (S, K)
     equation: str = ""
     model: FrictionModel | None = None
     aic: float = float("nan")
@@ -366,9 +366,8 @@ def _inherit(fit: LawFit) -> tuple:
 
 
 def _compound(parts, M: Moments, addable) -> list[tuple]:
-    """Two moves at once: a term dropped and another term added, made direction-dependent or
-    reshaped -- to leave a local optimum where one term stands in for another (a power law doing
-    the work of direction-dependent Coulomb friction, say)."""
+    """Two moves at once: a term dropped and another made direction-dependent -- to leave a local
+    optimum where one term stands in for the direction dependence of another."""
     out = []
     both = len(M.directions) == 2
     for i in range(len(parts)):
@@ -379,9 +378,6 @@ def _compound(parts, M: Moments, addable) -> list[tuple]:
         for j, p in enumerate(rest):
             if both and not p.split and p.fam.basis != "acc":
                 out.append(canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)]))
-        for a in addable:
-            if _group_of(a) not in have and _group_of(a) != _group_of(parts[i]):
-                out.append(canonical(rest + [a]))
     return out
 
 
@@ -665,7 +661,7 @@ def _discover(data, *, frequencies, gear, spectrum, library, library_options, op
     settings = {"optimizer": optimizer, "alpha": alpha, "thresholds": [float(t) for t in ths], "folds": int(
         len(np.unique(fold))), "by": by, "n_models": n_models, "max_parts": max_parts, "se_rule": se_rule,
         "local_search": local_search, "library": lib.describe()}
-    max_cols = 3 * max_parts
+    max_cols = 2 * max_parts
 
     # ---- stage 1: the friction level (speed, load, temperature, inertia), every segment's ripple
     # profiled out by its own free sin/cos coefficients
@@ -706,9 +702,13 @@ def _discover(data, *, frequencies, gear, spectrum, library, library_options, op
         yy = float(np.sum(M.yy))
         current = tuple(level)
         z_cur = pool1.cands[best1].fit.z if level else None
+        seen_fixed: set = set()
         for rnd in range(2):
             lvl = tuple(p for p in current if p.fam.basis != "ripple")
             rip = tuple(p for p in current if p.fam.basis == "ripple")
+            if ("level", _signature(lvl)) in seen_fixed:
+                break
+            seen_fixed.add(("level", _signature(lvl)))
             # ripple path given the level law
             Xf = _fixed_columns(M, lvl, current, z_cur)
             nf = Xf.shape[1]
@@ -722,7 +722,8 @@ def _discover(data, *, frequencies, gear, spectrum, library, library_options, op
             best = pool.cands[pool.best()]
             rip = tuple(p for p in best.parts if p.fam.basis == "ripple")
             # level path given the ripple law
-            if X1full is not None and rip:
+            if X1full is not None and rip and ("ripple", _signature(rip)) not in seen_fixed:
+                seen_fixed.add(("ripple", _signature(rip)))
                 Xf = _fixed_columns(M, rip, best.parts, best.fit.z)
                 nr = Xf.shape[1]
                 coefs1 = path(Scaled(np.hstack([Xf, X1full]), q, M.N, yy), ths, optimizer, alpha,
@@ -877,7 +878,8 @@ def _excess(c: Candidate, best: Candidate, M: Moments, groups) -> float:
     if D <= 0:
         return D
     if M.noise is not None and np.all(np.isfinite(M.noise)) and c.cv_pred is not None and best.cv_pred is not None:
-        d2 = np.sum((c.cv_pred - best.cv_pred) ** 2, axis=1)
+        d = c.cv_pred - best.cv_pred               # held-out prediction difference, as basis coefficients
+        d2 = np.einsum("sk,skl,sl->s", d, M.B, d)
         se = 2.0 * math.sqrt(float(np.sum(M.noise * d2)))
     else:
         p = _paired(c.cv_sse, best.cv_sse, groups, M.N)
@@ -887,12 +889,26 @@ def _excess(c: Candidate, best: Candidate, M: Moments, groups) -> float:
     return D / se
 
 
+#: when two laws of equal complexity predict held-out data equally well (within one standard
+#: error), the more conventional shape is preferred: SILO4's exponential Stribeck and decay
+#: laws, then Lola's rational form, then the Gaussian
+_PREFERENCE = {"stribeck_exp": 0, "stribeck_rational": 1, "stribeck_gauss": 2,
+               "ripple_const": 0, "ripple_exp": 0, "ripple_rational": 1}
+
+
 def _select(cands: dict, M: Moments, groups, se_rule) -> tuple:
     """The simplest candidate whose held-out error exceeds the best one's by at most ``se_rule``
-    standard errors of noise (:func:`_excess`); ties: the lower held-out error."""
+    standard errors of noise (:func:`_excess`).  Among the laws of that complexity, those within
+    one standard error of the best of them are ties, broken by :data:`_PREFERENCE` and then by
+    held-out error."""
     best = min(cands, key=lambda s: cands[s].rmse_holdout)
     ok = [s for s in cands if s == best or _excess(cands[s], cands[best], M, groups) <= se_rule]
-    return min(ok, key=lambda s: (cands[s].complexity, cands[s].rmse_holdout))
+    k = min(cands[s].complexity for s in ok)
+    same = [s for s in ok if cands[s].complexity == k]
+    top = min(same, key=lambda s: cands[s].rmse_holdout)
+    ties = [s for s in same if s == top or _excess(cands[s], cands[top], M, groups) <= 1.0]
+    return min(ties, key=lambda s: (sum(_PREFERENCE.get(p.family, 0) for p in cands[s].parts),
+                                    cands[s].rmse_holdout))
 
 
 def _inclusion_table(lib: Library, prob: np.ndarray, M, stage: str = "", threshold=None) -> pd.DataFrame:

@@ -224,7 +224,17 @@ class LawFit:
 
     def predict_sse(self, m: Moments) -> np.ndarray:
         """Per-segment residual sum of squares on other data (e.g. held-out segments)."""
+        m = m.restrict({b for _, _, b in self.layout.cols})
         return m.sse(_design(self.parts, self.layout, m, self.z), self.w)
+
+    def basis_coefficients(self, m: Moments) -> np.ndarray:
+        """(S, K): the law's prediction in every segment of ``m`` as coefficients of ``m``'s
+        sample bases (prediction = Phi_s @ beta_s)."""
+        A = _multipliers(self.parts, self.layout, m, self.z)
+        beta = np.zeros((m.S, m.K))
+        for j, (_, _, b) in enumerate(self.layout.cols):
+            beta[:, m.index(b)] += A[:, j] * self.w[j]
+        return beta
 
     def values(self) -> list[dict]:
         """Every parameter with its standard error: ``part, slot, name, value, se``."""
@@ -252,6 +262,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     """
     parts = tuple(parts)
     lay = _layout(parts, m)
+    m = m.restrict({b for _, _, b in lay.cols})
     if z0 is None:
         z0 = np.array([math.log(parts[i].param0) for i, _ in lay.nl])
     z = np.clip(np.asarray(z0, dtype=float), lay.lo + 1e-9, lay.hi - 1e-9) if len(lay.nl) else np.zeros(0)
@@ -318,7 +329,11 @@ def _covariance(fit: LawFit, m: Moments, X: np.ndarray) -> None:
         cols.append(-(dX @ fit.w)[:, None])
     J = np.hstack(cols)
     p = J.shape[1]
-    bread = np.linalg.pinv(J.T @ J, rcond=1e-12, hermitian=True)
+    # columns differ in scale by many decades (|v| at 600 rad/s against a log-parameter): invert
+    # the scaled normal matrix, or the pseudo-inverse's cut-off drops the weakly scaled directions
+    cn = np.sqrt(np.sum(J * J, axis=0))
+    cn[cn == 0] = 1.0
+    bread = np.linalg.pinv((J / cn).T @ (J / cn), rcond=1e-12, hermitian=True) / np.outer(cn, cn)
     S = m.S
     if S >= p + 2:
         g = np.einsum("skp,sk->sp", J.reshape(S, m.K, p), r.reshape(S, m.K))
@@ -336,17 +351,20 @@ def cross_validate(m: Moments, parts, fold: np.ndarray, *, z0=None, refine: bool
     """Held-out residual sum of squares of every segment, each fold predicted by the structure
     refitted (all parameters) on the other folds; and the held-out predictions (S, K) on the
     segments' pseudo rows (for comparing two laws' predictions)."""
+    full = m
+    lay = _layout(tuple(parts), m)
+    m = m.restrict({b for _, _, b in lay.cols})      # once, not per fold
+    kfull = np.array([full.index(b) for b in m.basis], dtype=int)
     out = np.zeros(m.S)
-    pred = np.zeros((m.S, m.K))
+    beta = np.zeros((m.S, full.K))
     for f in np.unique(fold):
         test = fold == f
         tr = m.take(np.flatnonzero(~test))
         fit = fit_law(tr, parts, z0=z0, refine=refine, max_nfev=40)
         mt = m.take(np.flatnonzero(test))
-        X = _design(fit.parts, fit.layout, mt, fit.z)
-        pred[test] = (X @ fit.w).reshape(mt.S, mt.K)
-        out[test] = mt.sse(X, fit.w)
-    return out, pred
+        out[test] = fit.predict_sse(mt)
+        beta[np.ix_(test, kfull)] = fit.basis_coefficients(mt)
+    return out, beta
 
 
 def cross_validate_linear(m: Moments, fit: LawFit, fold: np.ndarray) -> np.ndarray:
@@ -354,17 +372,24 @@ def cross_validate_linear(m: Moments, fit: LawFit, fold: np.ndarray) -> np.ndarr
     ``fit``'s values and only the linear coefficients refitted per fold: a fast screen (slightly
     optimistic for laws with nonlinear parameters) used while searching; the laws reported are
     scored with :func:`cross_validate`."""
-    X = _design(fit.parts, fit.layout, m, fit.z)
+    full = m
+    m = m.restrict({b for _, _, b in fit.layout.cols})
+    A = _multipliers(fit.parts, fit.layout, m, fit.z)
+    kidx = _basis_index(fit.layout, m)
+    X = (A[:, None, :] * m.P[:, :, kidx]).reshape(m.S * m.K, -1)
     Xs = X.reshape(m.S, m.K, -1)
+    kfull = np.array([full.index(b) for _, _, b in fit.layout.cols], dtype=int)
     out = np.zeros(m.S)
-    pred = np.zeros((m.S, m.K))
+    beta = np.zeros((m.S, full.K))
     for f in np.unique(fold):
         test = fold == f
         w = _lstsq(Xs[~test].reshape(-1, X.shape[1]), m.q[~test].reshape(-1))
-        pred[test] = np.einsum("skp,p->sk", Xs[test], w)
-        r = m.q[test] - pred[test]
+        r = m.q[test] - np.einsum("skp,p->sk", Xs[test], w)
         out[test] = np.sum(r * r, axis=1) + m.rest[test]
-    return out, pred
+        bt = np.zeros((int(test.sum()), full.K))
+        np.add.at(bt.T, kfull, (A[test] * w).T)
+        beta[test] = bt
+    return out, beta
 
 
 # ---------------------------------------------------------------------- reading a fitted law

@@ -100,6 +100,7 @@ class Moments:
     t_ref: float | None = None
     unit: str = "rad"
     notes: list = field(default_factory=list)
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
         if self.P is None:
@@ -135,7 +136,7 @@ class Moments:
                        speed=t(self.speed), n=t(self.n), B=t(self.B), c=t(self.c), P=t(self.P), q=t(self.q),
                        yy=t(self.yy),
                        rest=t(self.rest), load=t(self.load), temperature=t(self.temperature),
-                       cycles=t(self.cycles), noise=t(self.noise), notes=list(self.notes))
+                       cycles=t(self.cycles), noise=t(self.noise), notes=list(self.notes), _cache={})
 
     def profile(self, keep, min_cycles: float | None = None) -> "Moments":
         """The moments of the bases ``keep`` with the others profiled out *per segment* (each
@@ -170,9 +171,21 @@ class Moments:
             c2[s] = c[s, L] - T @ c[s, Rs]
             yy2[s] = yy[s] - c[s, Rs] @ iRR @ c[s, Rs]
         return replace(self, basis=tuple(self.basis[i] for i in L), B=B2, c=c2, yy=np.maximum(yy2, 0.0), P=None, q=None,
-                       noise=self.noise,
+                       noise=self.noise, _cache={},
                        rest=None, notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
                                                             + " profiled out per segment"])
+
+    def restrict(self, names) -> "Moments":
+        """The moments of the bases ``names`` alone (the others ignored, not profiled out): exact
+        for every law that uses only those bases, with fewer pseudo rows (cached)."""
+        key = tuple(b for b in self.basis if b in set(names))
+        if key == self.basis:
+            return self
+        if key not in self._cache:
+            idx = [self.index(b) for b in key]
+            self._cache[key] = replace(self, basis=key, B=self.B[:, idx][:, :, idx], c=self.c[:, idx], P=None,
+                                       q=None, rest=None, _cache={})
+        return self._cache[key]
 
     def groups(self, by: str = "segment") -> np.ndarray:
         """Group id of each segment for held-out folds: ``"segment"`` or ``"run"``."""
