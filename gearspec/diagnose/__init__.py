@@ -22,11 +22,12 @@ from .candidates import Candidate, GridCandidate, PeriodicCandidate, choose_ampl
 from .data import (DiagnoseData, butter_filtfilt, central_difference, decimate, decimation_index, moves,
                    reversal_travel, trajectory_data, travel_since_reversal)
 from .design import BaseBlock, FittedState, HarmonicBlock, State, TermBlock, fit_state, predict_model, state_from_model
-from .loop import KINDS, Diagnosis, Effect, baseline_model, diagnose, evaluate_candidate, folds_of, relative_error
+from .loop import (KINDS, Diagnosis, Effect, baseline_model, diagnose, evaluate_candidate, folds_of, idim_model,
+                   relative_error)
 from .residual import (ResidualSpectrum, acceleration_analysis, channel_analysis, position_spectra,
                        reversal_analysis, speed_analysis, speed_groups)
 
-__all__ = ["diagnose", "Diagnosis", "Effect", "KINDS", "baseline_model", "evaluate_candidate", "folds_of",
+__all__ = ["diagnose", "Diagnosis", "Effect", "KINDS", "baseline_model", "idim_model", "evaluate_candidate", "folds_of",
            "relative_error", "DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves",
            "butter_filtfilt", "central_difference", "decimate", "decimation_index", "State", "BaseBlock",
            "HarmonicBlock", "TermBlock", "FittedState", "fit_state", "state_from_model", "predict_model",

@@ -58,7 +58,7 @@ from .residual import (acceleration_analysis, channel_analysis, magnitude_residu
                        reversal_analysis, speed_analysis)
 
 __all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "folds_of", "baseline_model",
-           "KINDS", "relative_error"]
+           "idim_model", "KINDS", "relative_error"]
 
 #: effect kinds of CONTRACTS.md section 4
 KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
@@ -583,6 +583,27 @@ def baseline_model(dd: DiagnoseData, law: str = "silo4", *, gear=None, harmonics
     if terms:
         m = m.with_terms(*terms)
     m.name = f"{law} (joint fit)"
+    return m
+
+
+def idim_model(dd: DiagnoseData, *, symmetric: bool = True, offset: bool = True,
+               name: str | None = None) -> FrictionModel:
+    """The inverse dynamic identification model fitted by least squares (IDIM-LS), as the EMPS
+    reference procedure does: ``tau = M qdd + Fv qd + Fc sign(qd) (+ offset)``, one Fv and Fc for
+    both directions (``symmetric``) or per direction, on the observations of ``dd`` (use
+    :func:`~gearspec.diagnose.trajectory_data`: filtered position, central differences, every
+    column decimated).  A :class:`~gearspec.model.FrictionModel` of law ``coulomb_viscous`` with an
+    ``inertia`` term (M) and an ``offset`` term; ``rmse`` and, in ``meta["relative_error"]``, the
+    relative error ``100 ||y - yhat|| / ||y||`` in percent."""
+    P = {"tau_c": 0.0, "viscous": 0.0}
+    terms = [{"kind": "inertia", "inertia": 0.0}] + ([{"kind": "offset", "offset": 0.0}] if offset else [])
+    tmpl = FrictionModel("coulomb_viscous", P, dict(P), unit=dd.unit, terms=terms,
+                         name=name or f"IDIM-LS {'symmetric' if symmetric else 'asymmetric'}")
+    st = state_from_model(tmpl, dd, symmetric=symmetric and len(dd.directions()) == 2)
+    fitted = fit_state(st, dd)
+    m = fitted.model(name=tmpl.name)
+    m.meta = {**m.meta, "relative_error": relative_error(dd.y, fitted.prediction),
+              "procedure": "IDIM-LS (ordinary least squares on the decimated observation matrix)"}
     return m
 
 
