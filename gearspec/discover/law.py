@@ -431,9 +431,9 @@ def equation(fit: LawFit, frequencies, t_ref=None, unit: str = "rad") -> str:
             f = _g(float(frequencies[p.freq]), 6)
             a = _pair(amp, _g)
             if fam.name == "ripple_exp":
-                a += f"*exp(-{_pair(par, _g)}|v|)"
+                a += f"*exp(-{_pair(par, _g)}*|v|)"
             elif fam.name == "ripple_rational":
-                a += f"/(1+({_pair(par, _g)}|v|)^2)"
+                a += f"/(1+({_pair(par, _g)}*|v|)^2)"
             friction.append(f"{a}*sin(2pi*{f}*theta + {_pair(ph, lambda x: _g(x, 3))})")
             continue
         c = _pair({s: d["lin"][0][0] for s, d in sv.items()}, _g)

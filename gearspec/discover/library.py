@@ -107,9 +107,9 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
            description="residual inertia (acceleration; not friction)"),
     Family("ripple_const", "ripple", lambda u, p: np.ones_like(u), _ripple_factor(""), group="ripple",
            description="position ripple of constant amplitude (SILO4 eq. 6)"),
-    Family("ripple_exp", "ripple", lambda u, p: np.exp(-p * u), _ripple_factor("exp(-{p}|v|)"), "decay",
+    Family("ripple_exp", "ripple", lambda u, p: np.exp(-p * u), _ripple_factor("exp(-{p}*|v|)"), "decay",
            _DECAY_BOUNDS, group="ripple", description="meshing ripple decaying exponentially with speed (SILO4 eq. 8)"),
-    Family("ripple_rational", "ripple", lambda u, p: 1.0 / (1.0 + (p * u) ** 2), _ripple_factor("1/(1+({p}|v|)^2)"),
+    Family("ripple_rational", "ripple", lambda u, p: 1.0 / (1.0 + (p * u) ** 2), _ripple_factor("1/(1+({p}*|v|)^2)"),
            "decay", _DECAY_BOUNDS, group="ripple",
            description="ripple decaying as a Lorentzian of speed"),
 ]}
@@ -318,8 +318,9 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
         fams = [f for f in fams if f in ("coulomb", "load_coulomb", "temperature", "inertia", "ripple_const")]
     both = len(m.directions) == 2 and directions == "auto"
     variants = ("sym", "asym") if both else ("sym",)
-    vs_grid = np.geomspace(lo / 2, hi / 2, n_stribeck) if n_stribeck > 0 and hi > lo else np.array([])
-    decay_grid = np.geomspace(0.5, 4.5, n_decay) / hi if n_decay > 0 else np.array([])
+    # grid values rounded to 3 significant digits, so that the names print them exactly
+    vs_grid = _round3(np.geomspace(lo / 2, hi / 2, n_stribeck)) if n_stribeck > 0 and hi > lo else np.array([])
+    decay_grid = _round3(np.geomspace(0.5, 4.5, n_decay) / hi) if n_decay > 0 else np.array([])
     # frequencies that complete enough cycles somewhere
     freqs = [i for i in range(len(m.frequencies)) if np.any(m.cycles[:, i] >= min_cycles)]
     terms: list[Term] = []
@@ -342,3 +343,8 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
                 for var in variants:
                     terms.append(Term(f, None if p is None else float(p), fi, var))
     return Library(terms, m.frequencies, m.t_ref)
+
+
+def _round3(x):
+    x = np.asarray(x, dtype=float)
+    return np.array([float(f"{v:.3g}") for v in x])
