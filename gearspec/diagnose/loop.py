@@ -413,7 +413,7 @@ def _periodic_candidates(rnd: Round, analyses: dict, *, max_candidates: int = 6)
     peaks.sort(key=lambda x: -x[0])
     chosen: list = []
     for z, f, res, fp, sp in peaks:
-        if any(abs(f - fm) <= 2 * res for fm in model_f):
+        if any(abs(f - fm) <= max(2 * res, 5e-3 * fm) for fm in model_f):   # a line the model has
             continue
         hit = next((c for c in chosen if abs(c["f"] - f) <= 2 * max(res, c["res"])), None)
         if hit is not None:
@@ -878,7 +878,7 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
     key = _key(c)
     if isinstance(c, PeriodicCandidate):  # the same line seen again in a later round
         key = next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
-                    and abs(e.frequency - c.f0) <= 2 * c.resolution), key)
+                    and abs(e.frequency - c.f0) <= max(2 * c.resolution, 5e-3 * e.frequency)), key)
     prev = effects.get(key)
     if prev is not None and prev.accepted:
         return
