@@ -501,7 +501,7 @@ class _Pool:
         self.full: set = set()        # signatures with full held-out refits
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
-        self.refine_top = 8
+        self.refine_top = 4
 
     def consider(self, parts, origin, thr, refine: bool = True):
         parts = canonical(parts)
@@ -588,18 +588,21 @@ class _Pool:
         self.screen()
         for _ in range(4):
             near = sorted((s for s in self.cands if self._near(s, max(self.se_rule, 1.0))),
-                          key=lambda s: self.cands[s].rmse_holdout)[:15]
+                          key=lambda s: self.cands[s].rmse_holdout)[:10]
             todo = set(_front(self.cands)) | set(near)
             self.refit_holdout(todo)
             sel = _select({s: self.cands[s] for s in self.full}, self.M, self.groups, self.se_rule)
             if not local_search:
                 return sel
-            before = set(self.fits)
             base = self.cands[sel]
-            for parts in _neighbours(base.parts, self.M, self.addable, adds=False):
+            nb = set()
+            for parts in _neighbours(_inherit(base.fit), self.M, self.addable, adds=False):
                 self.consider(parts, f"neighbour of {_short(base, self.M)}", base.threshold)
+                sig = _signature(parts)
+                if sig in self.fits:
+                    nb.add(sig)
             self.screen()
-            self.refit_holdout(set(self.fits) - before)
+            self.refit_holdout(nb)
             nsel = _select({s: self.cands[s] for s in self.full}, self.M, self.groups, self.se_rule)
             if nsel == sel:
                 return sel
@@ -655,6 +658,13 @@ def _discover(data, *, frequencies, gear, spectrum, library, library_options, op
     lib = library if library is not None else default_library(M, **lib_opts)
     if len(lib) == 0:
         raise InputError("the candidate library is empty")
+    used = {b for _, _, b in lib.columns} | {"1"}
+    for i, f in enumerate(M.frequencies):
+        if f"sin{i}" not in used:
+            lab = M.labels[i]
+            notes.append(f"ripple line {f:.6g} cycles/{M.unit}" + (f" ({lab})" if lab else "")
+                         + " completes a cycle in too few segments to be told from the friction level: left out")
+    M = M.restrict(used)
     ths = (np.geomspace(1.0, 1e-5, int(thresholds)) if np.ndim(thresholds) == 0
            else np.sort(np.asarray(thresholds, dtype=float))[::-1])
     fold = fold_ids(M, by, folds)

@@ -253,12 +253,14 @@ class LawFit:
         return out
 
 
-def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False, max_nfev: int = 200) -> LawFit:
+def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False, max_nfev: int = 200,
+            scan: bool = True) -> LawFit:
     """Least-squares fit of the structure ``parts`` to the segments of ``m``.
 
     Linear coefficients in closed form, nonlinear parameters (Stribeck velocities, decay
     constants, exponents) by bounded ``scipy.optimize.least_squares`` on their logarithms from
-    ``z0`` (default: the parts' grid values), when ``refine``.
+    ``z0`` (default: the parts' grid values), when ``refine``; with ``scan``, each nonlinear
+    parameter is first scanned over its range (others held) and the refinement starts from the best.
     """
     parts = tuple(parts)
     lay = _layout(parts, m)
@@ -270,14 +272,38 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     converged = True
     kidx = _basis_index(lay, m)
     Pk = m.P[:, :, kidx]                     # (S, K, p)
+    # per (part, slot): its columns, magnitude function, sign pattern and parameter (z index or fixed)
+    slots = []
+    zpos = {key: k for k, key in enumerate(lay.nl)}
+    d = m.direction.astype(float)
+    for key in dict.fromkeys((i, sl) for i, sl, _ in lay.cols):
+        i, sl = key
+        p = parts[i]
+        cols = [j for j, (ii, ss, _) in enumerate(lay.cols) if (ii, ss) == key]
+        sgn = np.ones(m.S) if p.fam.basis == "acc" else (d if sl == 0 else sl * (m.direction == sl))
+        slots.append((cols, p.fam.magnitude, sgn, zpos.get(key), p.param0))
+    ncol = len(lay.cols)
     cache = {}
+
+    def mult(zz, deriv):
+        A = np.empty((m.S, ncol))
+        dA = [None] * len(zz)
+        for cols, mag, sgn, k, p0 in slots:
+            pv = p0 if k is None else math.exp(zz[k])
+            col = sgn * mag(m.speed, pv)
+            A[:, cols] = col[:, None]
+            if deriv and k is not None:
+                h = 1e-6
+                dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
+                dA[k] = [(j, dcol) for j in cols]
+        return A, dA
 
     def state(zz):
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
-            A, dA = _multipliers(parts, lay, m, zz, deriv=True)
-            X = (A[:, None, :] * Pk).reshape(-1, len(lay.cols))
+            A, dA = mult(zz, True)
+            X = (A[:, None, :] * Pk).reshape(-1, ncol)
             w, U = _solve(X, q)
             cache[key] = (X, w, U, dA)
         return cache[key]
@@ -285,6 +311,12 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     def resid(zz):
         X, w, U, _ = state(zz)
         return q - X @ w
+
+    def sse_at(zz):
+        A, _ = mult(zz, False)
+        X = (A[:, None, :] * Pk).reshape(-1, ncol)
+        r = q - X @ _solve(X, q)[0]
+        return float(r @ r)
 
     def jac(zz):
         # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w
@@ -298,6 +330,18 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
             J[:, k] = -(v - U @ (U.T @ v))
         return J
 
+    if refine and len(z) and scan:
+        # variable projection has local optima (a Stribeck velocity beyond the plateaus trading
+        # against Coulomb and viscous friction): scan each nonlinear parameter over its range, the
+        # others held, and start from the best point
+        best = sse_at(z)
+        for k in range(len(z)):
+            for g in np.linspace(lay.lo[k], lay.hi[k], 7)[1:-1]:
+                zz = z.copy()
+                zz[k] = g
+                r2 = sse_at(zz)
+                if r2 < best:
+                    best, z = r2, zz
     if refine and len(z):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -360,7 +404,7 @@ def cross_validate(m: Moments, parts, fold: np.ndarray, *, z0=None, refine: bool
     for f in np.unique(fold):
         test = fold == f
         tr = m.take(np.flatnonzero(~test))
-        fit = fit_law(tr, parts, z0=z0, refine=refine, max_nfev=40)
+        fit = fit_law(tr, parts, z0=z0, refine=refine, max_nfev=40, scan=False)
         mt = m.take(np.flatnonzero(test))
         out[test] = fit.predict_sse(mt)
         beta[np.ix_(test, kfull)] = fit.basis_coefficients(mt)

@@ -269,7 +269,7 @@ class Library:
 
 def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: int = 3,
                     exponents=(0.5, 2.0), directions: str = "auto", ripple_laws=("const", "exp", "rational"),
-                    min_cycles: float = 1.0) -> Library:
+                    min_cycles: float = 1.0, min_segments: int = 3) -> Library:
     """The standard library for the data summarised in ``m``.
 
     Parameters
@@ -291,7 +291,9 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
         Amplitude laws of the ripple terms.
     min_cycles : float
         A ripple frequency enters the library only if it completes at least this many cycles in
-        some segment (otherwise it cannot be told from the friction level).
+        ``min_segments`` segments or more (otherwise it cannot be told from the friction level,
+        nor its amplitude law from its amplitude).
+    min_segments : int
     """
     speeds = m.speed[m.speed > 0]
     if len(speeds) == 0:
@@ -322,7 +324,8 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
     vs_grid = _round3(np.geomspace(lo / 2, hi / 2, n_stribeck)) if n_stribeck > 0 and hi > lo else np.array([])
     decay_grid = _round3(np.geomspace(0.5, 4.5, n_decay) / hi) if n_decay > 0 else np.array([])
     # frequencies that complete enough cycles somewhere
-    freqs = [i for i in range(len(m.frequencies)) if np.any(m.cycles[:, i] >= min_cycles)]
+    need = min(min_segments, m.S)
+    freqs = [i for i in range(len(m.frequencies)) if np.sum(m.cycles[:, i] >= min_cycles) >= need]
     terms: list[Term] = []
     for f in fams:
         fam = FAMILIES[f]
