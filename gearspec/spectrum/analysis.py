@@ -313,10 +313,15 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         is_max[:grid.first_at_least(f_found_min)] = False
         cand = np.flatnonzero(is_max)
         del is_max
-        z_c = power[cand] / noise_model.level(cand)
         # a candidate needs at least the power that a known noise level (the lightest tail) would
-        # call significant; only those get the exact (F-distributed) false-alarm probability
-        keep_c = z_c > _z_floor(fap_threshold, m_eff)
+        # call significant; only those get the exact (F-distributed) false-alarm probability.  The
+        # lowest noise level anywhere screens out most of them without evaluating the level.
+        z_floor = _z_floor(fap_threshold, m_eff)
+        floor = noise_model.lowest()
+        if floor > 0:
+            cand = cand[power[cand] > z_floor * floor * (1 - 1e-6)]
+        z_c = power[cand] / noise_model.level(cand)
+        keep_c = z_c > z_floor
         cand, z_c = cand[keep_c], z_c[keep_c]
         fap_c = false_alarm_probability(z_c, m_eff, noise_model.bins(cand), oversample)
         sig = fap_c < fap_threshold
@@ -501,6 +506,12 @@ class _LocalNoise:
         if bad.any():
             v[bad] = self.fallback()
         return v
+
+    def lowest(self) -> float:
+        """A lower bound of the level at every bin (0 when there is none)."""
+        if not len(self.levels) or not np.all(np.isfinite(self.levels) & (self.levels > 0)):
+            return 0.0
+        return float(np.min(self.levels))
 
     def bins(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
