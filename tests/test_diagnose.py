@@ -247,6 +247,19 @@ def test_nothing_added_when_the_effect_is_declared():
 
 
 # ---------------------------------------------------------------------- pieces
+def test_residual_analysis_of_any_fitted_model():
+    """A model without the drift, against a recording with it: the time analysis sees it, the
+    acceleration and spectrum analyses see nothing of note; the true model leaves nothing."""
+    rec, full = recording([fx.drift(coefficient=2e-4)])
+    a = dg.residual_analysis(truth(), rec)
+    assert a["t"][1]["p"] < 1e-6 and a["t"][1]["both"]["slope"] == pytest.approx(2e-4, rel=0.1)
+    assert a["acc"][1]["p"] > 1e-3
+    b = dg.residual_analysis(full, rec)
+    assert b["t"][1]["p"] > 1e-3
+    assert np.std(b["residual"]) == pytest.approx(SIGMA, rel=0.05)
+    assert all(len(s.peaks) <= 1 for s in b["spectra"]["pooled"])
+
+
 def test_travel_since_reversal_and_moves():
     theta = np.array([0, 1, 2, 3, 2.5, 2, 1, 1.5, 2.0])
     v = np.array([1, 1, 1, 1, -1, -1, -1, 1, 1])

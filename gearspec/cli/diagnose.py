@@ -106,7 +106,9 @@ def run(args) -> int:
             args.law = "coulomb_viscous"
         terms = [{"kind": "inertia", "inertia": 0.0}] + ([{"kind": "offset", "offset": 0.0}] if args.offset else [])
         model = dg.baseline_model(data, "coulomb_viscous", symmetric=args.symmetric, terms=terms)
-    diag = dg.diagnose(data, model, law=args.law, harmonics=harmonics, symmetric=True if args.symmetric else None,
+    # a model read from a file keeps its own symmetry unless --symmetric; otherwise per direction
+    symmetric = True if args.symmetric else (None if args.model else False)
+    diag = dg.diagnose(data, model, law=args.law, harmonics=harmonics, symmetric=symmetric,
                        folds=args.folds, alpha=args.alpha, min_gain=args.min_gain, max_rounds=args.max_rounds,
                        kinds=kinds, validation=validation,
                        progress=None if args.quiet else (lambda s: print(s, flush=True)))
@@ -125,7 +127,7 @@ def run(args) -> int:
         print(diag.summary_table().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
         for e in diag.effects:
             mark = "ACCEPTED" if e.accepted else "rejected"
-            f = "" if e.frequency is None else f" at {e.frequency:.6g} cycles/{data.unit}"
+            f = "" if (e.frequency is None or "cycles" in e.name) else f" at {e.frequency:.6g} cycles/{data.unit}"
             lab = f" ({e.label})" if e.label else (f" (unknown order; {e.hint})" if e.hint else "")
             print(f"{mark:8s} {e.kind:11s} {e.name}{f}{lab}: held-out rmse {e.rmse_holdout_before:.4g} -> "
                   f"{e.rmse_holdout_after:.4g}, Z {e.z:.1f}")

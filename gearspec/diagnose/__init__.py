@@ -23,11 +23,12 @@ from .data import (DiagnoseData, butter_filtfilt, central_difference, decimate, 
                    reversal_travel, trajectory_data, travel_since_reversal)
 from .design import BaseBlock, FittedState, HarmonicBlock, State, TermBlock, fit_state, predict_model, state_from_model
 from .loop import (KINDS, Diagnosis, Effect, baseline_model, diagnose, evaluate_candidate, folds_of, idim_model,
-                   relative_error)
+                   relative_error, residual_analysis)
 from .residual import (ResidualSpectrum, acceleration_analysis, channel_analysis, position_spectra,
                        reversal_analysis, speed_analysis, speed_groups)
 
-__all__ = ["diagnose", "Diagnosis", "Effect", "KINDS", "baseline_model", "idim_model", "evaluate_candidate", "folds_of",
+__all__ = ["diagnose", "Diagnosis", "Effect", "KINDS", "baseline_model", "idim_model", "residual_analysis",
+           "evaluate_candidate", "folds_of",
            "relative_error", "DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves",
            "butter_filtfilt", "central_difference", "decimate", "decimation_index", "State", "BaseBlock",
            "HarmonicBlock", "TermBlock", "FittedState", "fit_state", "state_from_model", "predict_model",

@@ -52,13 +52,13 @@ from ..model import FrictionModel
 from ..recording import Recording
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, Proposal, term_candidates, train_fit
 from .data import DiagnoseData
-from .design import (FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, polish, refine,
-                     solve_normal, state_from_model)
+from .design import (FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, polish,
+                     predict_model, refine, solve_normal, state_from_model)
 from .residual import (acceleration_analysis, channel_analysis, magnitude_residual, position_spectra,
                        reversal_analysis, speed_analysis)
 
 __all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "folds_of", "baseline_model",
-           "idim_model", "KINDS", "relative_error"]
+           "idim_model", "residual_analysis", "KINDS", "relative_error"]
 
 #: effect kinds of CONTRACTS.md section 4
 KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
@@ -584,6 +584,28 @@ def baseline_model(dd: DiagnoseData, law: str = "silo4", *, gear=None, harmonics
         m = m.with_terms(*terms)
     m.name = f"{law} (joint fit)"
     return m
+
+
+def residual_analysis(model: FrictionModel, data, *, gear=None, fap: float = 0.01, per_segment: bool = True) -> dict:
+    """Every residual analysis of :mod:`~gearspec.diagnose.residual` for a fitted model on any
+    recording, as it is (nothing refitted): ``{"residual", "spectra", "speed", "load",
+    "temperature", "t", "acc", "reversal"}`` (the channels the data have).  ``data``: a Recording,
+    FitData or DiagnoseData."""
+    dd = _as_data(data, None, gear)
+    r = dd.y - predict_model(model, dd)
+    out = {"residual": r,
+           "spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment)
+           if dd.at("theta") is not None else {"pooled": [], "segments": []},
+           "speed": speed_analysis(dd, r)}
+    for ch, tr in (("load", np.abs), ("temperature", None), ("t", None)):
+        res = channel_analysis(dd, r, ch, transform=tr)
+        if res is not None:
+            out[ch] = res
+    for name, fn in (("acc", acceleration_analysis), ("reversal", reversal_analysis)):
+        res = fn(dd, r)
+        if res is not None:
+            out[name] = res
+    return out
 
 
 def idim_model(dd: DiagnoseData, *, symmetric: bool = True, offset: bool = True,
