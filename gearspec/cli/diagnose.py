@@ -127,7 +127,7 @@ def run(args) -> int:
         print(diag.summary_table().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
         for e in diag.effects:
             mark = "ACCEPTED" if e.accepted else "rejected"
-            f = "" if (e.frequency is None or "cycles" in e.name) else f" at {e.frequency:.6g} cycles/{data.unit}"
+            f = "" if (e.frequency is None or e.kind == "periodic") else f" at {e.frequency:.6g} cycles/{data.unit}"
             lab = f" ({e.label})" if e.label else (f" (unknown order; {e.hint})" if e.hint else "")
             print(f"{mark:8s} {e.kind:11s} {e.name}{f}{lab}: held-out rmse {e.rmse_holdout_before:.4g} -> "
                   f"{e.rmse_holdout_after:.4g}, Z {e.z:.1f}")

@@ -276,7 +276,7 @@ class PeriodicCandidate(Candidate):
 
     def __init__(self, f0: float, resolution: float, *, gear=None, evidence: str = "", detail=None, gate_p=None,
                  unit: str = "rad"):
-        super().__init__(f"periodic {f0:.6g}", evidence, detail, gate_p)
+        super().__init__(f"line at {f0:.6g} cycles/{unit}", evidence, detail, gate_p)
         self.f0 = float(f0)
         self.resolution = float(resolution)
         self.gear = gear
