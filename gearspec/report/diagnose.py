@@ -15,7 +15,7 @@ from ..diagnose import Diagnosis
 from ..plots import diagnose as dplots
 from . import markdown_table
 
-__all__ = ["write_diagnose_report", "effect_table", "interpretation"]
+__all__ = ["write_diagnose_report", "effect_table", "interpretation", "analysis_table"]
 
 
 def _f(x, fmt=".4g"):
@@ -168,6 +168,22 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     md += ["## Residual spectra", "", "Residual of the baseline model over position, pooled over the segments of each "
            "direction (each segment's mean removed), with the local noise level; the lines the loop tested are "
            "marked (green: accepted, grey: rejected).", "", f"![spectra]({fig_spec.name})", ""]
+    md += ["## Residual analyses of the baseline", "",
+           "What each detector saw in the baseline's residual (groups are the units of every test but the "
+           "spectra):", "", markdown_table(analysis_table(diag.analyses)), ""]
+    segs = diag.analyses.get("spectra", {}).get("segments", [])
+    if segs:
+        rows = []
+        for sp in segs:
+            top = sp.peaks.iloc[0] if len(sp.peaks) else None
+            rows.append({"segment": sp.segments[0], "direction": sp.direction, "speed": sp.speed_min,
+                         "n": sp.n, "strongest peak": None if top is None else top["frequency"],
+                         "amplitude": None if top is None else top["amplitude"],
+                         "FAP": None if top is None else top["fap"],
+                         "noise level (median)": float(np.median(sp.noise))})
+        md += ["Per segment: the strongest residual peak with false-alarm probability below 1 % (every "
+               "independent frequency of the segment searched; empty: none).", "",
+               markdown_table(pd.DataFrame(rows)), ""]
     # ---- effects
     md += ["## Effects accepted", ""]
     if not acc:
@@ -246,6 +262,41 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     path = out / "report.md"
     path.write_text("\n".join(md))
     return path
+
+
+def analysis_table(analyses: dict) -> pd.DataFrame:
+    """One row per residual analysis: what it tests and its statistic."""
+    rows = []
+    sp = analyses.get("speed")
+    if sp is not None:
+        for k, v in sp[1].items():
+            if k in (1, -1):
+                rows.append({"analysis": f"against speed, {'positive' if k > 0 else 'negative'} direction",
+                             "statistic": f"chi2 {v['chi2']:.3g} on {v['dof']} dof", "p": v["p"]})
+        if "asymmetry" in sp[1]:
+            a = sp[1]["asymmetry"]
+            rows.append({"analysis": "direction asymmetry (mean residual by direction)",
+                         "statistic": f"difference {a['difference']:.3g}, Welch t {a['t']:.2f}", "p": a["p"]})
+    for ch, name in (("load", "against |load|"), ("temperature", "against temperature"), ("t", "against time")):
+        res = analyses.get(ch)
+        if res is not None:
+            b = res[1].get("both", {})
+            rows.append({"analysis": name, "statistic": f"slope {b.get('slope', float('nan')):.3g}",
+                         "p": res[1]["p"]})
+    ac = analyses.get("acc")
+    if ac is not None:
+        rows.append({"analysis": "against acceleration (inertia)",
+                     "statistic": f"slope {ac[1]['slope']:.3g} (t {ac[1]['t']:.2f})", "p": ac[1]["p"]})
+    rv = analyses.get("reversal")
+    if rv is not None:
+        rows.append({"analysis": "near reversals (presliding profile)",
+                     "statistic": f"length {rv[1].get('length', float('nan')):.3g}, t {rv[1]['t']:.2f}",
+                     "p": rv[1]["p"]})
+    pooled = analyses.get("spectra", {}).get("pooled", [])
+    n_peaks = sum(len(s.peaks) for s in pooled)
+    rows.append({"analysis": "over position (pooled periodograms)",
+                 "statistic": f"{n_peaks} peak(s) with FAP < 1 % in {len(pooled)} pools", "p": None})
+    return pd.DataFrame(rows)
 
 
 def _param_table(m) -> pd.DataFrame:
