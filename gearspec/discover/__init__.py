@@ -23,10 +23,24 @@ Pipeline (one module each):
 ``law``      each support of the path becomes a structure, fitted with its nonlinear
              parameters refined by least squares (variable projection), scored by
              cross-validation over whole segments or runs, printed, exported as a FrictionModel.
-``explorer`` :func:`discover`: the path, refinement, held-out selection (simplest law within
-             one paired standard error of the best held-out error, with AIC/BIC beside), a local
-             search around the selected law, and the papers' laws refitted by
-             :func:`gearspec.identify.fit` on the same folds.
+``explorer`` :func:`discover`: the paths (the friction level first, every segment's ripple
+             profiled out; then the ripple with the level law held in; then the level again with
+             the ripple held in), a hill climb on held-out error around the best law (terms added,
+             dropped, made direction-dependent or symmetric, reshaped), the selection (the
+             simplest law whose held-out error exceeds the best one's by at most ``se_rule`` = 4
+             standard errors of the noise in that difference -- a margin for the hundreds of laws
+             the search scores -- with AIC/BIC beside), a bootstrap over segments for inclusion
+             probabilities, and the papers' laws refitted by :func:`gearspec.identify.fit` on the
+             same folds (published models, e.g. EMPS's IDIM-LS, scored as they are).
+``published`` friction models published with the real data sets.
+
+Choices worth knowing: one term per slot of equivalent shapes (one Stribeck shape, one amplitude
+law per ripple line: several neighbouring Stribeck velocities are how least squares spends
+collinearity, not physics); power-law exponents stay on their grid (a free exponent imitates
+Coulomb or viscous friction); nonlinear parameters are bounded to what the plateau speeds can
+identify and flagged when they end on a bound; a ripple line enters the library only when it
+completes a cycle in at least 3 segments; the speed laws need each segment's own velocity
+(``FitData(velocity="segment")``), which makes the reduction exact.
 """
 
 from .explorer import PAPER_LAWS, Candidate, DiscoveryResult, Reference, discover, spectrum_lines

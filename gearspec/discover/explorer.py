@@ -151,7 +151,7 @@ class DiscoveryResult:
             for v in c.fit.values():
                 p = c.parts[v["part"]]
                 coefs.append({"term": p.label(freqs), "direction": {0: "both", 1: "positive", -1: "negative"}[v["slot"]],
-                              "name": v["name"], "value": v["value"], "se": v["se"]})
+                              "name": v["name"], "value": v["value"], "se": v["se"], "at_bound": v["at_bound"]})
             cands.append({"equation": c.equation, "terms": c.terms(freqs), "complexity": c.complexity,
                           "rmse_holdout": c.rmse_holdout, "rmse": c.rmse, "aic": c.aic, "bic": c.bic,
                           "direction_dependent": c.direction_dependent, "origin": c.origin,

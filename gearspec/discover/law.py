@@ -245,11 +245,12 @@ class LawFit:
         out = []
         for j, (i, sl, b) in enumerate(lay.cols):
             out.append({"part": i, "slot": sl, "kind": "linear", "name": b, "value": float(self.w[j]),
-                        "se": float(se[j])})
+                        "se": float(se[j]), "at_bound": False})
         for k, (i, sl) in enumerate(lay.nl):
             v = math.exp(self.z[k])
+            at_bound = bool(min(self.z[k] - lay.lo[k], lay.hi[k] - self.z[k]) < 1e-3)
             out.append({"part": i, "slot": sl, "kind": "nonlinear", "name": self.parts[i].fam.param, "value": v,
-                        "se": float(v * se[nlin + k])})
+                        "se": float(v * se[nlin + k]), "at_bound": at_bound})
         return out
 
 

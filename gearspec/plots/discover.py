@@ -38,11 +38,17 @@ def plot_pareto(result, path) -> Path:
     ys = np.array([y for y in ys if np.isfinite(y) and y > 0])
     if len(ys) and ys.max() / ys.min() > 8:
         ax.set_yscale("log")
-    top = np.nanpercentile(ys, 97) if len(ys) > 3 else None
-    if top is not None and ys.max() > 20 * top:      # a runaway fold fit would flatten the rest
-        ax.set_ylim(top=top * 3)
-        ax.annotate("some laws above the top edge", xy=(0.99, 0.99), xycoords="axes fraction", ha="right",
-                    va="top", fontsize=8, color="0.4")
+    # a runaway fit (e.g. a fold extrapolating a decay) would flatten everything else: clip, and say so
+    limit = 5 * float(np.max(fy)) if len(fy) else None
+    off = [r for r in refs if limit is not None and r.rmse_holdout > limit]
+    if limit is not None and len(ys) and ys.max() > limit:
+        ax.set_ylim(top=limit)
+        text = "off scale: " + "; ".join(f"{textwrap.shorten(r.name, 40)} {r.rmse_holdout:.3g} {tu}" for r in off)
+        n_c = int(np.sum(cy > limit))
+        if n_c:
+            text += ("; " if off else "") + f"{n_c} candidate law(s)"
+        ax.annotate(text, xy=(0.01, 0.01), xycoords="axes fraction", ha="left", va="bottom", fontsize=8,
+                    color="0.3")
     ax.set_xlabel("complexity (free parameters)")
     ax.set_ylabel(f"held-out RMSE ({tu})")
     ax.set_title(f"Candidate laws: error on held-out {result.settings['by']}s against complexity", fontsize=11)

@@ -8,6 +8,10 @@ from pathlib import Path
 import pandas as pd
 
 from ..plots.discover import plot_inclusion, plot_levels, plot_pareto
+import math
+
+import numpy as np
+
 from . import markdown_table
 
 __all__ = ["write_discover_report"]
@@ -58,22 +62,27 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            f"{sel.complexity}. `(a | b)`: value for positive | negative motion; friction has the sign of v; "
            f"`a` is the acceleration. Rule: the simplest law whose held-out error exceeds the best one's by at "
            f"most {result.settings['se_rule']:g} standard errors of the noise in that difference.", ""]
-    md += [markdown_table(_coefficients(sel, M.frequencies)), "",
-           f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
+    coef = _coefficients(sel, M.frequencies)
+    md += [_table(coef), "", f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
+    if coef["at bound"].astype(bool).any():
+        md += ["Parameters marked *at bound* ended at the edge of the range the plateau speeds can identify "
+               "(Stribeck velocities from a fifth of the lowest to half the highest speed; decays from a 5 % to "
+               "an e^-20 fall over the speeds): the data say the effect lies beyond the measured speeds, not "
+               "where.", ""]
     md += ["## Pareto front: held-out error against complexity", "", f"![pareto]({figs['pareto'].name})", "",
-           markdown_table(cand, ".5g"), ""]
+           _table(cand, ".5g"), ""]
     md += ["## Compared with the papers' laws and published models", "",
            "Papers' laws fitted by `gearspec.identify.fit` (ordinary least squares, per direction) on the same "
            "folds as the candidates; published models scored as they are. `delta_mse`: held-out mean squared "
            "error minus the selected law's, with its standard error over held-out groups.", "",
-           markdown_table(comp, ".5g"), "", f"![levels]({figs['levels'].name})", ""]
+           _table(comp, ".5g"), "", f"![levels]({figs['levels'].name})", ""]
     md += ["## Inclusion probabilities", ""]
     if figs["inclusion"] is not None:
         md += [f"Fraction of {result.settings['n_models']} bootstrap replicates (whole {result.settings['by']}s "
                "resampled) in which the sparse regression selects each library term, at the largest threshold "
                "of each stage's path that selects as many terms as the chosen law has there.", "",
                f"![inclusion]({figs['inclusion'].name})", "",
-               markdown_table(result.inclusion.head(25)[["term", "family", "variant", "probability", "stage"]]), ""]
+               _table(result.inclusion.head(25)[["term", "family", "variant", "probability", "stage"]]), ""]
     else:
         md += ["_Not computed (--bootstrap 0)._", ""]
     md += ["## Method", "",
@@ -112,7 +121,7 @@ def _coefficients(c, freqs) -> pd.DataFrame:
         p = c.parts[v["part"]]
         rows.append({"term": p.label(freqs), "direction": {0: "both", 1: "positive", -1: "negative"}[v["slot"]],
                      "parameter": v["name"] if v["kind"] == "nonlinear" else _lin_name(p, v["name"]),
-                     "value": v["value"], "s.e.": v["se"]})
+                     "value": v["value"], "s.e.": v["se"], "at bound": "at bound" if v["at_bound"] else ""})
     return pd.DataFrame(rows)
 
 
@@ -122,3 +131,22 @@ def _lin_name(p, basis: str) -> str:
     if basis.startswith("cos"):
         return "coefficient of cos"
     return "coefficient"
+
+
+def _table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
+    """A Markdown table whose cells may hold equations: '|' is escaped, not replaced (the shared
+    :func:`markdown_table` turns it into '/', which would change |v| into /v/)."""
+    if df.empty:
+        return "_(none)_\n"
+
+    def fmt(v):
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            return ""
+        if isinstance(v, (float, np.floating)):
+            return format(float(v), floatfmt)
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(str(c) for c in df.columns) + " |", "|" + "---|" * len(df.columns)]
+    for row in df.itertuples(index=False):
+        lines.append("| " + " | ".join(fmt(v) for v in row) + " |")
+    return "\n".join(lines) + "\n"
