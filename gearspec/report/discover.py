@@ -71,6 +71,16 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
                "where.", ""]
     md += ["## Pareto front: held-out error against complexity", "", f"![pareto]({figs['pareto'].name})", "",
            _table(cand, ".5g"), ""]
+    # the laws on either side of the selection, with their coefficients
+    k = result.front.index(result.selected)
+    near = [i for i in result.front[max(k - 2, 0):k + 3] if i != result.selected]
+    if near:
+        md += ["### Neighbours of the selected law on the front", ""]
+        for i in near:
+            c = result.candidates[i]
+            md += [f"Complexity {c.complexity}, held-out RMSE {c.rmse_holdout:.5g} {tu}:", "", "```", c.equation,
+                   "```", "", _table(_coefficients(c, M.frequencies)), "",
+                   f"Standard errors: {c.fit.se_method or 'n/a'}.", ""]
     md += ["## Compared with the papers' laws and published models", "",
            "Papers' laws fitted by `gearspec.identify.fit` (ordinary least squares, per direction) on the same "
            "folds as the candidates; published models scored as they are. `delta_mse`: held-out mean squared "
