@@ -16,7 +16,6 @@ sigma * sqrt(1 + p/n) ~ 1.002 sigma; 15 % is what an effect left out or mis-shap
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest
@@ -224,10 +223,10 @@ FDR_SEEDS = 16
 
 def test_complete_models_get_nothing_added_over_many_seeds():
     """False-discovery rate: on recordings whose model is complete (the baseline law is the truth's
-    law, every line declared), over FDR_SEEDS seeds; the rule is calibrated at alpha = 1 % per round
-    (family-wise over the round's candidates).  A longer run (README: 0 of 70 seeds) is in the
-    design notes; here at most one acceptance is allowed among the seeds (binomial: at a true rate
-    of 1 %, P(>= 2 of 16) = 1.1 %)."""
+    law, every line declared), over FDR_SEEDS seeds; the rule is built for alpha = 1 % per round
+    (family-wise over the round's candidates).  The longer run of the README's design notes gave
+    1 false discovery in 100 recordings (four designs x 25 seeds); here at most one acceptance is
+    allowed among the seeds (binomial: at a true rate of 1 %, P(>= 2 of 16) = 1.1 %)."""
     accepted = []
     for seed in range(1000, 1000 + FDR_SEEDS):
         rec, _ = recording([], seed=seed)

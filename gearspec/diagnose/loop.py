@@ -50,7 +50,7 @@ from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
 from ..recording import Recording
-from .candidates import Candidate, FixedCandidate, PeriodicCandidate, Proposal, term_candidates, train_fit
+from .candidates import Candidate, FixedCandidate, PeriodicCandidate, term_candidates, train_fit
 from .data import DiagnoseData
 from .design import (FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, polish,
                      predict_model, refine, solve_normal, state_from_model)
