@@ -12,6 +12,7 @@ plateau.  Everything is returned as a :class:`~gearspec.recording.Recording` plu
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -158,9 +159,20 @@ def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_
     theta = integrate(vcmd)
     v_actual = vcmd
     if speed_ripple:
-        for _ in range(4):
-            v_actual = vcmd * (1.0 + speed_ripple * np.sin(2 * np.pi * f_r * theta) * hold)
-            theta = integrate(v_actual)
+        # theta' = v_cmd (1 + r sin(2 pi f theta)) on the plateaus, stepped exactly as sampled
+        # (theta[i+1] = theta[i] + v[i] dt), so that position, velocity and acceleration agree
+        k = 2 * np.pi * f_r
+        gain = vcmd * speed_ripple * hold
+        th = np.empty(n)
+        v_actual = np.empty(n)
+        x = float(theta0)
+        sin = math.sin
+        for i, (vc, g) in enumerate(zip(vcmd.tolist(), gain.tolist())):
+            th[i] = x
+            vi = vc + g * sin(k * x)
+            v_actual[i] = vi
+            x += vi * dt
+        theta = th
     if one_run_per_plateau:
         run = idx.astype(np.int64)
         t = np.concatenate([np.arange(np.sum(run == r)) * dt for r in range(len(speeds))])
