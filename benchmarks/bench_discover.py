@@ -43,7 +43,7 @@ def main(argv=None) -> int:
             os.environ[k] = str(args.threads)
     import numpy as np
 
-    from gearspec.discover import default_library, discover
+    from gearspec.discover import discover
     from gearspec.fitdata import FitData
     from gearspec.model import RPM, FrictionModel
     from gearspec.simulate import model_recording

@@ -19,8 +19,8 @@ import pandas as pd
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
-from .law import (LawFit, Part, canonical, complexity, cross_validate, cross_validate_linear, equation, fit_law,
-                  fold_ids, to_model)
+from .law import (LawFit, Part, canonical, cross_validate, cross_validate_linear, equation, fit_law, fold_ids,
+                  to_model)
 from .library import FAMILIES, GROUPS, Library, default_library
 from .moments import Moments, moments
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
@@ -28,7 +28,6 @@ from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
 #: the papers' laws the explorer compares with (names of :func:`gearspec.identify.fit`)
-_DEBUG = False
 PAPER_LAWS = ("coulomb_viscous", "stribeck", "silo4", "lola8", "lola11")
 
 
@@ -318,23 +317,6 @@ def _group_of(p: Part) -> tuple:
     return (fam, p.freq)
 
 
-def _collapsed(parts) -> list[tuple]:
-    """Variants of a structure with one part per slot of equivalent shapes (two Stribeck terms, two
-    amplitude laws of one ripple line, ...): each choice of the part kept."""
-    groups: dict = {}
-    for p in parts:
-        groups.setdefault(_group_of(p), []).append(p)
-    out = []
-    for g, members in groups.items():
-        if len(members) < 2:
-            continue
-        split = any(p.split for p in members)
-        rest = [p for p in parts if _group_of(p) != g]
-        for keep in members:
-            out.append(canonical(rest + [Part(keep.family, keep.freq, split, keep.param0)]))
-    return out
-
-
 def _addable(lib: Library) -> list[Part]:
     """One symmetric part per family (and ripple line, and fixed exponent) of the library, its
     parameter started at the middle of the library's grid: what the search may add."""
@@ -374,7 +356,6 @@ def _compound(parts, M: Moments, addable) -> list[tuple]:
         rest = list(parts[:i]) + list(parts[i + 1:])
         if not rest:
             continue
-        have = {_group_of(p) for p in rest}
         for j, p in enumerate(rest):
             if both and not p.split and p.fam.basis != "acc":
                 out.append(canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)]))
@@ -408,18 +389,6 @@ def _neighbours(parts, M: Moments, addable=(), adds: bool = True) -> list[tuple]
                                                                and a.fam.param == p.fam.param) else a.param0)
                 out.append(canonical(rest + [Part(a.family, p.freq, p.split, p0)]))
     return out
-
-
-def _default_param(fam: str, M: Moments) -> float:
-    """A start value for a family's nonlinear parameter when swapping shapes: the middle of the
-    plateau speeds (Stribeck velocity) or a decay that halves the amplitude over the speed range."""
-    sp = M.speed[M.speed > 0]
-    lo, hi = float(np.min(sp)), float(np.max(sp))
-    if FAMILIES[fam].param == "v_s":
-        return math.sqrt(lo * hi)
-    if FAMILIES[fam].param == "decay":
-        return 1.0 / hi
-    return 1.0
 
 
 def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, library: Library | None = None,
@@ -574,9 +543,6 @@ class _Pool:
                 compound = True          # a local optimum of single moves: try pairs once
                 continue
             compound = False
-            if _DEBUG:
-                print("climb", _short(self.cands[cur], self.M), self.cands[cur].rmse_holdout, "->",
-                      _short(self.cands[nxt], self.M), self.cands[nxt].rmse_holdout)
             if nxt == cur:
                 break
             cur = nxt
