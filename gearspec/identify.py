@@ -340,12 +340,13 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     # grids for the start: Stribeck velocity over the plateau speeds, decays from 0
     lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
     # a Stribeck velocity far outside the plateau speeds is not identifiable (the term is then a
-    # constant or a straight line): the search is bounded to [lo/50, 2 hi] and a result on a
-    # bound is reported as not identified
-    vs_bounds = (math.log(lo / 50), math.log(2 * hi))
+    # constant or a straight line; below lo/10 it has fallen by e^10 before the slowest plateau
+    # and its height is pure extrapolation): the search is bounded to [lo/10, 2 hi] and a result
+    # on a bound is reported as not identified
+    vs_bounds = (math.log(lo / 10), math.log(2 * hi))
     if nb_nl:
         grid_vs = np.geomspace(lo / 10, hi * 2, 25)
-        if init and init.get("v_s") and lo / 50 < float(init["v_s"]) < 2 * hi:
+        if init and init.get("v_s") and lo / 10 < float(init["v_s"]) < 2 * hi:
             grid_vs = np.append(grid_vs, float(init["v_s"]))
     else:
         grid_vs = [None]
@@ -603,14 +604,18 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     if len(keep) < len(specs):
         specs = [specs[k] for k in keep]
         stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
-    # a decay needs the line at two speeds or more
+    # a decay needs the line measured on its own (a whole cycle in a segment) at two speeds or
+    # more: a line seen only in partial cycles shifts segment levels, which the speed law could
+    # trade against a speed-dependent amplitude; it keeps a constant amplitude (SILO4 eq. 6)
     specs = [dict(h) for h in specs]
     for k, h in enumerate(specs):
-        speeds = np.unique(np.round(stats.speed[stats.active[:, k]], 9))
+        whole = stats.sampled[:, k] & (stats.cycles[:, k] >= 1.0)
+        speeds = np.unique(np.round(stats.speed[whole], 9))
         if len(speeds) < 2 and h.get("decay", True) is not False and h.get("law", "exp") != "const":
             h["decay"] = False
             lab = h.get("label") or f"{h['frequency']:.6g}"
-            ni[f"{dname}.{lab}.decay"] = "the line is fitted at one speed only: its amplitude is held constant"
+            ni[f"{dname}.{lab}.decay"] = (f"the line completes a cycle within a segment at {len(speeds)} speed(s) "
+                                          f"only: its amplitude is held constant")
     basis = _BASES[law]
     distinct = len(np.unique(np.round(stats.speed, 9)))
     need = len(basis.lin) + len(basis.nonlin)
@@ -623,7 +628,11 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
                                f"plateaus at only {distinct} speed(s); fit a simpler law "
                                f"(e.g. coulomb_viscous) or record more speeds")
     prob = _make_problem(stats, law, specs, weights)
-    sol = _fit_direction(prob, init=init)
+    try:
+        sol = _fit_direction(prob, init=init)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}); the lines "
+                               f"asked for may be too close to each other or to the Nyquist frequency") from exc
     if sol["status"] <= 0:
         raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction")
     P = _direction_params(prob, sol)

@@ -22,7 +22,7 @@ def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
             return ""
         if isinstance(v, (float, np.floating)):
             return format(float(v), floatfmt)
-        return str(v).replace("|", "/")
+        return str(v).replace("|", "\\|")  # escaped: |v| stays |v| in the rendered table
 
     lines = ["| " + " | ".join(str(c) for c in cols) + " |", "|" + "---|" * len(cols)]
     for row in df.itertuples(index=False):
