@@ -73,6 +73,16 @@ def load_from_args(args):
                           header=not args.no_header, names=args.names, signal=args.signal)
 
 
+def parse_lines(text: str | None) -> list[float] | None:
+    """``--lines F,F,...``: frequencies in cycles per unit of theta (None when not given)."""
+    if not text:
+        return None
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"--lines takes frequencies separated by commas, got '{text}'") from None
+
+
 def segments_from_args(rec, args):
     """Constant-speed segments with the segment options."""
     from ..segment import find_segments

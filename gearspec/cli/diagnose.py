@@ -8,7 +8,14 @@ import shlex
 import sys
 import time
 
-from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+from . import (
+    add_output_options,
+    add_recording_options,
+    add_segment_options,
+    load_from_args,
+    parse_lines,
+    segments_from_args,
+)
 
 LAWS = ("silo4", "stribeck", "coulomb_viscous", "lola8", "lola11")
 KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
@@ -73,12 +80,7 @@ def run(args) -> int:
         bad = [k for k in kinds if k not in KINDS]
         if bad:
             raise InputError(f"--kinds: unknown kind(s) {', '.join(bad)} (known: {', '.join(KINDS)})")
-    harmonics = None
-    if args.lines:
-        try:
-            harmonics = [float(x) for x in args.lines.split(",") if x.strip()]
-        except ValueError:
-            raise InputError(f"--lines takes frequencies separated by commas, got '{args.lines}'") from None
+    harmonics = parse_lines(args.lines)
     from .. import diagnose as dg
     from ..model import FrictionModel
 

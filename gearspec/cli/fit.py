@@ -7,7 +7,14 @@ import shlex
 import sys
 import time
 
-from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+from . import (
+    add_output_options,
+    add_recording_options,
+    add_segment_options,
+    load_from_args,
+    parse_lines,
+    segments_from_args,
+)
 
 LAWS = ("silo4", "stribeck", "lola8", "lola11", "coulomb_viscous")
 
@@ -46,12 +53,7 @@ def run(args) -> int:
         raise InputError(f"--folds must be at least 2, got {args.folds}")
     rec = load_from_args(args)
     seg = segments_from_args(rec, args)
-    harmonics = None
-    if args.lines:
-        try:
-            harmonics = [float(x) for x in args.lines.split(",") if x.strip()]
-        except ValueError:
-            raise InputError(f"--lines takes frequencies separated by commas, got '{args.lines}'") from None
+    harmonics = parse_lines(args.lines)
     result = identify_recording(rec, args.law, segmentation=seg, harmonics=harmonics,
                                 published=False if args.no_published else None, holdout=args.holdout,
                                 folds=args.folds, se=args.se, load_ratio=args.load_ratio)
