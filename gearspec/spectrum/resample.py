@@ -85,11 +85,15 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
                 ok = False
                 break
         if ok:
-            th, yy = np.ascontiguousarray(th), np.ascontiguousarray(yy)
+            # grid point k lies between samples k - 1 and k + 1: each chunk of the grid needs only
+            # its own stretch of samples (np.interp copies its inputs when they are read-only, as
+            # a recording's columns are: whole arrays per chunk would cost far more than the
+            # interpolation)
             values = np.empty(m)
             for i in range(0, m, chunk):
                 j = min(m, i + chunk)
-                values[i:j] = np.interp(lo + h * np.arange(i, j), th, yy)
+                a, b = max(0, i - 1), min(n, j + 1)
+                values[i:j] = np.interp(lo + h * np.arange(i, j), th[a:b], yy[a:b])
             return lo, h, values
     t = np.subtract(theta, lo)
     t /= h
