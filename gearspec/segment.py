@@ -36,6 +36,7 @@ piece, on a uniform time grid (resampled linearly when the sampling jitters by m
 from __future__ import annotations
 
 import math
+import os
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -50,6 +51,8 @@ __all__ = ["Segment", "Segmentation", "find_segments", "derivatives", "friction_
 _K = 4  # blocks per speed window
 _WINDOW_LADDER = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
 _COVER_FRACTION = 0.8
+#: pieces at least this long try the windows of the "auto" ladder in two threads (by default)
+PARALLEL_MIN_SAMPLES = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -111,7 +114,7 @@ class Segmentation:
 # ---------------------------------------------------------------------- segmentation
 def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: float = 0.15,
                   min_speed: float | None = None, min_duration: float | None = None,
-                  min_samples: int = 32) -> Segmentation:
+                  min_samples: int = 32, workers: int | str = "auto") -> Segmentation:
     """Find constant-speed segments per direction (see the module docstring for the method).
 
     Parameters
@@ -129,6 +132,10 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         Shortest segment kept, seconds.  Default: two windows, and at least 0.1 s.
     min_samples : int
         Shortest segment kept, samples.
+    workers : int or "auto"
+        Windows of the ``"auto"`` ladder tried at once, in threads (numpy releases the GIL for
+        the bulk of the work; the result is the same whatever the number).  ``"auto"``: two on a
+        machine with two or more CPUs for pieces of at least ``PARALLEL_MIN_SAMPLES`` samples.
 
     Returns
     -------
@@ -140,19 +147,32 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         window = float(window)
         if not window > 0:
             raise InputError(f"the segment window must be a positive time in s, got {window}")
+    if workers != "auto" and (not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}")
     t, theta = rec.t, rec.theta
     segments: list[Segment] = []
     excluded: Counter = Counter()
     chosen = {}
     for run, a, b in rec.pieces():
         ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
-        tried = []
         noise = _position_noise(theta[a:b]) if min_speed is None else None
         dt = float(np.median(np.diff(t[a:min(b, a + 100_000)]))) if b - a >= 2 else None  # once per piece
-        for w in ladder:
-            res = _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise, dt)
-            if res is not None:
-                tried.append((sum(e - s for s, e, *_ in res[0]), w, res))
+
+        def one(w, a=a, b=b, noise=noise, dt=dt):
+            return _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise, dt)
+
+        n_workers = ((2 if (os.cpu_count() or 1) >= 2 and b - a >= PARALLEL_MIN_SAMPLES else 1)
+                     if workers == "auto" else int(workers))
+        if n_workers > 1 and len(ladder) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            # the shortest windows (most blocks) are the most work: they go first
+            with ThreadPoolExecutor(max_workers=min(n_workers, len(ladder)),
+                                    thread_name_prefix="gearspec-window") as pool:
+                results = list(pool.map(one, ladder))
+        else:
+            results = [one(w) for w in ladder]
+        tried = [(sum(e - s for s, e, *_ in res[0]), w, res) for w, res in zip(ladder, results) if res is not None]
         if not tried:  # piece too short for any window
             excluded["transient"] += b - a
             continue
@@ -247,17 +267,7 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     # the ends of a piece, where one of them does not exist, the first (last) two non-overlapping
     # windows stand in, so a piece that ends on a plateau keeps it and one that starts with a
     # ramp does not
-    j = np.arange(m)
-    left = j - _K + 1
-    right = j.copy()
-    at_start = left < 0
-    left[at_start] = 0
-    right[at_start] = np.maximum(right[at_start], _K)
-    at_end = right > m - _K
-    right[at_end] = m - _K
-    left[at_end] = np.minimum(left[at_end], m - 2 * _K)
-    before = v_win[np.clip(left, 0, m - _K)]
-    after = v_win[np.clip(right, 0, m - _K)]
+    before, after = _before_after(v_win, m)
     across = 0.5 * (before + after)
     # speed noise of a window from position noise (second differences), for the default min_speed
     if min_speed is None:
@@ -308,6 +318,40 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     labels["transient"] += int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)
     labels = Counter({k: v for k, v in labels.items() if v})
     return segs, labels
+
+
+def _before_after(v_win: np.ndarray, m: int):
+    """For every block j of m: the window speed ending at j (``before``, window j-K+1) and the one
+    starting at j (``after``, window j), with the piece's first (last) two non-overlapping windows
+    standing in near its ends.  Slices in the interior, index arithmetic only at the ends."""
+    K = _K
+    top = m - K  # the last window
+
+    def idx(j):  # the rule for a few blocks j, as index arrays
+        j = np.asarray(j)
+        left = j - K + 1
+        right = j.copy()
+        at_start = left < 0
+        left[at_start] = 0
+        right[at_start] = np.maximum(right[at_start], K)
+        at_end = right > top
+        right[at_end] = top
+        left[at_end] = np.minimum(left[at_end], m - 2 * K)
+        return np.clip(left, 0, top), np.clip(right, 0, top)
+
+    before = np.empty(m)
+    after = np.empty(m)
+    # interior: K-1 <= j <= top, where left = j-K+1 and right = j
+    a, b = K - 1, top + 1
+    if b > a:
+        before[a:b] = v_win[0:b - K + 1]
+        after[a:b] = v_win[a:b]
+    ends = np.concatenate([np.arange(0, min(a, m)), np.arange(max(b, a, 0), m)])
+    if len(ends):
+        li, ri = idx(ends)
+        before[ends] = v_win[li]
+        after[ends] = v_win[ri]
+    return before, after
 
 
 def _trim_speed(v, s, e, rel_tol):
