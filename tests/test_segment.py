@@ -141,3 +141,12 @@ def test_friction_torque_by_segment_equals_the_whole_recording():
     # no inertia: the drive torque itself
     rec3 = Recording.from_arrays(t=t, theta=theta, torque=tau)
     assert np.array_equal(FrictionTorque(rec3)[10:20], tau[10:20])
+
+
+def test_windows_in_threads_give_the_same_segments():
+    rec, _ = plateau_recording([2.0, -5.0, 11.0], ripples=[Ripple(0.8, 0.05)], level=0.3, duration=2.0, fs=1000,
+                               ramp=0.25, speed_ripple=0.08, noise=0.01, seed=4)
+    one, two = find_segments(rec, workers=1), find_segments(rec, workers=2)
+    assert one.segments == two.segments and one.excluded == two.excluded and len(one) == 3
+    with pytest.raises(InputError, match="workers"):
+        find_segments(rec, workers=0)
