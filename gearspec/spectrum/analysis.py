@@ -47,7 +47,13 @@ from ..errors import InputError
 from ..gears import GearTrain, load_gear
 from ..recording import Recording
 from ..segment import FrictionTorque, Segment, Segmentation, find_segments
-from .fft import hann_sinusoid_dft, hann_spectrum32
+from .fft import (
+    hann_fft_length,
+    hann_sinusoid_dft,
+    hann_spectrum32,
+    hann_spectrum32_buffer,
+    legendre_constant,
+)
 from .harmonic import (
     HarmonicFit,
     NormalEquations,
@@ -55,7 +61,7 @@ from .harmonic import (
     refine_frequencies,
 )
 from .periodogram import LombScargle, false_alarm_probability, noise_blocks
-from .resample import resample_uniform
+from .resample import grid_size, resample_uniform
 
 __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "analyze"]
 
@@ -537,16 +543,26 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
     included, nuisance removed) is stored there for the figures.
     """
     n = len(theta)
-    g0, h, vals = resample_uniform(theta, y, lo=lo, hi=hi)
-    m = len(vals)
+    if lo is None:
+        lo, hi = float(np.min(theta)), float(np.max(theta))
+    h, m = grid_size(n, lo, hi)
+    g0 = lo
     # x of the nuisance's Legendre series on the grid: x_k = a + b k
     if fit0.hi > fit0.lo:
         b = 2.0 * h / (fit0.hi - fit0.lo)
         a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
     else:
         a = b = 0.0
-    spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
-    del vals
+    if m < 4:  # degenerate: the general function
+        _, _, vals = resample_uniform(theta, y, lo=lo, hi=hi)
+        spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
+    else:
+        # resampled straight into the transform's float32 buffer, the nuisance's constant part
+        # taken off first in double precision: no double-precision copy of the grid
+        buf = np.zeros(hann_fft_length(m, oversample), np.float32)
+        resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
+        spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b)
+        del buf
     nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
     if keep_into is not None:
         keep_into.fft_frequency = (df * np.arange(len(spec))).astype(np.float32)
@@ -555,7 +571,7 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
         k0 = int(round(f / df))
         k = np.arange(max(0, k0 - 40), min(len(spec), k0 + 41))
         spec[k] -= hann_sinusoid_dft(k, nfft, m, g0, h, f, ca, cb).astype(spec.dtype)
-    k_lo = max(1, int(np.ceil((1.0 / (np.ptp(theta) if lo is None else hi - lo)) / df)))
+    k_lo = max(1, int(np.ceil((1.0 / (hi - lo)) / df)))
     k_hi = min(len(spec) - 1, int(np.floor(f_max / df)))
     sel = spec[k_lo:k_hi + 1]
     power = np.square(sel.real)      # single precision, as the spectrum: ~1e-7 of each bin's power

@@ -90,19 +90,44 @@ def hann_spectrum32(values: np.ndarray, spacing: float, pad: float = 2.0, legend
         spec, df, wsum, enbw = hann_spectrum(v - (legendre[0][0] if legendre is not None and len(legendre[0]) else 0),
                                              spacing, pad)
         return spec.astype(np.complex64), df, wsum, enbw
-    nfft = scipy.fft.next_fast_len(int(np.ceil(n * max(1.0, pad))), real=True)
+    nfft = hann_fft_length(n, pad)
     buf = np.zeros(nfft, np.float32)
-    x = buf[:n]
     coef = np.asarray(legendre[0], dtype=float) if legendre is not None else np.zeros(0)
+    a, b = (legendre[1], legendre[2]) if legendre is not None else (0.0, 0.0)
+    np.subtract(v, legendre_constant(coef, a), out=buf[:n], casting="unsafe")
+    return hann_spectrum32_buffer(buf, n, spacing, coef, a, b)
+
+
+def hann_fft_length(n: int, pad: float = 2.0) -> int:
+    """The transform length of :func:`hann_spectrum` for n values: a fast length of at least
+    ``pad`` times n."""
+    return int(scipy.fft.next_fast_len(int(np.ceil(n * max(1.0, pad))), real=True))
+
+
+def legendre_constant(coef, a: float) -> float:
+    """The part of ``sum_j coef_j P_j(a + b m)`` that :func:`hann_spectrum32_buffer` expects to be
+    subtracted already, in double precision: the constant term, and for a straight line (two
+    terms) also its value at m = 0."""
+    coef = np.asarray(coef, dtype=float)
+    if len(coef) == 0:
+        return 0.0
+    if len(coef) == 2:
+        return float(coef[0] + coef[1] * a)
+    return float(coef[0])
+
+
+def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: float = 0.0, b: float = 0.0):
+    """The work of :func:`hann_spectrum32` on a zero-padded float32 buffer (its length is the
+    transform length) whose first n values hold the signal with ``legendre_constant(coef, a)``
+    already subtracted; the buffer is used up.  For callers that fill the buffer themselves (no
+    double-precision copy of the signal)."""
+    coef = np.asarray(coef, dtype=float)
+    nfft = len(buf)
+    x = buf[:n]
     m = np.arange(n, dtype=np.float32)  # exact below 2^24
-    if len(coef) == 2:  # a straight line, c0 + c1 (a + b m): the constant part in double precision
-        a, b = legendre[1], legendre[2]
-        np.subtract(v, coef[0] + coef[1] * a, out=x, casting="unsafe")
+    if len(coef) == 2:  # a straight line: its slope
         x -= np.float32(coef[1] * b) * m
-    else:
-        np.subtract(v, coef[0] if len(coef) else 0.0, out=x, casting="unsafe")
     if len(coef) > 2:
-        a, b = legendre[1], legendre[2]
         t = m * np.float32(b)
         t += np.float32(a)
         p0, p1 = None, t

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import resample_poly
 
-__all__ = ["resample_over_position", "resample_uniform"]
+__all__ = ["resample_over_position", "resample_uniform", "grid_size"]
 
 
 def resample_over_position(theta: np.ndarray, y: np.ndarray, spacing: float | None = None,
@@ -48,13 +48,25 @@ def resample_over_position(theta: np.ndarray, y: np.ndarray, spacing: float | No
     return grid, values
 
 
+def grid_size(n: int, lo: float, hi: float, spacing: float | None = None) -> tuple[float, int]:
+    """``(spacing, number of grid points)`` of :func:`resample_uniform` for n samples in [lo, hi]."""
+    span = hi - lo
+    h = span / (n - 1) if spacing is None else float(spacing)
+    return h, int(np.floor(span / h)) + 1
+
+
 def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = None, lo: float | None = None,
-                     hi: float | None = None, chunk: int = 1 << 16) -> tuple[float, float, np.ndarray]:
+                     hi: float | None = None, chunk: int = 1 << 16, out: np.ndarray | None = None,
+                     shift: float = 0.0) -> tuple[float, float, np.ndarray]:
     """The cell averaging and interpolation of :func:`resample_over_position` (no decimation),
     returned as ``(first grid position, spacing, values)`` without the grid itself; ``lo`` and
     ``hi`` (the extremes of theta) may be given when known.  Temporaries are freed as soon as
     they are used and the grid is made in chunks: the peak memory is about four arrays of the
-    samples' length."""
+    samples' length (none for one sample per cell).
+
+    With ``out`` (e.g. a float32 buffer at least as long as the grid, see :func:`grid_size`) the
+    values minus ``shift`` are written there, chunk by chunk, in double precision until they are
+    stored; ``values`` is then the filled part of ``out``."""
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
     n = len(theta)
@@ -65,8 +77,14 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
     span = hi - lo
     if span <= 0:
         raise ValueError("position does not change: nothing to resample over")
-    h = span / (n - 1) if spacing is None else float(spacing)
-    m = int(np.floor(span / h)) + 1
+    h, m = grid_size(n, lo, hi, spacing)
+    values = np.empty(m) if out is None else out[:m]
+
+    def store(i, j, v):
+        if shift:
+            v -= shift
+        values[i:j] = v
+
     if m == n:
         # the common case of steady motion: one sample per cell, in order (every sample within
         # 0.49 cells of its grid point); the cell averages are then the samples themselves, and
@@ -89,11 +107,10 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
             # its own stretch of samples (np.interp copies its inputs when they are read-only, as
             # a recording's columns are: whole arrays per chunk would cost far more than the
             # interpolation)
-            values = np.empty(m)
             for i in range(0, m, chunk):
                 j = min(m, i + chunk)
                 a, b = max(0, i - 1), min(n, j + 1)
-                values[i:j] = np.interp(lo + h * np.arange(i, j), th[a:b], yy[a:b])
+                store(i, j, np.interp(lo + h * np.arange(i, j), th[a:b], yy[a:b]))
             return lo, h, values
     t = np.subtract(theta, lo)
     t /= h
@@ -114,8 +131,7 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
         xs = xs[filled] / cnt
         ys = ys[filled] / cnt
     del counts, filled
-    values = np.empty(m)
     for i in range(0, m, chunk):
         j = min(m, i + chunk)
-        values[i:j] = np.interp(lo + h * np.arange(i, j), xs, ys)
+        store(i, j, np.interp(lo + h * np.arange(i, j), xs, ys))
     return lo, h, values
