@@ -559,9 +559,10 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
     else:
         # resampled straight into the transform's float32 buffer, the nuisance's constant part
         # taken off first in double precision: no double-precision copy of the grid
-        buf = np.zeros(hann_fft_length(m, oversample), np.float32)
+        buf = np.empty(m, np.float32)  # the transform pads it (in its own work buffer)
         resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
-        spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b)
+        spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b,
+                                                      nfft=hann_fft_length(m, oversample))
         del buf
     nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
     if keep_into is not None:
@@ -658,7 +659,9 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     n_workers = _n_workers(workers, seg)
 
     def one(s: Segment) -> SegmentSpectrum:
-        y = tau[s.rows] * s.direction  # a new array: the friction magnitude of this segment
+        y = tau[s.rows]
+        if s.direction < 0:  # the friction magnitude (a view of the torque when it is the torque)
+            y = -y
         return analyze_segment(theta[s.rows], y, gear, segment=s, **options)
 
     def one_in_pool(s: Segment) -> SegmentSpectrum:

@@ -116,13 +116,15 @@ def legendre_constant(coef, a: float) -> float:
     return float(coef[0])
 
 
-def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: float = 0.0, b: float = 0.0):
-    """The work of :func:`hann_spectrum32` on a zero-padded float32 buffer (its length is the
-    transform length) whose first n values hold the signal with ``legendre_constant(coef, a)``
-    already subtracted; the buffer is used up.  For callers that fill the buffer themselves (no
-    double-precision copy of the signal)."""
+def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: float = 0.0, b: float = 0.0,
+                           nfft: int | None = None):
+    """The work of :func:`hann_spectrum32` on a float32 buffer whose first n values hold the
+    signal with ``legendre_constant(coef, a)`` already subtracted; the buffer is used up.  Its
+    length is the transform length, or ``nfft`` is given (the transform pads it: the buffer then
+    needs only the n values).  For callers that fill the buffer themselves (no double-precision
+    copy of the signal)."""
     coef = np.asarray(coef, dtype=float)
-    nfft = len(buf)
+    nfft = len(buf) if nfft is None else int(nfft)
     x = buf[:n]
     m = np.arange(n, dtype=np.float32)  # exact below 2^24
     if len(coef) == 2:  # a straight line: its slope
@@ -148,8 +150,9 @@ def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: 
     m *= np.float32(-0.5)
     m += np.float32(0.5)
     x *= m
-    del m, x
-    spec = scipy.fft.rfft(buf, overwrite_x=True)
+    del m
+    spec = scipy.fft.rfft(buf if len(buf) == nfft else x, nfft, overwrite_x=True)
+    del x
     wsum = 0.5 * (n - 1)            # sum of the window
     w2 = 0.375 * (n - 1)            # sum of its squares
     return spec, 1.0 / (nfft * spacing), wsum, n * w2 / wsum**2
