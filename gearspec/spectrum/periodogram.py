@@ -220,14 +220,19 @@ def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = 
                      else np.zeros(n_full, bool))
             lev = np.empty(n_full)
             cnt = np.empty(n_full)
-            clean = ~dirty
-            if not dirty.any():
-                lev, cnt = block_levels(rows, masked=False)
-            elif clean.any():
-                lev[clean], cnt[clean] = block_levels(rows[clean], masked=False)
-            if dirty.any():
-                mrows = np.where(mask[start:stop].reshape(n_full, width)[dirty], np.nan, rows[dirty])
-                lev[dirty], cnt[dirty] = block_levels(mrows)
+            mrows_all = mask[start:stop].reshape(n_full, width) if mask is not None else None
+            # in groups of rows: the sorted copy and the temporaries stay small
+            step = max(1, (1 << 18) // width)
+            for i in range(0, n_full, step):
+                r_, d_ = rows[i:i + step], dirty[i:i + step]
+                lv, ct = lev[i:i + step], cnt[i:i + step]
+                if not d_.any():
+                    lv[:], ct[:] = block_levels(r_, masked=False)
+                    continue
+                c_ = ~d_
+                if c_.any():
+                    lv[c_], ct[c_] = block_levels(r_[c_], masked=False)
+                lv[d_], ct[d_] = block_levels(np.where(mrows_all[i:i + step][d_], np.nan, r_[d_]))
             levels[n_grow:n_grow + n_full], counts[n_grow:n_grow + n_full] = lev, cnt
         for k in range(n_grow + n_full, len(edges) - 1):
             lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
