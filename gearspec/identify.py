@@ -725,10 +725,11 @@ def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
 
 
 def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
-                 folds: int = 5) -> float | None:
+                 folds: int = 5, residual: Callable | None = None) -> float | None:
     """Root-mean-square error on held-out data: ``folds``-fold cross-validation over whole
     segments (or runs); each fold is predicted by a model fitted to the others.  Folds where the
-    fit fails (too few speeds left) are skipped; None when every fold fails."""
+    fit fails (too few speeds left) are skipped; None when every fold fails.  ``residual(model,
+    test_data)`` gives the error of a fold (default: ``model.residual``, friction torque)."""
     groups = data.groups(by)
     ng = len(np.unique(groups))
     if ng < 2:
@@ -742,7 +743,8 @@ def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, b
             continue
         try:
             m = fit_fn(data.subset(~test))
-            r = m.residual(data.subset(test))
+            t = data.subset(test)
+            r = m.residual(t) if residual is None else residual(m, t)
         except InputError:
             continue
         r = r[np.isfinite(r)]
@@ -884,25 +886,11 @@ def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None
         amplitudes = amplitudes_from_spectrum(amplitudes, data, specs)
     model = _published(data, amplitudes, specs, high_speed, set(constant))
     if holdout:
-        groups = data.groups(holdout)
-        k = min(folds, len(np.unique(groups)))
-        if k >= 2:
-            fold = _folds(data, holdout, k)
-            sse, n = 0.0, 0
-            for f in range(k):
-                test = fold == f
-                if not test.any() or test.all():
-                    continue
-                train = data.subset(~test)
-                amp = amplitudes[amplitudes["segment"].isin(np.unique(train.segment))]
-                try:
-                    r = _published(train, amp, specs, high_speed, set(constant)).residual(data.subset(test))
-                except InputError:
-                    continue
-                r = r[np.isfinite(r)]
-                sse += float(r @ r)
-                n += len(r)
-            model.rmse_holdout = math.sqrt(sse / n) if n else None
+        def fit_fold(train):  # the plateaus and line amplitudes of the training segments only
+            amp = amplitudes[amplitudes["segment"].isin(np.unique(train.segment))]
+            return _published(train, amp, specs, high_speed, set(constant))
+
+        model.rmse_holdout = holdout_rmse(fit_fold, data, by=holdout, folds=folds)
     return model
 
 
@@ -1095,21 +1083,8 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
 
 
 def _eff_holdout(data, law, ratio, by, folds):
-    groups = data.groups(by)
-    k = min(folds, len(np.unique(groups)))
-    fold = _folds(data, by, k)
-    sse, n = 0.0, 0
-    for f in range(k):
-        test = fold == f
-        try:
-            m = fit_efficiency(data.subset(~test), law, ratio=ratio)
-        except InputError:
-            continue
-        t = data.subset(test)
-        r = efficiency_model(m, t.v, t.load, ratio) - t.y
-        sse += float(r @ r)
-        n += len(r)
-    return math.sqrt(sse / n) if n else None
+    return holdout_rmse(lambda tr: fit_efficiency(tr, law, ratio=ratio), data, by=by, folds=folds,
+                        residual=lambda m, t: efficiency_model(m, t.v, t.load, ratio) - t.y)
 
 
 def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_extrapolated: bool = True
