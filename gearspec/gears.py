@@ -435,7 +435,7 @@ def integer_hint(gear: GearTrain | None, frequency: float, tol: float, max_multi
     fastest shaft (smallest multiple) first, and only shafts whose frequency is ten times the
     tolerance (so that neighbouring multiples can be told apart).
 
-    (The same rule as the ``hint`` of :mod:`gearspec.spectrum`'s unexplained peaks.)
+    (The ``hint`` of :mod:`gearspec.spectrum`'s unexplained peaks.)
     """
     if gear is None or not (frequency > 0):
         return None

@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from ..gears import GearTrain, load_gear
+from ..gears import GearTrain, integer_hint, load_gear
 from ..recording import Recording
 from ..segment import FrictionTorque, Segment, Segmentation, find_segments
 from .fft import (
@@ -374,7 +374,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
             tol = max(0.5 / span, 1e-6 * f)
             line = gear.label(f, tol) if gear is not None else None
             label, declared = (line.label if line is not None else None), False
-        hint = _integer_hint(gear, f, max(0.5 / span, 1e-6 * f)) if (label is None and gear is not None) else None
+        hint = integer_hint(gear, f, max(0.5 / span, 1e-6 * f)) if (label is None and gear is not None) else None
         peaks.append(Peak(frequency=float(f), amplitude=float(amp[k]), amplitude_se=float(amp_se[k]),
                           phase=float(ph[k]), phase_se=float(ph_se[k]), fap=float(fap_fit[k]),
                           order=None if gear is None else gear.order(f), label=label, declared=declared,
@@ -589,24 +589,6 @@ def _refine(grid: _Grid, power, i):
     den = a - 2 * b + c
     shift = 0.5 * (a - c) / den if den < 0 else 0.0
     return float(grid.at(i) + np.clip(shift, -0.5, 0.5) * (grid.at(1) - grid.at(0)))
-
-
-def _integer_hint(gear: GearTrain, f: float, tol: float) -> str | None:
-    """'7x motor shaft' when f sits within tol of an integer multiple (>= 2) of a shaft line.
-
-    Not a label: a high multiple of a slow shaft matches almost anything, so only multiples up to
-    64 are tried, fastest shaft (smallest multiple) first, and only shafts whose frequency is ten
-    times the tolerance (so that neighbouring multiples are distinguishable).  A motor pole-pair or cogging order
-    shows up this way.
-    """
-    shafts = sorted((ln for ln in gear.declared_lines() if ln.kind == "shaft"), key=lambda x: -x.frequency)
-    for ln in shafts:
-        if tol > 0.1 * ln.frequency:  # neighbouring multiples cannot be told apart
-            continue
-        m = round(f / ln.frequency)
-        if 2 <= m <= 64 and abs(f - m * ln.frequency) <= tol:
-            return f"{m}x {ln.label}"
-    return None
 
 
 # ---------------------------------------------------------------------- a whole recording
