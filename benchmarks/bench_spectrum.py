@@ -414,7 +414,7 @@ def stage_breakdown(R, s, th, y, gear):
     # n/a when they change)
     from gearspec.spectrum import analysis as _an
 
-    stage("  1 position Nyquist (selection)", lambda: _an._position_nyquist(th))
+    stage("  1 position Nyquist (selection)", lambda: _an.position_nyquist(th))
     eq = stage(f"  2 normal equations, {len(f_dec)} declared lines (1 pass)",
                lambda: NormalEquations.accumulate(th, y, f_dec, deg))
     if eq is not None:

@@ -253,7 +253,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     if n < 16 or span <= 0:
         return SegmentSpectrum(segment, [], float(np.mean(y)) if n else float("nan"), float("nan"), span,
                                float("nan"), 0, [], None, note="too few samples to analyse")
-    nyquist = _position_nyquist(theta)
+    nyquist = position_nyquist(theta)
     f_search_max = 0.5 * (n - 1) / span
     if max_frequency is not None:
         f_search_max = min(f_search_max, float(max_frequency))
@@ -403,8 +403,11 @@ def _ls_threads() -> int | None:
     return 1 if getattr(_local, "in_pool", False) else None
 
 
-def _position_nyquist(theta: np.ndarray) -> float:
-    """Half the inverse of the 95th percentile of the nonzero sample spacings (linear
+def position_nyquist(theta: np.ndarray) -> float:
+    """The position Nyquist frequency of samples at positions ``theta`` (cycles per unit of theta):
+    the one source of this fact for every stage (spectrum, identification, the closed loop).
+
+    Half the inverse of the 95th percentile of the nonzero sample spacings (linear
     interpolation, as ``np.percentile``), from a selection in single precision: the spacing is
     rounded to 1e-7 of itself, and the selection takes a third of the time."""
     sp = np.empty(len(theta) - 1, np.float32)
