@@ -368,3 +368,22 @@ def test_segments_in_threads_give_the_same_result():
 
     assert json.dumps(one.to_dict(), default=float) == json.dumps(
         {**two.to_dict(), "settings": one.to_dict()["settings"]}, default=float)
+
+
+def test_an_empty_user_segmentation_is_refused_not_replaced_by_the_defaults():
+    """Issue 10 item 8: an empty Segmentation is falsy; ``segmentation or find_segments(...)``
+    dropped the user's options (the JSON then said ``window: auto``) and analysed other segments."""
+    from gearspec.errors import InputError
+    from gearspec.segment import find_segments
+
+    rec, _ = plateau_recording([40, -40], ripples=[Ripple(F_MOTOR, 1e-3, 0.5)], level=0.01, duration=3,
+                               fs=1000, noise=1e-4, gear=SILO4, seed=2)
+    assert len(find_segments(rec)) == 2  # the defaults find both plateaus
+    seg = find_segments(rec, min_speed=1e3)  # faster than any plateau: nothing
+    assert len(seg) == 0 and seg.settings.get("min_speed") == 1e3
+    with pytest.raises(InputError, match="no constant-speed segment"):
+        analyze(rec, segmentation=seg)
+    # a non-empty user segmentation is used as given, its settings recorded
+    seg2 = find_segments(rec, window=0.2)
+    res = analyze(rec, segmentation=seg2)
+    assert res.settings["window"] == seg2.settings["window"] != "auto"

@@ -627,8 +627,10 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     gear = load_gear(gear) if gear is not None else rec.gear
     if gear is not None and gear.unit != rec.unit:
         raise InputError(f"gear spec '{gear.name}' is for theta in {gear.unit}, the recording's theta is in {rec.unit}")
-    seg = segmentation or find_segments(rec, window=window, rel_tol=rel_tol, min_speed=min_speed,
-                                        min_duration=min_duration)
+    # `is None`, not `or`: an empty Segmentation is falsy, and the user's segmentation (with its
+    # options) must be honoured -- refused below when it holds no segment -- never replaced
+    seg = segmentation if segmentation is not None else find_segments(
+        rec, window=window, rel_tol=rel_tol, min_speed=min_speed, min_duration=min_duration)
     if len(seg) == 0:
         raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found "
                          f"(rows: {dict(seg.excluded)}); try a larger --rel-tol or a fixed --window")
