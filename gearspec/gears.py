@@ -37,13 +37,14 @@ from typing import Iterable
 
 from .errors import InputError, warn
 
-__all__ = ["Stage", "Line", "GearTrain", "KINDS", "presets", "load_gear", "integer_hint"]
+__all__ = ["Stage", "Line", "GearTrain", "KINDS", "presets", "load_gear", "integer_hint", "integer_order",
+           "IntegerOrder", "alias_frequency", "alias_of", "HINT_COINCIDENCE"]
 
 KINDS = ("planetary", "worm", "spur", "helical", "harmonic", "cycloidal", "ballscrew", "belt", "other")
 _CARRIER_KINDS = ("planetary", "harmonic", "cycloidal")
 _LINEAR_KINDS = ("ballscrew", "belt")
 _WAVE_MULTIPLES = (1, 2, 4)
-_KIND_RANK = {"shaft": 0, "wave": 1, "mesh": 2, "harmonic": 3, "sideband": 4}
+_KIND_RANK = {"shaft": 0, "wave": 1, "mesh": 2, "harmonic": 3, "sideband": 4, "found": 5, "alias": 6}
 _TOP_KEYS = {"name", "reference", "unit", "torque_constant", "inertia", "stages", "description"}
 _STAGE_KEYS = {"name", "kind", "ratio", "teeth", "lead"}
 
@@ -345,11 +346,17 @@ class GearTrain:
             merged.append(Line(ln.frequency, ln.label, ln.kind, self.order(ln.frequency), ln.parents))
         return merged
 
-    def label(self, frequency: float, tolerance: float, max_harmonic: int = 4) -> Line | None:
+    def label(self, frequency: float, tolerance: float, max_harmonic: int = 4, *, spacing: float | None = None,
+              nyquist: float | None = None, known: Iterable[tuple[float, str]] = ()) -> Line | None:
         """The simplest line within ``tolerance`` (cycles per unit) of ``frequency``, or None.
 
         Simplest means: shaft before wave generator before mesh before harmonic before sideband;
         among equals, the closest.
+
+        With ``spacing`` (the mean position spacing of the samples the frequency was measured
+        on) and no line at the frequency itself, a line above the position Nyquist frequency
+        (``nyquist``, default ``0.5 / spacing``) whose alias falls there: ``alias of <label>``
+        (:func:`alias_of`, which also tries the lines in ``known``).
         """
         best = None
         for ln in _candidates(self, max_harmonic):
@@ -358,6 +365,9 @@ class GearTrain:
                 key = (_KIND_RANK[ln.kind], d)
                 if best is None or key < best[0]:
                     best = (key, ln)
+        if best is None and spacing is not None:
+            return alias_of(self, frequency, tolerance, spacing, nyquist=nyquist, known=known,
+                            max_harmonic=max_harmonic)
         return None if best is None else best[1]
 
     def torque_from_current(self, current):
@@ -425,25 +435,119 @@ def load_gear(spec: "str | Path | GearTrain | dict | None") -> GearTrain | None:
     raise InputError(f"gear spec '{text}': no such file and no such preset (presets: {', '.join(known)})")
 
 
-def integer_hint(gear: GearTrain | None, frequency: float, tol: float, max_multiple: int = 64) -> str | None:
-    """'7x motor shaft' when ``frequency`` sits within ``tol`` of an integer multiple (>= 2) of a
-    shaft line of ``gear``; None otherwise.
+#: the largest chance that a frequency unrelated to a shaft falls within the tolerance of one of
+#: its integer multiples, for an integer-order hint (or an alias of one) to be given at all
+HINT_COINCIDENCE = 0.1
 
-    Not a label (a label is what the declared lines explain, :meth:`GearTrain.label`): a motor
-    pole-pair, slot or commutator count, or a cogging order shows up this way.  A high multiple
-    of a slow shaft matches almost anything, so only multiples up to ``max_multiple`` are tried,
-    fastest shaft (smallest multiple) first, and only shafts whose frequency is ten times the
-    tolerance (so that neighbouring multiples can be told apart).
 
-    (The ``hint`` of :mod:`gearspec.spectrum`'s unexplained peaks.)
+@dataclass(frozen=True)
+class IntegerOrder:
+    """An integer multiple of a shaft that a measured frequency sits on (:func:`integer_order`)."""
+
+    multiple: int
+    shaft: str               # the shaft's label
+    frequency: float         # the exact frequency, multiple x shaft frequency (cycles per unit)
+    order: float | None      # the exact order (cycles per output turn)
+
+    @property
+    def hint(self) -> str:
+        return f"{self.multiple}x {self.shaft}"
+
+
+def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_multiple: int | None = None,
+                  coincidence: float = HINT_COINCIDENCE) -> IntegerOrder | None:
+    """The integer multiple (>= 2) of a shaft of ``gear`` within ``tol`` of ``frequency``, or None.
+
+    Every multiple is tried (72x, 96x, 144x of a motor shaft as well as 7x) that the frequency's
+    uncertainty ``tol`` can tell from its neighbours.  The bound: the multiples of a shaft at
+    ``f_s`` are ``f_s`` apart, so a frequency that has nothing to do with the shaft lands within
+    ``tol`` of one of them with probability ``2 tol / f_s`` (uniform between two multiples); a
+    shaft is admissible only while that chance is at most ``coincidence`` (10 %), i.e.
+    ``tol <= coincidence * f_s / 2`` -- far below the ``f_s / 2`` at which neighbouring multiples
+    stop being distinguishable at all.  A slow shaft (a planetary or output shaft) thus needs a
+    proportionally sharper frequency, which is what keeps hints such as "53x planetary output
+    shaft" out.  Shafts are tried fastest first (the smallest multiple wins).  ``max_multiple``
+    optionally caps the multiple.
     """
-    if gear is None or not (frequency > 0):
+    if gear is None or not (frequency > 0) or not (tol >= 0):
         return None
     shafts = sorted((ln for ln in gear.declared_lines() if ln.kind == "shaft"), key=lambda x: -x.frequency)
     for ln in shafts:
-        if tol > 0.1 * ln.frequency:  # neighbouring multiples cannot be told apart
+        if 2.0 * tol > coincidence * ln.frequency:  # neighbouring multiples cannot be told apart reliably
             continue
         m = round(frequency / ln.frequency)
-        if 2 <= m <= max_multiple and abs(frequency - m * ln.frequency) <= tol:
-            return f"{m}x {ln.label}"
+        if m >= 2 and (max_multiple is None or m <= max_multiple) and abs(frequency - m * ln.frequency) <= tol:
+            exact = m * ln.frequency
+            return IntegerOrder(m, ln.label, exact, gear.order(exact))
+    return None
+
+
+def integer_hint(gear: GearTrain | None, frequency: float, tol: float, max_multiple: int | None = None,
+                 coincidence: float = HINT_COINCIDENCE) -> str | None:
+    """'7x motor shaft' when ``frequency`` sits within ``tol`` of an integer multiple (>= 2) of a
+    shaft line of ``gear`` that ``tol`` resolves (:func:`integer_order`, which also gives the
+    exact frequency and order); None otherwise.
+
+    Not a label (a label is what the declared lines explain, :meth:`GearTrain.label`): a motor
+    pole-pair, slot or commutator count, or a cogging order shows up this way.
+
+    (The ``hint`` of :mod:`gearspec.spectrum`'s unexplained peaks and of diagnose's candidates.)
+    """
+    io = integer_order(gear, frequency, tol, max_multiple=max_multiple, coincidence=coincidence)
+    return None if io is None else io.hint
+
+
+# ---------------------------------------------------------------------- aliasing
+def alias_frequency(frequency: float, spacing: float) -> float:
+    """Where a line at ``frequency`` (cycles per unit) shows up in samples taken every ``spacing``
+    units of position: ``|f - m / spacing|`` for the nearest integer m (in [0, 0.5 / spacing]).
+
+    Exact for uniform spacing; with jittered spacing the alias is smeared around the value at
+    the mean spacing."""
+    fs = 1.0 / spacing
+    return abs(frequency - round(frequency / fs) * fs)
+
+
+def alias_of(gear: GearTrain | None, frequency: float, tol: float, spacing: float, *,
+             nyquist: float | None = None, known: Iterable[tuple[float, str]] = (), max_harmonic: int = 4,
+             coincidence: float = HINT_COINCIDENCE) -> Line | None:
+    """The line above the position Nyquist frequency whose alias is within ``tol`` of the measured
+    ``frequency``, as a :class:`Line` labelled ``alias of <label>`` (kind ``"alias"``; its
+    ``frequency`` and ``order`` are the true line's), or None.
+
+    ``spacing`` is the mean position spacing of the samples (the alias is computed from it,
+    :func:`alias_frequency`); ``nyquist`` the position Nyquist frequency of the samples
+    (default ``0.5 / spacing``; :func:`gearspec.spectrum.position_nyquist`): only lines above it
+    alias.  Tried, simplest first: the lines :meth:`GearTrain.label` knows (declared lines,
+    harmonics up to ``max_harmonic``, sidebands), the lines in ``known`` (``(frequency, label)``
+    pairs, e.g. lines found in other segments) with their harmonics, then integer multiples of a
+    shaft in the first fold (true frequency ``1/spacing -+ frequency``) under the resolution
+    bound of :func:`integer_order`.
+    """
+    if not (spacing > 0) or not (frequency >= 0) or not (tol >= 0):
+        return None
+    fs = 1.0 / spacing
+    fn = 0.5 * fs if nyquist is None else float(nyquist)
+    lines: list[Line] = list(_candidates(gear, max_harmonic)) if gear is not None else []
+    for f0, lab in known:
+        lines.append(Line(float(f0), str(lab), "found"))
+        lines += [Line(h * float(f0), f"{h}x {lab}", "found") for h in range(2, max_harmonic + 1)]
+    best = None
+    for ln in lines:
+        if not (ln.frequency > fn):  # measurable at its own frequency: not an alias
+            continue
+        d = abs(alias_frequency(ln.frequency, spacing) - frequency)
+        if d <= tol:
+            key = (_KIND_RANK[ln.kind], d)
+            if best is None or key < best[0]:
+                best = (key, ln)
+    if best is not None:
+        ln = best[1]
+        order = gear.order(ln.frequency) if gear is not None else None
+        return Line(ln.frequency, f"alias of {ln.label}", "alias", order, (ln.label,))
+    for f_true in (fs - frequency, fs + frequency):
+        if f_true > fn:
+            io = integer_order(gear, f_true, tol, coincidence=coincidence)
+            if io is not None:
+                return Line(io.frequency, f"alias of {io.hint}", "alias", io.order, (io.hint,))
     return None

@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from ..gears import GearTrain, integer_hint, load_gear
+from ..gears import GearTrain, alias_frequency, integer_order, load_gear
 from ..recording import Recording
 from ..segment import FrictionTorque, Segment, Segmentation, find_segments
 from .fft import (
@@ -66,6 +66,7 @@ from .resample import grid_size, resample_uniform
 __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "analyze"]
 
 _GUARD = 3.0  # resolution steps kept clear around fitted lines when searching for peaks
+_MAX_ROUNDS = 6  # search -> joint fit -> search the residual of all lines found, at most this often
 
 
 @dataclass(frozen=True)
@@ -83,11 +84,17 @@ class Peak:
     declared: bool
     snr: float  # power over local noise power at the frequency
     hint: str | None = None  # for an unlabelled peak: an integer multiple of a shaft it sits on
+    frequency_se: float = 0.0  # standard error of a found peak's frequency (0: declared, fixed)
+    frequency_exact: float | None = None  # with a hint: the exact frequency of that multiple
+    order_exact: float | None = None      # ... and its exact order
+    aliased_from: dict | None = None  # a peak labelled 'alias of X': X's label, frequency and order
 
     def to_dict(self) -> dict:
         return {"frequency": self.frequency, "amplitude": self.amplitude, "amplitude_se": self.amplitude_se,
                 "phase": self.phase, "phase_se": self.phase_se, "fap": self.fap, "order": self.order,
-                "label": self.label, "declared": self.declared, "snr": self.snr, "hint": self.hint}
+                "label": self.label, "declared": self.declared, "snr": self.snr, "hint": self.hint,
+                "frequency_se": self.frequency_se, "frequency_exact": self.frequency_exact,
+                "order_exact": self.order_exact, "aliased_from": self.aliased_from}
 
 
 @dataclass
@@ -132,6 +139,7 @@ class SegmentSpectrum:
                 "start": s.start, "stop": s.stop, "level": self.level, "sigma": self.sigma,
                 "span": self.span, "nyquist": self.nyquist, "nuisance_degree": self.degree,
                 "peaks": [p.to_dict() for p in self.peaks], "skipped_lines": self.skipped,
+                "above_nyquist": [d["label"] for d in self.skipped if d.get("kind") == "above_nyquist"],
                 **({"note": self.note} if self.note else {})}
 
 
@@ -254,7 +262,9 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         return SegmentSpectrum(segment, [], float(np.mean(y)) if n else float("nan"), float("nan"), span,
                                float("nan"), 0, [], None, note="too few samples to analyse")
     nyquist = position_nyquist(theta)
-    f_search_max = 0.5 * (n - 1) / span
+    # nothing above the position Nyquist frequency is searched (nor fitted, nor reported as
+    # measured): with jittered spacing it is below the mean spacing's 0.5 (n - 1) / span
+    f_search_max = min(0.5 * (n - 1) / span, nyquist)
     if max_frequency is not None:
         f_search_max = min(f_search_max, float(max_frequency))
     # declared lines: fit, too slow, or too fast
@@ -262,12 +272,15 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     for ln in (gear.declared_lines(max_harmonic=harmonics) if gear is not None else []):
         cycles = ln.frequency * span
         if cycles < min_cycles:
-            skipped.append({"label": ln.label, "frequency": ln.frequency,
+            skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "too_slow",
                             "reason": f"{cycles:.3g} cycles in the segment (< {min_cycles:g}); absorbed by the nuisance polynomial"})
             slow_cycles.append(cycles)
         elif ln.frequency > 0.9 * nyquist:
-            skipped.append({"label": ln.label, "frequency": ln.frequency,
-                            "reason": f"above 0.9 x the position Nyquist frequency ({nyquist:.4g})"})
+            # not measurable here: never fitted; where it shows up (its alias at the mean spacing)
+            # is said, and a peak found there is labelled 'alias of <label>'
+            skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "above_nyquist",
+                            "alias": alias_frequency(ln.frequency, span / (n - 1)) if ln.frequency > nyquist else None,
+                            "reason": f"above 0.9 x the position Nyquist frequency ({nyquist:.4g}): not measured"})
         else:
             fitted.append(ln)
     deg = (max(1, min_degree_for_cycles(max(slow_cycles))) if slow_cycles else 1) if degree == "auto" else int(degree)
@@ -284,6 +297,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     use_ls = periodogram == "lombscargle" or (periodogram == "auto" and n <= LS_MAX_SAMPLES)
     out = SegmentSpectrum(segment, [], level=eq.y0, sigma=fit0.sigma, span=span, nyquist=nyquist,
                           degree=deg, skipped=skipped, fit=fit0)
+    fft_res = None
     if use_ls:
         ls = LombScargle(theta, y - fit0.predict(theta), method=method, nthreads=_ls_threads())
         fmin, df, nf = ls.autogrid(oversample=oversample, fmax=f_search_max)
@@ -292,93 +306,101 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         enbw = 1.0
         del ls
     else:
-        k_lo, _, df, power, enbw = _fft_residual_power(theta, y, fit0, oversample, f_search_max,
-                                                          out if keep_spectra else None, lo=lo, hi=hi)
+        k_lo, _, df, power, enbw, fft_res = _fft_residual_power(
+            theta, y, fit0, oversample, f_search_max, out if keep_spectra else None, lo=lo, hi=hi,
+            keep_residual=max_peaks > 0)
         grid = _Grid(0.0, df, k_lo, len(power))
     nbin = len(power)
-    # the fit removed each declared line's power from its own bin and its neighbours: leave those
-    # bins out of the noise level, or it reads low
-    fitted_mask = np.zeros(nbin, bool)
-    for f0 in declared_f:
-        fitted_mask[grid.within(f0, 1.0 / span)] = True
-    noise_model = _LocalNoise(power, width=int(100 * oversample), min_width=int(20 * oversample),
-                              mask=fitted_mask, enbw=enbw)
-    del fitted_mask
-    m_eff = max(1.0, nbin / oversample)
-    # 3. peaks no declared line explains: not where the nuisance polynomial could mimic them, and
-    # not within 1.5 resolution steps of a declared line (the two could not be told apart)
+    power_first = power if keep_spectra else None
+    m_eff = max(1.0, nbin / oversample)  # independent frequencies searched: the same in every round
+    # 3. peaks no declared line explains (see _search), found iteratively: a dense comb of lines
+    # raises the local noise level around each of them, so after every search the lines found so
+    # far are fitted jointly (frequencies refined), the ones no longer significant dropped, and
+    # the residual of all of them searched again -- its noise level re-estimated without their
+    # power and sidelobes -- until a round finds nothing (at most _MAX_ROUNDS rounds).  Every
+    # round searches the same frequencies: m_eff stays the count in every false-alarm probability.
     guard = _GUARD / span
     f_found_min = max(2.0, min_cycles, (deg + 1) / math.pi) / span
+    n_dec = len(declared_f)
+    eq_dec = eq
     found: list[float] = []
-    if max_peaks > 0 and nbin >= 3:
-        is_max = np.zeros(nbin, bool)
-        np.greater(power[1:-1], power[:-2], out=is_max[1:-1])
-        is_max[1:-1] &= power[1:-1] >= power[2:]
-        for f0 in declared_f:
-            is_max[grid.within(f0, 1.5 / span)] = False
-        is_max[:grid.first_at_least(f_found_min)] = False
-        cand = np.flatnonzero(is_max)
-        del is_max
-        # a candidate needs at least the power that a known noise level (the lightest tail) would
-        # call significant; only those get the exact (F-distributed) false-alarm probability.  The
-        # lowest noise level anywhere screens out most of them without evaluating the level.
-        z_floor = _z_floor(fap_threshold, m_eff)
-        floor = noise_model.lowest()
-        if floor > 0:
-            cand = cand[power[cand] > z_floor * floor * (1 - 1e-6)]
-        z_c = power[cand] / noise_model.level(cand)
-        keep_c = z_c > z_floor
-        cand, z_c = cand[keep_c], z_c[keep_c]
-        fap_c = false_alarm_probability(z_c, m_eff, noise_model.bins(cand), oversample)
-        sig = fap_c < fap_threshold
-        cand, z_c = cand[sig], z_c[sig]
-        for i in cand[np.argsort(-z_c)]:
-            f_pk = _refine(grid, power, i)
-            if any(abs(f_pk - f0) < guard for f0 in found):
-                continue
-            found.append(f_pk)
-            if len(found) >= max_peaks:
-                break
-    # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass that
-    # computes only the rows of the found lines -- the declared lines' equations are reused --
-    # the last one also the joint fit); a found peak stays only while its fitted amplitude is
-    # significant (a sidelobe of a stronger line is not, once that line is fitted): dropping one
-    # is a smaller solve of the same normal equations, not another pass
-    if found:
-        n_dec = len(declared_f)
-        _, _, eq = refine_frequencies(theta, y, declared_f + found, range(n_dec, n_dec + len(found)), degree=deg,
-                                      iterations=3, base=eq)
-    all_f = eq.frequency
-    keep = list(range(len(all_f)))
-    while True:
-        fit = eq.fit(keep)
-        s_at = grid.interp(fit.frequency, noise_model.level) if len(keep) else np.array([])
-        k_at = grid.interp(fit.frequency, noise_model.bins) if len(keep) else np.array([])
-        z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at / enbw, 1e-300)
-        is_dec = np.array([j < len(declared_f) for j in keep], bool)
-        fap_fit = np.where(is_dec, false_alarm_probability(z_fit, 1.0, k_at, oversample),
-                           false_alarm_probability(z_fit, m_eff, k_at, oversample))
-        bad = [j for j, dec, fp, f in zip(keep, is_dec, fap_fit, fit.frequency)
-               if not dec and (fp >= fap_threshold or f < f_found_min)]
-        if not bad:
+    rejected: list[float] = []     # found, then dropped: never searched for again
+    keep = list(range(n_dec))
+    se_eq = np.zeros(n_dec)        # frequency standard errors (white noise) of eq's lines
+    fit = fit0
+    for rnd in range(_MAX_ROUNDS):
+        if rnd > 0:  # the residual of every line fitted so far
+            if use_ls:
+                ls = LombScargle(theta, y - fit.predict(theta), method=method, nthreads=_ls_threads())
+                power = np.atleast_1d(ls.power_grid(grid.base, grid.df, nbin))
+                del ls
+            else:
+                power = fft_res.power(fit)
+        # the fit removed each fitted line's power from its own bin and its neighbours: leave
+        # those bins out of the noise level, or it reads low
+        fitted_mask = np.zeros(nbin, bool)
+        for f0 in fit.frequency:
+            fitted_mask[grid.within(f0, 1.0 / span)] = True
+        noise_model = _LocalNoise(power, width=int(100 * oversample), min_width=int(20 * oversample),
+                                  mask=fitted_mask, enbw=enbw)
+        del fitted_mask
+        room = max_peaks - len(found)
+        new = (_search(power, grid, noise_model, declared_f, found + rejected, span, guard, f_found_min,
+                       fap_threshold, m_eff, oversample, room) if room > 0 and nbin >= 3 else [])
+        if not new:
             break
-        keep = [j for j in keep if j not in bad]
+        # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass that
+        # computes only the rows of the found lines -- the declared lines' equations are reused --
+        # the last one also the joint fit); a found peak stays only while its fitted amplitude is
+        # significant (a sidelobe of a stronger line is not, once that line is fitted): dropping
+        # one is a smaller solve of the same normal equations, not another pass
+        f_all, se_eq, eq = refine_frequencies(theta, y, declared_f + found + new,
+                                              range(n_dec, n_dec + len(found) + len(new)), degree=deg,
+                                              iterations=3, base=eq_dec)
+        keep, fit, _, _ = _significant(eq, list(range(len(f_all))), noise_model, grid, n, enbw, n_dec,
+                                       fap_threshold, m_eff, oversample, f_found_min)
+        rejected += [float(f_all[j]) for j in range(n_dec, len(f_all)) if j not in keep]
+        found = [float(f_all[j]) for j in keep if j >= n_dec]
+    if fft_res is not None:
+        fft_res.release()
+    # the false-alarm probabilities and error scaling from the noise of the last residual searched
+    keep, fit, z_fit, fap_fit = _significant(eq, keep, noise_model, grid, n, enbw, n_dec, fap_threshold, m_eff,
+                                             oversample, f_found_min)
+    f_se = np.asarray(se_eq, dtype=float)[keep] if len(keep) else np.zeros(0)
     if noise == "local" and len(keep):
-        fit = fit.scaled(np.clip(s_at / enbw / max(fit.sigma**2, 1e-300), 0.05, 1e6))
+        s_at = grid.interp(fit.frequency, noise_model.level)
+        factor = np.clip(s_at / enbw / max(fit.sigma**2, 1e-300), 0.05, 1e6)
+        fit = fit.scaled(factor)
+        f_se = f_se * np.sqrt(factor)
     amp, amp_se, ph, ph_se = fit.amplitude, fit.amplitude_se, fit.phase, fit.phase_se
+    spacing = span / (n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
     peaks = []
     for k, (j, f) in enumerate(zip(keep, fit.frequency)):
-        if j < len(declared_f):
+        aliased = exact = None
+        if j < n_dec:
             label, declared = fitted[j].label, True
         else:
-            tol = max(0.5 / span, 1e-6 * f)
-            line = gear.label(f, tol) if gear is not None else None
-            label, declared = (line.label if line is not None else None), False
-        hint = integer_hint(gear, f, max(0.5 / span, 1e-6 * f)) if (label is None and gear is not None) else None
+            declared, line = False, None
+            if gear is not None:
+                line = gear.label(f, max(0.5 / span, 1e-6 * f))
+                if line is None:  # a line above the position Nyquist frequency, seen at its alias
+                    line = gear.label(f, max(0.5 / span, 3 * f_se[k]), spacing=spacing, nyquist=nyquist)
+            label = line.label if line is not None else None
+            if line is not None and line.kind == "alias":
+                aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
+            elif label is None and gear is not None:
+                # an integer order: the frequency's uncertainty (three standard errors, and no less
+                # than 0.05 resolution steps, so that the resolution bound of integer_order asks a
+                # shaft to turn at least once in the segment -- the Rayleigh criterion) must tell
+                # neighbouring multiples apart
+                exact = integer_order(gear, f, max(3 * f_se[k], 0.05 / span, 1e-6 * f))
         peaks.append(Peak(frequency=float(f), amplitude=float(amp[k]), amplitude_se=float(amp_se[k]),
                           phase=float(ph[k]), phase_se=float(ph_se[k]), fap=float(fap_fit[k]),
                           order=None if gear is None else gear.order(f), label=label, declared=declared,
-                          snr=float(z_fit[k]), hint=hint))
+                          snr=float(z_fit[k]), hint=None if exact is None else exact.hint,
+                          frequency_se=float(f_se[k]),
+                          frequency_exact=None if exact is None else exact.frequency,
+                          order_exact=None if exact is None else exact.order, aliased_from=aliased))
     out.peaks, out.fit, out.sigma = peaks, fit, fit.sigma
     # 5. spectra for the figures
     if keep_spectra:
@@ -389,9 +411,75 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         out.ls_frequency = freqs.astype(np.float32)
         p_sig = ls_sig.power_grid(freqs[0], freqs[1] - freqs[0], len(freqs)) if len(freqs) > 1 else power
         out.ls_amplitude = ls_sig.amplitude(power=p_sig).astype(np.float32)
-        out.ls_residual_amplitude = np.sqrt(4.0 * np.maximum(power, 0) / enbw / n).astype(np.float32)
+        # the residual of the declared lines (the found peaks stand out in it), against the noise
+        # level of the last round (the residual of every line found)
+        out.ls_residual_amplitude = np.sqrt(4.0 * np.maximum(power_first, 0) / enbw / n).astype(np.float32)
         out.noise_amplitude = np.sqrt(4.0 * noise_model.level(np.arange(nbin)) / enbw / n).astype(np.float32)
     return out
+
+
+def _search(power, grid: "_Grid", noise_model: "_LocalNoise", declared_f, taken, span, guard, f_found_min,
+            fap_threshold, m_eff, oversample, room) -> list[float]:
+    """Peaks of a residual power spectrum that nothing fitted explains, strongest first: local
+    maxima whose false-alarm probability (local noise, F-distributed for an estimated level,
+    ``m_eff`` independent frequencies searched) is below ``fap_threshold``; none within 1.5
+    resolution steps of a declared line (the two could not be told apart), within ``guard`` of a
+    line in ``taken`` (found or rejected before) or of a stronger new one, or below
+    ``f_found_min`` (where the nuisance polynomial could mimic it).  At most ``room``."""
+    nbin = len(power)
+    is_max = np.zeros(nbin, bool)
+    np.greater(power[1:-1], power[:-2], out=is_max[1:-1])
+    is_max[1:-1] &= power[1:-1] >= power[2:]
+    for f0 in declared_f:
+        is_max[grid.within(f0, 1.5 / span)] = False
+    for f0 in taken:
+        is_max[grid.within(f0, guard)] = False
+    is_max[:grid.first_at_least(f_found_min)] = False
+    cand = np.flatnonzero(is_max)
+    del is_max
+    # a candidate needs at least the power that a known noise level (the lightest tail) would
+    # call significant; only those get the exact (F-distributed) false-alarm probability.  The
+    # lowest noise level anywhere screens out most of them without evaluating the level.
+    z_floor = _z_floor(fap_threshold, m_eff)
+    floor = noise_model.lowest()
+    if floor > 0:
+        cand = cand[power[cand] > z_floor * floor * (1 - 1e-6)]
+    z_c = power[cand] / noise_model.level(cand)
+    keep_c = z_c > z_floor
+    cand, z_c = cand[keep_c], z_c[keep_c]
+    fap_c = false_alarm_probability(z_c, m_eff, noise_model.bins(cand), oversample)
+    sig = fap_c < fap_threshold
+    cand, z_c = cand[sig], z_c[sig]
+    new: list[float] = []
+    for i in cand[np.argsort(-z_c)]:
+        f_pk = _refine(grid, power, i)
+        if any(abs(f_pk - f0) < guard for f0 in new):
+            continue
+        new.append(f_pk)
+        if len(new) >= room:
+            break
+    return new
+
+
+def _significant(eq: NormalEquations, keep, noise_model: "_LocalNoise", grid: "_Grid", n, enbw, n_dec,
+                 fap_threshold, m_eff, oversample, f_found_min):
+    """The joint fit of the lines ``keep`` of ``eq``, found lines (index >= ``n_dec``) dropped while
+    one is not significant against ``noise_model`` or too slow.  Returns ``(keep, fit, z, fap)``;
+    a declared line's fap is for one frequency, a found one's counts the ``m_eff`` searched."""
+    keep = list(keep)
+    while True:
+        fit = eq.fit(keep)
+        s_at = grid.interp(fit.frequency, noise_model.level) if len(keep) else np.array([])
+        k_at = grid.interp(fit.frequency, noise_model.bins) if len(keep) else np.array([])
+        z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at / enbw, 1e-300)
+        is_dec = np.array([j < n_dec for j in keep], bool)
+        fap_fit = np.where(is_dec, false_alarm_probability(z_fit, 1.0, k_at, oversample),
+                           false_alarm_probability(z_fit, m_eff, k_at, oversample))
+        bad = [j for j, dec, fp, f in zip(keep, is_dec, fap_fit, fit.frequency)
+               if not dec and (fp >= fap_threshold or f < f_found_min)]
+        if not bad:
+            return keep, fit, z_fit, fap_fit
+        keep = [j for j in keep if j not in bad]
 
 
 _local = threading.local()  # .in_pool: this thread analyses one segment of several at once
@@ -530,7 +618,7 @@ class _LocalNoise:
 
 
 def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None,
-                        lo: float | None = None, hi: float | None = None):
+                        lo: float | None = None, hi: float | None = None, keep_residual: bool = False):
     """Power of the residual of ``fit0`` from one Hann-windowed FFT of the signal resampled over
     position: the nuisance polynomial is subtracted on the grid, the fitted lines in closed form
     near their bins (:func:`~gearspec.spectrum.fft.hann_sinusoid_dft`; beyond +-40 bins the
@@ -544,6 +632,10 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
 
     With ``keep_into`` (a SegmentSpectrum) the calibrated amplitude spectrum of the signal (line
     included, nuisance removed) is stored there for the figures.
+
+    Returns ``(k_lo, k_hi, df, power, enbw, residual)``: ``residual`` (with ``keep_residual``,
+    else None) is a :class:`_FFTResidual` that gives the power of the residual of another fit
+    (more lines) without another transform.
     """
     n = len(theta)
     if lo is None:
@@ -581,7 +673,50 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
     power = np.square(sel.real)      # single precision, as the spectrum: ~1e-7 of each bin's power
     power += np.square(sel.imag)
     power *= np.float32(n / wsum**2)
-    return k_lo, k_hi, df, power, enbw
+    res = (_FFTResidual(sel, k_lo, df, nfft, m, g0, h, np.float32(n / wsum**2), fit0, power)
+           if keep_residual and len(sel) else None)
+    return k_lo, k_hi, df, power, enbw, res
+
+
+class _FFTResidual:
+    """The complex residual spectrum of :func:`_fft_residual_power` (a view of its bins k_lo..k_hi),
+    kept to give the power of the residual of a fit with more lines: the bins within +-40 of
+    every line of either fit are recomputed in closed form (the first fit's lines put back, the
+    new fit's taken out, as the first were), the rest copied.  The change of the nuisance
+    polynomial between the two fits is left in (it is slow: it touches the lowest bins only)."""
+
+    _HALF = 40  # bins either side of a line (the Hann window's leakage beyond is below 1e-7)
+
+    def __init__(self, sel, k_lo, df, nfft, m, g0, h, scale, fit0: HarmonicFit, power0):
+        self.sel, self.k_lo, self.df, self.nfft, self.m, self.g0, self.h = sel, int(k_lo), df, nfft, m, g0, h
+        self.scale, self.power0 = scale, power0
+        self.lines0 = list(zip(fit0.frequency, fit0.coef_cos, fit0.coef_sin))
+
+    def _window(self, f):
+        k0 = int(round(f / self.df))
+        a = max(self.k_lo, k0 - self._HALF)
+        b = min(self.k_lo + len(self.sel) - 1, k0 + self._HALF)
+        return a, b
+
+    def power(self, fit: HarmonicFit):
+        p = self.power0.copy()
+        lines1 = list(zip(fit.frequency, fit.coef_cos, fit.coef_sin))
+        spans = [self._window(f) for f, _, _ in self.lines0 + lines1]
+        idx = np.unique(np.concatenate([np.arange(a, b + 1) for a, b in spans if b >= a] or [np.zeros(0, int)]))
+        if not len(idx):
+            return p
+        val = self.sel[idx - self.k_lo].astype(np.complex128)
+        for sign, lines in ((1.0, self.lines0), (-1.0, lines1)):
+            for f, ca, cb in lines:
+                a, b = self._window(f)
+                w = (idx >= a) & (idx <= b)
+                if w.any():
+                    val[w] += sign * hann_sinusoid_dft(idx[w], self.nfft, self.m, self.g0, self.h, f, ca, cb)
+        p[idx - self.k_lo] = (np.square(val.real) + np.square(val.imag)) * float(self.scale)
+        return p
+
+    def release(self):
+        self.sel = self.power0 = None
 
 
 def _refine(grid: _Grid, power, i):
