@@ -461,20 +461,24 @@ def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_m
     Every multiple is tried (72x, 96x, 144x of a motor shaft as well as 7x) that the frequency's
     uncertainty ``tol`` can tell from its neighbours.  The bound: the multiples of a shaft at
     ``f_s`` are ``f_s`` apart, so a frequency that has nothing to do with the shaft lands within
-    ``tol`` of one of them with probability ``2 tol / f_s`` (uniform between two multiples); a
-    shaft is admissible only while that chance is at most ``coincidence`` (10 %), i.e.
-    ``tol <= coincidence * f_s / 2`` -- far below the ``f_s / 2`` at which neighbouring multiples
-    stop being distinguishable at all.  A slow shaft (a planetary or output shaft) thus needs a
-    proportionally sharper frequency, which is what keeps hints such as "53x planetary output
-    shaft" out.  Shafts are tried fastest first (the smallest multiple wins).  ``max_multiple``
-    optionally caps the multiple.
+    ``tol`` of one of them with probability ``2 tol / f_s`` (uniform between two multiples).
+    Shafts are tried fastest first (the smallest multiple wins), each only while the summed
+    chance over the shafts tried so far is at most ``coincidence`` (10 %): so the chance that an
+    unrelated frequency gets any hint at all stays below it (a union bound), and neighbouring
+    multiples are always far apart compared with ``tol`` (``tol <= coincidence * f_s / 2``,
+    against the ``f_s / 2`` at which they stop being distinguishable).  A slow shaft (a
+    planetary or output shaft) thus needs a frequency sharper by the ratio of the shafts, which
+    is what keeps hints such as "53x planetary output shaft" out.  ``max_multiple`` optionally
+    caps the multiple.
     """
     if gear is None or not (frequency > 0) or not (tol >= 0):
         return None
     shafts = sorted((ln for ln in gear.declared_lines() if ln.kind == "shaft"), key=lambda x: -x.frequency)
+    chance = 0.0
     for ln in shafts:
-        if 2.0 * tol > coincidence * ln.frequency:  # neighbouring multiples cannot be told apart reliably
-            continue
+        chance += 2.0 * tol / ln.frequency
+        if chance > coincidence:  # neighbouring multiples of this shaft (or slower) cannot be told apart reliably
+            break
         m = round(frequency / ln.frequency)
         if m >= 2 and (max_multiple is None or m <= max_multiple) and abs(frequency - m * ln.frequency) <= tol:
             exact = m * ln.frequency

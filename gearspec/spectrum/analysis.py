@@ -373,6 +373,10 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         fit = fit.scaled(factor)
         f_se = f_se * np.sqrt(factor)
     amp, amp_se, ph, ph_se = fit.amplitude, fit.amplitude_se, fit.phase, fit.phase_se
+    # a found line's phase is given at theta = 0, away from the segment's centre where the
+    # Gauss-Newton step decouples it from the frequency: its frequency error adds
+    # 2 pi (centre - 0) f_se to the phase's (0 for declared lines, whose frequency is fixed)
+    ph_se = np.hypot(ph_se, 2 * np.pi * 0.5 * (lo + hi) * f_se) if len(f_se) else ph_se
     spacing = span / (n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
     peaks = []
     for k, (j, f) in enumerate(zip(keep, fit.frequency)):
