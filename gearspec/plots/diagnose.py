@@ -24,30 +24,56 @@ def _speed_label(dd):
 
 def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torque_unit: str = "Nm",
                  title: str = "Residual spectra over position (baseline model)") -> Path:
-    """The pooled residual periodograms of each direction (all speeds), with their local noise
-    level, every candidate line marked (accepted: green, rejected: grey)."""
-    pooled = [s for s in spectra if s.pooled]
-    per_dir = {}
+    """The pooled residual periodograms of each direction, with their local noise level, every
+    candidate line marked (accepted: green, rejected: grey).
+
+    One panel per direction: the all-speed pool (the one with most segments), and, thinner, the
+    pools of slower speeds whose spectra reach higher frequencies (the all-speed pool stops below
+    the position Nyquist frequency of its fastest segment: a line found at slow speed lies beyond
+    it).  The frequency axis extends past every candidate line; a candidate beyond every spectrum
+    drawn is marked dashed."""
+    pooled = [s for s in spectra if s.pooled and len(s.frequency)]
+    per_dir, extra = {}, {}
     for s in pooled:  # the all-speed pool of each direction: the one with most segments
         if s.direction not in per_dir or len(s.segments) > len(per_dir[s.direction].segments):
             per_dir[s.direction] = s
-    rows = [per_dir[d] for d in (1, -1) if d in per_dir]
-    fig, axes = plt.subplots(max(len(rows), 1), 1, figsize=(11, 3.4 * max(len(rows), 1)), squeeze=False)
-    for ax, s in zip(axes[:, 0], rows):
+    for s in pooled:  # the pools that reach further up, highest reach first, at most two
+        main = per_dir[s.direction]
+        if s is not main and s.frequency[-1] > 1.05 * main.frequency[-1]:
+            extra.setdefault(s.direction, []).append(s)
+    for d in extra:
+        extra[d] = sorted(extra[d], key=lambda x: -x.frequency[-1])[:2]
+    rows = [d for d in (1, -1) if d in per_dir]
+    marks = [e for e in effects if getattr(e, "frequency", None) is not None and np.isfinite(e.frequency)
+             and e.frequency > 0]
+    fig, axes = plt.subplots(max(len(rows), 1), 1, figsize=(11, 3.6 * max(len(rows), 1)), squeeze=False)
+    for ax, d in zip(axes[:, 0], rows):
+        s = per_dir[d]
         color = POS if s.direction > 0 else NEG
-        ax.semilogy(s.frequency, np.maximum(s.amplitude, 1e-300), color=color, lw=0.6, label="residual")
+        drawn = [s] + extra.get(d, [])
+        ax.semilogy(s.frequency, np.maximum(s.amplitude, 1e-300), color=color, lw=0.6, label=f"residual: {s.label}")
         ax.semilogy(s.frequency, np.maximum(s.noise, 1e-300), color="k", lw=0.8, ls="--", label="local noise level")
-        for e in effects:
-            if e.kind != "periodic" or e.frequency is None:
-                continue
-            if not (s.frequency[0] <= e.frequency <= s.frequency[-1]):
-                continue
-            c = "tab:green" if e.accepted else "0.55"
-            ax.axvline(e.frequency, color=c, lw=1.0, alpha=0.8, zorder=0)
-            lab = e.label or e.hint or "unknown order"
-            ax.annotate(f"{e.frequency:.5g}\n{lab}", (e.frequency, np.max(s.amplitude)), fontsize=7, color=c,
-                        rotation=90, va="top", ha="right")
+        for k, x in enumerate(extra.get(d, [])):
+            ax.semilogy(x.frequency, np.maximum(x.amplitude, 1e-300), color=color, lw=0.5, alpha=0.35 - 0.1 * k,
+                        label=f"residual: {x.label}")
+            ax.semilogy(x.frequency, np.maximum(x.noise, 1e-300), color="k", lw=0.6, ls=":", alpha=0.6)
+        f_lo = min(x.frequency[0] for x in drawn)
+        f_hi = max(x.frequency[-1] for x in drawn)
+        if marks:
+            f_lo = min(f_lo, min(e.frequency for e in marks) / 1.5)
+            f_hi = max(f_hi, max(e.frequency for e in marks) * 1.5)
+        ax.set_xlim(f_lo, f_hi)
         ax.set_xscale("log")
+        # markers, labels staggered in height (axes fraction) so that neighbours do not overlap
+        for k, e in enumerate(sorted(marks, key=lambda e: e.frequency)):
+            c = "tab:green" if e.accepted else "0.55"
+            beyond = not any(x.frequency[0] <= e.frequency <= x.frequency[-1] for x in drawn)
+            ax.axvline(e.frequency, color=c, lw=1.2 if e.accepted else 0.9, ls="--" if beyond else "-",
+                       alpha=0.9, zorder=0)
+            lab = e.label or getattr(e, "hint", None) or "unknown order"
+            note = " (beyond the spectra)" if beyond else ""
+            ax.annotate(f"{e.frequency:.5g} {lab}{note}", (e.frequency, 0.98 - 0.3 * (k % 3)),
+                        xycoords=("data", "axes fraction"), fontsize=7, color=c, rotation=90, va="top", ha="right")
         ax.set_ylabel(f"amplitude ({torque_unit})")
         ax.set_title(s.label, fontsize=9)
         ax.grid(alpha=0.3, which="both")

@@ -1,0 +1,48 @@
+"""Issue 10 item 8 / issue 16: the residual-spectrum figure of ``diagnose`` was cut below the
+frequency of the line the loop accepted (the all-speed pool stops below the Nyquist frequency of
+its fastest segment; the line had been found in the slow pool), and drew no marker for it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+import gearspec.plots.diagnose as dplots
+from gearspec.diagnose.residual import ResidualSpectrum
+
+
+def _pool(direction, speeds, n_seg, f_hi, peak=None):
+    f = np.linspace(0.005, f_hi, 400)
+    amp = np.full(f.size, 4e-6)
+    if peak is not None:
+        amp[np.argmin(abs(f - peak))] = 3e-5
+    return ResidualSpectrum(direction, speeds[0], speeds[1], list(range(n_seg)), 1000, 300.0, f, amp,
+                            np.full(f.size, 4e-6))
+
+
+def test_residual_spectra_extend_past_and_mark_every_candidate(tmp_path, monkeypatch):
+    spectra = [_pool(1, (31.4, 157.1), 6, 0.65),                 # all speeds: stops at 0.65
+               _pool(1, (31.4, 31.4), 2, 3.2, peak=1.114),        # the slow pool reaches 3.2
+               _pool(-1, (31.4, 157.1), 6, 0.65)]                  # negative: no slow pool at all
+    effects = [SimpleNamespace(kind="periodic", frequency=1.114, accepted=True, label=None, hint="7x motor shaft"),
+               SimpleNamespace(kind="periodic", frequency=0.4775, accepted=False, label="3x motor shaft", hint=None),
+               SimpleNamespace(kind="speed_law", frequency=None, accepted=False, label=None, hint=None)]
+    figs = []
+    monkeypatch.setattr(dplots, "save", lambda fig, path: figs.append(fig) or path)
+    dplots.plot_spectra(spectra, effects, tmp_path / "r.png")
+    (fig,) = figs
+    axes = fig.axes
+    assert len(axes) == 2
+    for ax in axes:
+        lo, hi = ax.get_xlim()
+        assert lo < 0.4775 and hi > 1.114 * 1.2                   # past every candidate line
+        xs = sorted(round(float(ln.get_xdata()[0]), 4) for ln in ax.lines if len(set(ln.get_xdata())) == 1)
+        assert xs == [0.4775, 1.114]                               # a marker for each candidate
+        texts = " | ".join(t.get_text() for t in ax.texts)
+        assert "7x motor shaft" in texts and "3x motor shaft" in texts
+    # the positive panel draws the slow pool that reaches the accepted line; the negative has none
+    # and says the line is beyond its spectra
+    assert any("31.4-31.4" in (ln.get_label() or "") for ln in axes[0].lines)
+    assert "beyond the spectra" in " ".join(t.get_text() for t in axes[1].texts)
+    assert "beyond the spectra" not in " ".join(t.get_text() for t in axes[0].texts if "1.114" in t.get_text())
