@@ -72,13 +72,16 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
                           alpha=0.7, label="Lomb-Scargle of the residual of the declared lines")
                 ax.loglog(s.ls_frequency, s.noise_amplitude, color="k", lw=0.8, ls=":", label="local noise level")
             for p in s.peaks:
-                color = "#9467bd" if p.declared else ("#ff7f0e" if p.label else "#d62728")
+                color = ("#9467bd" if p.declared else "#17becf" if p.aliased_from else
+                         "#ff7f0e" if p.label else "#d62728")
                 ax.errorbar([p.frequency], [max(p.amplitude, 1e-12)], yerr=[[0], [p.amplitude_se]], fmt="o",
                             ms=4, color=color, mfc=color if p.fap < 0.01 else "none", zorder=5)
             for p in sorted(s.peaks, key=lambda q: -q.amplitude)[:5]:
                 txt = p.label.split(" = ")[0] if p.label else (p.hint or "?")
                 ax.annotate(txt[:28], (p.frequency, max(p.amplitude, 1e-12)), fontsize=6, xytext=(3, 4),
                             textcoords="offset points")
+            if np.isfinite(s.nyquist) and s.nyquist > 0:  # nothing beyond is measured
+                ax.axvline(s.nyquist, color="k", lw=0.8, ls="-.", alpha=0.6, label="position Nyquist frequency")
             ax.set_title(f"segment {i}: run {s.segment.run}, dir {s.direction:+d}, "
                          f"{s.speed:.4g} {unit}/s, {s.segment.n} samples", fontsize=8, loc="left")
             ax.set_xlabel(f"frequency (cycles/{unit})", fontsize=8)
@@ -91,6 +94,7 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
 
         handles += [Line2D([], [], marker="o", ls="", color="#9467bd", label="declared line (fit, +1 s.e.)"),
                     Line2D([], [], marker="o", ls="", color="#ff7f0e", label="found: harmonic/sideband"),
+                    Line2D([], [], marker="o", ls="", color="#17becf", label="found: alias of a line above Nyquist"),
                     Line2D([], [], marker="o", ls="", color="#d62728", label="found: unexplained"),
                     Line2D([], [], marker="o", ls="", color="0.3", mfc="none", label="hollow: fap >= 0.01")]
         fig.legend(handles=handles, loc="upper center", ncol=5, fontsize=8, frameon=False)

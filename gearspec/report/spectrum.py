@@ -15,6 +15,18 @@ from . import _rpm, markdown_table
 __all__ = ["write_spectrum_report"]
 
 
+def _ranges(idx: list[int]) -> str:
+    """'0-3, 7' from [0, 1, 2, 3, 7]."""
+    out, start = [], None
+    for k, i in enumerate(idx):
+        if start is None:
+            start = i
+        if k == len(idx) - 1 or idx[k + 1] != i + 1:
+            out.append(f"{start}" if start == i else f"{start}-{i}")
+            start = None
+    return ", ".join(out)
+
+
 def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentation, out: str | Path,
                           command: str = "") -> Path:
     """Write ``report.md``, the figures and ``peaks.csv`` of a spectrum analysis into ``out``."""
@@ -70,13 +82,17 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
                         median_snr=("snr", "median"))
                    .reset_index())
         md += [markdown_table(summary), ""]
-        skipped = {}
-        for s in result.segments:
-            for k in s.skipped:
-                skipped.setdefault(k["label"], k["reason"].split(";")[0].split(" (")[0])
-        if skipped:
-            md += ["Lines not fitted in some segments (too slow to complete a cycle, or above the position "
-                   "Nyquist frequency): " + "; ".join(f"{k}" for k in skipped) + ".", ""]
+    slow, above = {}, {}
+    for i, s in enumerate(result.segments):
+        for k in s.skipped:
+            (above if k.get("kind") == "above_nyquist" else slow).setdefault(k["label"], []).append(i)
+    if slow:
+        md += ["Lines not fitted in some segments because they complete less than a cycle there: "
+               + "; ".join(f"{k} (segments {_ranges(v)})" for k, v in slow.items()) + ".", ""]
+    if above:
+        md += ["Lines above the position Nyquist frequency of some segments -- **not measured there** (never "
+               "fitted; a peak found at the frequency where such a line aliases is labelled `alias of <label>`): "
+               + "; ".join(f"{k} (segments {_ranges(v)})" for k, v in above.items()) + ".", ""]
     # found peaks
     md += ["## Peaks no declared line explains", ""]
     found = table[~table["declared"]] if not table.empty else table
@@ -85,13 +101,18 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     else:
         if figs["unexplained"] is not None:
             md += [f"![unexplained peaks]({figs['unexplained'].name})", ""]
-        cols = ["segment", "direction", "speed", "frequency", "order", "amplitude", "amplitude_se", "fap", "label", "hint"]
+        cols = ["segment", "direction", "speed", "frequency", "order", "amplitude", "amplitude_se", "fap", "label", "hint",
+                "order_exact"]
+        cols = [c for c in cols if c in found.columns]
         md += [markdown_table(found.sort_values(["frequency"])[cols].rename(
             columns={"speed": f"speed ({unit}/s)", "frequency": f"frequency (cycles/{unit})",
                      "amplitude": f"amplitude ({tu})", "amplitude_se": "s.e."})), ""]
         md += ["`label`: the harmonic or sideband of declared lines that explains the peak; empty when nothing "
-               "declared does. `hint`: an integer multiple of a shaft the peak sits on (a motor pole-pair or "
-               "cogging order looks like this), a clue, not an explanation.", ""]
+               "declared does; `alias of <label>` when it is where a line above the segment's position Nyquist "
+               "frequency shows up (that line is not measured). `hint`: an integer multiple of a shaft the peak "
+               "sits on within its frequency uncertainty (a motor pole-pair or cogging order looks like this), a "
+               "clue, not an explanation; given only when the uncertainty tells neighbouring multiples apart, with "
+               "the exact order in `order_exact` beside the measured one.", ""]
     md += ["## Order spectra", "",
            "FFT of torque resampled over position (Hann window, amplitude-calibrated) in grey, Lomb-Scargle of the "
            "raw samples in green, the local noise level dotted; dots are the jointly fitted amplitudes "
@@ -99,7 +120,9 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     md += [f"![spectra]({p.name})" for p in figs["spectra"]]
     md += ["", "## Method", "",
            "Friction magnitude y = direction x (torque - J thetadd) over position; joint least-squares fit of all "
-           "declared lines and significant peaks with a Legendre nuisance polynomial; standard errors scaled by "
+           "declared lines and significant peaks with a Legendre nuisance polynomial, peaks searched again in the "
+           "residual of every line found until none is left (a dense comb of lines raises the noise level around "
+           "each); standard errors scaled by "
            "the local noise level of the Lomb-Scargle periodogram; false-alarm probabilities against the local "
            "noise level (one frequency for declared lines, all searched frequencies for found peaks). "
            f"Frequencies in cycles/{unit}; amplitudes in {tu}; phases in rad of A sin(2 pi f theta + phi).", ""]
