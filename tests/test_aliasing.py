@@ -132,3 +132,26 @@ def test_no_hint_where_the_resolution_cannot_separate_neighbouring_multiples():
     # the motor shaft itself, at a tolerance of half its frequency: no hint either
     assert integer_hint(MOTOR, 7 * F_MOTOR, 0.06 * F_MOTOR) is None
     assert integer_order(MOTOR, 7 * F_MOTOR, 0.04 * F_MOTOR).multiple == 7
+
+
+def test_a_line_found_at_slow_speed_explains_its_alias_at_fast_speed():
+    """An undeclared ripple at 11.9 cycles/rad (74.8 per turn: no integer order) is measured in a
+    slow segment (10 rad/s: Nyquist 50) and aliases to 20 - 11.9 = 8.1 in a fast one (50 rad/s)."""
+    from gearspec.spectrum.analysis import relabel_aliases
+
+    rng = np.random.default_rng(5)
+    segs = []
+    for speed in (10.0, 50.0):
+        theta = 1.0 + speed * np.arange(4000) / FS
+        y = 0.05 + 2e-3 * np.sin(2 * np.pi * 11.9 * theta) + rng.normal(0, 2e-4, theta.size)
+        segs.append(analyze_segment(theta, y, MOTOR))
+    slow, fast = segs
+    (p_slow,) = [p for p in slow.peaks if not p.declared]
+    assert p_slow.frequency == pytest.approx(11.9, abs=1e-3) and p_slow.label is None and p_slow.hint is None
+    (p_fast,) = [p for p in fast.peaks if not p.declared]
+    assert p_fast.frequency == pytest.approx(20 - 11.9, abs=1e-3) and p_fast.label is None  # alone: unexplained
+    assert relabel_aliases(segs, MOTOR) == 1
+    (p_fast,) = [p for p in fast.peaks if not p.declared]
+    assert p_fast.label.startswith("alias of line at 11.9") and p_fast.label.endswith("cycles/rad")
+    assert p_fast.aliased_from["frequency"] == pytest.approx(11.9, abs=1e-3)
+    assert slow.peaks[-1].label is None or slow.peaks[-1].declared   # the measured one stays as it was

@@ -37,14 +37,14 @@ import math
 import sys
 import threading
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from ..gears import GearTrain, alias_frequency, integer_order, load_gear
+from ..gears import GearTrain, alias_frequency, alias_of, integer_order, load_gear
 from ..recording import Recording
 from ..segment import FrictionTorque, Segment, Segmentation, find_segments
 from .fft import (
@@ -814,9 +814,46 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
 
             iterator = tqdm(iterator, desc="segments", unit="seg", file=sys.stderr)
         results = [one(s) for s in iterator]
+    relabel_aliases(results, gear, unit=rec.unit)
     excluded = Counter(rec.excluded) + Counter(seg.excluded)
     return SpectrumResult(results, excluded, rec.n_read, rec.unit, gear, notes,
                           settings={**seg.settings, **options, "inertia": inertia})
+
+
+def relabel_aliases(segments: list[SegmentSpectrum], gear: GearTrain | None = None, unit: str = "rad") -> int:
+    """Label ``alias of <line>`` the unexplained peaks of a segment that sit where a line found
+    in *another* segment (measured there, below its position Nyquist frequency) aliases in this
+    one -- the same ripple seen at a slow speed and, above the Nyquist frequency, at a fast one
+    (:func:`gearspec.gears.alias_of`, the rule the per-segment labels use).  Changes the peaks in
+    place; returns how many were relabelled."""
+    known: list[tuple[float, str]] = []
+    for s in segments:
+        for p in s.peaks:
+            if p.declared or p.aliased_from is not None or p.fap >= 0.01:
+                continue
+            name = (p.label.split(" = ")[0] if p.label else p.hint) or f"line at {p.frequency:.6g} cycles/{unit}"
+            if not any(abs(f - p.frequency) <= 1e-4 * p.frequency for f, _ in known):
+                known.append((p.frequency, name))
+    changed = 0
+    for s in segments:
+        n = s.segment.n
+        if not s.peaks or n < 2 or not (s.span > 0):
+            continue
+        spacing = s.span / (n - 1)
+        for i, p in enumerate(s.peaks):
+            if p.declared or p.label is not None:
+                continue
+            others = [(f, lab) for f, lab in known if f > s.nyquist]  # only lines this segment cannot measure
+            if not others:
+                continue
+            ln = alias_of(None, p.frequency, max(0.5 / s.span, 3 * p.frequency_se), spacing, nyquist=s.nyquist,
+                          known=others, max_harmonic=1)
+            if ln is not None:
+                s.peaks[i] = replace(p, label=ln.label, hint=None, frequency_exact=None, order_exact=None,
+                                     aliased_from={"label": ln.parents[0], "frequency": ln.frequency,
+                                                   "order": None if gear is None else gear.order(ln.frequency)})
+                changed += 1
+    return changed
 
 
 def _n_workers(workers, seg: Segmentation) -> int:
