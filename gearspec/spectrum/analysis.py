@@ -22,6 +22,17 @@ magnitude, so that levels and phases mean the same in both directions, as in SIL
    peak whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is
    dropped.  Standard errors are rescaled by the local noise level (honest for coloured noise).
    Without found peaks the whole analysis is one pass over the samples plus one spectrum.
+5. Steps 3-4 repeat on the residual of every line found so far (the noise level re-estimated
+   from it: a dense comb of lines no longer raises the level around its weaker members), until a
+   round finds nothing; the later rounds search the Hann spectrum of the resampled signal with
+   every fitted line taken out in closed form (no new transform, no new periodogram).
+
+Nothing above the segment's position Nyquist frequency (:func:`position_nyquist`) is searched,
+fitted or reported as measured: such declared lines are listed (``above_nyquist``) with the
+frequency where they alias, and a peak found there is labelled ``alias of <label>``
+(:func:`gearspec.gears.alias_of`; across segments, :func:`relabel_aliases`).  An unlabelled
+peak gets an integer-order ``hint`` (with ``order_exact``) only when its frequency uncertainty
+tells neighbouring multiples of the shaft apart (:func:`gearspec.gears.integer_order`).
 
 Every declared line that fits is reported as a peak whether it is strong or not (its ``fap`` is
 the chance that noise alone gives that much fitted power at that one frequency); a found peak's
@@ -312,6 +323,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         grid = _Grid(0.0, df, k_lo, len(power))
     nbin = len(power)
     power_first = power if keep_spectra else None
+    grid0, nbin0, enbw0 = grid, nbin, enbw
     m_eff = max(1.0, nbin / oversample)  # independent frequencies searched: the same in every round
     # 3. peaks no declared line explains (see _search), found iteratively: a dense comb of lines
     # raises the local noise level around each of them, so after every search the lines found so
@@ -330,12 +342,22 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     fit = fit0
     for rnd in range(_MAX_ROUNDS):
         if rnd > 0:  # the residual of every line fitted so far
-            if use_ls:
+            if fft_res is None and nbin >= 3:
+                # a Lomb-Scargle segment: the later rounds search the Hann spectrum of the signal
+                # resampled over position, every fitted line taken out in closed form -- one
+                # transform for all of them, a fraction of a periodogram's cost (the search's
+                # frequencies and their count m_eff stay those of the first round's range)
+                k_lo, _, df, p1, enbw1, fft_res = _fft_residual_power(theta, y, fit0, oversample, f_search_max,
+                                                                      lo=lo, hi=hi, keep_residual=True)
+                if fft_res is not None:
+                    grid, enbw, nbin = _Grid(0.0, df, k_lo, len(p1)), enbw1, len(p1)
+                del p1
+            if fft_res is not None:
+                power = fft_res.power(fit)
+            else:
                 ls = LombScargle(theta, y - fit.predict(theta), method=method, nthreads=_ls_threads())
                 power = np.atleast_1d(ls.power_grid(grid.base, grid.df, nbin))
                 del ls
-            else:
-                power = fft_res.power(fit)
         # the fit removed each fitted line's power from its own bin and its neighbours: leave
         # those bins out of the noise level, or it reads low
         fitted_mask = np.zeros(nbin, bool)
@@ -343,6 +365,8 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
             fitted_mask[grid.within(f0, 1.0 / span)] = True
         noise_model = _LocalNoise(power, width=int(100 * oversample), min_width=int(20 * oversample),
                                   mask=fitted_mask, enbw=enbw)
+        if rnd == 0:
+            noise0 = noise_model
         del fitted_mask
         room = max_peaks - len(found)
         new = (_search(power, grid, noise_model, declared_f, found + rejected, span, guard, f_found_min,
@@ -408,6 +432,9 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
     out.peaks, out.fit, out.sigma = peaks, fit, fit.sigma
     # 5. spectra for the figures
     if keep_spectra:
+        # on the first round's grid; the noise level of the last round when it searched that grid
+        noise_fig = noise_model if grid is grid0 else noise0
+        grid, nbin, enbw = grid0, nbin0, enbw0
         freqs = grid.frequencies()
         if out.fft_frequency is None:
             _fft_residual_power(theta, y, fit0, oversample, f_search_max, out, lo=lo, hi=hi)
@@ -418,7 +445,7 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         # the residual of the declared lines (the found peaks stand out in it), against the noise
         # level of the last round (the residual of every line found)
         out.ls_residual_amplitude = np.sqrt(4.0 * np.maximum(power_first, 0) / enbw / n).astype(np.float32)
-        out.noise_amplitude = np.sqrt(4.0 * noise_model.level(np.arange(nbin)) / enbw / n).astype(np.float32)
+        out.noise_amplitude = np.sqrt(4.0 * noise_fig.level(np.arange(nbin)) / enbw / n).astype(np.float32)
     return out
 
 
