@@ -18,7 +18,7 @@ from . import (
 )
 
 LAWS = ("silo4", "stribeck", "coulomb_viscous", "lola8", "lola11")
-KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
+KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "lag", "other")
 
 
 def register(sub) -> None:
