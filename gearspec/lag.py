@@ -14,7 +14,8 @@ segment sees it clearly.  This module is the one place for that fact:
 * :func:`lag_from_phases` -- the lag from per-segment phases of lines at known frequencies:
   every (line, direction) has its own phase ``phi``; the lag is common.  Phases wrap: the lag is
   first found by a grid search of the weighted circular misfit (no unwrapping that could slip a
-  cycle between two speeds), then refined by weighted least squares on the phases unwrapped
+  cycle between two speeds; when speeds share a common step the misfit repeats every
+  ``1/(f step)`` and the smallest of the equally good lags is taken), then refined by weighted least squares on the phases unwrapped
   around that solution (weights: inverse phase variances), which gives its standard error
   (scaled up by the misfit when the phases scatter more than their errors say).
 * :func:`estimate_lag` -- the same from a recording: the declared lines of the gear spec,
@@ -135,7 +136,13 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
     n = int(min(max(2 * math.ceil(max_lag / step) + 1, 3), 200_001))
     grid = np.linspace(-max_lag, max_lag, n)
     cost = np.concatenate([misfit(grid[a:a + 4096]) for a in range(0, n, 4096)])
-    lag = float(grid[int(np.argmin(cost))])
+    # speeds with a common step leave the lag ambiguous (2 pi f v L repeats every 1/(f dv)):
+    # among the local minima as good as the best (within 4 in chi2 units, or 10 %), the smallest lag
+    cmin = float(cost.min())
+    loc = np.flatnonzero((cost <= cmin + max(4.0, 0.1 * cmin))
+                         & (cost <= np.concatenate(([np.inf], cost[:-1])))
+                         & (cost <= np.concatenate((cost[1:], [np.inf]))))
+    lag = float(grid[loc[np.argmin(np.abs(grid[loc]))]]) if len(loc) else float(grid[int(np.argmin(cost))])
     # weighted least squares on the phases unwrapped about the grid solution (two passes)
     for _ in range(3):
         psi = ph + k * lag
@@ -263,7 +270,13 @@ def lag_option(rec, value, *, say=print, **segment_options):
         return rec
     text = str(value).strip().lower()
     if text == "auto":
-        est = estimate_lag(rec, segmentation=None, **{k: v for k, v in segment_options.items() if v is not None})
+        opts = {k: v for k, v in segment_options.items() if v is not None}
+        if str(opts.get("window", "auto")) != "auto":
+            try:
+                opts["window"] = float(opts["window"])
+            except ValueError:
+                raise InputError(f"--window takes seconds or 'auto', got '{opts['window']}'") from None
+        est = estimate_lag(rec, segmentation=None, **opts)
         say(f"lag (--lag auto): {1e3 * est.lag:.4g} ms +- {1e3 * est.se:.2g} ms ({est.describe()})")
         out = apply_lag(rec, est.lag)
         out.meta["lag_se"] = est.se
@@ -275,4 +288,7 @@ def lag_option(rec, value, *, say=print, **segment_options):
         raise InputError(f"--lag takes a number of seconds or 'auto', got '{value}'") from None
     if not math.isfinite(L):
         raise InputError(f"--lag takes a finite number of seconds or 'auto', got '{value}'")
-    return apply_lag(rec, L)
+    out = apply_lag(rec, L)
+    say(f"lag (--lag): {1e3 * L:.4g} ms applied; {out.excluded.get('lag_edge', 0) - rec.excluded.get('lag_edge', 0)} "
+        "row(s) at piece edges excluded (lag_edge)")
+    return out

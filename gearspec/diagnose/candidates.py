@@ -580,9 +580,12 @@ class LaggedHarmonicBlock(HarmonicBlock):
 
 
 def _lagged(blk: HarmonicBlock, lag: float) -> LaggedHarmonicBlock:
+    """The lagged form of a line of the model (a sideband stays a sideband: same columns
+    rule)."""
     import dataclasses
-    kw = {f.name: getattr(blk, f.name) for f in dataclasses.fields(HarmonicBlock) if f.name not in ("uid", "coef")}
-    return LaggedHarmonicBlock(**kw, coef=blk.coef, lag=float(lag))
+    cls = LaggedSidebandBlock if isinstance(blk, SidebandBlock) else LaggedHarmonicBlock
+    kw = {f.name: getattr(blk, f.name) for f in dataclasses.fields(blk) if f.name not in ("uid", "coef", "lag")}
+    return cls(**kw, coef=blk.coef, lag=float(lag))
 
 
 def segment_phases(dd, frequencies, *, min_snr: float = 5.0) -> dict:
@@ -653,10 +656,19 @@ class LagCandidate(Candidate):
             self._cache = {"round": rnd}
         if ck not in self._cache:
             add = [_lagged(b, est.lag) for b in lines]
-            C = np.column_stack([b.columns(rnd.dd) for b in add])
-            xtc, ctc, cty = cross_grams(rnd, C)
-            self._cache[ck] = Proposal(add, lines, xtc, ctc, cty, f"lag {1e3 * est.lag:.4g} ms")
+            prop = _TaylorProposal(add, lines, describe=f"lag {1e3 * est.lag:.4g} ms")
+            prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd))
+            self._cache[ck] = prop
         return self._cache[ck]
+
+
+class _TaylorProposal(Proposal):
+    """Blocks that replace blocks of the model with the same nonlinear parameters (the lines,
+    lagged): they keep their Taylor columns, as the blocks they replace have them in the fits
+    without the candidate, so that the held-out comparison differs by the candidate alone."""
+
+    def columns(self, dd) -> np.ndarray:
+        return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
 
 
 def lag_candidates(rnd) -> list[Candidate]:
@@ -706,6 +718,11 @@ class SidebandBlock(HarmonicBlock):
             ok = _travel_ok(dd, self.min_travel)
             cols = np.where(ok[:, None], cols, 0.0)
         return cols
+
+
+@dataclass(frozen=True, eq=False)
+class LaggedSidebandBlock(SidebandBlock, LaggedHarmonicBlock):
+    """A sideband line seen through a lagged torque channel."""
 
 
 def _travel_ok(dd, min_travel: float) -> np.ndarray:
@@ -784,7 +801,8 @@ def sideband_candidates(rnd, analyses: dict, *, gate: float) -> list[Candidate]:
         carrier = next((b for b in lines if b.label and (b.label == hi_lab or hi_lab in b.label.split(" = "))), None)
         if carrier is None:
             continue
-        sb = [x for x in sb if not any(math.isclose(x.frequency, f, rel_tol=1e-6) for f in have)]
+        # not where the model has a line already (declared, or found in the residual: within 0.2 %)
+        sb = [x for x in sb if not any(math.isclose(x.frequency, f, rel_tol=2e-3) for f in have)]
         if not sb:
             continue
         f_m = shafts[lo_lab].frequency
