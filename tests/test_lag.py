@@ -111,12 +111,13 @@ def _phase_series(rng, lag, freqs_se, speeds, phi0=3.0):
 
 
 def test_phase_wrapping_is_handled():
-    # 4 ms at 30 rad/s on a line of 5 cycles/rad: the phase turns 3.8 rad, wrapping between speeds
+    # 9 ms on a line of 5 cycles/rad: the phase turns 2 pi 5 x 25 rad/s x 9 ms = 7 rad between
+    # 5 and 30 rad/s, wrapping more than once across the speeds
     rng = np.random.default_rng(3)
-    f, v, ph, se, grp = _phase_series(rng, 4e-3, [(5.0, 0.01)], [5, 12, 20, 30, -5, -12, -20, -30])
+    f, v, ph, se, grp = _phase_series(rng, 9e-3, [(5.0, 0.01)], [5, 12, 20, 30, -5, -12, -20, -30])
     est = lag_from_phases(f, v, ph, se, grp, max_lag=0.02)
     assert isinstance(est, LagEstimate)
-    assert abs(est.lag - 4e-3) < 4 * est.se
+    assert abs(est.lag - 9e-3) < 4 * est.se
     assert est.se < 2e-5
 
 
