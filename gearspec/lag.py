@@ -137,9 +137,11 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
     grid = np.linspace(-max_lag, max_lag, n)
     cost = np.concatenate([misfit(grid[a:a + 4096]) for a in range(0, n, 4096)])
     # speeds with a common step leave the lag ambiguous (2 pi f v L repeats every 1/(f dv)):
-    # among the local minima as good as the best (within 4 in chi2 units, or 10 %), the smallest lag
+    # among the local minima as good as the best (within 4 in chi2 units, scaled by the misfit per
+    # degree of freedom when the phases scatter more than their errors say), the smallest lag
     cmin = float(cost.min())
-    loc = np.flatnonzero((cost <= cmin + max(4.0, 0.1 * cmin))
+    dof0 = max(len(ph) - 1 - ng, 1)
+    loc = np.flatnonzero((cost <= cmin + 4.0 * max(1.0, cmin / dof0))
                          & (cost <= np.concatenate(([np.inf], cost[:-1])))
                          & (cost <= np.concatenate((cost[1:], [np.inf]))))
     lag = float(grid[loc[np.argmin(np.abs(grid[loc]))]]) if len(loc) else float(grid[int(np.argmin(cost))])

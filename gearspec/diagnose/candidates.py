@@ -708,7 +708,8 @@ SIDEBAND_CYCLES = 2.0
 class SidebandBlock(HarmonicBlock):
     """A sideband line (declared by the gear: carrier +- modulating shaft), pooled per direction
     over the plateaus whose travel is at least ``min_travel`` (its columns are zero on the
-    others)."""
+    others: the loop fits and scores it only there).  The model it writes carries the line as a
+    harmonic at every speed: the modulation is physical, only its estimate needs long plateaus."""
 
     min_travel: float = 0.0
 
