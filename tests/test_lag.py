@@ -145,20 +145,36 @@ def test_diagnose_accepts_a_lag_only_when_there_is_one(base):
     from gearspec.diagnose import diagnose
 
     g = load_gear(GEAR)
-    for k in (2, 0):
-        diag = diagnose(delayed(base, k), gear=g, kinds=["lag", "periodic"], max_rounds=2)
-        lag = [e for e in diag.effects if e.kind == "lag"]
-        assert len(lag) == 1
-        d = lag[0].to_dict()
-        assert d["kind"] == "lag" and d["value"] is not None
-        if k:
-            assert lag[0].accepted
-            assert abs(d["value"] - k / FS) < 0.1 / FS
-            assert diag.final_model.meta["lag"] == pytest.approx(d["value"], rel=1e-9)
-            assert lag[0].rmse_holdout_after < 0.7 * lag[0].rmse_holdout_before
-        else:
-            assert not lag[0].accepted
-            assert abs(d["value"]) < 0.1 / FS
+    diag = diagnose(delayed(base, 2), gear=g, kinds=["lag", "periodic"], max_rounds=2)
+    lag = [e for e in diag.effects if e.kind == "lag"]
+    assert len(lag) == 1 and lag[0].accepted
+    d = lag[0].to_dict()
+    assert d["kind"] == "lag" and abs(d["value"] - 2 / FS) < 0.1 / FS
+    assert diag.final_model.meta["lag"] == pytest.approx(d["value"], rel=1e-9)
+    assert lag[0].rmse_holdout_after < 0.7 * lag[0].rmse_holdout_before
+    # no lag: the loop does not accept one
+    diag0 = diagnose(delayed(base, 0), gear=g, kinds=["lag", "periodic"], max_rounds=2)
+    assert not any(e.kind == "lag" and e.accepted for e in diag0.effects)
+
+
+def test_held_out_test_rejects_a_lag_that_is_not_there(base):
+    # the candidate forced in (its gate opened): estimated on the training folds, it is near 0
+    # and the held-out test rejects it
+    from scipy import stats
+
+    from gearspec.diagnose import candidates as C
+    from gearspec.diagnose import loop
+    from gearspec.diagnose.design import state_from_model
+
+    g = load_gear(GEAR)
+    dd = loop._as_data(delayed(base, 0), None, g)
+    rnd = loop.Round(dd, loop._settle(state_from_model(loop.baseline_model(dd, "silo4", gear=g), dd), dd),
+                     loop.folds_of(dd, 5))
+    assert C.lag_candidates(rnd, gate=0.01) == []          # phases consistent with no lag
+    cand, = C.lag_candidates(rnd, gate=1.01)
+    assert abs(cand.value) < 3 * cand.value_se + 0.03e-3
+    ev = loop.evaluate_candidate(rnd, cand, z_crit=float(stats.t.isf(0.01, dd.n_groups - 1)), min_gain=0.005)
+    assert not ev.passed and abs(ev.gain) < 0.005
 
 
 def test_cli_lag_auto(base, tmp_path, capsys):

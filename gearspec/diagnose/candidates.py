@@ -535,7 +535,7 @@ def term_candidates(rnd, analyses: dict, *, gate: float) -> list[Candidate]:
                                      describe_value=lambda g: f"gap {g:.4g}"))
     # a channel lag; sidebands the gear declares (they compete with the amplitude laws above)
     if "lag" not in has:
-        out += lag_candidates(rnd)
+        out += lag_candidates(rnd, gate=gate)
     out += sideband_candidates(rnd, analyses, gate=gate)
     return out
 
@@ -671,10 +671,11 @@ class _TaylorProposal(Proposal):
         return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
 
 
-def lag_candidates(rnd) -> list[Candidate]:
+def lag_candidates(rnd, *, gate: float = 0.01) -> list[Candidate]:
     """The lag candidate, when the data can show a lag: plateau data (not reduced), no lag in
-    the model yet, and a line of the model seen strongly at :data:`gearspec.lag.MIN_SPEEDS`
-    speeds or more of one direction."""
+    the model yet, a line of the model seen strongly at :data:`gearspec.lag.MIN_SPEEDS` speeds
+    or more of one direction, and a lag estimated on all data that differs from zero at
+    p < ``gate`` (its phases are otherwise consistent with no lag)."""
     from ..lag import lag_from_phases
     dd = rnd.dd
     if dd.kind != "plateaus" or dd.reduce is not None or dd.at("theta") is None or dd.at("t") is None:
@@ -691,7 +692,7 @@ def lag_candidates(rnd) -> list[Candidate]:
     max_lag = max(20 * float(np.median(dt)), 0.05) if len(dt) else 0.05
     est = lag_from_phases(table["frequency"], table["velocity"], table["phase"], table["phase_se"], table["series"],
                           max_lag=max_lag)
-    if est is None:
+    if est is None or not est.p < gate:   # phases consistent with no lag: nothing to test
         return []
     ev = (f"the phases of the model's lines drift with speed across plateaus: {est.describe()}, z {est.z:.1f} "
           f"(p {est.p:.2g})")
@@ -772,6 +773,8 @@ class SidebandCandidate(Candidate):
             add = [SidebandBlock(key=f"sideband {ln.frequency:.6g}", frequency=float(ln.frequency), label=ln.label,
                                  dirs=c.dirs, symmetric=c.symmetric, law=c.law, decay=c.decay, found=False,
                                  min_travel=self.min_travel) for ln in self.lines]
+            if isinstance(c, LaggedHarmonicBlock):   # a lag accepted before: the sidebands see it too
+                add = [_lagged(b, c.lag) for b in add]
             C = np.column_stack([b.columns(rnd.dd) for b in add])
             xtc, ctc, cty = cross_grams(rnd, C)
             self._cache = {"round": rnd, "prop": Proposal(add, [], xtc, ctc, cty, self.name)}
