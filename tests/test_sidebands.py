@@ -31,6 +31,7 @@ FC = 24 / (2 * math.pi)
 FM = 1 / (2 * math.pi)
 SPEEDS = [4, 8, 15, 25, 35, -4, -8, -15, -25, -35]
 A, M, PHI, PSI = 0.02, 0.5, 0.7, 1.1
+FS = 1000.0
 
 
 @pytest.fixture(scope="module")
@@ -41,13 +42,13 @@ def gear():
 @pytest.fixture(scope="module")
 def am(gear):
     rips = [Ripple(FC, A, PHI), Ripple(FC + FM, A * M / 2, PHI + PSI), Ripple(FC - FM, A * M / 2, PHI - PSI)]
-    rec, _ = plateau_recording(SPEEDS, ripples=rips, level=0.1, duration=1.5, fs=1000, noise=0.005, gear=gear, seed=3)
+    rec, _ = plateau_recording(SPEEDS, ripples=rips, level=0.1, duration=1.5, fs=FS, noise=0.005, gear=gear, seed=3)
     return rec
 
 
 @pytest.fixture(scope="module")
 def law(gear):
-    rec, _ = plateau_recording(SPEEDS, ripples=[], level=0.1, duration=1.5, fs=1000, noise=0.005, gear=gear, seed=3)
+    rec, _ = plateau_recording(SPEEDS, ripples=[], level=0.1, duration=1.5, fs=FS, noise=0.005, gear=gear, seed=3)
     th = rec.theta
     v = np.gradient(th, rec.t)
     d = rec.data.copy()
