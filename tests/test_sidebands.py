@@ -142,3 +142,12 @@ def test_diagnose_accepts_sidebands_with_their_amplitudes(am, gear):
             h = next(h for h in hs if math.isclose(h["frequency"], f, rel_tol=1e-9))
             assert h["label"].startswith("spur tooth mesh") and "motor shaft" in h["label"]
             assert h["amplitude"] / car["amplitude"] == pytest.approx(M / 2, abs=0.03)
+
+
+def test_a_lag_is_not_credited_with_what_the_lines_taylor_columns_do(law_round):
+    # the lag candidate replaces every line by its lagged form; it must keep their Taylor columns
+    # (decay refits), or the held-out comparison credits it with dropping them (here ~20 %)
+    rnd = law_round[0]
+    cand, = C.lag_candidates(rnd, gate=1.01)
+    ev = held_out(rnd, [cand])[0]
+    assert not ev.passed and abs(ev.gain) < 0.005
