@@ -47,6 +47,8 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-header", action="store_true", help="csv files have no header row (give --names)")
     g.add_argument("--names", metavar="A,B,...", help="column names for --no-header files")
     g.add_argument("--signal", choices=("torque", "current"), help="channel to analyse when both are present")
+    g.add_argument("--lag", metavar="SECONDS|auto", help="torque (current) logged this long behind position: shifted "
+                   "back; 'auto': estimated from the declared lines' phases across speeds, reported and applied")
 
 
 def add_output_options(p: argparse.ArgumentParser) -> None:
@@ -69,8 +71,12 @@ def load_from_args(args):
     """The recording named by the recording options."""
     from ..recording import load_recording
 
-    return load_recording(args.recordings, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
-                          header=not args.no_header, names=args.names, signal=args.signal)
+    from ..lag import lag_option
+
+    rec = load_recording(args.recordings, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
+                         header=not args.no_header, names=args.names, signal=args.signal)
+    return lag_option(rec, getattr(args, "lag", None), say=lambda s: getattr(args, "quiet", False) or print(s),
+                      **{k: getattr(args, k, None) for k in ("window", "rel_tol", "min_speed", "min_duration")})
 
 
 def parse_lines(text: str | None) -> list[float] | None:

@@ -18,7 +18,7 @@ from . import (
 )
 
 LAWS = ("silo4", "stribeck", "coulomb_viscous", "lola8", "lola11")
-KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
+KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "lag", "other")
 
 
 def register(sub) -> None:
@@ -118,7 +118,10 @@ def run(args) -> int:
         from pathlib import Path
 
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(diag.to_dict(), indent=1, default=_json_default))
+        out = diag.to_dict()
+        if "lag" in rec.meta:  # --lag: the lag applied before the loop (s)
+            out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
+        Path(args.json).write_text(json.dumps(out, indent=1, default=_json_default))
     if args.out:
         from ..report.diagnose import write_diagnose_report
 
@@ -144,8 +147,11 @@ def run(args) -> int:
 def _load_other(args, paths):
     from ..recording import load_recording
 
-    return load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
-                          header=not args.no_header, names=args.names, signal=args.signal)
+    from ..lag import lag_option
+
+    other = load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
+                           header=not args.no_header, names=args.names, signal=args.signal)
+    return lag_option(other, args.lag, say=lambda s: args.quiet or print("validation " + s))
 
 
 def _json_default(o):

@@ -61,7 +61,10 @@ def run(args) -> int:
         from pathlib import Path
 
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=1))
+        out = result.to_dict()
+        if "lag" in rec.meta:  # --lag: the lag applied (s), with its standard error when estimated
+            out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
+        Path(args.json).write_text(json.dumps(out, indent=1))
     if args.out:
         from ..report.fit import write_fit_report
 

@@ -14,11 +14,13 @@ Modules (data flows one way):
 ``design``      a model as linear blocks of columns (base law, lines, terms), fitted jointly;
                 to and from :class:`~gearspec.model.FrictionModel`
 ``residual``    the residual analyses
-``candidates``  the candidate terms and how each searches its own nonlinear parameters
+``candidates``  the candidate terms and how each searches its own nonlinear parameters (a channel
+                lag and declared sidebands included)
 ``loop``        :func:`diagnose`, the held-out acceptance test, :class:`Diagnosis`
 """
 
-from .candidates import Candidate, GridCandidate, PeriodicCandidate, choose_amplitude_law
+from .candidates import (Candidate, GridCandidate, LagCandidate, PeriodicCandidate, SidebandCandidate,
+                         choose_amplitude_law)
 from .data import (DiagnoseData, butter_filtfilt, central_difference, decimate, decimation_index, moves,
                    reversal_travel, trajectory_data, travel_since_reversal)
 from .design import BaseBlock, FittedState, HarmonicBlock, State, TermBlock, fit_state, predict_model, state_from_model
@@ -32,6 +34,6 @@ __all__ = ["diagnose", "Diagnosis", "Effect", "KINDS", "baseline_model", "idim_m
            "relative_error", "DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves",
            "butter_filtfilt", "central_difference", "decimate", "decimation_index", "State", "BaseBlock",
            "HarmonicBlock", "TermBlock", "FittedState", "fit_state", "state_from_model", "predict_model",
-           "Candidate", "GridCandidate", "PeriodicCandidate", "choose_amplitude_law", "ResidualSpectrum",
+           "Candidate", "GridCandidate", "PeriodicCandidate", "LagCandidate", "SidebandCandidate", "choose_amplitude_law", "ResidualSpectrum",
            "position_spectra", "speed_analysis", "speed_groups", "channel_analysis", "acceleration_analysis",
            "reversal_analysis"]

@@ -23,6 +23,13 @@ Candidate kinds (``CONTRACTS.md`` section 4):
 ``inertia``      a missing inertia: torque ``J thetadd``
 ``hysteresis``   presliding after reversals (``-s exp(-travel/L)``) or backlash (friction
                  missing over a gap after reversals)
+``lag``          the torque channel logged behind position: the lag estimated from the phases of
+                 the model's lines across the training plateaus, every line fitted at
+                 ``theta - v lag`` (:class:`LagCandidate`)
+
+Declared sidebands (``periodic``): a line of the model amplitude-modulated by a slower shaft, at
+the frequencies the gear declares, pooled per direction over the plateaus long enough to resolve
+them (:class:`SidebandCandidate`); they compete with another amplitude law of the carrier.
 """
 
 from __future__ import annotations
@@ -38,7 +45,9 @@ from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .design import LINEAR, BaseBlock, Block, Grams, HarmonicBlock, TermBlock, solve_normal, travel_range
 
-__all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate", "AsymmetryBlock"]
+__all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate", "AsymmetryBlock",
+           "LagCandidate", "LaggedHarmonicBlock", "SidebandCandidate", "SidebandBlock", "segment_phases",
+           "lag_candidates", "sideband_candidates", "SIDEBAND_CYCLES"]
 
 _TWO_PI = 2.0 * math.pi
 _DNAME = {1: "positive", -1: "negative", 0: "both"}
@@ -524,6 +533,301 @@ def term_candidates(rnd, analyses: dict, *, gate: float) -> list[Candidate]:
                                                            fixed=(("gap", float(g)),), effect_kind="hysteresis")], []),
                                      grid, evidence=ev, detail={"analysis": "reversal"}, gate_p=st["p"],
                                      describe_value=lambda g: f"gap {g:.4g}"))
+    # a channel lag; sidebands the gear declares (they compete with the amplitude laws above)
+    if "lag" not in has:
+        out += lag_candidates(rnd, gate=gate)
+    out += sideband_candidates(rnd, analyses, gate=gate)
     return out
 
 
+
+
+# ---------------------------------------------------------------------- lag
+@dataclass(frozen=True, eq=False)
+class LaggedHarmonicBlock(HarmonicBlock):
+    """A line of the model seen through a torque channel logged ``lag`` seconds behind position
+    (:mod:`gearspec.lag`): its columns at ``theta - v lag`` (exact on a plateau, where the
+    velocity is constant).  The harmonic it writes is the friction's own (phase at the true
+    position); the model records the lag in ``meta["lag"]``."""
+
+    lag: float = 0.0
+
+    def _raw(self, dd):
+        if self.lag == 0.0:
+            return super()._raw(dd)
+        store = dd.cache.setdefault("lagged", {})
+        view = store.get(self.lag)
+        if view is None:
+            import dataclasses
+            import types
+            f = dd.fit
+            view = types.SimpleNamespace(fit=dataclasses.replace(f, theta=f.theta - f.v * self.lag, cache={}),
+                                         cache={}, reduce=dd.reduce)
+            while len(store) >= 8:
+                store.pop(next(iter(store)))
+            store[self.lag] = view
+        return super()._raw(view)
+
+    def write(self, model, coef, se):
+        super().write(model, coef, se)
+        model.meta = {**model.meta, "lag": float(self.lag)}
+        note = f"lag: torque channel {1e3 * self.lag:.4g} ms behind position (lines fitted at theta - v lag)"
+        if note not in model.notes:
+            model.notes.append(note)
+
+    def describe(self):
+        return super().describe() + f"; torque lag {1e3 * self.lag:.4g} ms"
+
+
+def _lagged(blk: HarmonicBlock, lag: float) -> LaggedHarmonicBlock:
+    """The lagged form of a line of the model (a sideband stays a sideband: same columns
+    rule)."""
+    import dataclasses
+    cls = LaggedSidebandBlock if isinstance(blk, SidebandBlock) else LaggedHarmonicBlock
+    kw = {f.name: getattr(blk, f.name) for f in dataclasses.fields(blk) if f.name not in ("uid", "coef", "lag")}
+    return cls(**kw, coef=blk.coef, lag=float(lag))
+
+
+def segment_phases(dd, frequencies, *, min_snr: float = 5.0) -> dict:
+    """Per held-out group (a plateau) and line of ``frequencies``: the phase of the line in the
+    friction magnitude (``sin(2 pi f theta + phase)``, all lines and a straight line fitted
+    jointly, :func:`gearspec.spectrum.harmonic.harmonic_fit`) with its standard error, where
+    the line is resolved and stands ``min_snr`` standard errors above the noise.  Cached on the
+    data.  Returns arrays ``group, frequency, velocity, phase, phase_se, series``."""
+    from ..spectrum.harmonic import harmonic_fit
+    from .design import resolved
+
+    key = ("segment_phases", tuple(np.round(frequencies, 12)), float(min_snr))
+    hit = dd.cache.get(key)
+    if hit is not None:
+        return hit
+    th = dd.at("theta")
+    d = dd.at("direction")
+    v = dd.at("v")
+    rows = []
+    for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+        x = int(d[a])
+        fr = [f for f in frequencies if resolved(dd, f)[dd.index[a]] and f * np.ptp(th[a:z]) >= 1.0]
+        if not fr or z - a < 4 * len(fr) + 16:
+            continue
+        hf = harmonic_fit(th[a:z], x * dd.y[a:z], fr, degree=1)
+        for f, A, Ase, ph, phse in zip(fr, hf.amplitude, hf.amplitude_se, hf.phase, hf.phase_se):
+            if Ase > 0 and A >= min_snr * Ase:
+                rows.append((g, f, float(np.mean(v[a:z])), ph, phse, f"{f:.6g} ({'+' if x > 0 else '-'})"))
+    cols = list(zip(*rows)) if rows else [[]] * 6
+    out = {k: np.asarray(c) for k, c in zip(("group", "frequency", "velocity", "phase", "phase_se", "series"), cols)}
+    dd.cache[key] = out
+    return out
+
+
+class LagCandidate(Candidate):
+    """The torque channel behind position by a lag (``CONTRACTS.md`` kind ``lag``): in every
+    fold the lag is estimated from the phases of the model's lines across the training plateaus
+    (:func:`gearspec.lag.lag_from_phases`) and every line of the model is replaced by its lagged
+    form (:class:`LaggedHarmonicBlock`).  ``value``: the lag estimated on all data (s)."""
+
+    kind = "lag"
+
+    def __init__(self, table: dict, estimate, max_lag: float, evidence: str = ""):
+        super().__init__("torque channel lag", evidence, {"analysis": "lag", "estimate": estimate.to_dict()},
+                         gate_p=estimate.p)
+        self.table = table
+        self.max_lag = float(max_lag)
+        self.value = float(estimate.lag)
+        self.value_se = float(estimate.se)
+        self._cache = {}
+
+    def estimate(self, train: np.ndarray):
+        from ..lag import lag_from_phases
+        t = self.table
+        sel = train[t["group"].astype(int)]
+        return lag_from_phases(t["frequency"][sel], t["velocity"][sel], t["phase"][sel], t["phase_se"][sel],
+                               t["series"][sel], max_lag=self.max_lag)
+
+    def propose(self, rnd, train):
+        est = self.estimate(train)
+        if est is None:
+            return None
+        lines = [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock)]
+        if not lines:
+            return None
+        ck = (id(rnd), round(est.lag, 15))
+        if self._cache.get("round") is not rnd:
+            self._cache = {"round": rnd}
+        if ck not in self._cache:
+            add = [_lagged(b, est.lag) for b in lines]
+            prop = _TaylorProposal(add, lines, describe=f"lag {1e3 * est.lag:.4g} ms")
+            prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd))
+            self._cache[ck] = prop
+        return self._cache[ck]
+
+
+class _TaylorProposal(Proposal):
+    """Blocks that replace blocks of the model with the same nonlinear parameters (the lines,
+    lagged): they keep their Taylor columns, as the blocks they replace have them in the fits
+    without the candidate, so that the held-out comparison differs by the candidate alone."""
+
+    def columns(self, dd) -> np.ndarray:
+        return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
+
+
+def lag_candidates(rnd, *, gate: float = 0.01) -> list[Candidate]:
+    """The lag candidate, when the data can show a lag: plateau data (not reduced), no lag in
+    the model yet, a line of the model seen strongly at :data:`gearspec.lag.MIN_SPEEDS` speeds
+    or more of one direction, and a lag estimated on all data that differs from zero at
+    p < ``gate`` (its phases are otherwise consistent with no lag)."""
+    from ..lag import lag_from_phases
+    dd = rnd.dd
+    if dd.kind != "plateaus" or dd.reduce is not None or dd.at("theta") is None or dd.at("t") is None:
+        return []
+    blocks = [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock)]
+    if not blocks or any(isinstance(b, LaggedHarmonicBlock) for b in blocks):
+        return []
+    table = segment_phases(dd, sorted({b.frequency for b in blocks}))
+    if not len(table["group"]):
+        return []
+    t = dd.at("t")
+    dt = np.diff(t)
+    dt = dt[dt > 0]
+    max_lag = max(20 * float(np.median(dt)), 0.05) if len(dt) else 0.05
+    est = lag_from_phases(table["frequency"], table["velocity"], table["phase"], table["phase_se"], table["series"],
+                          max_lag=max_lag)
+    if est is None or not est.p < gate:   # phases consistent with no lag: nothing to test
+        return []
+    ev = (f"the phases of the model's lines drift with speed across plateaus: {est.describe()}, z {est.z:.1f} "
+          f"(p {est.p:.2g})")
+    return [LagCandidate(table, est, max_lag, evidence=ev)]
+
+
+# ---------------------------------------------------------------------- sidebands
+#: a sideband pair f_c +- f_m is fitted only on plateaus whose travel covers this many periods
+#: of the modulating line (1/f_m): shorter ones cannot tell the sidebands from the carrier
+SIDEBAND_CYCLES = 2.0
+
+
+@dataclass(frozen=True, eq=False)
+class SidebandBlock(HarmonicBlock):
+    """A sideband line (declared by the gear: carrier +- modulating shaft), pooled per direction
+    over the plateaus whose travel is at least ``min_travel`` (its columns are zero on the
+    others: the loop fits and scores it only there).  The model it writes carries the line as a
+    harmonic at every speed: the modulation is physical, only its estimate needs long plateaus."""
+
+    min_travel: float = 0.0
+
+    def _raw(self, dd):
+        cols = super()._raw(dd)
+        if self.min_travel > 0:
+            ok = _travel_ok(dd, self.min_travel)
+            cols = np.where(ok[:, None], cols, 0.0)
+        return cols
+
+
+@dataclass(frozen=True, eq=False)
+class LaggedSidebandBlock(SidebandBlock, LaggedHarmonicBlock):
+    """A sideband line seen through a lagged torque channel."""
+
+
+def _travel_ok(dd, min_travel: float) -> np.ndarray:
+    """Samples (of ``dd.fit``) in a segment whose travel is at least ``min_travel``."""
+    key = ("travel_ok", float(min_travel))
+    hit = dd.cache.get(key)
+    if hit is not None:
+        return hit
+    f = dd.fit
+    seg = f.segment
+    ids, inv = np.unique(seg, return_inverse=True)
+    lo = np.full(len(ids), np.inf)
+    hi = np.full(len(ids), -np.inf)
+    np.minimum.at(lo, inv, f.theta)
+    np.maximum.at(hi, inv, f.theta)
+    out = (hi - lo)[inv] >= min_travel
+    dd.cache[key] = out
+    return out
+
+
+class SidebandCandidate(Candidate):
+    """Both sidebands ``f_c +- f_m`` of a line of the model (the carrier) modulated by a slower
+    shaft, at the frequencies the gear declares (:meth:`GearTrain.candidate_lines`), pooled per
+    direction over the plateaus that resolve them; their amplitude law is the carrier's (an
+    amplitude modulation of depth m gives sidebands of m/2 of the carrier at every speed)."""
+
+    kind = "periodic"
+
+    def __init__(self, carrier: HarmonicBlock, lines: list, min_travel: float, *, evidence: str = "", gate_p=None,
+                 unit: str = "rad", detail=None):
+        lab = " and ".join(ln.label for ln in lines)
+        super().__init__(f"sidebands {lab}", evidence, detail, gate_p)
+        self.carrier = carrier
+        self.lines = lines
+        self.min_travel = float(min_travel)
+        self.frequency = float(lines[0].frequency)
+        self.label = lines[0].label
+        self.f0 = self.frequency
+        self.resolution = 0.0
+        self._cache = {}
+
+    def propose(self, rnd, train):
+        if self._cache.get("round") is not rnd:
+            c = next((b for b in rnd.state.blocks if isinstance(b, HarmonicBlock)
+                      and math.isclose(b.frequency, self.carrier.frequency, rel_tol=1e-9)), self.carrier)
+            add = [SidebandBlock(key=f"sideband {ln.frequency:.6g}", frequency=float(ln.frequency), label=ln.label,
+                                 dirs=c.dirs, symmetric=c.symmetric, law=c.law, decay=c.decay, found=False,
+                                 min_travel=self.min_travel) for ln in self.lines]
+            if isinstance(c, LaggedHarmonicBlock):   # a lag accepted before: the sidebands see it too
+                add = [_lagged(b, c.lag) for b in add]
+            C = np.column_stack([b.columns(rnd.dd) for b in add])
+            xtc, ctc, cty = cross_grams(rnd, C)
+            self._cache = {"round": rnd, "prop": Proposal(add, [], xtc, ctc, cty, self.name)}
+        return self._cache["prop"]
+
+
+def sideband_candidates(rnd, analyses: dict, *, gate: float) -> list[Candidate]:
+    """Sidebands the gear declares around a line of the model (the carrier: the higher of the two
+    parents) modulated by a slower shaft (the lower, a shaft line), proposed when at least three
+    plateaus resolve them (travel of :data:`SIDEBAND_CYCLES` modulation periods or more) and one
+    of them stands out in the pooled residual spectrum at p < ``gate``.  They compete, in the
+    same round, with another amplitude law of the carrier; the held-out test prefers one."""
+    dd = rnd.dd
+    gear = dd.gear
+    if gear is None or dd.reduce is not None or dd.at("theta") is None:
+        return []
+    lines = [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock)]
+    have = [b.frequency for b in lines]
+    shafts = {ln.label: ln for ln in gear.declared_lines(1) if ln.kind == "shaft"}
+    pairs: dict = {}
+    for ln in gear.candidate_lines(sidebands=True):
+        if ln.kind != "sideband" or len(ln.parents) != 2 or ln.parents[1] not in shafts:
+            continue
+        pairs.setdefault(ln.parents, []).append(ln)
+    spectra = analyses.get("spectra", {}).get("pooled", [])
+    out = []
+    for (hi_lab, lo_lab), sb in pairs.items():
+        carrier = next((b for b in lines if b.label and (b.label == hi_lab or hi_lab in b.label.split(" = "))), None)
+        if carrier is None:
+            continue
+        # not where the model has a line already (declared, or found in the residual: within 0.2 %)
+        sb = [x for x in sb if not any(math.isclose(x.frequency, f, rel_tol=2e-3) for f in have)]
+        if not sb:
+            continue
+        f_m = shafts[lo_lab].frequency
+        min_travel = SIDEBAND_CYCLES / f_m
+        ok = _travel_ok(dd, min_travel)[dd.index]
+        n_groups = len(np.unique(dd.group[ok]))
+        if n_groups < 3:
+            continue
+        zs = [(s.power_z(x.frequency), x) for s in spectra for x in sb
+              if len(s.frequency) and s.frequency[0] <= x.frequency <= s.frequency[-1]]
+        if not zs:
+            continue
+        zmax = max(z for z, _ in zs)
+        p_line = min(1.0, len(zs) * math.exp(-zmax))
+        if not p_line < gate:
+            continue
+        out.append(SidebandCandidate(
+            carrier, sb, min_travel, unit=dd.unit, gate_p=p_line,
+            evidence=(f"declared sidebands of {hi_lab} modulated by the {lo_lab} stand out in the residual spectrum "
+                      f"(power {zmax:.1f} x local noise, p {p_line:.2g}); fitted on the {n_groups} plateaus that "
+                      f"travel {SIDEBAND_CYCLES:g} modulation periods or more"),
+            detail={"analysis": "spectrum", "frequency": sb[0].frequency, "min_travel": min_travel,
+                    "groups": n_groups}))
+    return out

@@ -61,7 +61,7 @@ __all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "fo
            "idim_model", "residual_analysis", "KINDS", "relative_error"]
 
 #: effect kinds of CONTRACTS.md section 4
-KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "other")
+KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "lag", "other")
 
 
 def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
@@ -462,6 +462,7 @@ class Effect:
     detail: dict = field(default_factory=dict, repr=False)
     validation: dict | None = None
     history: list = field(default_factory=list)
+    value: float | None = None       # a scalar effect's estimate (lag: s)
 
     def to_dict(self) -> dict:
         f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
@@ -470,7 +471,8 @@ class Effect:
              "rmse_holdout_after": f(self.rmse_holdout_after), "name": self.name, "hint": self.hint,
              "order": f(self.order), "z": f(self.z), "z_crit": f(self.z_crit), "gain": f(self.gain),
              "consistency": f(self.consistency), "parameters_added": self.n_params, "round": self.round,
-             "decision": self.decision, "fitted": self.parameters, "terms": self.terms, "history": self.history}
+             "decision": self.decision, "fitted": self.parameters, "terms": self.terms, "history": self.history,
+             "value": f(self.value)}
         if self.validation is not None:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
         return d
@@ -912,7 +914,8 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
                order=(dd.gear.order(c.frequency) if (dd.gear is not None and c.frequency) else None),
                z=ev.z, z_crit=ev.z_crit, gain=ev.gain, consistency=ev.consistency, n_params=ev.n_params, round=k,
                decision=("passes the test (another candidate went first this round)" if ev.passed else
-                         "rejected: " + ev.reason), detail=dict(c.detail), history=history)
+                         "rejected: " + ev.reason), detail=dict(c.detail), history=history,
+               value=getattr(c, "value", None))
     e.detail["residual"] = rnd.fitted.residual
     e.detail["contribution"] = ev.contribution
     e.history.append(f"round {k}: Z {ev.z:.2f} (needs {ev.z_crit:.2f}), held-out rmse {ev.rmse_holdout_before:.4g} -> "

@@ -81,6 +81,10 @@ def interpretation(diag: Diagnosis, e) -> list[str]:
     if e.kind == "hysteresis":
         out.append("Friction near reversals differs from the steady law (presliding / backlash): "
                    + (e.parameters or e.name) + ".")
+    if e.kind == "lag" and e.value is not None:
+        out.append(f"The torque channel is logged {1e3 * e.value:.4g} ms behind the position channel (the lines' "
+                   "phases drift with speed); every line is fitted at theta - v lag. Re-run with `--lag "
+                   f"{e.value:.4g}` to shift the torque back before any analysis.")
     return out
 
 
