@@ -60,3 +60,25 @@ def test_lola_law_without_load_is_exit_2(recording_csv, capsys):
 def test_bad_lines_option_is_exit_2(recording_csv, capsys):
     assert main(["fit", str(recording_csv), "--lines", "0.8,abc", "--quiet"]) == 2
     assert "--lines" in capsys.readouterr().err
+
+
+def test_heldout_rmse_is_null_with_its_reason_when_cross_validation_cannot_run(tmp_path, capsys):
+    # 4 plateau speeds per direction: eq. 3 has 4 parameters, so no fold leaving a speed out can be
+    # fitted; the held-out rmse is null with the reason (never the in-sample rmse), while
+    # coulomb_viscous (2 parameters) is cross-validated as usual
+    truth = FrictionModel("stribeck", {k: v for k, v in TRUTH.items() if k != "harmonics"})
+    sp = [0.5, 2, 8, 30]
+    rec, _ = model_recording(truth, sp + [-s for s in sp], duration=1.0, fs=500, noise=1e-3, seed=4)
+    path = rec.save(tmp_path / "four.csv")
+    js = tmp_path / "fit.json"
+    assert main(["fit", str(path), "--law", "stribeck", "--no-published", "--json", str(js)]) == 0
+    d = json.loads(js.read_text())
+    assert d["rmse"] > 0 and d["rmse_holdout"] is None
+    assert "could not run" in d["rmse_holdout_reason"] and "3 speed(s)" in d["rmse_holdout_reason"]
+    comp = {r["model"]: r for r in d["comparison"]}
+    cv = comp["coulomb_viscous"]
+    assert cv["rmse_holdout"] > cv["rmse"] and cv["rmse_holdout_reason"] is None
+    out = capsys.readouterr().out
+    assert "held-out rmse n/a" in out and "3 speed(s)" in out
+    m = FrictionModel.from_json(js)
+    assert m.rmse_holdout is None and "could not run" in m.rmse_holdout_reason

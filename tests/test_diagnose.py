@@ -333,3 +333,26 @@ def test_cli_bad_input_exits_2_with_one_message(tmp_path, capsys, args, needle):
     rc = main(["diagnose", str(path), "--gear", "silo4-joint3", "--quiet"] + args)
     err = capsys.readouterr().err
     assert rc == 2 and needle in err and err.count("\n") == 1
+
+
+def test_found_line_law_only_from_measurable_segments_and_held_outside():
+    """A 72-per-turn line measurable (below 0.8 x the position Nyquist) at 6..26 rad/s only, gone
+    at 40..56 (the logger's filter): the loop finds it, fits its amplitude law at 6..26 rad/s only,
+    records that range, and the final model holds the amplitude at the edge outside it."""
+    from test_identify import F_COG, aliased_line_recording
+
+    rec = aliased_line_recording()
+    diag = dg.diagnose(rec, law="coulomb_viscous", by="run", kinds=["periodic"])
+    fm = diag.final_model
+    for d, s in (("positive", 1), ("negative", -1)):
+        h = next(h for h in fm.harmonics(d) if abs(h["frequency"] - F_COG) < 1e-3 * F_COG)
+        assert h["speed_range"] == pytest.approx([6.0, 26.0], rel=1e-9)
+        th = np.linspace(0, 1, 200)
+        # the line alone: half the difference of the model half a line period apart
+        line = lambda v: (fm.evaluate(th, np.full(200, s * v)) - fm.evaluate(th + 0.5 / F_COG, np.full(200, s * v))) / 2  # noqa
+        amp = lambda v: np.sqrt(2 * np.mean(line(v) ** 2))  # noqa: E731
+        # truth at the edges: 5e-3 exp(-0.03 * 6) = 4.18e-3 and 5e-3 exp(-0.03 * 26) = 2.29e-3 (10 % for noise)
+        assert amp(6.0) == pytest.approx(5e-3 * np.exp(-0.03 * 6), rel=0.1)
+        assert amp(26.0) == pytest.approx(5e-3 * np.exp(-0.03 * 26), rel=0.1)
+        assert np.allclose(line(1e-9), line(6.0), rtol=1e-12, atol=0)
+        assert np.allclose(line(56.0), line(26.0), rtol=1e-12, atol=0)

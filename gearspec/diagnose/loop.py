@@ -96,7 +96,7 @@ class Round:
         fitted = fit_state(state, dd)
         self.state = state.refreshed(fitted.coef)
         self.fitted = FittedState(self.state, fitted.coef, fitted.se, fitted.residual, fitted.rmse,
-                                  fitted.prediction)
+                                  fitted.prediction, speed_ranges=fitted.speed_ranges)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         self.X = self.state.design(dd, taylor=True)
         self.grams = Grams.of(self.X, dd.y, dd)
@@ -369,13 +369,14 @@ def _load_line_analysis(rnd: Round, r: np.ndarray) -> dict:
     d = dd.at("direction")
     for blk in [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock) and not b.load_phase]:
         phases = dict(rnd.line_phases(blk))
+        rng = blk.ranges(dd)
         xs, ys, ws = [], [], []
         for a, z in zip(dd.starts, dd.stops):
             dirn = int(d[a])
             key = 0 if blk.symmetric else dirn
             if key not in phases:
                 continue
-            g = blk._g(key, s[a:z])
+            g = blk._g(key, s[a:z], rng.get(key))
             shape = g * np.sin(2 * np.pi * blk.frequency * theta[a:z] + phases[key])
             shape = shape - shape.mean()
             den = float(shape @ shape)
