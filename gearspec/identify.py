@@ -56,7 +56,7 @@ from .spectrum import position_nyquist
 
 __all__ = ["fit", "silo4_published", "holdout_rmse", "holdout", "compare", "refit", "harmonic_specs", "fit_efficiency",
            "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError", "segment_errors", "identify_recording", "FitResult",
-           "line_amplitudes", "amplitudes_from_spectrum"]
+           "line_amplitudes", "amplitudes_from_spectrum", "negative_viscous", "MIN_CYCLES"]
 
 _TWO_PI = 2.0 * np.pi
 #: a segment counts towards a line where it covers at least this fraction of a cycle (the default
@@ -520,7 +520,8 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
 
 def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",
         se: str = "covariance", bootstrap: int = 200, min_cycles: float = MIN_CYCLES, holdout: str | None = "segment",
-        folds: int = 5, init: FrictionModel | None = None, seed: int = 0, name: str | None = None) -> FrictionModel:
+        folds: int = 5, init: FrictionModel | None = None, seed: int = 0, name: str | None = None,
+        check: bool = True) -> FrictionModel:
     """Fit a friction law to samples, jointly per direction (weighted nonlinear least squares).
 
     Parameters
@@ -548,6 +549,9 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
         runs (None: skip).
     init : FrictionModel, optional
         Starting values (e.g. from :func:`silo4_published`).
+    check : bool
+        Warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
+        (:func:`negative_viscous`); it is flagged in the model either way.
 
     Returns
     -------
@@ -592,6 +596,9 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
                           unit=data.unit, not_identified=not_identified, notes=notes, name=name or law,
                           meta={"fit": settings})
     model.rmse = _safe_rmse(model, data)
+    for msg in negative_viscous(model, data):
+        if check:
+            warn(msg)
     if holdout:
         model.rmse_holdout, model.rmse_holdout_reason = _holdout_of(
             lambda tr: refit(model, tr, holdout=None), data, by=holdout, folds=folds)
@@ -600,6 +607,40 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
 
 def _holdout_of(fit_fn, data, **kw):
     return holdout(fit_fn, data, **kw)
+
+
+def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``) of each direction: friction
+    that falls with speed over the whole measured range is rarely physical, and more often an
+    inertia, a channel lag or aliasing the model does not hold, or plateau speeds too close
+    together to tell viscous from Stribeck friction.  Each flag is one sentence, added to
+    ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]`` (``"direction.parameter"
+    -> sentence``); returns the sentences."""
+    out = []
+    flags = model.meta.setdefault("flags", {})
+    su = "rad/s" if model.unit == "rad" else "m/s"
+    for dname, p in model.directions.items():
+        for k in ("viscous", "b"):
+            val = p.get(k)
+            if k not in model.law_spec.params or val is None or not val < 0:
+                continue
+            se = p.get(k + "_se")
+            sig = (f" ({abs(val) / se:.1f} standard errors below 0)" if se is not None and np.isfinite(se) and se > 0
+                   else "")
+            rng = ""
+            if data is not None:
+                sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
+                if len(sp):
+                    rng = f" over {float(np.min(sp)):.3g}..{float(np.max(sp)):.3g} {su}"
+            msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
+                   f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
+                   f"tell viscous from Stribeck friction")
+            flags[f"{dname}.{k}"] = msg
+            note = "warning: " + msg
+            if note not in model.notes:
+                model.notes.append(note)
+            out.append(msg)
+    return out
 
 
 def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
@@ -810,7 +851,7 @@ def refit(model: FrictionModel, data: FitData, **overrides) -> FrictionModel:
     if not s:
         raise InputError("this model carries no fit settings (it was not made by gearspec.identify.fit)")
     kw = {"harmonics": s.get("harmonics") or None, "weights": s.get("weights", "segment"), "se": "covariance",
-          "min_cycles": s.get("min_cycles", 1.0), "name": model.name}
+          "min_cycles": s.get("min_cycles", 1.0), "name": model.name, "check": False}
     if s["law"] != "silo4" and not s.get("harmonics"):
         kw["harmonics"] = None
     if s["law"] == "silo4" and not s.get("harmonics"):
@@ -842,7 +883,7 @@ def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *,
             kw = dict(c)
             kw.setdefault("holdout", None)
             m = fit(data, **kw)
-            ho, why = holdout(lambda tr, kw=kw: fit(tr, **kw), data, by=by, folds=folds)
+            ho, why = holdout(lambda tr, kw=kw: fit(tr, **{**kw, "check": False}), data, by=by, folds=folds)
         n_par = _n_params(m)
         rows.append({"model": name, "law": m.law, "parameters": n_par, "rmse": _safe_rmse(m, data),
                      "rmse_holdout": ho, "rmse_holdout_reason": why})
@@ -1085,7 +1126,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
     src = init
     if src is None:
         try:
-            src = fit(pts, law, holdout=None, weights="uniform")
+            src = fit(pts, law, holdout=None, weights="uniform", check=False)
         except InputError:
             src = None
     if src is not None:

@@ -394,6 +394,7 @@ class FrictionModel:
         if self.rmse_holdout_reason:
             lines.append(f"held-out rmse {'not computed' if self.rmse_holdout is None else 'partial'}: "
                          f"{self.rmse_holdout_reason}")
+        lines += [n for n in self.notes if n.startswith("warning:")]
         su = "rad/s" if self.unit == "rad" else "m/s"
         for dname, p in self.directions.items():
             for h in p["harmonics"]:
