@@ -236,7 +236,11 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
     G = X.T @ X
     g = X.T @ y
     yy = float(y @ y)
-    beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
+    try:
+        beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
+    except np.linalg.LinAlgError as exc:
+        raise ConvergenceError(f"the local fit of a segment did not converge ({exc}) with {K} lines; fit fewer "
+                               f"lines (--lines)") from exc
     rss = max(yy - beta @ g, 0.0)
     dof = len(ii) - (1 + 2 * int(out["sampled"].sum()))
     out.update(G=G, g=g, yy=yy, beta_hat=beta, rss_hat=rss, sigma2=rss / dof if dof >= 3 else np.nan)
@@ -494,7 +498,7 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
         phi = float(math.atan2(c, a))
         if A > 0 and np.all(np.isfinite(cov)):
             ga = np.array([a / A, c / A])
-            gp = np.array([-c / A ** 2, a / A ** 2])
+            gp = ga[::-1] * np.array([-1.0, 1.0]) / A     # (-c, a) / A^2 without A^2 (denormal A)
             C2 = cov[np.ix_([ia, ic], [ia, ic])]
             a_se = float(math.sqrt(max(ga @ C2 @ ga, 0)))
             p_se = float(math.sqrt(max(gp @ C2 @ gp, 0)))
@@ -610,7 +614,8 @@ def _holdout_of(fit_fn, data, **kw):
 
 
 def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
-    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``) of each direction: friction
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard
+    errors below 0) of each direction: friction
     that falls with speed over the whole measured range is rarely physical, and more often an
     inertia, a channel lag or aliasing the model does not hold, or plateau speeds too close
     together to tell viscous from Stribeck friction.  Each flag is one sentence, added to
@@ -625,8 +630,10 @@ def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[
             if k not in model.law_spec.params or val is None or not val < 0:
                 continue
             se = p.get(k + "_se")
-            sig = (f" ({abs(val) / se:.1f} standard errors below 0)" if se is not None and np.isfinite(se) and se > 0
-                   else "")
+            # a value within two standard errors of 0 is no finding (and none without an error)
+            if se is None or not np.isfinite(se) or not val < -2 * se:
+                continue
+            sig = f" ({abs(val) / se:.1f} standard errors below 0)" if se > 0 else ""
             rng = ""
             if data is not None:
                 sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
@@ -654,8 +661,19 @@ def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
     return model.rmse_on(data.subset(ok))
 
 
-def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
-                       bootstrap, seed):
+def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, **kw):
+    """One direction's fit; a linear-algebra failure (an SVD or eigen-solver that does not
+    converge: lines far too many or too close for the data) is a :class:`ConvergenceError` with
+    one sentence, never a traceback."""
+    try:
+        return _fit_one_direction_(sub, law, specs, dname, **kw)
+    except np.linalg.LinAlgError as exc:
+        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
+                               f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
+
+
+def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
+                        bootstrap, seed):
     notes: list[str] = []
     ni: dict[str, str] = {}
     freqs = [h["frequency"] for h in specs]
@@ -913,8 +931,11 @@ def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.
             continue
         st = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
         for i, sid in enumerate(st.segment):
-            cov = np.linalg.pinv(st.G[i], rcond=1e-12, hermitian=True) * (st.sigma2[i] if np.isfinite(st.sigma2[i])
-                                                                           else np.nan)
+            try:
+                cov = np.linalg.pinv(st.G[i], rcond=1e-12, hermitian=True) * (st.sigma2[i] if np.isfinite(st.sigma2[i])
+                                                                               else np.nan)
+            except np.linalg.LinAlgError:
+                cov = np.full(st.G[i].shape, np.nan)
             for k, h in enumerate(specs):
                 if not st.active[i, k]:
                     continue
@@ -1230,7 +1251,9 @@ def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
         rows.append({"segment": int(sid), "run": int(sub.run[0]), "direction": d,
                      "speed": float(np.mean(np.abs(sub.v))), "n": len(sub), "level": level,
                      "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
-                     "rmse": float(np.sqrt(np.mean(err ** 2))), "e_percent": 100 * float(np.mean(err)) / level})
+                     "rmse": float(np.sqrt(np.mean(err ** 2))),
+                     # in percent of the mean friction; undefined (NaN) where that mean is 0
+                     "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")})
     return pd.DataFrame(rows)
 
 

@@ -356,3 +356,15 @@ def test_found_line_law_only_from_measurable_segments_and_held_outside():
         assert amp(26.0) == pytest.approx(5e-3 * np.exp(-0.03 * 26), rel=0.1)
         assert np.allclose(line(1e-9), line(6.0), rtol=1e-12, atol=0)
         assert np.allclose(line(56.0), line(26.0), rtol=1e-12, atol=0)
+
+
+def test_line_with_denormal_amplitude_writes_finite_standard_errors():
+    # fuzz finding: a denormal amplitude squared to 0 in the phase standard error (ZeroDivisionError)
+    from gearspec.diagnose.design import HarmonicBlock
+    m = FrictionModel("none", {"harmonics": []})
+    blk = HarmonicBlock(frequency=2.0, dirs=(1,), law=((1, "const"),), decay=((1, 0.0),))
+    blk.write(m, np.array([3e-310, 4e-310]), np.array([1e-311, 1e-311]))
+    h = m.harmonics("positive")[0]
+    assert h["amplitude"] == pytest.approx(5e-310, rel=1e-6)
+    assert h["amplitude_se"] == pytest.approx(1e-311, rel=1e-6)    # |(a, c)/A| . (sa, sc) with sa = sc
+    assert h["phase_se"] == pytest.approx(1e-311 / 5e-310, rel=1e-6)

@@ -329,3 +329,20 @@ def test_amplitude_law_fitted_only_where_the_line_is_measurable_and_held_outside
         assert line(1e-9) == pytest.approx(line(6.0), rel=1e-12)
         assert line(56.0) == pytest.approx(line(26.0), rel=1e-12)
         assert line(6.0) == pytest.approx(h["amplitude"] * math.exp(-h["decay"] * 6.0), rel=1e-9)
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e-310])
+def test_zero_and_denormal_torque_fit_without_crashing(scale):
+    # fuzz findings: all-zero torque divided by the mean friction (e_percent), and a denormal
+    # amplitude squared to 0 in the phase standard error; both are numbers (or NaN), not tracebacks
+    rec = twin(random_truth(np.random.default_rng(5)), 5, speeds=[0.5, 2, 8, 30])
+    rec.data["torque"] = rec.data["torque"] * scale
+    data = FitData.from_recording(rec)
+    m = identify.fit(data, "silo4", harmonics=SPECS, holdout=None, check=False)
+    assert m.rmse == pytest.approx(0.0, abs=1e-300)
+    errs = identify.segment_errors(m, data)
+    assert len(errs) == data.n_segments
+    if scale == 0.0:
+        assert errs["e_percent"].isna().all()       # percent of a zero mean friction: undefined
+    for h in m.harmonics("positive"):
+        assert not (h["phase_se"] < 0)               # finite or NaN

@@ -302,8 +302,10 @@ class HarmonicBlock(Block):
             i += 2
             A = math.hypot(a, c)
             phi = math.atan2(c, a)
-            A_se = math.sqrt((a * sa) ** 2 + (c * sc) ** 2) / A if A > 0 else float("nan")
-            p_se = math.sqrt((c * sa) ** 2 + (a * sc) ** 2) / A ** 2 if A > 0 else float("nan")
+            # with the unit vector (a, c) / A: no A^2, which underflows to 0 for a denormal amplitude
+            ua, uc = (a / A, c / A) if A > 0 else (float("nan"), float("nan"))
+            A_se = math.hypot(ua * sa, uc * sc) if A > 0 else float("nan")
+            p_se = math.hypot(uc * sa, ua * sc) / A if A > 0 else float("nan")
             h = {"frequency": float(self.frequency), "amplitude": float(A), "amplitude_se": float(A_se),
                  "phase": float(phi), "phase_se": float(p_se), "law": dict(self.law).get(d, "exp"),
                  "decay": float(dict(self.decay).get(d, 0.0))}
