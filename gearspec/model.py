@@ -21,7 +21,7 @@ evaluates identically.
 
 No extrapolation: a harmonic's amplitude law is evaluated only within its ``speed_range``;
 outside it the amplitude is held at the range's edge (the law at the nearest measured speed).
-A harmonic without ``speed_range`` (JSON written before gearspec 0.4, or a hand-written model)
+A harmonic without ``speed_range`` (JSON written before speed_range existed, or a hand-written model)
 is evaluated as written at every speed (no clamp).
 
 Parameters that the data could not identify are ``None`` (never invented) and listed in
@@ -371,6 +371,13 @@ class FrictionModel:
                          self.unit)
                 r["frequency"] = f
                 rows.append(r)
+            # the speeds the amplitude law was fitted on (held at the edges outside)
+            if any(h.get("speed_range") for h in hs.values()):
+                for j, key in ((0, "min"), (1, "max")):
+                    r = _row(f"{lab} law fitted |v| {key}", "rad/s", hs,
+                             lambda h, j=j: ((h.get("speed_range") or (None, None))[j], None), self.unit)
+                    r["frequency"] = f
+                    rows.append(r)
         for t in self.terms:
             rows.append({"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None})
         return pd.DataFrame(rows)

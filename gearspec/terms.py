@@ -123,7 +123,7 @@ def _periodic(term, *, theta, v, load=None, **_):
     ``speed_range``: ``[min, max]`` of the speeds the amplitude law was fitted on; outside it the
     amplitude is held at the range's edge (``g(clip(|v|, min, max))``): a law is never
     extrapolated past the speeds that measured it.  Without ``speed_range`` (models written
-    before 0.4) the law is evaluated at every speed as written."""
+    before it existed) the law is evaluated at every speed as written."""
     speed = clamp_speed(np.abs(np.asarray(v, dtype=float)), term.get("speed_range"))
     amp = term["amplitude"]
     k = term.get("load_coefficient", 0.0)
