@@ -488,14 +488,6 @@ class Effect:
     validation: dict | None = None
     history: list = field(default_factory=list)
 
-    @property
-    def status(self) -> str:
-        """``accepted`` (in the final model), ``removed`` (accepted once, then taken out again by
-        backward elimination or the validation data) or ``rejected`` (never accepted)."""
-        if self.accepted:
-            return "accepted"
-        return "removed" if self.detail.get("removed") else "rejected"
-
     def to_dict(self) -> dict:
         f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
         d = {"kind": self.kind, "accepted": bool(self.accepted), "frequency": f(self.frequency), "label": self.label,
@@ -504,10 +496,18 @@ class Effect:
              "order": f(self.order), "z": f(self.z), "z_crit": f(self.z_crit), "gain": f(self.gain),
              "consistency": f(self.consistency), "parameters_added": self.n_params, "round": self.round,
              "decision": self.decision, "fitted": self.parameters, "terms": self.terms, "history": self.history}
-        d["status"] = self.status
         if self.validation is not None:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
+        d["status"] = self.status
         return d
+
+    @property
+    def status(self) -> str:
+        """``accepted`` (in the final model), ``removed`` (accepted once, then taken out again by
+        backward elimination or the validation data) or ``rejected`` (never accepted)."""
+        if self.accepted:
+            return "accepted"
+        return "removed" if self.detail.get("removed") else "rejected"
 
 
 @dataclass
