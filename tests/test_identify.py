@@ -346,3 +346,15 @@ def test_zero_and_denormal_torque_fit_without_crashing(scale):
         assert errs["e_percent"].isna().all()       # percent of a zero mean friction: undefined
     for h in m.harmonics("positive"):
         assert not (h["phase_se"] < 0)               # finite or NaN
+
+
+def test_linear_algebra_failure_is_a_one_sentence_convergence_error(monkeypatch):
+    # fuzz finding: a 50-stage gear (hundreds of lines) made an SVD fail to converge outside the
+    # guarded solve: any LinAlgError of a direction's fit is a ConvergenceError (exit 2 in the CLI)
+    def boom(*a, **k):
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(identify, "_make_problem", boom)
+    data = FitData.from_recording(twin(random_truth(np.random.default_rng(6)), 6, speeds=[0.5, 2, 8, 30]))
+    with pytest.raises(identify.ConvergenceError, match="did not converge in the positive direction.*fewer lines"):
+        identify.fit(data, "silo4", harmonics=SPECS, holdout=None)
