@@ -52,12 +52,16 @@ from .errors import InputError, warn
 from .fitdata import FitData
 from .gears import GearTrain, load_gear
 from .model import LAWS, RPM, FrictionModel
+from .spectrum import position_nyquist
 
-__all__ = ["fit", "silo4_published", "holdout_rmse", "compare", "refit", "harmonic_specs", "fit_efficiency",
+__all__ = ["fit", "silo4_published", "holdout_rmse", "holdout", "compare", "refit", "harmonic_specs", "fit_efficiency",
            "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError", "segment_errors", "identify_recording", "FitResult",
-           "line_amplitudes", "amplitudes_from_spectrum"]
+           "line_amplitudes", "amplitudes_from_spectrum", "negative_viscous", "MIN_CYCLES"]
 
 _TWO_PI = 2.0 * np.pi
+#: a segment counts towards a line where it covers at least this fraction of a cycle (the default
+#: of :func:`fit`; the closed loop uses the same rule for the speed range of an amplitude law)
+MIN_CYCLES = 0.1
 
 
 class ConvergenceError(InputError):
@@ -215,9 +219,8 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
         th = data.theta[ii]
         span = float(np.ptp(th)) if len(th) > 1 else 0.0
         out["cycles"] = freqs * span
-        dth = np.abs(np.diff(np.sort(th))) if len(th) > 2 else np.array([np.inf])
-        step = float(np.percentile(dth[dth > 0], 90)) if np.any(dth > 0) else np.inf
-        nyq = 0.5 / step if step > 0 else np.inf
+        # THE position-Nyquist rule (gearspec.spectrum.position_nyquist), on the samples in time order
+        nyq = position_nyquist(th) if len(th) > 1 else 0.0
         out["sampled"] = freqs < nyquist_fraction * nyq
         out["active"] = (out["cycles"] >= min_cycles) & out["sampled"]
         # phases from positions centred on the segment (exact in double precision), rotated back
@@ -233,7 +236,11 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
     G = X.T @ X
     g = X.T @ y
     yy = float(y @ y)
-    beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
+    try:
+        beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
+    except np.linalg.LinAlgError as exc:
+        raise ConvergenceError(f"the local fit of a segment did not converge ({exc}) with {K} lines; fit fewer "
+                               f"lines (--lines)") from exc
     rss = max(yy - beta @ g, 0.0)
     dof = len(ii) - (1 + 2 * int(out["sampled"].sum()))
     out.update(G=G, g=g, yy=yy, beta_hat=beta, rss_hat=rss, sigma2=rss / dof if dof >= 3 else np.nan)
@@ -250,16 +257,18 @@ class _Problem:
     amp_law: list[str]
     weights: np.ndarray        # (S,)
     Lt: np.ndarray             # (S, P, P): sqrt(w) diag(sqrt(lambda)) U^T
+    ranges: np.ndarray         # (K, 2): speed range of each amplitude law (:func:`speed_ranges`)
 
     @property
     def K(self):
         return len(self.harmonics)
 
     def factors(self, decays):
-        """(S, K) amplitude factor of each harmonic at each segment's speed."""
-        s = self.stats.speed[:, None]
-        out = np.ones((len(s), self.K))
+        """(S, K) amplitude factor of each harmonic at each segment's speed, the speed held within
+        the harmonic's ``speed_range`` (as :meth:`FrictionModel.evaluate` does)."""
+        out = np.ones((len(self.stats.speed), self.K))
         for k, law in enumerate(self.amp_law):
+            s = np.clip(self.stats.speed, *self.ranges[k])[:, None]
             b = decays[k]
             if law == "exp":
                 out[:, k] = np.exp(-b * s[:, 0])
@@ -328,7 +337,22 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
     decay_free = np.array([h.get("decay", True) is not False and h.get("law", "exp") != "const" for h in harmonics],
                           bool)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
-    return _Problem(stats, basis, harmonics, decay_free, amp_law, w, Lt)
+    return _Problem(stats, basis, harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
+
+
+def speed_ranges(stats: SegmentStats) -> np.ndarray:
+    """``(K, 2)``: ``[min, max]`` of the speeds of the segments where each line was measurable
+    (``active``: below the position-Nyquist limit of the segment,
+    :func:`gearspec.spectrum.position_nyquist`, and at least ``min_cycles`` of its cycles in the
+    segment).  The amplitude law is fitted there and held at the edges elsewhere
+    (``speed_range`` of a harmonic); ``[0, inf]`` for a line measured nowhere."""
+    K = len(stats.frequencies)
+    out = np.tile([0.0, np.inf], (K, 1))
+    for k in range(K):
+        m = stats.active[:, k]
+        if m.any():
+            out[k] = float(np.min(stats.speed[m])), float(np.max(stats.speed[m]))
+    return out
 
 
 def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
@@ -474,7 +498,7 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
         phi = float(math.atan2(c, a))
         if A > 0 and np.all(np.isfinite(cov)):
             ga = np.array([a / A, c / A])
-            gp = np.array([-c / A ** 2, a / A ** 2])
+            gp = ga[::-1] * np.array([-1.0, 1.0]) / A     # (-c, a) / A^2 without A^2 (denormal A)
             C2 = cov[np.ix_([ia, ic], [ia, ic])]
             a_se = float(math.sqrt(max(ga @ C2 @ ga, 0)))
             p_se = float(math.sqrt(max(gp @ C2 @ gp, 0)))
@@ -491,14 +515,17 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
         if h.get("label"):
             entry["label"] = h["label"]
         entry["segments"] = int(prob.stats.active[:, k].sum())
+        if np.all(np.isfinite(prob.ranges[k])):
+            entry["speed_range"] = [float(prob.ranges[k][0]), float(prob.ranges[k][1])]
         harm.append(entry)
     P["harmonics"] = harm
     return P
 
 
 def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",
-        se: str = "covariance", bootstrap: int = 200, min_cycles: float = 0.1, holdout: str | None = "segment",
-        folds: int = 5, init: FrictionModel | None = None, seed: int = 0, name: str | None = None) -> FrictionModel:
+        se: str = "covariance", bootstrap: int = 200, min_cycles: float = MIN_CYCLES, holdout: str | None = "segment",
+        folds: int = 5, init: FrictionModel | None = None, seed: int = 0, name: str | None = None,
+        check: bool = True) -> FrictionModel:
     """Fit a friction law to samples, jointly per direction (weighted nonlinear least squares).
 
     Parameters
@@ -526,6 +553,9 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
         runs (None: skip).
     init : FrictionModel, optional
         Starting values (e.g. from :func:`silo4_published`).
+    check : bool
+        Warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
+        (:func:`negative_viscous`); it is flagged in the model either way.
 
     Returns
     -------
@@ -570,9 +600,54 @@ def fit(data: FitData, law: str = "silo4", *, harmonics=None, gear=None, weights
                           unit=data.unit, not_identified=not_identified, notes=notes, name=name or law,
                           meta={"fit": settings})
     model.rmse = _safe_rmse(model, data)
+    for msg in negative_viscous(model, data):
+        if check:
+            warn(msg)
     if holdout:
-        model.rmse_holdout = holdout_rmse(lambda tr: refit(model, tr, holdout=None), data, by=holdout, folds=folds)
+        model.rmse_holdout, model.rmse_holdout_reason = _holdout_of(
+            lambda tr: refit(model, tr, holdout=None), data, by=holdout, folds=folds)
     return model
+
+
+def _holdout_of(fit_fn, data, **kw):
+    return holdout(fit_fn, data, **kw)
+
+
+def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard
+    errors below 0) of each direction: friction
+    that falls with speed over the whole measured range is rarely physical, and more often an
+    inertia, a channel lag or aliasing the model does not hold, or plateau speeds too close
+    together to tell viscous from Stribeck friction.  Each flag is one sentence, added to
+    ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]`` (``"direction.parameter"
+    -> sentence``); returns the sentences."""
+    out = []
+    flags = model.meta.setdefault("flags", {})
+    su = "rad/s" if model.unit == "rad" else "m/s"
+    for dname, p in model.directions.items():
+        for k in ("viscous", "b"):
+            val = p.get(k)
+            if k not in model.law_spec.params or val is None or not val < 0:
+                continue
+            se = p.get(k + "_se")
+            # a value within two standard errors of 0 is no finding (and none without an error)
+            if se is None or not np.isfinite(se) or not val < -2 * se:
+                continue
+            sig = f" ({abs(val) / se:.1f} standard errors below 0)" if se > 0 else ""
+            rng = ""
+            if data is not None:
+                sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
+                if len(sp):
+                    rng = f" over {float(np.min(sp)):.3g}..{float(np.max(sp)):.3g} {su}"
+            msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
+                   f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
+                   f"tell viscous from Stribeck friction")
+            flags[f"{dname}.{k}"] = msg
+            note = "warning: " + msg
+            if note not in model.notes:
+                model.notes.append(note)
+            out.append(msg)
+    return out
 
 
 def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
@@ -586,8 +661,19 @@ def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
     return model.rmse_on(data.subset(ok))
 
 
-def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
-                       bootstrap, seed):
+def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, **kw):
+    """One direction's fit; a linear-algebra failure (an SVD or eigen-solver that does not
+    converge: lines far too many or too close for the data) is a :class:`ConvergenceError` with
+    one sentence, never a traceback."""
+    try:
+        return _fit_one_direction_(sub, law, specs, dname, **kw)
+    except np.linalg.LinAlgError as exc:
+        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
+                               f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
+
+
+def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
+                        bootstrap, seed):
     notes: list[str] = []
     ni: dict[str, str] = {}
     freqs = [h["frequency"] for h in specs]
@@ -729,28 +815,52 @@ def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, b
     """Root-mean-square error on held-out data: ``folds``-fold cross-validation over whole
     segments (or runs); each fold is predicted by a model fitted to the others.  Folds where the
     fit fails (too few speeds left) are skipped; None when every fold fails.  ``residual(model,
-    test_data)`` gives the error of a fold (default: ``model.residual``, friction torque)."""
+    test_data)`` gives the error of a fold (default: ``model.residual``, friction torque).
+    :func:`holdout` gives the reason too."""
+    return holdout(fit_fn, data, by=by, folds=folds, residual=residual)[0]
+
+
+def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
+            folds: int = 5, residual: Callable | None = None) -> tuple[float | None, str | None]:
+    """:func:`holdout_rmse` and why it is missing or partial: ``(rmse, reason)``.
+
+    ``rmse`` is None when cross-validation cannot run -- fewer than two held-out groups, or no
+    fold whose model can be fitted without it and predict it (each direction needs its own
+    groups, and enough speeds left for the law) -- and ``reason`` says which, in one sentence;
+    never the in-sample error in its place.  When some folds fail, ``rmse`` comes from the others
+    and ``reason`` says how many held-out samples it covers."""
     groups = data.groups(by)
     ng = len(np.unique(groups))
     if ng < 2:
-        return None
+        return None, (f"cross-validation needs two held-out {by}s or more; the data have {ng}")
     k = min(folds, ng)
     fold = _folds(data, by, k)
     sse, n = 0.0, 0
+    failed: list[str] = []
+    ran = 0
     for f in range(k):
         test = fold == f
         if not test.any() or test.all():
             continue
+        ran += 1
         try:
             m = fit_fn(data.subset(~test))
             t = data.subset(test)
             r = m.residual(t) if residual is None else residual(m, t)
-        except InputError:
+        except InputError as exc:
+            failed.append(str(exc))
             continue
         r = r[np.isfinite(r)]
         sse += float(r @ r)
         n += len(r)
-    return math.sqrt(sse / n) if n else None
+    if not n:
+        why = failed[0] if failed else f"every {by} falls into one fold"
+        return None, (f"cross-validation over {ng} {by}s could not run: no fold could be fitted without its "
+                      f"{by}s and predict them ({why})")
+    if n < len(data):
+        return math.sqrt(sse / n), (f"from {n} of {len(data)} samples: {len(failed)} of {ran} folds could not be "
+                                    f"fitted without their {by}s ({failed[0] if failed else 'no test data'})")
+    return math.sqrt(sse / n), None
 
 
 def refit(model: FrictionModel, data: FitData, **overrides) -> FrictionModel:
@@ -759,7 +869,7 @@ def refit(model: FrictionModel, data: FitData, **overrides) -> FrictionModel:
     if not s:
         raise InputError("this model carries no fit settings (it was not made by gearspec.identify.fit)")
     kw = {"harmonics": s.get("harmonics") or None, "weights": s.get("weights", "segment"), "se": "covariance",
-          "min_cycles": s.get("min_cycles", 1.0), "name": model.name}
+          "min_cycles": s.get("min_cycles", 1.0), "name": model.name, "check": False}
     if s["law"] != "silo4" and not s.get("harmonics"):
         kw["harmonics"] = None
     if s["law"] == "silo4" and not s.get("harmonics"):
@@ -775,25 +885,26 @@ def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *,
     """Models side by side on the same data: rmse (in-sample) and held-out rmse.
 
     ``candidates`` maps a name to a fitted model (refitted per fold with its own settings for the
-    held-out error; a model without fit settings is scored as is, ``rmse_holdout`` = its rmse on
-    the data) or to keyword arguments of :func:`fit` (``{"law": "stribeck"}``).
+    held-out error; a model without fit settings cannot be refitted: ``rmse_holdout`` None, never
+    its in-sample rmse) or to keyword arguments of :func:`fit` (``{"law": "stribeck"}``).
+    ``rmse_holdout_reason`` says why a held-out rmse is missing or partial (:func:`holdout`).
     """
     rows = []
     for name, c in candidates.items():
         if isinstance(c, FrictionModel):
             m = c
             if m.meta.get("fit"):
-                ho = holdout_rmse(lambda tr, m=m: refit(m, tr, holdout=None), data, by=by, folds=folds)
+                ho, why = holdout(lambda tr, m=m: refit(m, tr, holdout=None), data, by=by, folds=folds)
             else:
-                ho = None
+                ho, why = None, "the model carries no fit settings to refit it without the held-out data"
         else:
             kw = dict(c)
             kw.setdefault("holdout", None)
             m = fit(data, **kw)
-            ho = holdout_rmse(lambda tr, kw=kw: fit(tr, **kw), data, by=by, folds=folds)
+            ho, why = holdout(lambda tr, kw=kw: fit(tr, **{**kw, "check": False}), data, by=by, folds=folds)
         n_par = _n_params(m)
         rows.append({"model": name, "law": m.law, "parameters": n_par, "rmse": _safe_rmse(m, data),
-                     "rmse_holdout": ho})
+                     "rmse_holdout": ho, "rmse_holdout_reason": why})
     return pd.DataFrame(rows)
 
 
@@ -820,8 +931,11 @@ def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.
             continue
         st = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
         for i, sid in enumerate(st.segment):
-            cov = np.linalg.pinv(st.G[i], rcond=1e-12, hermitian=True) * (st.sigma2[i] if np.isfinite(st.sigma2[i])
-                                                                           else np.nan)
+            try:
+                cov = np.linalg.pinv(st.G[i], rcond=1e-12, hermitian=True) * (st.sigma2[i] if np.isfinite(st.sigma2[i])
+                                                                               else np.nan)
+            except np.linalg.LinAlgError:
+                cov = np.full(st.G[i].shape, np.nan)
             for k, h in enumerate(specs):
                 if not st.active[i, k]:
                     continue
@@ -890,7 +1004,7 @@ def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None
             amp = amplitudes[amplitudes["segment"].isin(np.unique(train.segment))]
             return _published(train, amp, specs, high_speed, set(constant))
 
-        model.rmse_holdout = holdout_rmse(fit_fold, data, by=holdout, folds=folds)
+        model.rmse_holdout, model.rmse_holdout_reason = _holdout_of(fit_fold, data, by=holdout, folds=folds)
     return model
 
 
@@ -946,7 +1060,9 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
                 continue
             sp, amp, ph = rows["speed"].to_numpy(), rows["amplitude"].to_numpy(), rows["phase"].to_numpy()
             phase = float(np.angle(np.sum(amp * np.exp(1j * ph))))
-            entry = {"frequency": h["frequency"], "phase": phase}
+            # the amplitude law holds over the speeds of the segments that measured the line
+            entry = {"frequency": h["frequency"], "phase": phase,
+                     "speed_range": [float(np.min(sp)), float(np.max(sp))]}
             if lab:
                 entry["label"] = lab
             if lab in constant or len(np.unique(np.round(sp, 9))) < 2:
@@ -1031,7 +1147,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
     src = init
     if src is None:
         try:
-            src = fit(pts, law, holdout=None, weights="uniform")
+            src = fit(pts, law, holdout=None, weights="uniform", check=False)
         except InputError:
             src = None
     if src is not None:
@@ -1078,13 +1194,13 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
                       meta={"fit": {"law": law, "method": "efficiency", "ratio": ratio}})
     m.rmse = float(math.sqrt(np.mean(r * r)))
     if holdout:
-        m.rmse_holdout = _eff_holdout(data, law, ratio, holdout, folds)
+        m.rmse_holdout, m.rmse_holdout_reason = _eff_holdout(data, law, ratio, holdout, folds)
     return m
 
 
 def _eff_holdout(data, law, ratio, by, folds):
-    return holdout_rmse(lambda tr: fit_efficiency(tr, law, ratio=ratio), data, by=by, folds=folds,
-                        residual=lambda m, t: efficiency_model(m, t.v, t.load, ratio) - t.y)
+    return _holdout_of(lambda tr: fit_efficiency(tr, law, ratio=ratio), data, by=by, folds=folds,
+                       residual=lambda m, t: efficiency_model(m, t.v, t.load, ratio) - t.y)
 
 
 def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_extrapolated: bool = True
@@ -1135,7 +1251,9 @@ def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
         rows.append({"segment": int(sid), "run": int(sub.run[0]), "direction": d,
                      "speed": float(np.mean(np.abs(sub.v))), "n": len(sub), "level": level,
                      "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
-                     "rmse": float(np.sqrt(np.mean(err ** 2))), "e_percent": 100 * float(np.mean(err)) / level})
+                     "rmse": float(np.sqrt(np.mean(err ** 2))),
+                     # in percent of the mean friction; undefined (NaN) where that mean is 0
+                     "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")})
     return pd.DataFrame(rows)
 
 
@@ -1232,6 +1350,7 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
         except InputError as exc:
             notes.append(f"{other} not fitted: {exc}")
     rows = [{"model": name, "law": m.law, "parameters": _n_params(m), "rmse": m.rmse,
-             "rmse_holdout": m.rmse_holdout} for name, m in models.items()]
+             "rmse_holdout": m.rmse_holdout, "rmse_holdout_reason": m.rmse_holdout_reason}
+            for name, m in models.items()]
     errors = {name: segment_errors(m, data) for name, m in models.items()}
     return FitResult(model, models, pd.DataFrame(rows), errors, data, amplitudes, notes)

@@ -15,8 +15,14 @@ closed loop adds).  The friction torque has the sign of the velocity (``CONTRACT
 Serialised (``to_dict``/``to_json``) in the form of ``gearspec fit --json`` (``CONTRACTS.md`` section
 4): ``{"law", "directions": {"positive": P, "negative": P}, "rmse", "rmse_holdout", "terms", ...}``,
 every value ``x`` with its standard error ``x_se`` (NaN/None where unknown), harmonics as
-``{"frequency", "amplitude", "decay", "phase", ...}`` with ``decay`` in s/rad.  A model read back
+``{"frequency", "amplitude", "decay", "phase", "speed_range", ...}`` with ``decay`` in s/rad and
+``speed_range`` the ``[min, max]`` of |v| the amplitude law was fitted on.  A model read back
 evaluates identically.
+
+No extrapolation: a harmonic's amplitude law is evaluated only within its ``speed_range``;
+outside it the amplitude is held at the range's edge (the law at the nearest measured speed).
+A harmonic without ``speed_range`` (JSON written before speed_range existed, or a hand-written model)
+is evaluated as written at every speed (no clamp).
 
 Parameters that the data could not identify are ``None`` (never invented) and listed in
 ``not_identified`` with the reason; evaluating a model with a missing parameter raises an error
@@ -121,7 +127,9 @@ class FrictionModel:
         ``harmonics``: a list of mappings with ``frequency`` (cycles per unit of theta),
         ``amplitude`` (Nm), ``decay`` (s/rad, default 0), ``phase`` (rad, default 0) and optionally
         ``label``, ``law`` (amplitude law: exp (default), const, rational, power),
-        ``load_coefficient`` (SILO4 eq. 14) and the ``_se`` of each.  ``negative`` defaults to a
+        ``load_coefficient`` (SILO4 eq. 14), ``speed_range`` (``[min, max]`` of |v| the amplitude
+        law was fitted on; the amplitude is held at the edge outside it; absent: no clamp) and the
+        ``_se`` of each.  ``negative`` defaults to a
         copy of ``positive`` (a symmetric model).
     terms : iterable of dict
         Extra terms (:mod:`gearspec.terms`).
@@ -129,6 +137,9 @@ class FrictionModel:
         Unit of theta: torques are Nm (or N on a linear axis).
     rmse, rmse_holdout : float, optional
         Fit statistics (in-sample and on held-out data), in torque units.
+    rmse_holdout_reason : str, optional
+        Why ``rmse_holdout`` is None (cross-validation could not run) or covers only part of the
+        data; None when it was computed on every sample.
     not_identified : dict, optional
         ``"direction.parameter" -> reason`` for parameters the data could not identify.
     notes : list of str, optional
@@ -137,7 +148,7 @@ class FrictionModel:
     def __init__(self, law: str, positive: Mapping, negative: Mapping | None = None, *, terms: Iterable = (),
                  unit: str = "rad", rmse: float | None = None, rmse_holdout: float | None = None,
                  not_identified: Mapping | None = None, notes: Iterable[str] = (), name: str | None = None,
-                 meta: Mapping | None = None):
+                 meta: Mapping | None = None, rmse_holdout_reason: str | None = None):
         if law not in LAWS:
             raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
         if unit not in ("rad", "m"):
@@ -152,6 +163,7 @@ class FrictionModel:
         self.unit = unit
         self.rmse = rmse
         self.rmse_holdout = rmse_holdout
+        self.rmse_holdout_reason = rmse_holdout_reason
         self.not_identified = dict(not_identified or {})
         self.notes = list(notes)
         self.name = name or law
@@ -167,6 +179,8 @@ class FrictionModel:
                 raise InputError(f"a harmonic of the model lacks {', '.join(missing)}")
             h.setdefault("decay", 0.0)
             h.setdefault("phase", 0.0)
+            if h.get("speed_range") is not None:
+                h["speed_range"] = _speed_range(h["speed_range"])
         for k in LAWS[self.law].params:
             p.setdefault(k, None)
         return p
@@ -195,7 +209,7 @@ class FrictionModel:
         m.terms += [dict(t) for t in terms]
         if name:
             m.name = name
-        m.rmse = m.rmse_holdout = None
+        m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
         return m
 
     def with_harmonic(self, harmonic: Mapping, direction=None) -> "FrictionModel":
@@ -204,7 +218,7 @@ class FrictionModel:
         for d in ((_dir_name(direction),) if direction is not None else DIRECTIONS):
             m.directions[d]["harmonics"].append(dict(harmonic))
         m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
-        m.rmse = m.rmse_holdout = None
+        m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
         return m
 
     # ------------------------------------------------------------------ evaluation
@@ -215,6 +229,11 @@ class FrictionModel:
         (inertia, offset) are added as they are.  Inputs are arrays of one length (scalars
         broadcast): ``theta`` (rad or m; needed by harmonics), ``v`` (rad/s or m/s), ``load``
         (Nm at the output), ``temperature`` (degC), ``t`` (s), ``acc`` (rad/s^2) and ``run``.
+
+        A harmonic whose amplitude law carries a ``speed_range`` ``[min, max]`` is evaluated with
+        ``|v|`` held within it: below ``min`` (e.g. at standstill) and above ``max`` the amplitude
+        is the law's value at that edge, never an extrapolation of the law past the speeds it was
+        fitted on.  Harmonics without ``speed_range`` are not clamped.
         """
         if v is None:
             raise InputError("the model needs the velocity v")
@@ -306,6 +325,7 @@ class FrictionModel:
         return clean({"law": self.law, "name": self.name, "unit": self.unit,
                       "directions": self.directions, "terms": self.terms,
                       "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
+                      "rmse_holdout_reason": self.rmse_holdout_reason,
                       "not_identified": self.not_identified, "notes": self.notes, "meta": self.meta})
 
     @classmethod
@@ -315,7 +335,8 @@ class FrictionModel:
         dirs = d["directions"]
         return cls(d["law"], dirs["positive"], dirs.get("negative"), terms=d.get("terms", ()), unit=d.get("unit", "rad"),
                    rmse=d.get("rmse"), rmse_holdout=d.get("rmse_holdout"), not_identified=d.get("not_identified"),
-                   notes=d.get("notes", ()), name=d.get("name"), meta=d.get("meta"))
+                   notes=d.get("notes", ()), name=d.get("name"), meta=d.get("meta"),
+                   rmse_holdout_reason=d.get("rmse_holdout_reason"))
 
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
@@ -350,6 +371,13 @@ class FrictionModel:
                          self.unit)
                 r["frequency"] = f
                 rows.append(r)
+            # the speeds the amplitude law was fitted on (held at the edges outside)
+            if any(h.get("speed_range") for h in hs.values()):
+                for j, key in ((0, "min"), (1, "max")):
+                    r = _row(f"{lab} law fitted |v| {key}", "rad/s", hs,
+                             lambda h, j=j: ((h.get("speed_range") or (None, None))[j], None), self.unit)
+                    r["frequency"] = f
+                    rows.append(r)
         for t in self.terms:
             rows.append({"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None})
         return pd.DataFrame(rows)
@@ -370,9 +398,35 @@ class FrictionModel:
         if self.rmse is not None or self.rmse_holdout is not None:
             lines.append(f"rmse {_fmt(self.rmse)}, held-out rmse {_fmt(self.rmse_holdout)} "
                          f"({'Nm' if self.unit == 'rad' else 'N'})")
+        if self.rmse_holdout_reason:
+            lines.append(f"held-out rmse {'not computed' if self.rmse_holdout is None else 'partial'}: "
+                         f"{self.rmse_holdout_reason}")
+        lines += [n for n in self.notes if n.startswith("warning:")]
+        su = "rad/s" if self.unit == "rad" else "m/s"
+        for dname, p in self.directions.items():
+            for h in p["harmonics"]:
+                r = h.get("speed_range")
+                lab = h.get("label") or f"line at {h['frequency']:.6g} cycles/{self.unit}"
+                if r is not None:
+                    lines.append(f"{lab} ({dname}): {h.get('law', 'exp')} amplitude law fitted on |v| "
+                                 f"{r[0]:.4g}..{r[1]:.4g} {su}; held at the edge outside")
+                elif h.get("amplitude") is not None and h.get("law", "exp") != "const":
+                    lines.append(f"{lab} ({dname}): no speed range recorded; the amplitude law is "
+                                 f"evaluated at every speed")
         for k, why in self.not_identified.items():
             lines.append(f"not identified: {k}: {why}")
         return "\n".join(lines)
+
+
+def _speed_range(r) -> list:
+    """``[min, max]`` of a harmonic's speed range, checked (InputError otherwise)."""
+    try:
+        lo, hi = (float(x) for x in r)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"a harmonic's speed_range must be [min, max] of |v|, got {r!r}") from exc
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
+        raise InputError(f"a harmonic's speed_range must be [min, max] with 0 <= min <= max, got {r!r}")
+    return [lo, hi]
 
 
 def _fmt(x):

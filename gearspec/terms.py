@@ -27,7 +27,8 @@ import numpy as np
 from . import laws
 from .errors import InputError
 
-__all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "amplitude_law", "AMPLITUDE_LAWS"]
+__all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "amplitude_law", "AMPLITUDE_LAWS",
+           "clamp_speed"]
 
 
 @dataclass(frozen=True)
@@ -102,13 +103,28 @@ def amplitude_law(law: str, speed, decay):
 AMPLITUDE_LAWS = ("exp", "const", "rational", "power")
 
 
+def clamp_speed(speed, speed_range):
+    """``|v|`` held within ``speed_range`` (``[min, max]``, either may be None; None: unchanged):
+    where an amplitude law is evaluated outside the speeds it was fitted on, it gives the value at
+    the nearest edge of that range."""
+    if not speed_range:
+        return speed
+    lo, hi = speed_range
+    return np.clip(speed, -np.inf if lo is None else float(lo), np.inf if hi is None else float(hi))
+
+
 @register_term("periodic", needs=("theta",), params=("frequency", "amplitude", "decay", "phase", "load_coefficient"),
                describe=lambda t: (f"periodic {t.get('label') or 'unlabelled'} at {t['frequency']:.6g} cycles/unit: "
                                    f"{t['amplitude']:.4g} x {t.get('law', 'exp')}(decay {t.get('decay', 0):.4g})"))
 def _periodic(term, *, theta, v, load=None, **_):
     """``(A + k load^2) g(|v|) sin(2 pi f theta + phi)``: SILO4 eqs. 6, 8 and 14 with ``g`` the
-    amplitude law (``law``: exp (default), const, rational, power)."""
-    speed = np.abs(np.asarray(v, dtype=float))
+    amplitude law (``law``: exp (default), const, rational, power).
+
+    ``speed_range``: ``[min, max]`` of the speeds the amplitude law was fitted on; outside it the
+    amplitude is held at the range's edge (``g(clip(|v|, min, max))``): a law is never
+    extrapolated past the speeds that measured it.  Without ``speed_range`` (models written
+    before it existed) the law is evaluated at every speed as written."""
+    speed = clamp_speed(np.abs(np.asarray(v, dtype=float)), term.get("speed_range"))
     amp = term["amplitude"]
     k = term.get("load_coefficient", 0.0)
     if k:

@@ -60,3 +60,45 @@ def test_lola_law_without_load_is_exit_2(recording_csv, capsys):
 def test_bad_lines_option_is_exit_2(recording_csv, capsys):
     assert main(["fit", str(recording_csv), "--lines", "0.8,abc", "--quiet"]) == 2
     assert "--lines" in capsys.readouterr().err
+
+
+def test_heldout_rmse_is_null_with_its_reason_when_cross_validation_cannot_run(tmp_path, capsys):
+    # 4 plateau speeds per direction: eq. 3 has 4 parameters, so no fold leaving a speed out can be
+    # fitted; the held-out rmse is null with the reason (never the in-sample rmse), while
+    # coulomb_viscous (2 parameters) is cross-validated as usual
+    truth = FrictionModel("stribeck", {k: v for k, v in TRUTH.items() if k != "harmonics"})
+    sp = [0.5, 2, 8, 30]
+    rec, _ = model_recording(truth, sp + [-s for s in sp], duration=1.0, fs=500, noise=1e-3, seed=4)
+    path = rec.save(tmp_path / "four.csv")
+    js = tmp_path / "fit.json"
+    assert main(["fit", str(path), "--law", "stribeck", "--no-published", "--json", str(js)]) == 0
+    d = json.loads(js.read_text())
+    assert d["rmse"] > 0 and d["rmse_holdout"] is None
+    assert "could not run" in d["rmse_holdout_reason"] and "3 speed(s)" in d["rmse_holdout_reason"]
+    comp = {r["model"]: r for r in d["comparison"]}
+    cv = comp["coulomb_viscous"]
+    assert cv["rmse_holdout"] > cv["rmse"] and cv["rmse_holdout_reason"] is None
+    out = capsys.readouterr().out
+    assert "held-out rmse n/a" in out and "3 speed(s)" in out
+    m = FrictionModel.from_json(js)
+    assert m.rmse_holdout is None and "could not run" in m.rmse_holdout_reason
+
+
+def test_negative_viscous_coefficient_is_warned_and_flagged(tmp_path, capsys):
+    # friction falling with speed over 1..20 rad/s (what a missing inertia or a lag can produce):
+    # the fitted viscous coefficient is negative (-2e-3 +- ~1e-5 at this noise), and fit says so
+    truth = FrictionModel("coulomb_viscous", {"tau_c": 0.1, "viscous": -2e-3})
+    sp = [1, 2, 4, 8, 12, 20]
+    rec, _ = model_recording(truth, sp + [-s for s in sp], duration=1.0, fs=500, noise=1e-3, seed=5)
+    path = rec.save(tmp_path / "neg.csv")
+    js = tmp_path / "fit.json"
+    assert main(["fit", str(path), "--law", "coulomb_viscous", "--json", str(js)]) == 0
+    d = json.loads(js.read_text())
+    assert d["directions"]["positive"]["viscous"] == pytest.approx(-2e-3, rel=0.05)
+    flags = d["meta"]["flags"]
+    assert set(flags) == {"positive.viscous", "negative.viscous"}
+    assert "inertia" in flags["positive.viscous"] and "too narrow" in flags["positive.viscous"]
+    cap = capsys.readouterr()
+    warned = [ln for ln in cap.err.splitlines() if ln.startswith("gearspec: warning:") and "negative" in ln]
+    assert len(warned) == 2                     # one sentence per direction, not one per fold
+    assert "warning: coulomb_viscous" in cap.out  # and in print(model)

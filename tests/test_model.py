@@ -1,5 +1,6 @@
 """FrictionModel and friction terms against hand-computed values of the papers' laws."""
 
+import json
 import math
 
 import numpy as np
@@ -86,3 +87,30 @@ def test_unknown_law_and_term_are_refused():
         FrictionModel("coulomb", {})
     with pytest.raises(InputError, match="unknown friction term"):
         FrictionModel("none", {}, terms=[{"kind": "magic"}])
+
+
+def test_amplitude_law_is_held_at_the_edge_of_its_speed_range(tmp_path):
+    # an exp law fitted on 6..26 rad/s: below 6 (standstill) and above 26 the amplitude is the law's
+    # value at the edge, exactly; inside, the law as written
+    h = {"frequency": 2.0, "amplitude": 5e-3, "decay": 0.03, "phase": 0.0, "speed_range": [6.0, 26.0]}
+    m = FrictionModel("coulomb_viscous", {"tau_c": 0.0, "viscous": 0.0, "harmonics": [h]})
+    theta = np.full(5, 0.125)                        # sin(2 pi 2 0.125) = 1: the amplitude itself
+    v = np.array([1e-9, 3.0, 10.0, 26.0, 60.0])
+    got = m.evaluate(theta, v)
+    amp = lambda s: 5e-3 * math.exp(-0.03 * s)       # noqa: E731
+    assert got == pytest.approx([amp(6), amp(6), amp(10), amp(26), amp(26)], rel=1e-12)
+    # JSON round trip exact, and the range is said in print(model)
+    back = FrictionModel.from_json(m.to_json(tmp_path / "m.json"))
+    assert back.harmonics(1)[0]["speed_range"] == [6.0, 26.0]
+    assert np.array_equal(back.evaluate(theta, v), got)
+    assert "fitted on |v| 6..26 rad/s; held at the edge outside" in str(m)
+    # a model written before speed_range (no range): no clamp, and it says so
+    old = m.to_dict()
+    for p in old["directions"].values():
+        for hh in p["harmonics"]:
+            del hh["speed_range"]
+    m_old = FrictionModel.from_dict(json.loads(json.dumps(old)))
+    assert m_old.evaluate(theta, v)[0] == pytest.approx(amp(0), rel=1e-9)
+    assert "no speed range recorded" in str(m_old)
+    with pytest.raises(InputError, match="speed_range"):
+        FrictionModel("none", {"harmonics": [dict(h, speed_range=[5.0])]})

@@ -73,7 +73,7 @@ def run(args) -> int:
     if not args.quiet:
         print(result.model.describe())
         print()
-        print(result.comparison.to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+        print(comparison_text(result.comparison))
         for n in result.notes or []:
             print(f"note: {n}")
         print(f"({time.perf_counter() - t0:.1f} s)")
@@ -82,3 +82,17 @@ def run(args) -> int:
         if args.json:
             print(f"json: {args.json}")
     return 0
+
+
+def comparison_text(comp) -> str:
+    """The comparison table as printed: a missing held-out rmse shows as n/a, with its reason below
+    (never a number in its place)."""
+    show = comp.drop(columns=["rmse_holdout_reason"], errors="ignore")
+    lines = [show.to_string(index=False, na_rep="n/a", float_format=lambda x: f"{x:.4g}")]
+    for _, r in comp.iterrows():
+        why = r.get("rmse_holdout_reason")
+        if isinstance(why, str) and why:
+            what = "held-out rmse n/a" if r["rmse_holdout"] is None or r["rmse_holdout"] != r["rmse_holdout"] \
+                else "held-out rmse partial"
+            lines.append(f"{what} for {r['model']}: {why}")
+    return "\n".join(lines)

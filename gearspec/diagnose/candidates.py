@@ -43,7 +43,8 @@ from ..gears import integer_hint
 from ..model import LAWS
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
-from .design import LINEAR, BaseBlock, Block, Grams, HarmonicBlock, TermBlock, solve_normal, travel_range
+from .design import (LINEAR, BaseBlock, Block, Grams, HarmonicBlock, TermBlock, measurable, solve_normal,
+                     travel_range)
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate", "AsymmetryBlock",
            "LagCandidate", "LaggedHarmonicBlock", "SidebandCandidate", "SidebandBlock", "segment_phases",
@@ -341,8 +342,15 @@ class PeriodicCandidate(Candidate):
                 f += float(np.clip(0.5 * (a - c) / den, -0.5, 0.5) * (freqs[1] - freqs[0]))
         symmetric = rnd.state.symmetric
         laws, decays = [], []
-        groups = [(0, moving)] if symmetric else [(x, (d == x) & moving) for x in dirs]
+        # the amplitude law from the segments that measure the line only (below their position
+        # Nyquist limit, a whole cycle): aliased segments would pass for a decay
+        meas = measurable(dd, f)[dd.index][rows] if dd.reduce is None else np.ones(len(d), bool)
+        groups = [(0, moving & meas)] if symmetric else [(x, (d == x) & moving & meas) for x in dirs]
         for x, sel in groups:
+            if not sel.any():
+                laws.append((x, "const"))
+                decays.append((x, 0.0))
+                continue
             yv = (d[sel] if x == 0 else x) * r0[sel]
             law, dec, _ = choose_amplitude_law(theta[sel], speed[sel], seg[sel], yv, f)
             laws.append((x, law))

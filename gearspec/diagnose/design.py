@@ -32,7 +32,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel
-from ..terms import TERMS, amplitude_law, evaluate_term
+from ..spectrum import position_nyquist
+from ..terms import TERMS, amplitude_law, clamp_speed, evaluate_term
 from .data import DiagnoseData
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "Grams", "FittedState", "fit_state",
@@ -222,10 +223,21 @@ class HarmonicBlock(Block):
     load_phase: tuple = ()   # ((d, phase), ...): eq. 14 column in these directions
     extra: tuple = ()        # ((d, {key: value}), ...) carried into the model's harmonic (e.g. evidence)
     found: bool = False      # added by the loop (else part of the model it started from)
+    #: ((d, (min, max)), ...): speed ranges fixed by the model the block came from (evaluation of a
+    #: fitted model on other data); directions without one take the data's (:func:`line_speed_range`)
+    speed_range: tuple = ()
 
-    def _g(self, d, speed):
+    def _g(self, d, speed, rng=None):
+        """Amplitude factor of direction ``d`` at ``speed``, held within ``rng`` (min, max)."""
         lw = dict(self.law).get(d, "exp")
-        return amplitude_law(lw, speed, float(dict(self.decay).get(d, 0.0)))
+        return amplitude_law(lw, clamp_speed(speed, rng), float(dict(self.decay).get(d, 0.0)))
+
+    def ranges(self, dd: DiagnoseData) -> dict:
+        """Speed range of the amplitude law of every direction (key 0 when symmetric): the one
+        the block carries, else the speeds at which ``dd`` measures the line."""
+        fixed = dict(self.speed_range)
+        return {d: fixed.get(d) or line_speed_range(dd, self.frequency, d)
+                for d in ((0,) if self.symmetric else self.dirs)}
 
     def _groups(self, f):
         if self.symmetric:
@@ -266,8 +278,9 @@ class HarmonicBlock(Block):
             ok = resolved(dd, self.frequency)
             if not ok.all():
                 sn, cs = np.where(ok, sn, 0.0), np.where(ok, cs, 0.0)
+        rng = self.ranges(dd)
         for d, sel in self._groups(f):
-            g = np.where(sel, sgn * self._g(d, speed), 0.0)
+            g = np.where(sel, sgn * self._g(d, speed, rng.get(d)), 0.0)
             cols += [g * sn, g * cs]
             if d in lp:
                 if f.load is None:
@@ -275,10 +288,13 @@ class HarmonicBlock(Block):
                 cols.append(g * f.load ** 2 * (sn * math.cos(lp[d]) + cs * math.sin(lp[d])))
         return np.column_stack(cols)
 
-    def write(self, model, coef, se):
+    def write(self, model, coef, se, ranges: dict | None = None):
+        """The fitted line into ``model``'s harmonics; ``ranges`` (:meth:`ranges`): the speed range
+        each direction's amplitude law was fitted on (``speed_range``)."""
         i = 0
         lp = dict(self.load_phase)
         ex = dict(self.extra)
+        ranges = {**dict(self.speed_range), **(ranges or {})}
         targets = [(0, DIRECTIONS)] if self.symmetric else [(d, (_DNAME[d],)) for d in self.dirs]
         for d, names in targets:
             a, c = coef[i], coef[i + 1]
@@ -286,13 +302,17 @@ class HarmonicBlock(Block):
             i += 2
             A = math.hypot(a, c)
             phi = math.atan2(c, a)
-            A_se = math.sqrt((a * sa) ** 2 + (c * sc) ** 2) / A if A > 0 else float("nan")
-            p_se = math.sqrt((c * sa) ** 2 + (a * sc) ** 2) / A ** 2 if A > 0 else float("nan")
+            # with the unit vector (a, c) / A: no A^2, which underflows to 0 for a denormal amplitude
+            ua, uc = (a / A, c / A) if A > 0 else (float("nan"), float("nan"))
+            A_se = math.hypot(ua * sa, uc * sc) if A > 0 else float("nan")
+            p_se = math.hypot(uc * sa, ua * sc) / A if A > 0 else float("nan")
             h = {"frequency": float(self.frequency), "amplitude": float(A), "amplitude_se": float(A_se),
                  "phase": float(phi), "phase_se": float(p_se), "law": dict(self.law).get(d, "exp"),
                  "decay": float(dict(self.decay).get(d, 0.0))}
             if self.label:
                 h["label"] = self.label
+            if ranges.get(d) is not None:
+                h["speed_range"] = [float(ranges[d][0]), float(ranges[d][1])]
             if d in lp:
                 k = coef[i]
                 # the load column carries its own phase; the model's term shares the line's phase
@@ -519,6 +539,8 @@ class FittedState:
     prediction: np.ndarray = field(repr=False, default=None)
     #: standard errors of the nonlinear parameters, ``{uid: {key: se}}`` (from their Taylor columns)
     nonlinear_se: dict = field(default_factory=dict)
+    #: speed ranges of the lines' amplitude laws, ``{uid: {d: (min, max)}}`` (:meth:`HarmonicBlock.ranges`)
+    speed_ranges: dict = field(default_factory=dict)
 
     def model(self, name: str | None = None, rmse_holdout: float | None = None) -> FrictionModel:
         """The fitted state as a FrictionModel (base parameters, harmonics and terms, with
@@ -533,7 +555,10 @@ class FittedState:
         m.terms = []
         for blk, (a, z) in zip(self.state.blocks, self.state.spans()):
             n_terms = len(m.terms)
-            blk.write(m, self.coef[a:z], self.se[a:z])
+            if isinstance(blk, HarmonicBlock):
+                blk.write(m, self.coef[a:z], self.se[a:z], ranges=self.speed_ranges.get(blk.uid))
+            else:
+                blk.write(m, self.coef[a:z], self.se[a:z])
             _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
         m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
         m.rmse = self.rmse
@@ -593,14 +618,18 @@ def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) ->
     n, p = X.shape
     s2 = float(r @ r) / max(n - p, 1)
     se = np.sqrt(np.clip(np.diag(_cov(G, s2)), 0, None))
-    return FittedState(state, beta, se, r, float(np.sqrt(np.mean(r * r))), pred)
+    ranges = {b.uid: b.ranges(dd) for b in state.blocks if isinstance(b, HarmonicBlock)}
+    return FittedState(state, beta, se, r, float(np.sqrt(np.mean(r * r))), pred, speed_ranges=ranges)
 
 
 # ---------------------------------------------------------------------- from a model
-def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool | None = None) -> State:
+def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool | None = None,
+                     keep_ranges: bool = False) -> State:
     """The blocks of a FrictionModel: its base law (per direction, or shared when the model is
     symmetric), every harmonic (paired across directions by frequency) and every term of a kind
-    the loop fits (:data:`TERM_LINEAR`); nonlinear parameters as the model has them."""
+    the loop fits (:data:`TERM_LINEAR`); nonlinear parameters as the model has them.
+    ``keep_ranges``: the lines keep the model's speed ranges (evaluating a fitted model); by
+    default a refit takes the speeds at which ``dd`` measures each line."""
     law = model.law
     if law not in LINEAR:
         raise InputError(f"the closed loop cannot refit law '{law}'")
@@ -645,15 +674,19 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
         any_h = next(iter(per.values()))
         load_phase = tuple((d, float(per[d].get("phase", 0.0))) for d in dirs if per[d].get("load_coefficient"))
         if symmetric:
+            rng = ((0, tuple(any_h["speed_range"])),) if keep_ranges and any_h.get("speed_range") else ()
             blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.get("label"), dirs=dirs,
                                         symmetric=True, law=((0, any_h.get("law", "exp")),),
                                         decay=((0, float(any_h.get("decay", 0.0) or 0.0)),),
-                                        load_phase=((0, load_phase[0][1]),) if load_phase else ()))
+                                        load_phase=((0, load_phase[0][1]),) if load_phase else (),
+                                        speed_range=rng))
         else:
+            rng = tuple((d, tuple(per[d]["speed_range"])) for d in dirs
+                        if keep_ranges and per[d].get("speed_range")) if keep_ranges else ()
             blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.get("label"), dirs=dirs,
                                         law=tuple((d, per[d].get("law", "exp")) for d in dirs),
                                         decay=tuple((d, float(per[d].get("decay", 0.0) or 0.0)) for d in dirs),
-                                        load_phase=load_phase))
+                                        load_phase=load_phase, speed_range=rng))
     for t in model.terms:
         kind = t["kind"]
         if kind not in TERM_LINEAR:
@@ -669,7 +702,7 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
 def predict_model(model: FrictionModel, dd: DiagnoseData) -> np.ndarray:
     """A model's drive torque at the observations of ``dd`` (evaluated per sample, reduced like
     the data; presliding and backlash from the travel since the last reversal)."""
-    st = state_from_model(model, dd, symmetric=False)
+    st = state_from_model(model, dd, symmetric=False, keep_ranges=True)
     # coefficients as the model has them: fit nothing, read them back
     cols = []
     coefs = []
@@ -707,22 +740,26 @@ def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
     return np.array([float(t[lin])])
 
 
+def _segment_bounds(f) -> list:
+    seg = f.segment
+    bounds = np.flatnonzero(np.diff(seg) != 0) + 1
+    return list(zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [len(seg)]))))
+
+
 def segment_nyquist(dd: DiagnoseData) -> np.ndarray:
-    """Position Nyquist frequency of the segment of every sample (half the inverse of the 90th
-    percentile of the position steps in the segment), cached on the data."""
+    """Position Nyquist frequency of the segment of every sample
+    (:func:`gearspec.spectrum.position_nyquist` of the segment's positions), cached on the data."""
     hit = dd.cache.get("nyquist")
     if hit is not None:
         return hit
     f = dd.fit
     out = np.full(len(f), np.inf)
     if f.theta is not None:
-        seg = f.segment
-        bounds = np.flatnonzero(np.diff(seg) != 0) + 1
-        for a, z in zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [len(seg)]))):
-            st = np.abs(np.diff(f.theta[a:z]))
-            st = st[st > 0]
-            if len(st):
-                out[a:z] = 0.5 / float(np.percentile(st, 90))
+        for a, z in _segment_bounds(f):
+            if z - a > 1:
+                nyq = position_nyquist(f.theta[a:z])
+                if nyq > 0:
+                    out[a:z] = nyq
     dd.cache["nyquist"] = out
     return out
 
@@ -731,6 +768,40 @@ def resolved(dd: DiagnoseData, frequency: float, fraction: float = 0.8) -> np.nd
     """Samples whose segment resolves a line at ``frequency`` (below ``fraction`` of its position
     Nyquist frequency)."""
     return frequency < fraction * segment_nyquist(dd)
+
+
+def measurable(dd: DiagnoseData, frequency: float) -> np.ndarray:
+    """Samples (of ``dd.fit``) whose segment measures a line at ``frequency``: resolved
+    (:func:`resolved`) and at least :data:`gearspec.identify.MIN_CYCLES` of its cycles within the
+    segment's travel (the rule of :func:`gearspec.identify.fit`).  An amplitude law is chosen and
+    fitted from these samples only, and held at the edges of their speeds elsewhere."""
+    from ..identify import MIN_CYCLES
+
+    f = dd.fit
+    if f.theta is None:
+        return np.zeros(len(f), bool)
+    span = dd.cache.get("segment_span")
+    if span is None:
+        span = np.zeros(len(f))
+        for a, z in _segment_bounds(f):
+            span[a:z] = float(np.ptp(f.theta[a:z])) if z > a else 0.0
+        dd.cache["segment_span"] = span
+    return resolved(dd, frequency) & (frequency * span >= MIN_CYCLES)
+
+
+def line_speed_range(dd: DiagnoseData, frequency: float, direction: int = 0) -> tuple | None:
+    """``(min, max)`` of |v| where ``dd`` measures a line at ``frequency`` (:func:`measurable`) in
+    ``direction`` (0: both); None where it measures it nowhere.  Whole trajectories (reduced
+    data, where the lines are fitted on every sample): the range of the moving samples."""
+    f = dd.fit
+    sel = (f.direction == direction) if direction else np.ones(len(f), bool)
+    sel = sel & (f.v != 0)
+    if dd.reduce is None:
+        sel = sel & measurable(dd, frequency)
+    if not sel.any():
+        return None
+    sp = np.abs(f.v[sel])
+    return float(np.min(sp)), float(np.max(sp))
 
 
 # ---------------------------------------------------------------------- nonlinear parameters

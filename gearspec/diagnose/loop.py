@@ -96,7 +96,7 @@ class Round:
         fitted = fit_state(state, dd)
         self.state = state.refreshed(fitted.coef)
         self.fitted = FittedState(self.state, fitted.coef, fitted.se, fitted.residual, fitted.rmse,
-                                  fitted.prediction)
+                                  fitted.prediction, speed_ranges=fitted.speed_ranges)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         self.X = self.state.design(dd, taylor=True)
         self.grams = Grams.of(self.X, dd.y, dd)
@@ -280,7 +280,8 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
     gain = (hb - ha) / hb if hb > 0 else 0.0
     reasons = []
     if not z >= z_crit:
-        reasons.append(f"held-out Z {z:.2f} below {z_crit:.2f} (what noise alone gives at this level)")
+        reasons.append(f"held-out Z {z:.2f} below {z_crit:.2f} (what noise alone gives at this level)"
+                       + low_power_note(z_crit, ng))
     if not cons >= consistency:
         reasons.append(f"improves in folds carrying only {100 * cons:.0f} % of the change (needs {100 * consistency:.0f} %)")
     if not gain >= min_gain:
@@ -290,6 +291,29 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
               else "; ".join(reasons))
     return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, sse0, sse1,
                       fr.contribution)
+
+
+#: the t quantile the Z test needs is called low-power when it exceeds the normal quantile of the same
+#: level by this factor (few held-out groups: t with groups - 1 degrees of freedom)
+LOW_POWER_RATIO = 1.5
+
+
+def low_power_note(z_crit: float, groups: int) -> str:
+    """A clause for a rejection by the Z gate when the held-out groups are too few for the test to
+    reach significance in practice: its t quantile (``groups - 1`` degrees of freedom) is more
+    than :data:`LOW_POWER_RATIO` times the normal quantile of the same level.  Empty otherwise."""
+    if groups < 2 or not math.isfinite(z_crit):
+        return ""
+    level = float(stats.t.sf(z_crit, groups - 1))
+    z_many = float(stats.norm.isf(level))
+    ratio = z_crit / z_many
+    if ratio <= LOW_POWER_RATIO:
+        return ""
+    verdict = ("the test cannot reach significance in practice" if ratio > 2 * LOW_POWER_RATIO
+               else "the test has little power")
+    return (f"; with {groups} held-out groups {verdict}: it needs Z above {z_crit:.1f} (a t quantile with "
+            f"{groups - 1} degrees of freedom) where many groups would need {z_many:.1f}; hold out by segment "
+            f"or record more runs")
 
 
 def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: float,
@@ -369,13 +393,14 @@ def _load_line_analysis(rnd: Round, r: np.ndarray) -> dict:
     d = dd.at("direction")
     for blk in [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock) and not b.load_phase]:
         phases = dict(rnd.line_phases(blk))
+        rng = blk.ranges(dd)
         xs, ys, ws = [], [], []
         for a, z in zip(dd.starts, dd.stops):
             dirn = int(d[a])
             key = 0 if blk.symmetric else dirn
             if key not in phases:
                 continue
-            g = blk._g(key, s[a:z])
+            g = blk._g(key, s[a:z], rng.get(key))
             shape = g * np.sin(2 * np.pi * blk.frequency * theta[a:z] + phases[key])
             shape = shape - shape.mean()
             den = float(shape @ shape)
@@ -475,7 +500,16 @@ class Effect:
              "value": f(self.value)}
         if self.validation is not None:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
+        d["status"] = self.status
         return d
+
+    @property
+    def status(self) -> str:
+        """``accepted`` (in the final model), ``removed`` (accepted once, then taken out again by
+        backward elimination or the validation data) or ``rejected`` (never accepted)."""
+        if self.accepted:
+            return "accepted"
+        return "removed" if self.detail.get("removed") else "rejected"
 
 
 @dataclass
@@ -763,6 +797,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         z_crit = float(stats.t.isf(alpha / len(cands), max(G - 1, 1)))
         evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
         for c, ev in evals:
+            _bar_reentry(effects, c, ev)
             _record(effects, c, ev, k, rnd)
             trace.append({"round": k, "candidate": c.name, "kind": c.kind, "z": ev.z, "z_crit": z_crit,
                           "gain": ev.gain, "consistency": ev.consistency, "passed": ev.passed})
@@ -777,9 +812,10 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             break
         new_state = _settle(rnd.state.replaced(prop.drop, prop.add), dd)
         rnd = Round(dd, new_state, fold)
-        e = effects[_key(c)]
+        e = effects[_effect_key(effects, c)]
         e.accepted = True
         e.decision = ev.reason
+        e.detail.setdefault("accepted_z", []).append(float(ev.z))
         e.history.append(f"round {k}: accepted")
         e.detail["blocks"] = [b.uid for b in prop.add]
         e.detail["dropped"] = [b for b in prop.drop]
@@ -794,13 +830,20 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
             e.order = dd.gear.order(f_fit) if dd.gear is not None else None
         e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
+        was_in = {x.name for x in effects.values() if x.accepted}
         removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
         if removed:
             rnd = removed
+        gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
+        # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
+        # data, refitted in every fold as the baseline's are): what the final model reports
+        ho_now, _ = _holdout(rnd)
         rounds.append({"round": k, "candidates": len(cands), "accepted": e.name, "z_crit": z_crit,
-                       "rmse": rnd.fitted.rmse})
+                       "rmse": rnd.fitted.rmse, "rmse_holdout_step": ev.rmse_holdout_after,
+                       "rmse_holdout_model": ho_now, "removed": gone})
         say(f"round {k}: {len(cands)} candidates, accepted {e.name} (held-out rmse {ev.rmse_holdout_before:.4g} -> "
-            f"{ev.rmse_holdout_after:.4g})")
+            f"{ev.rmse_holdout_after:.4g}; the model with it refitted: {ho_now:.4g})"
+            + (f"; removed again: {', '.join(gone)}" if gone else ""))
     final_fit = rnd.fitted
     final_ho, final_h = _holdout(rnd)
     name = "final: " + model.name + "".join(f" + {e.name}" for e in effects.values() if e.accepted)
@@ -815,6 +858,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     diag.trace = pd.DataFrame(trace)
     if validation is not None:
         _validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain)
+    if not (diag.validation or {}).get("removed"):
+        diag.notes += _holdout_notes(rounds, base_ho, final_ho)
     # what each accepted term explains in the final model: its contribution, and the partial
     # residual (data minus the rest of the final model) it is fitted to
     for e in diag.effects:
@@ -825,6 +870,30 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             e.detail["partial"] = True
     diag.final_analyses = analyse(Round(dd, diag.final.state, fold), fap=fap, per_segment=False)
     return diag
+
+
+def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
+    """Why the final held-out rmse is not the last accepted step's number, when it is not: the
+    step re-ran the candidate's own search (frequency, amplitude law, shape) in every fold -- the
+    honest figure for choosing the term; the final model (like the baseline) has its nonlinear
+    parameters settled on all data and refits them in every fold through their Taylor columns;
+    and backward elimination may have removed terms since."""
+    acc = [r for r in rounds if r.get("accepted")]
+    if not acc:
+        return []
+    last = acc[-1]
+    step, model_ho = last["rmse_holdout_step"], last["rmse_holdout_model"]
+    if math.isclose(step, final_ho, rel_tol=1e-9):
+        return []
+    out = (f"held-out rmse: {base_ho:.5g} (baseline) -> {final_ho:.5g} (final model). The last accepted step "
+           f"(round {last['round']}) reported {step:.5g}: there the candidate's own search (frequency, amplitude "
+           f"law, shape) ran again in every fold, the honest figure for choosing it; the final model, like the "
+           f"baseline, has its nonlinear parameters settled on all data and refits them in every fold (same folds)")
+    if last.get("removed"):
+        out += f", and backward elimination removed {', '.join(last['removed'])}"
+    if not math.isclose(model_ho, final_ho, rel_tol=1e-9):
+        out += "; later rounds changed the model"
+    return [out + "."]
 
 
 def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) -> list:
@@ -877,6 +946,7 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
             return changed
         e, ev, rnd_wo = weakest
         e.accepted = False
+        e.detail.setdefault("removed", []).append(round_no)
         e.decision = (f"removed in round {round_no}: once '{newest.name}' was added it no longer lowers the held-out "
                       f"error enough ({ev.reason})")
         e.history.append(e.decision)
@@ -898,11 +968,44 @@ def _key(c: Candidate) -> str:
     return f"{c.kind}: {c.name}"
 
 
-def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> None:
+def _effect_key(effects: dict, c: Candidate) -> str:
+    """The key of ``c``'s effect: a line seen again in a later round (within two resolution steps)
+    is the same effect."""
     key = _key(c)
-    if isinstance(c, PeriodicCandidate):  # the same line seen again in a later round
+    if isinstance(c, PeriodicCandidate):
         key = next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
                     and abs(e.frequency - c.f0) <= max(2 * c.resolution, 5e-3 * e.frequency)), key)
+    return key
+
+
+#: a term removed by backward elimination is accepted again at most this many times
+MAX_REENTRIES = 1
+
+
+def _bar_reentry(effects: dict, c: Candidate, ev: Evaluation) -> None:
+    """The re-entry rule: a term that backward elimination removed is accepted again only when the
+    evidence changed -- its held-out Z now exceeds the largest Z it was ever accepted with (the
+    model around it explains less than when it was removed, so the term explains more) -- and
+    at most :data:`MAX_REENTRIES` times; otherwise the same evidence would accept and remove the
+    same term round after round.  Marks ``ev`` as failing, with the reason, when barred."""
+    prev = effects.get(_effect_key(effects, c))
+    if prev is None or prev.accepted or not prev.detail.get("removed") or not ev.passed:
+        return
+    z_before = max(prev.detail.get("accepted_z", [float("-inf")]))
+    removed = prev.detail["removed"]
+    if len(removed) > MAX_REENTRIES:
+        why = f"removed {len(removed)} times already (rounds {', '.join(map(str, removed))}): not accepted again"
+    elif not ev.z > z_before:
+        why = (f"removed in round {removed[-1]}; passes again with Z {ev.z:.1f}, not above the Z {z_before:.1f} it "
+               f"was accepted with: the same evidence, not accepted again")
+    else:
+        return
+    ev.passed = False
+    ev.reason = why
+
+
+def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> None:
+    key = _effect_key(effects, c)
     prev = effects.get(key)
     if prev is not None and prev.accepted:
         return
@@ -920,6 +1023,10 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
     e.detail["contribution"] = ev.contribution
     e.history.append(f"round {k}: Z {ev.z:.2f} (needs {ev.z_crit:.2f}), held-out rmse {ev.rmse_holdout_before:.4g} -> "
                      f"{ev.rmse_holdout_after:.4g}: " + ("passes" if ev.passed else "fails"))
+    if prev is not None:  # what the loop did with it before: acceptances and removals
+        for kk in ("accepted_z", "removed"):
+            if kk in prev.detail:
+                e.detail[kk] = list(prev.detail[kk])
     effects[key] = e
 
 
@@ -996,6 +1103,7 @@ def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, mi
                       f"{v['relative_error_without']:.3f} % -> {v['relative_error_with']:.3f} %, Z {v['z']:.2f} "
                       f"< {v['z_crit']:.2f} or gain below {100 * min_gain:.2g} %)")
         e.history.append(e.decision)
+        e.detail.setdefault("removed", []).append("validation")
         removed.append(e)
         state = st_wo
     if removed:
@@ -1006,6 +1114,10 @@ def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, mi
         diag.final = rnd2.fitted
         diag.final_model = rnd2.fitted.model(name=name, rmse_holdout=ho)
         diag.final_holdout = h
+        diag.notes.append(f"held-out rmse: {diag.baseline_model.rmse_holdout:.5g} (baseline) -> {ho:.5g} (final "
+                          f"model): the validation data removed {', '.join(e.name for e in removed)} after the "
+                          f"loop, and the final model is the one without "
+                          f"{'them' if len(removed) > 1 else 'it'} (same folds as every step)")
     # numbers on the validation data, baseline and final (both fitted on the estimation data)
     pb = diag.baseline.state.design(vd) @ diag.baseline.coef
     pf = diag.final.state.design(vd) @ diag.final.coef

@@ -10,7 +10,7 @@ import pandas as pd
 
 from ..fitdata import FitData
 from ..model import RPM, FrictionModel
-from ..terms import amplitude_law
+from ..terms import amplitude_law, clamp_speed
 from . import NEG, POS, plt, save
 
 __all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
@@ -91,7 +91,9 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
                 h = next((h for h in m.harmonics(name) if h.get("label") == lab), None)
                 if h is None:
                     continue
-                amp = h["amplitude"] * amplitude_law(h.get("law", "exp"), grid, h.get("decay") or 0.0)
+                # as the model evaluates it: held at the edges of the speeds the law was fitted on
+                amp = h["amplitude"] * amplitude_law(h.get("law", "exp"), clamp_speed(grid, h.get("speed_range")),
+                                                     h.get("decay") or 0.0)
                 ax.plot(grid * xs, amp, ls, color=color, lw=1.0, label=f"{name}: {mlabel}")
         ax.set_title(lab, fontsize=10)
         ax.set_xlabel(xl)

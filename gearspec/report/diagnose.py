@@ -27,7 +27,7 @@ def effect_table(diag: Diagnosis) -> pd.DataFrame:
     threshold, held-out rmse before and after, and the decision."""
     rows = []
     for e in diag.effects:
-        rows.append({"kind": e.kind, "effect": e.name, "accepted": "yes" if e.accepted else "no",
+        rows.append({"kind": e.kind, "effect": e.name, "accepted": "yes" if e.accepted else "no", "status": e.status,
                      "frequency": e.frequency, "label": e.label or (f"({e.hint})" if e.hint else ""),
                      "Z": e.z, "Z needed": e.z_crit, "held-out before": e.rmse_holdout_before,
                      "held-out after": e.rmse_holdout_after, "round": e.round})
@@ -144,7 +144,9 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     acc = [e for e in diag.effects if e.accepted]
     md += ["## Summary", ""]
     if acc:
-        md += [f"{len(acc)} effect(s) accepted, {len(diag.effects) - len(acc)} candidate(s) rejected:", ""]
+        n_rem = sum(e.status == "removed" for e in diag.effects)
+        md += [f"{len(acc)} effect(s) accepted, " + (f"{n_rem} accepted and removed again, " if n_rem else "")
+               + f"{len(diag.effects) - len(acc) - n_rem} candidate(s) rejected:", ""]
         md += [f"- **{e.kind}**: {e.name}" + (f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else "")
                + (f" ({e.label})" if e.label else (f" (unknown order, {e.hint})" if e.hint else ""))
                + f" -- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu}" for e in acc]
@@ -155,6 +157,7 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     st = diag.summary_table()
     md += ["Before and after (rmse in-sample, and on held-out groups: each fold predicted by a model fitted "
            f"without it), in {tu}:", "", markdown_table(st), ""]
+    md += [f"- {n}" for n in diag.notes] + ([""] if diag.notes else [])
     if diag.validation:
         v = diag.validation
         md += [f"On the independent recording `{v['name']}` ({v['groups']} groups; models fitted on the estimation "
@@ -224,7 +227,8 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
             continue
         f = f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else ""
         lab = f" ({e.label})" if e.label else (f" (unknown order, {e.hint})" if e.hint else "")
-        md += [f"- **{e.kind}: {e.name}**{f}{lab} -- evidence: {e.evidence}. Held-out rmse "
+        what = "accepted, then removed again" if e.status == "removed" else "rejected"
+        md += [f"- **{e.kind}: {e.name}**{f}{lab} ({what}) -- evidence: {e.evidence}. Held-out rmse "
                f"{e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu}, Z {_f(e.z, '.2f')} (needs "
                f"{_f(e.z_crit, '.2f')}). Decision: {e.decision}"]
         if len(e.history) > 1:
@@ -318,6 +322,9 @@ def _term_text(t, direction=None) -> str:
              f"{t.get('law', 'exp')} law, decay {t.get('decay', 0):.4g}")
         if t.get("load_coefficient"):
             s += f", load coefficient {t['load_coefficient']:.4g} (+- {_f(t.get('load_coefficient_se'), '.2g')})"
+        if t.get("speed_range"):
+            lo, hi = t["speed_range"]
+            s += f", law fitted on |v| {lo:.4g}..{hi:.4g} (held at the edge outside)"
         return (f"{direction}: " if direction else "") + s
     parts = []
     for k, v in t.items():

@@ -72,7 +72,14 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
            f"rmse over all samples in segments, and held-out rmse from {m.meta.get('fit', {}).get('folds', 5)}-fold "
            "cross-validation over whole segments (each fold predicted by a model fitted without it), "
            f"in {tu}.", ""]
-    md += [markdown_table(result.comparison), ""]
+    md += [markdown_table(result.comparison.drop(columns=["rmse_holdout_reason"], errors="ignore")), ""]
+    for _, r in result.comparison.iterrows():
+        why = r.get("rmse_holdout_reason")
+        if isinstance(why, str) and why:
+            md += [f"- Held-out rmse of {r['model']}: "
+                   f"{'not computed' if pd.isna(r['rmse_holdout']) else 'partial'}"
+                   f" ({why})."]
+    md += [""]
     if result.notes:
         md += [f"- {n}" for n in result.notes] + [""]
     md += ["## Stribeck curve", "", "Mean friction of every plateau (error bars: 2 standard errors from block "
