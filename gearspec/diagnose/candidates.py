@@ -576,8 +576,8 @@ class LaggedHarmonicBlock(HarmonicBlock):
             store[self.lag] = view
         return super()._raw(view)
 
-    def write(self, model, coef, se):
-        super().write(model, coef, se)
+    def write(self, model, coef, se, ranges: dict | None = None):
+        super().write(model, coef, se, ranges=ranges)
         model.meta = {**model.meta, "lag": float(self.lag)}
         note = f"lag: torque channel {1e3 * self.lag:.4g} ms behind position (lines fitted at theta - v lag)"
         if note not in model.notes:
