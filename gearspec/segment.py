@@ -270,8 +270,8 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     before, after = _before_after(v_win, m)
     across = 0.5 * (before + after)
     # speed noise of a window from position noise (second differences), for the default min_speed
+    sigma = noise if noise is not None else _position_noise(theta)
     if min_speed is None:
-        sigma = noise if noise is not None else _position_noise(theta)
         nw = _K * b
         v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
         v_floor = 10 * v_noise
@@ -291,6 +291,11 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     runs_ = _merge_fragments(runs_, t, theta, b, rel_tol)
     runs_ = [r for s, e in runs_ for r in _split_drift(across, s, e, rel_tol)]
     runs_ = [_trim_speed(across, s, e, rel_tol) for s, e in runs_]
+    # block-to-block speeds (the finest the blocks resolve): a ramp is smooth at this scale, ripple is not
+    tmid = 0.5 * (tb[1:] + tb[:-1])
+    vblock = np.diff(thb) / np.maximum(np.diff(tb), 1e-300)
+    vnoise2 = 2.0 * sigma * sigma / b / (b * dt) ** 2  # variance of a block speed from position noise
+    runs_ = [r for s, e in runs_ for r in _split_smooth(tmid, vblock, s, e, rel_tol, vnoise2)]
     segs = []
     short_blocks = []
     for s2, e2 in runs_:
@@ -445,6 +450,76 @@ def _split_drift(v: np.ndarray, s: int, e: int, rel_tol: float, depth: int = 0):
     if abs(v1 - v2) <= rel_tol * abs(seg.mean()):
         return [(s, e)]
     return _split_drift(v, s, s + k, rel_tol, depth + 1) + _split_drift(v, s + k, e, rel_tol, depth + 1)
+
+
+#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` over
+#: its length is a ramp, not a plateau (the rest of the tolerance is left to ripple) ...
+_SMOOTH_SPREAD = 1.0 / 3.0
+#: ... when that curve stands out of the position noise (its sum of squares, 3 degrees of freedom
+#: beyond the mean, exceeds this many noise variances: chi-square tail below 1e-4) ...
+_SMOOTH_CHI2 = 20.0
+#: degree of the smooth curve (a cubic in time: a ramp, a bell's top, one swing of a sine)
+_SMOOTH_DEGREE = 3
+
+
+def _split_smooth(tb: np.ndarray, v: np.ndarray, s: int, e: int, rel_tol: float, vnoise2: float = 0.0,
+                  prove_flat: bool = False, depth: int = 0):
+    """Blocks s..e without a systematic speed change.
+
+    The before/after test bounds the speed change over one window only; along an acceleration
+    ramp, the top of a bell-shaped move, a creeping tail or a slow sine the speed changes little
+    per window but steadily, and a run of "steady" blocks results.  The smooth curve is a cubic in
+    time fitted to the block-to-block speeds ``v`` (variance ``vnoise2`` from position noise
+    alone).  A run is a ramp when that curve spans more than ``_SMOOTH_SPREAD * rel_tol`` of the
+    mean speed, stands out of the noise (``_SMOOTH_CHI2``) and explains more of the speed's
+    variation than what is left beside it beyond the noise.  Ripple (closed-loop, stick-slip,
+    position-locked) is not smooth in time over a plateau: the cubic explains little of it, and
+    the rule leaves such plateaus alone however large the ripple.
+
+    A ramp is split (CUSUM) recursively; a part of a ramp is kept only where it is shown flat
+    (``prove_flat``: its spread plus two standard errors within the limit), so that the plateau
+    beside a ramp stays and the ramp's own fragments go.  Runs never judged a ramp are kept, unless
+    the position noise alone is too large to show a change of the limit (a crawl near the noise
+    floor, such as the end of a creeping tail)."""
+    n = e - s
+    limit = _SMOOTH_SPREAD * rel_tol
+    if n < 2 + _SMOOTH_DEGREE:
+        return [] if prove_flat else [(s, e)]
+    seg = v[s:e - 1]  # block speeds between the blocks of the run
+    x = tb[s:e - 1]
+    x = (x - x[0]) / max(x[-1] - x[0], 1e-300) * 2.0 - 1.0
+    c = np.polynomial.legendre.legfit(x, seg, _SMOOTH_DEGREE)
+    f = np.polynomial.legendre.legval(x, c)
+    mean = float(np.mean(seg))
+    ss_res = float(np.sum((seg - f) ** 2))
+    ss_fit = float(np.sum((f - mean) ** 2))
+    dof = max(len(seg) - _SMOOTH_DEGREE - 1, 1)
+    # the noise variance predicted from position noise, never above the scatter actually seen (a
+    # quantised encoder in steady motion dithers: its block means are better than q / sqrt(12))
+    vnoise2 = min(vnoise2, ss_res / dof)
+    ss_rest = max(ss_res - dof * vnoise2, 0.0)  # ripple beyond noise
+    scale = max(abs(mean), 1e-300)
+    spread = float(f.max() - f.min()) / scale
+    k_se = 4.0 * math.sqrt((_SMOOTH_DEGREE + 1) / len(seg))  # two standard errors of a range of the curve
+    if k_se * math.sqrt(vnoise2) / scale > limit:
+        # position noise alone hides a change of the limit over this run: not shown constant
+        return []
+    if prove_flat:
+        s_res = math.sqrt(ss_res / dof)
+        upper = spread + k_se * s_res / scale
+        if upper <= limit:
+            return [(s, e)]
+    else:
+        smooth = ss_fit > _SMOOTH_CHI2 * vnoise2 and ss_fit > ss_rest
+        if spread <= limit or not smooth:
+            return [(s, e)]
+    if n < 2 * _K or depth > 30:
+        return []
+    cs = np.cumsum(seg - mean)
+    k = int(np.argmax(np.abs(cs[:-1]))) + 1
+    k = min(max(k, 1), n - 1)
+    return (_split_smooth(tb, v, s, s + k, rel_tol, vnoise2, True, depth + 1)
+            + _split_smooth(tb, v, s + k, e, rel_tol, vnoise2, True, depth + 1))
 
 
 # ---------------------------------------------------------------------- derivatives
