@@ -19,18 +19,30 @@ Segments are found from position alone (no commanded speed is needed):
    fitted to the candidate's middle 60 % (the band is 1.5 times the largest deviation there): this
    removes a transient that a long window could not see, and nothing from a clean plateau.
    Candidates shorter than ``min_duration`` (default two windows, at least 0.1 s) are dropped.
+   A candidate whose block-to-block speed follows a smooth curve (a cubic in time that stands
+   out of the position noise and explains more than the ripple beside it) spanning more than a
+   third of ``rel_tol`` is a ramp, a bell's top or a creeping tail: it is split, and only parts
+   shown flat are kept (:func:`_split_smooth`).
 6. With ``window="auto"`` steps 2-5 are repeated for windows of 0.02 ... 2 s and each piece keeps
    the shortest window whose segments cover at least 80 % of the most any window covers.
    Slow, stick-slipping plateaus thereby get long windows, brisk bang-bang profiles short ones
    (a long window would hide a short transient at the start of a plateau).
 
+Quasi-static sweeps come first (:func:`quasi_static_sweeps`): per run, over position (time gaps do
+not cut them), a monotonic sweep whose rows were stored at rest after each step of a position loop
+becomes one segment of kind ``"quasi_static"`` (recognised, or every sweep with
+``quasi_static=True``); the plateau search runs on the rows outside them.
+
 Every row of the recording ends in exactly one segment or is counted under one reason:
-``standstill`` (speed below ``min_speed``), ``transient`` (ramps, reversals, unsteady speed and the
-edges of pieces), ``short_plateau`` (steady, but shorter than ``min_duration``).
+``standstill`` (speed below ``min_speed``; a forced sweep without travel), ``transient`` (ramps,
+reversals, unsteady speed and the edges of pieces), ``short_plateau`` (steady, but shorter than
+``min_duration``), ``short_sweep`` (a forced quasi-static sweep of fewer than ``min_samples`` rows).
 
 Derivatives for inertia removal use a Savitzky-Golay filter (``scipy.signal.savgol_filter``,
 polynomial order 2, ``deriv_window`` samples, default about 20 ms and at least 7 samples) on each
 piece, on a uniform time grid (resampled linearly when the sampling jitters by more than 1 %).
+A piece too short for the filter (in samples, or in points of that grid) gets no derivative (NaN),
+never an error.  Quasi-static segments use no derivative at all.
 """
 
 from __future__ import annotations
