@@ -266,6 +266,18 @@ def _at_rest_statistics(t: np.ndarray, theta: np.ndarray) -> dict:
             "step_spread": _spread(steps), "speed_spread": _spread(speeds)}
 
 
+def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000) -> dict:
+    """:func:`_at_rest_statistics` of a whole run, from up to ``chunks`` contiguous stretches of
+    ``size`` rows (row-to-row statistics: a stride would sum steps and average time steps)."""
+    n = len(t)
+    if n <= chunks * size:
+        return _at_rest_statistics(t, theta)
+    starts = np.linspace(0, n - size, chunks).astype(int)
+    dth = np.concatenate([np.diff(theta[s:s + size]) for s in starts])
+    dt = np.concatenate([np.diff(t[s:s + size]) for s in starts])
+    return _at_rest_statistics(np.concatenate(([0.0], np.cumsum(dt))), np.concatenate(([0.0], np.cumsum(dth))))
+
+
 def _looks_at_rest(st: dict) -> bool:
     """The recognition rule (see the constants above)."""
     return (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS
@@ -346,10 +358,8 @@ def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
         a, b = int(a), int(b)
         if b - a < 2:
             continue
-        if not force:
-            stride = max(1, (b - a) // 1_000_000)
-            if not _looks_at_rest(_at_rest_statistics(t[a:b:stride], theta[a:b:stride])):
-                continue
+        if not force and not _looks_at_rest(_run_statistics(t[a:b], theta[a:b])):
+            continue
         d = np.abs(np.diff(theta[a:b]))
         nz = d[d > 0]
         if not len(nz):
@@ -696,6 +706,9 @@ def _split_smooth(tb: np.ndarray, v: np.ndarray, s: int, e: int, rel_tol: float,
         return [] if prove_flat else [(s, e)]
     seg = v[s:e - 1]  # block speeds between the blocks of the run
     x = tb[s:e - 1]
+    if len(seg) > 4096:  # a long run: its shape is as clear from every k-th block speed
+        k = -(-len(seg) // 4096)
+        seg, x = seg[::k], x[::k]
     x = (x - x[0]) / max(x[-1] - x[0], 1e-300) * 2.0 - 1.0
     c = np.polynomial.legendre.legfit(x, seg, _SMOOTH_DEGREE)
     f = np.polynomial.legendre.legval(x, c)
