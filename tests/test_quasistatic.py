@@ -264,3 +264,21 @@ def test_map_with_position_noise_at_rest():
     seg = find_segments(rec)
     assert [(s.start, s.stop, s.direction, s.kind) for s in seg] == \
         [(a, b, d, "quasi_static") for a, b, d in truth["sweeps"]]
+
+
+def test_spectrum_cli_writes_the_kind_and_the_lines(tmp_path, capsys):
+    rec, truth = _map(seed=8)
+    csv, toml = _write(tmp_path, rec)
+    out = tmp_path / "spectrum.json"
+    assert main(["spectrum", str(csv), "--gear", str(toml), "--harmonics", "6", "--min-cycles", "0.9",
+                 "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "2 segments" in printed and "cogging" in printed
+    d = json.loads(out.read_text())
+    assert d["settings"]["quasi_static"] == "auto" and d["settings"]["quasi_static_segments"] == 2
+    for s in d["segments"]:
+        assert s["kind"] == "quasi_static"
+        tr = truth["directions"][s["direction"]]
+        for r in tr["ripples"]:
+            p = min(s["peaks"], key=lambda p: abs(p["frequency"] - r["frequency"]))
+            assert abs(p["amplitude"] - r["amplitude"]) < 4 * p["amplitude_se"]
