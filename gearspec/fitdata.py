@@ -50,7 +50,8 @@ class FitData:
     unit : str
         "rad" or "m".
     segments : DataFrame
-        One row per segment id: ``segment, run, direction, speed, velocity, n`` (and ``t0, t1``).
+        One row per segment id: ``segment, run, direction, speed, velocity, n`` (and ``t0, t1``,
+        ``kind``: "plateau" or "quasi_static").
     notes : list of str
     """
 
@@ -120,13 +121,17 @@ class FitData:
         idx = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
         sid = np.concatenate([np.full(s.n, i) for i, s in enumerate(seg.segments)])
         d = np.concatenate([np.full(s.n, s.direction, np.int8) for s in seg.segments])
-        if velocity == "segment":
+        # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
+        # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
+        qs = np.concatenate([np.full(s.n, s.kind == "quasi_static") for s in seg.segments])
+        if velocity == "segment" or qs.all():
             v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
-        elif "velocity" in rec.data:
-            v = rec.data["velocity"].to_numpy(dtype=float)[idx]
         else:
-            v = vel[idx]
-        a = np.nan_to_num(acc[idx])
+            v = rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx]
+            v = np.where(qs, np.concatenate([np.full(s.n, s.velocity) for s in seg.segments]), v)
+        a = acc[idx]
+        no_deriv = int(np.count_nonzero(np.isnan(a) & ~qs))
+        a = np.where(qs, 0.0, np.nan_to_num(a))
         y = tau[idx] - (J * a if J else 0.0)
         get = lambda c: rec.data[c].to_numpy(dtype=float)[idx] if c in rec.data else None  # noqa: E731
         notes = []
@@ -136,11 +141,18 @@ class FitData:
             y = y - d * np.abs(get("load")) / float(load_ratio)
             notes.append(f"load torque at the motor subtracted: |load| / {load_ratio:g} against the motion (eq. 12)")
         rows = [{"segment": i, "run": s.run, "direction": s.direction, "speed": s.speed, "velocity": s.velocity,
-                 "n": s.n, "t0": float(rec.t[s.start]), "t1": float(rec.t[s.stop - 1])}
+                 "n": s.n, "t0": float(rec.t[s.start]), "t1": float(rec.t[s.stop - 1]), "kind": s.kind}
                 for i, s in enumerate(seg.segments)]
         notes.insert(0, f"{len(idx)} samples in {len(seg)} segments; velocity: {velocity}")
+        n_qs = sum(s.kind == "quasi_static" for s in seg.segments)
+        if n_qs:
+            notes.append(f"{n_qs} quasi-static sweep(s) ({int(qs.sum())} rows taken at rest): torque against "
+                         f"position, no time derivative; their speed is nominal (travel over duration)")
+        if J and no_deriv:
+            notes.append(f"{no_deriv} rows in segments are in pieces too short for the derivative filter: "
+                         f"no acceleration there, inertia not removed")
         if J:
-            notes.append(f"inertia removed: tau - {J:g} x thetadd")
+            notes.append(f"inertia removed: tau - {J:g} x thetadd" + (" (plateaus only)" if n_qs else ""))
         return cls(theta=rec.theta[idx], v=v, y=y, acc=a, load=get("load"), temperature=get("temperature"),
                    t=rec.t[idx], run=rec.run[idx], segment=sid, direction=d, unit=rec.unit,
                    segments=pd.DataFrame(rows), notes=notes)

@@ -98,6 +98,8 @@ _BASES = {
     "lola8": _Basis(("t_f0", "mu", "b", "gamma"), (),
                     lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s, np.abs(load) * s])),
     "lola11": _Basis(("t_f0", "mu", "b", "t_fs"), ("v_s",), _lola11_cols),
+    # the level alone (a quasi-static map: no speed dependence to identify)
+    "level": _Basis(("tau_c",), (), lambda s, load: np.ones((len(s), 1))),
     # law (11) without its Stribeck part (when v_S is not identified)
     "lola8_nogamma": _Basis(("t_f0", "mu", "b"), (),
                             lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s])),
@@ -694,6 +696,8 @@ def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *
     # more: a line seen only in partial cycles shifts segment levels, which the speed law could
     # trade against a speed-dependent amplitude; it keeps a constant amplitude (SILO4 eq. 6)
     specs = [dict(h) for h in specs]
+    if len(sub.segments) and "kind" in sub.segments and bool((sub.segments["kind"] == "quasi_static").all()):
+        return _quasi_static_direction(sub, stats, law, specs, dname, ni, notes, weights)
     for k, h in enumerate(specs):
         whole = stats.sampled[:, k] & (stats.cycles[:, k] >= 1.0)
         speeds = np.unique(np.round(stats.speed[whole], 9))
@@ -751,6 +755,33 @@ def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *
             for k in drop:
                 ni[f"{dname}.{k}"] = why
             notes.append(f"{dname}: Stribeck part of law {law} not identified; Coulomb + viscous part fitted alone")
+    P["n_segments"] = int(len(stats.speed))
+    P["n_samples"] = int(np.sum(stats.n))
+    return P, ni, notes
+
+
+def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: list[dict], dname: str,
+                            ni: dict, notes: list, weights):
+    """One direction of a quasi-static map (every segment a sweep taken at rest): the level
+    (``tau_c``, the direction offset) and the lines with constant amplitudes.  The speeds of the
+    sweeps are nominal (travel over duration, at rest in between), so nothing that depends on
+    speed (Stribeck, viscous, decay laws) is identifiable: those are None, with the reason."""
+    if LAWS[law].needs_load or law not in ("silo4", "stribeck", "coulomb_viscous", "none"):
+        raise ConvergenceError(f"law {law} needs plateaus at several speeds and loads; the {dname} direction "
+                               f"has quasi-static sweeps only (fit silo4, stribeck or coulomb_viscous)")
+    why = (f"the {dname} direction has quasi-static sweeps only (rows taken at rest; their speed is nominal): "
+           f"no speed dependence can be identified")
+    for h in specs:
+        if h.get("decay", True) is not False and h.get("law", "exp") != "const":
+            ni[f"{dname}.{h.get('label') or format(h['frequency'], '.6g')}.decay"] = why + "; amplitude held constant"
+        h["decay"] = False
+    prob = _make_problem(stats, "none" if law == "none" else "level", specs, weights)
+    P = _direction_params(prob, _fit_direction(prob))
+    for k in LAWS[law].params:
+        if k not in P:
+            P[k], P[k + "_se"] = None, None
+            ni[f"{dname}.{k}"] = why
+    notes.append(f"{dname}: quasi-static map: level and lines only")
     P["n_segments"] = int(len(stats.speed))
     P["n_samples"] = int(np.sum(stats.n))
     return P, ni, notes

@@ -67,13 +67,15 @@ class Law:
 
 
 def _stribeck_mag(speed, load, tau_c, tau_s, v_s, viscous):
+    if viscous is None:  # not identified (a quasi-static map): the viscous part is left out
+        viscous = 0.0
     if tau_s is None or v_s is None:  # Stribeck part not identified: Coulomb + viscous
         return tau_c + viscous * np.asarray(speed, dtype=float)
     return laws.stribeck(speed, tau_c, tau_s, v_s, viscous)
 
 
 def _cv_mag(speed, load, tau_c, viscous):
-    return tau_c + viscous * speed
+    return tau_c + (0.0 if viscous is None else viscous) * speed
 
 
 def _lola8_mag(speed, load, t_f0, mu, b, gamma):
@@ -90,12 +92,13 @@ def _lola11_mag(speed, load, t_f0, mu, b, t_fs, v_s):
 LAWS: dict[str, Law] = {
     "none": Law("none", (), (), lambda speed, load: np.zeros_like(speed), description="no base friction"),
     "coulomb_viscous": Law("coulomb_viscous", ("tau_c", "viscous"), ("Nm", "Nm s/rad"), _cv_mag,
-                           description="Coulomb + viscous: tau_c + B|v|"),
+                           description="Coulomb + viscous: tau_c + B|v|", optional=("viscous",)),
     "stribeck": Law("stribeck", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
-                    description="SILO4 eq. 3: tau_c + (tau_s - tau_c) exp(-|v|/v_s) + B|v|", optional=("tau_s", "v_s")),
+                    description="SILO4 eq. 3: tau_c + (tau_s - tau_c) exp(-|v|/v_s) + B|v|",
+                    optional=("tau_s", "v_s", "viscous")),
     "silo4": Law("silo4", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
                  description="SILO4 eq. 11: eq. 3 + position ripple + meshing ripple decaying as exp(-b|v|)",
-                 optional=("tau_s", "v_s")),
+                 optional=("tau_s", "v_s", "viscous")),
     "lola8": Law("lola8", ("t_f0", "mu", "b", "gamma"), ("Nm", "-", "Nm s/rad", "s/rad"), _lola8_mag, True,
                  "Lola/CROPS law (8): T_f0 + mu|T_l| + (b + gamma|T_l|)|v|"),
     "lola11": Law("lola11", ("t_f0", "mu", "b", "t_fs", "v_s"), ("Nm", "-", "Nm s/rad", "Nm", "rad/s"), _lola11_mag,

@@ -19,18 +19,30 @@ Segments are found from position alone (no commanded speed is needed):
    fitted to the candidate's middle 60 % (the band is 1.5 times the largest deviation there): this
    removes a transient that a long window could not see, and nothing from a clean plateau.
    Candidates shorter than ``min_duration`` (default two windows, at least 0.1 s) are dropped.
+   A candidate whose block-to-block speed follows a smooth curve (a cubic in time that stands
+   out of the position noise and explains more than the ripple beside it) spanning more than a
+   third of ``rel_tol`` is a ramp, a bell's top or a creeping tail: it is split, and only parts
+   shown flat are kept (:func:`_split_smooth`).
 6. With ``window="auto"`` steps 2-5 are repeated for windows of 0.02 ... 2 s and each piece keeps
    the shortest window whose segments cover at least 80 % of the most any window covers.
    Slow, stick-slipping plateaus thereby get long windows, brisk bang-bang profiles short ones
    (a long window would hide a short transient at the start of a plateau).
 
+Quasi-static sweeps come first (:func:`quasi_static_sweeps`): per run, over position (time gaps do
+not cut them), a monotonic sweep whose rows were stored at rest after each step of a position loop
+becomes one segment of kind ``"quasi_static"`` (recognised, or every sweep with
+``quasi_static=True``); the plateau search runs on the rows outside them.
+
 Every row of the recording ends in exactly one segment or is counted under one reason:
-``standstill`` (speed below ``min_speed``), ``transient`` (ramps, reversals, unsteady speed and the
-edges of pieces), ``short_plateau`` (steady, but shorter than ``min_duration``).
+``standstill`` (speed below ``min_speed``; a forced sweep without travel), ``transient`` (ramps,
+reversals, unsteady speed and the edges of pieces), ``short_plateau`` (steady, but shorter than
+``min_duration``), ``short_sweep`` (a forced quasi-static sweep of fewer than ``min_samples`` rows).
 
 Derivatives for inertia removal use a Savitzky-Golay filter (``scipy.signal.savgol_filter``,
 polynomial order 2, ``deriv_window`` samples, default about 20 ms and at least 7 samples) on each
 piece, on a uniform time grid (resampled linearly when the sampling jitters by more than 1 %).
+A piece too short for the filter (in samples, or in points of that grid) gets no derivative (NaN),
+never an error.  Quasi-static segments use no derivative at all.
 """
 
 from __future__ import annotations
@@ -46,7 +58,8 @@ from scipy.signal import savgol_filter
 from .errors import InputError
 from .recording import Recording
 
-__all__ = ["Segment", "Segmentation", "find_segments", "derivatives", "friction_torque", "FrictionTorque"]
+__all__ = ["Segment", "Segmentation", "find_segments", "quasi_static_sweeps", "derivatives", "friction_torque",
+           "FrictionTorque"]
 
 _K = 4  # blocks per speed window
 _WINDOW_LADDER = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
@@ -57,10 +70,13 @@ PARALLEL_MIN_SAMPLES = 1_000_000
 
 @dataclass(frozen=True)
 class Segment:
-    """A constant-speed stretch of one run, in one direction.
+    """A constant-speed stretch of one run, in one direction, or a quasi-static sweep.
 
     ``start``/``stop`` index rows of ``Recording.data`` (stop exclusive).  ``speed`` is the mean
-    speed (travel over duration, always >= 0, unit/s); ``direction`` is +1 or -1.
+    speed (travel over duration, always >= 0, unit/s); ``direction`` is +1 or -1.  ``kind`` is
+    ``"plateau"`` (constant speed) or ``"quasi_static"`` (a monotonic sweep whose rows were taken
+    at rest: there ``speed`` is nominal, travel over the sweep's duration, and nothing depends on
+    it; no time derivative is used).
     """
 
     run: int
@@ -70,6 +86,7 @@ class Segment:
     speed: float
     speed_ripple: float = 0.0  # relative std of the window speed inside the segment
     window: float = 0.0        # the speed window (s) used to find it
+    kind: str = "plateau"      # "plateau" (constant speed) or "quasi_static" (a sweep at rest)
 
     @property
     def n(self) -> int:
@@ -86,7 +103,12 @@ class Segment:
 
     def to_dict(self) -> dict:
         return {"run": self.run, "start": self.start, "stop": self.stop, "direction": self.direction,
-                "speed": self.speed, "n": self.n, "speed_ripple": self.speed_ripple, "window": self.window}
+                "speed": self.speed, "n": self.n, "speed_ripple": self.speed_ripple, "window": self.window,
+                "kind": self.kind}
+
+    @property
+    def quasi_static(self) -> bool:
+        return self.kind == "quasi_static"
 
 
 @dataclass
@@ -114,8 +136,9 @@ class Segmentation:
 # ---------------------------------------------------------------------- segmentation
 def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: float = 0.15,
                   min_speed: float | None = None, min_duration: float | None = None,
-                  min_samples: int = 32, workers: int | str = "auto") -> Segmentation:
-    """Find constant-speed segments per direction (see the module docstring for the method).
+                  min_samples: int = 32, workers: int | str = "auto",
+                  quasi_static: bool | None = None) -> Segmentation:
+    """Find constant-speed segments per direction, and quasi-static sweeps (see the module docstring).
 
     Parameters
     ----------
@@ -136,6 +159,11 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         Windows of the ``"auto"`` ladder tried at once, in threads (numpy releases the GIL for
         the bulk of the work; the result is the same whatever the number).  ``"auto"``: two on a
         machine with two or more CPUs for pieces of at least ``PARALLEL_MIN_SAMPLES`` samples.
+    quasi_static : bool or None
+        ``None`` (default): recognise quasi-static sweeps (rows stored at rest, position rather
+        than time setting the motion; see :func:`quasi_static_sweeps`) and look for plateaus in
+        the rest.  ``True`` (``--quasi-static``): every monotonic sweep of each run is a
+        quasi-static segment.  ``False``: plateaus only.
 
     Returns
     -------
@@ -149,13 +177,19 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
             raise InputError(f"the segment window must be a positive time in s, got {window}")
     if workers != "auto" and (not isinstance(workers, (int, np.integer)) or workers < 1):
         raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}")
+    if quasi_static not in (None, True, False):
+        raise InputError(f"quasi_static must be None (recognise), True or False, got {quasi_static!r}")
     t, theta = rec.t, rec.theta
     segments: list[Segment] = []
     excluded: Counter = Counter()
     chosen = {}
-    for run, a, b in rec.pieces():
+    qs_segments, qs_excluded, taken = ([], Counter(), []) if quasi_static is False else \
+        _quasi_static_segments(rec, force=bool(quasi_static), min_samples=min_samples)
+    segments += qs_segments
+    excluded += qs_excluded
+    for run, a, b in _outside(rec.pieces(), taken):
         ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
-        noise = _position_noise(theta[a:b]) if min_speed is None else None
+        noise = _position_noise(theta[a:b]) if b - a >= 3 else None
         dt = float(np.median(np.diff(t[a:min(b, a + 100_000)]))) if b - a >= 2 else None  # once per piece
 
         def one(w, a=a, b=b, noise=noise, dt=dt):
@@ -185,11 +219,196 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
             segments.append(Segment(int(run), int(a + s), int(a + e), int(direction), float(speed), ripple, float(w)))
         for reason, count in labels.items():
             excluded[reason] += count
+    segments.sort(key=lambda x: x.start)
     seg = Segmentation(segments, excluded, len(rec), {"window": window, "rel_tol": rel_tol,
                                                       "min_speed": min_speed, "min_duration": min_duration,
-                                                      "windows_chosen": sorted(set(chosen.values()))})
+                                                      "windows_chosen": sorted(set(chosen.values())),
+                                                      "quasi_static": ("auto" if quasi_static is None
+                                                                       else bool(quasi_static)),
+                                                      "quasi_static_segments": len(qs_segments)})
     seg.check_ledger()
     return seg
+
+# ---------------------------------------------------------------------- quasi-static sweeps
+#: a sweep is recognised as quasi-static when it has at least this many steps (moves between rows):
+#: enough distinct positions for the joint fit of a level and a few lines with dozens of degrees
+#: of freedom left, and for the spread statistics below to mean something
+QS_MIN_STEPS = 50
+#: ... when the speed between rows (step / time step) varies over at least a factor of 2 (10-90 %
+#: range) ...
+QS_MIN_SPEED_SPREAD = math.log(2.0)
+#: ... at least this many times more than the steps themselves do (in log, 10-90 % range): rows
+#: stored when the shaft came to rest after a step of the position loop have a steady step and
+#: an irregular time step, continuous motion sampled by a clock has steps that follow the time
+#: steps (or a regular clock)
+QS_SPREAD_RATIO = 2.0
+#: ... and at most this fraction of its rows repeats the previous position
+QS_MAX_REPEATS = 0.5
+#: a reversal is a return of more than this many median steps (smaller returns are jitter)
+QS_REVERSAL_STEPS = 3.0
+
+
+def _spread(x: np.ndarray) -> float:
+    """10-90 % range of log(x) (x > 0)."""
+    if len(x) < 2:
+        return 0.0
+    lo, hi = np.percentile(x, [10, 90])
+    return float(math.log(hi / lo)) if lo > 0 else float("inf")
+
+
+def _at_rest_statistics(t: np.ndarray, theta: np.ndarray) -> dict:
+    """Steps, repeats and the spread of steps and of row-to-row speeds of a stretch of rows."""
+    dth = np.abs(np.diff(theta))
+    dt = np.diff(t)
+    move = dth > 0
+    steps, speeds = dth[move], dth[move] / np.maximum(dt[move], 1e-300)
+    return {"steps": int(move.sum()), "repeats": float(1 - move.mean()) if len(move) else 1.0,
+            "step_spread": _spread(steps), "speed_spread": _spread(speeds)}
+
+
+def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000) -> dict:
+    """:func:`_at_rest_statistics` of a whole run, from up to ``chunks`` contiguous stretches of
+    ``size`` rows (row-to-row statistics: a stride would sum steps and average time steps)."""
+    n = len(t)
+    if n <= chunks * size:
+        return _at_rest_statistics(t, theta)
+    starts = np.linspace(0, n - size, chunks).astype(int)
+    dth = np.concatenate([np.diff(theta[s:s + size]) for s in starts])
+    dt = np.concatenate([np.diff(t[s:s + size]) for s in starts])
+    return _at_rest_statistics(np.concatenate(([0.0], np.cumsum(dt))), np.concatenate(([0.0], np.cumsum(dth))))
+
+
+def _looks_at_rest(st: dict) -> bool:
+    """The recognition rule (see the constants above)."""
+    return (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS
+            and st["speed_spread"] >= QS_MIN_SPEED_SPREAD
+            and st["speed_spread"] >= QS_SPREAD_RATIO * st["step_spread"])
+
+
+def _sweeps(theta: np.ndarray, tol: float) -> list[tuple[int, int, int]]:
+    """Monotonic sweeps ``(start, stop, direction)`` of one run, split at reversals of more than
+    ``tol`` (hysteresis: smaller returns are jitter and stay in the sweep).  The row at a turning
+    point ends the sweep before it; every row is in one sweep; direction 0: no travel of ``tol``."""
+    n = len(theta)
+    if n == 0:
+        return []
+    th = theta.tolist()
+    turns = []
+    d = 0
+    hi = lo = 0
+    first = 0
+    for i in range(1, n):
+        x = th[i]
+        if d == 0:
+            if x > th[hi]:
+                hi = i
+            if x < th[lo]:
+                lo = i
+            if th[hi] - th[lo] >= tol:
+                d = 1 if hi > lo else -1
+                first = d
+        elif d > 0:
+            if x > th[hi]:
+                hi = i
+            elif th[hi] - x >= tol:
+                turns.append(hi)
+                d, lo = -1, i
+        else:
+            if x < th[lo]:
+                lo = i
+            elif x - th[lo] >= tol:
+                turns.append(lo)
+                d, hi = 1, i
+    bounds = [0] + [k + 1 for k in turns] + [n]
+    out = []
+    direction = first
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b > a:
+            out.append((a, b, direction))
+        direction = -direction
+    return out
+
+
+def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
+    """The monotonic sweeps of each run, with the statistics of the recognition rule.
+
+    Works over position, per run: time gaps do not split a sweep (at rest, time is irrelevant).
+    A sweep ends at a reversal of more than ``QS_REVERSAL_STEPS`` median steps.  It is
+    *quasi-static* (``"at_rest"``) when it has at least ``QS_MIN_STEPS`` steps, at most
+    ``QS_MAX_REPEATS`` of its rows repeat a position, and the speed between rows varies over a
+    factor of two or more and ``QS_SPREAD_RATIO`` times more than the steps do (log 10-90 %
+    ranges): rows stored by position (at rest after each step of a position loop), not by a
+    clock.  On a plateau the speed between rows is steady (or, on a regular clock, varies exactly
+    as the steps do: stick-slip, encoder noise), so no plateau recording passes.  Without
+    ``force`` a run whose rows as a whole do not pass is not searched (the cheap common case).
+
+    Returns
+    -------
+    list of dict
+        ``run, start, stop, direction`` (rows of the recording, stop exclusive) and ``at_rest``,
+        plus the statistics.
+    """
+    t, theta, run = rec.t, rec.theta, rec.run
+    out = []
+    if len(t) == 0:
+        return out
+    cuts = np.flatnonzero(np.diff(run) != 0) + 1
+    bounds = np.concatenate(([0], cuts, [len(run)]))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        a, b = int(a), int(b)
+        if b - a < 2:
+            continue
+        if not force and not _looks_at_rest(_run_statistics(t[a:b], theta[a:b])):
+            continue
+        d = np.abs(np.diff(theta[a:b]))
+        nz = d[d > 0]
+        if not len(nz):
+            continue
+        tol = QS_REVERSAL_STEPS * float(np.median(nz))
+        for s, e, direction in _sweeps(theta[a:b], tol):
+            st = _at_rest_statistics(t[a + s:a + e], theta[a + s:a + e])
+            out.append({"run": int(run[a]), "start": a + s, "stop": a + e, "direction": int(direction),
+                        "at_rest": bool(direction != 0 and _looks_at_rest(st)), **st})
+    return out
+
+
+def _quasi_static_segments(rec: Recording, *, force: bool, min_samples: int):
+    """Quasi-static segments (recognised, or every sweep when ``force``), their ledger, and the
+    row ranges they take."""
+    segments, excluded, taken = [], Counter(), []
+    t, theta = rec.t, rec.theta
+    for sw in quasi_static_sweeps(rec, force=force):
+        a, b, d = sw["start"], sw["stop"], sw["direction"]
+        if not (sw["at_rest"] or force):
+            continue
+        taken.append((a, b))
+        if d == 0:
+            excluded["standstill"] += b - a
+            continue
+        if b - a < min_samples:
+            excluded["short_sweep"] += b - a
+            continue
+        dur = float(t[b - 1] - t[a])
+        speed = abs(float(theta[b - 1] - theta[a])) / dur if dur > 0 else float("nan")
+        segments.append(Segment(sw["run"], a, b, d, speed, 0.0, 0.0, "quasi_static"))
+    return segments, excluded, sorted(taken)
+
+
+def _outside(pieces, taken):
+    """The pieces ``(run, a, b)`` with the row ranges ``taken`` cut out."""
+    if not taken:
+        yield from pieces
+        return
+    for run, a, b in pieces:
+        pos = a
+        for s, e in taken:
+            if e <= pos or s >= b:
+                continue
+            if s > pos:
+                yield run, pos, s
+            pos = max(pos, e)
+        if pos < b:
+            yield run, pos, b
 
 
 def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
@@ -270,8 +489,8 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     before, after = _before_after(v_win, m)
     across = 0.5 * (before + after)
     # speed noise of a window from position noise (second differences), for the default min_speed
+    sigma = noise if noise is not None else _position_noise(theta)
     if min_speed is None:
-        sigma = noise if noise is not None else _position_noise(theta)
         nw = _K * b
         v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
         v_floor = 10 * v_noise
@@ -291,6 +510,11 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     runs_ = _merge_fragments(runs_, t, theta, b, rel_tol)
     runs_ = [r for s, e in runs_ for r in _split_drift(across, s, e, rel_tol)]
     runs_ = [_trim_speed(across, s, e, rel_tol) for s, e in runs_]
+    # block-to-block speeds (the finest the blocks resolve): a ramp is smooth at this scale, ripple is not
+    tmid = 0.5 * (tb[1:] + tb[:-1])
+    vblock = np.diff(thb) / np.maximum(np.diff(tb), 1e-300)
+    vnoise2 = 2.0 * sigma * sigma / b / (b * dt) ** 2  # variance of a block speed from position noise
+    runs_ = [r for s, e in runs_ for r in _split_smooth(tmid, vblock, s, e, rel_tol, vnoise2)]
     segs = []
     short_blocks = []
     for s2, e2 in runs_:
@@ -447,6 +671,79 @@ def _split_drift(v: np.ndarray, s: int, e: int, rel_tol: float, depth: int = 0):
     return _split_drift(v, s, s + k, rel_tol, depth + 1) + _split_drift(v, s + k, e, rel_tol, depth + 1)
 
 
+#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` over
+#: its length is a ramp, not a plateau (the rest of the tolerance is left to ripple) ...
+_SMOOTH_SPREAD = 1.0 / 3.0
+#: ... when that curve stands out of the position noise (its sum of squares, 3 degrees of freedom
+#: beyond the mean, exceeds this many noise variances: chi-square tail below 1e-4) ...
+_SMOOTH_CHI2 = 20.0
+#: degree of the smooth curve (a cubic in time: a ramp, a bell's top, one swing of a sine)
+_SMOOTH_DEGREE = 3
+
+
+def _split_smooth(tb: np.ndarray, v: np.ndarray, s: int, e: int, rel_tol: float, vnoise2: float = 0.0,
+                  prove_flat: bool = False, depth: int = 0):
+    """Blocks s..e without a systematic speed change.
+
+    The before/after test bounds the speed change over one window only; along an acceleration
+    ramp, the top of a bell-shaped move, a creeping tail or a slow sine the speed changes little
+    per window but steadily, and a run of "steady" blocks results.  The smooth curve is a cubic in
+    time fitted to the block-to-block speeds ``v`` (variance ``vnoise2`` from position noise
+    alone).  A run is a ramp when that curve spans more than ``_SMOOTH_SPREAD * rel_tol`` of the
+    mean speed, stands out of the noise (``_SMOOTH_CHI2``) and explains more of the speed's
+    variation than what is left beside it beyond the noise.  Ripple (closed-loop, stick-slip,
+    position-locked) is not smooth in time over a plateau: the cubic explains little of it, and
+    the rule leaves such plateaus alone however large the ripple.
+
+    A ramp is split (CUSUM) recursively; a part of a ramp is kept only where it is shown flat
+    (``prove_flat``: its spread plus two standard errors within the limit), so that the plateau
+    beside a ramp stays and the ramp's own fragments go.  Runs never judged a ramp are kept, unless
+    the position noise alone is too large to show a change of the limit (a crawl near the noise
+    floor, such as the end of a creeping tail)."""
+    n = e - s
+    limit = _SMOOTH_SPREAD * rel_tol
+    if n < 2 + _SMOOTH_DEGREE:
+        return [] if prove_flat else [(s, e)]
+    seg = v[s:e - 1]  # block speeds between the blocks of the run
+    x = tb[s:e - 1]
+    if len(seg) > 4096:  # a long run: its shape is as clear from every k-th block speed
+        k = -(-len(seg) // 4096)
+        seg, x = seg[::k], x[::k]
+    x = (x - x[0]) / max(x[-1] - x[0], 1e-300) * 2.0 - 1.0
+    c = np.polynomial.legendre.legfit(x, seg, _SMOOTH_DEGREE)
+    f = np.polynomial.legendre.legval(x, c)
+    mean = float(np.mean(seg))
+    ss_res = float(np.sum((seg - f) ** 2))
+    ss_fit = float(np.sum((f - mean) ** 2))
+    dof = max(len(seg) - _SMOOTH_DEGREE - 1, 1)
+    # the noise variance predicted from position noise, never above the scatter actually seen (a
+    # quantised encoder in steady motion dithers: its block means are better than q / sqrt(12))
+    vnoise2 = min(vnoise2, ss_res / dof)
+    ss_rest = max(ss_res - dof * vnoise2, 0.0)  # ripple beyond noise
+    scale = max(abs(mean), 1e-300)
+    spread = float(f.max() - f.min()) / scale
+    k_se = 4.0 * math.sqrt((_SMOOTH_DEGREE + 1) / len(seg))  # two standard errors of a range of the curve
+    if k_se * math.sqrt(vnoise2) / scale > limit:
+        # position noise alone hides a change of the limit over this run: not shown constant
+        return []
+    if prove_flat:
+        s_res = math.sqrt(ss_res / dof)
+        upper = spread + k_se * s_res / scale
+        if upper <= limit:
+            return [(s, e)]
+    else:
+        smooth = ss_fit > _SMOOTH_CHI2 * vnoise2 and ss_fit > ss_rest
+        if spread <= limit or not smooth:
+            return [(s, e)]
+    if n < 2 * _K or depth > 30:
+        return []
+    cs = np.cumsum(seg - mean)
+    k = int(np.argmax(np.abs(cs[:-1]))) + 1
+    k = min(max(k, 1), n - 1)
+    return (_split_smooth(tb, v, s, s + k, rel_tol, vnoise2, True, depth + 1)
+            + _split_smooth(tb, v, s + k, e, rel_tol, vnoise2, True, depth + 1))
+
+
 # ---------------------------------------------------------------------- derivatives
 def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Velocity and acceleration of ``theta`` by a Savitzky-Golay filter, piece by piece.
@@ -460,21 +757,18 @@ def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.nda
     Returns
     -------
     velocity, acceleration : ndarray
-        In unit/s and unit/s^2, one value per row; pieces shorter than the window get NaN.
+        In unit/s and unit/s^2, one value per row; pieces shorter than the window (in samples,
+        or on the uniform grid a jittered piece is resampled to) get NaN: no derivative.
     """
     t, theta = rec.t, rec.theta
     vel = np.full(len(t), np.nan)
     acc = np.full(len(t), np.nan)
     for _, a, b in rec.pieces():
         tt, th = t[a:b], theta[a:b]
-        if b - a < 5:
+        params = _filter_params(tt, deriv_window)
+        if params is None:
             continue
-        dt = float(np.median(np.diff(tt)))
-        w = deriv_window or max(7, int(round(0.02 / dt)) | 1)
-        w = int(w) | 1
-        if w > b - a:
-            continue
-        uniform = np.max(np.abs(np.diff(tt) - dt)) <= 0.01 * dt
+        dt, w, uniform = params
         if uniform:
             vel[a:b] = savgol_filter(th, w, 2, deriv=1, delta=dt)
             acc[a:b] = savgol_filter(th, w, 2, deriv=2, delta=dt)
@@ -484,6 +778,28 @@ def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.nda
             vel[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=1, delta=dt))
             acc[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
     return vel, acc
+
+
+def _filter_params(tt: np.ndarray, deriv_window: int | None):
+    """``(dt, window, uniform)`` of the Savitzky-Golay filter on one piece with sample times
+    ``tt``, or None when the piece is too short for it: fewer samples than the window, or (for a
+    jittered piece, resampled to a uniform grid of the median step first) fewer grid points."""
+    n = len(tt)
+    if n < 5:
+        return None
+    d = np.diff(tt)
+    dt = float(np.median(d))
+    if not dt > 0:
+        return None
+    w = deriv_window or max(7, int(round(0.02 / dt)) | 1)
+    w = int(w) | 1
+    if w > n:
+        return None
+    np.subtract(d, dt, out=d)
+    uniform = bool(np.max(np.abs(d)) <= 0.01 * dt)
+    if not uniform and math.ceil((tt[-1] + dt / 2 - tt[0]) / dt) < w:  # len(np.arange(...)) of the grid
+        return None
+    return dt, w, uniform
 
 
 def friction_torque(rec: Recording, inertia: float | None = None, deriv_window: int | None = None) -> np.ndarray:
@@ -524,19 +840,8 @@ class FrictionTorque:
             t = self.rec.t
             out = []
             for _, a, b in self.rec.pieces():
-                if b - a < 5:
-                    out.append((a, b, None, None, None))
-                    continue
-                d = np.diff(t[a:b])
-                dt = float(np.median(d))
-                w = self.deriv_window or max(7, int(round(0.02 / dt)) | 1)
-                w = int(w) | 1
-                if w > b - a:
-                    out.append((a, b, None, None, None))
-                    continue
-                np.subtract(d, dt, out=d)
-                uniform = np.max(np.abs(d)) <= 0.01 * dt
-                out.append((a, b, dt, w, uniform))
+                params = _filter_params(t[a:b], self.deriv_window)
+                out.append((a, b, None, None, None) if params is None else (a, b, *params))
             self._pieces = out
         return self._pieces
 

@@ -150,3 +150,31 @@ def test_windows_in_threads_give_the_same_segments():
     assert one.segments == two.segments and one.excluded == two.excluded and len(one) == 3
     with pytest.raises(InputError, match="workers"):
         find_segments(rec, workers=0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_no_segment_on_ramps_bell_tops_or_creeping_tails(seed):
+    # an industrial axis moved by excitation trajectories (4 ms): minimum-jerk moves, a move with a
+    # genuine 1.5 rad/s cruise between half-cosine ramps, a windowed sum of sines; every move ends
+    # in a creeping tail from 0.2 rad/s to rest
+    from gearspec.simulate.synthetic import excitation_recording
+
+    rec, truth = excitation_recording(seed=seed)
+    v = np.abs(truth["velocity"])
+    seg = find_segments(rec)
+    seg.check_ledger()
+    t = rec.t
+    rel_tol = 0.15
+    for s in seg:
+        vs = v[s.start:s.stop]
+        # constant speed over the whole segment: the true speed stays within the third of the
+        # tolerance the smooth-speed rule allows a plateau (the rest is for ripple, which has none here)
+        assert (vs.max() - vs.min()) / s.speed < rel_tol / 3, (s, vs.min(), vs.max())
+        assert np.all(np.abs(vs / s.speed - 1) < rel_tol / 3)
+        for t0, t1 in truth["tails"]:
+            assert t[s.stop - 1] < t0 or t[s.start] > t1, ("segment on a creeping tail", s)
+    # the genuine cruises are kept, nearly whole
+    for t0, t1, speed in truth["cruise"]:
+        hits = [s for s in seg if t[s.start] < t1 and t[s.stop - 1] > t0]
+        assert len(hits) == 1 and hits[0].speed == pytest.approx(speed, rel=0.005)
+        assert t[hits[0].stop - 1] - t[hits[0].start] > 0.9 * (t1 - t0)

@@ -65,6 +65,9 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-speed", type=float, help="speeds below this (unit/s) are standstill")
     g.add_argument("--min-duration", type=float, help="shortest segment kept, s")
     g.add_argument("--no-inertia", action="store_true", help="do not subtract J*thetadd even if the spec gives J")
+    g.add_argument("--quasi-static", action=argparse.BooleanOptionalAction, default=None,
+                   help="every monotonic sweep of each run is a quasi-static segment (rows taken at rest: torque "
+                        "against position, no time derivative); --no-quasi-static: plateaus only; default: recognised")
 
 
 def load_from_args(args):
@@ -94,7 +97,8 @@ def segments_from_args(rec, args):
     from ..segment import find_segments
 
     return find_segments(rec, window=args.window if args.window == "auto" else float(args.window),
-                         rel_tol=args.rel_tol, min_speed=args.min_speed, min_duration=args.min_duration)
+                         rel_tol=args.rel_tol, min_speed=args.min_speed, min_duration=args.min_duration,
+                         quasi_static=getattr(args, "quasi_static", None))
 
 
 # ---------------------------------------------------------------------- parser

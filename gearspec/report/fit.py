@@ -55,8 +55,10 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
         md += [f"Command: `{command}`", ""]
     if recording_summary:
         md += ["## Recording", "", "```", recording_summary, "```", ""]
-    md += [f"{len(data)} samples in {data.n_segments} constant-speed segments "
-           f"({int((data.segments['direction'] > 0).sum())} positive, {int((data.segments['direction'] < 0).sum())} "
+    n_qs = int((data.segments["kind"] == "quasi_static").sum()) if "kind" in data.segments else 0
+    md += [f"{len(data)} samples in {data.n_segments} " + (f"segments ({n_qs} quasi-static sweeps taken at rest) "
+                                                            if n_qs else "constant-speed segments ")
+           + f"({int((data.segments['direction'] > 0).sum())} positive, {int((data.segments['direction'] < 0).sum())} "
            f"negative). " + " ".join(data.notes), ""]
     md += [f"## Model: {m.name}", "", f"Law: {m.law_spec.description}.", "",
            "Parameters per direction in SI units with standard errors, and in the SILO4 paper's units "

@@ -56,12 +56,18 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     else:
         md += ["## Gear train", "", "No gear spec: no line is declared; every peak found is reported unlabelled.", ""]
     md += ["## Segments", "",
-           f"Found from position alone (speed window(s) {', '.join(f'{w:g} s' for w in seg.settings.get('windows_chosen', []))}, "
-           f"relative tolerance {seg.settings.get('rel_tol')}).", "", f"![segments]({figs['segments'].name})", ""]
+           f"Found from position alone ("
+           + "".join(f"speed window(s) {', '.join(f'{w:g} s' for w in ws)}, " for ws in [seg.settings.get('windows_chosen')] if ws)
+           + f"relative tolerance {seg.settings.get('rel_tol')})"
+           + (f"; {seg.settings['quasi_static_segments']} quasi-static sweep(s) (rows taken at rest: torque against "
+              "position, no time derivative, nominal speed = travel / duration)"
+              if seg.settings.get("quasi_static_segments") else "") + ".", "",
+           f"![segments]({figs['segments'].name})", ""]
     rows = []
     for i, s in enumerate(result.segments):
         g = s.segment
-        rows.append({"segment": i, "run": g.run, "dir": g.direction, f"speed ({unit}/s)": g.speed,
+        rows.append({"segment": i, "kind": g.kind.replace("_", "-"), "run": g.run, "dir": g.direction,
+                     f"speed ({unit}/s)": g.speed,
                      **({"speed (rpm)": _rpm(g.speed, unit)} if unit == "rad" else {}),
                      "samples": g.n, f"travel ({unit})": s.span, f"mean friction ({tu})": s.level,
                      f"residual sd ({tu})": s.sigma, "speed ripple (rel. sd)": g.speed_ripple})

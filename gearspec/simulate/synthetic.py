@@ -19,7 +19,7 @@ import numpy as np
 
 from ..recording import Recording
 
-__all__ = ["Ripple", "plateau_recording", "model_recording"]
+__all__ = ["Ripple", "plateau_recording", "model_recording", "quasi_static_recording", "excitation_recording"]
 
 
 @dataclass(frozen=True)
@@ -248,3 +248,142 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
                                 unit=unit, source="synthetic")
     return rec, truth
 
+
+
+# ---------------------------------------------------------------------- quasi-static maps
+def quasi_static_recording(*, step=0.002, revolutions=1.0, levels=(0.05, 0.04), ripples=(), noise=0.0,
+                           median_dt=0.013, dt_spread=0.35, gap_probability=0.01, max_gap=1.0,
+                           repeat_probability=0.05, position_noise=0.0, theta0=0.0, velocity=False,
+                           gear=None, unit="rad", seed=None):
+    """A quasi-static stepped map: a row stored only when the shaft is at rest after each step.
+
+    A position loop steps the shaft by ``step`` over ``revolutions`` turns forward, then back over
+    the same travel.  Rows come at irregular times: log-normal steps of median ``median_dt``
+    (log-sd ``dt_spread``), now and then (``gap_probability``) a pause uniform up to ``max_gap`` s,
+    and with ``repeat_probability`` a further row at the same position (the loop stored twice).
+
+    The friction magnitude at rest is that of the direction of the last step,
+
+        y = level_d + sum_k A_k,d sin(2 pi f_k theta + phi_k,d),    torque = d * y + noise
+
+    (``level = (forward, backward)``; ``ripples`` are :class:`Ripple` with per-direction amplitude
+    and phase; their decay is ignored: there is no speed).
+
+    Returns
+    -------
+    recording : Recording
+    truth : dict
+        ``directions``: for +1 and -1, ``level`` and ``ripples`` (``frequency``, ``amplitude``,
+        ``phase``) in the friction-magnitude frame; ``sweeps``: (start, stop, direction) rows;
+        ``n``: rows.
+    """
+    rng = np.random.default_rng(seed)
+    n_steps = int(round(revolutions * 2 * np.pi / step))
+    fwd = theta0 + step * np.arange(n_steps + 1)
+    pos = np.concatenate([fwd, fwd[::-1][1:]])
+    dirs = np.concatenate([np.ones(n_steps + 1, int), -np.ones(n_steps, int)])
+    # repeated rows at the same position
+    reps = 1 + (rng.random(len(pos)) < repeat_probability).astype(int)
+    pos = np.repeat(pos, reps)
+    dirs = np.repeat(dirs, reps)
+    n = len(pos)
+    dt = median_dt * np.exp(dt_spread * rng.standard_normal(n - 1))
+    gaps = rng.random(n - 1) < gap_probability
+    dt[gaps] = rng.uniform(5 * median_dt, max_gap, int(gaps.sum()))
+    t = np.concatenate(([0.0], np.cumsum(dt)))
+    lvl = {1: float(levels[0]), -1: float(levels[1])}
+    y = np.where(dirs > 0, lvl[1], lvl[-1])
+    truth = {"directions": {}, "n": n}
+    for d in (1, -1):
+        sel = dirs == d
+        rip = []
+        for r in ripples:
+            a, ph = r.value("amplitude", d), r.value("phase", d)
+            y[sel] += a * np.sin(2 * np.pi * r.frequency * pos[sel] + ph)
+            rip.append({"frequency": r.frequency, "amplitude": a, "phase": ph})
+        truth["directions"][d] = {"level": lvl[d], "ripples": rip}
+    torque = dirs * y + (rng.normal(0.0, noise, n) if noise else 0.0)
+    meas = pos + (rng.normal(0.0, position_noise, n) if position_noise else 0.0)
+    turn = int(np.flatnonzero(dirs < 0)[0])
+    truth["sweeps"] = [(0, turn, 1), (turn, n, -1)]
+    cols = {"velocity": rng.normal(0.0, 1e-4, n)} if velocity else {}
+    rec = Recording.from_arrays(t=t, theta=meas, torque=torque, gear=gear, unit=unit, source="synthetic-quasi-static",
+                                **cols)
+    return rec, truth
+
+
+# ---------------------------------------------------------------------- excitation trajectories
+def excitation_recording(*, fs=250.0, move=10.0, amplitude=2.0, cruise_speed=1.5, creep=0.2, creep_time=2.0,
+                         sines=((0.2, 1.0), (0.5, 0.4), (1.1, 0.15)), position_noise=2e-5, noise=0.02,
+                         level=0.3, viscous=0.05, inertia=0.01, gear=None, unit="rad", seed=None):
+    """An industrial axis moved by excitation trajectories: no plateau except where stated.
+
+    Three moves of ``move`` seconds each, sampled at ``fs`` (4 ms), one run, one after the other:
+
+    1. a bell-shaped point-to-point move of ``amplitude`` rad (minimum-jerk velocity profile),
+       there and back;
+    2. a smooth point-to-point move with a genuine constant-speed cruise at ``cruise_speed``
+       (velocity ramps shaped as half-cosines), there and back;
+    3. a sum of sines (``sines``: (frequency Hz, velocity amplitude rad/s) pairs), a Fourier
+       excitation trajectory with speeds sweeping through zero.
+
+    Every move ends in a creeping tail: the axis keeps creeping at ``creep`` rad/s, decaying to
+    rest over ``creep_time`` s (a position loop settling against friction), in the direction of the
+    last motion.  Torque: ``sign(v) (level + viscous |v|) + inertia * acc`` plus white noise.
+
+    Returns
+    -------
+    recording : Recording
+    truth : dict
+        ``velocity`` (true velocity at every row), ``acceleration``, ``cruise``: list of
+        (t0, t1, speed) of the genuine constant-speed stretches, ``tails``: list of (t0, t1).
+    """
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / fs
+    vs, cruise, tails = [], [], []
+    t_now = 0.0
+
+    def add(v, kind=None, speed=None):
+        nonlocal t_now
+        if kind == "cruise":
+            cruise.append((t_now, t_now + (len(v) - 1) * dt, speed))
+        if kind == "tail":
+            tails.append((t_now, t_now + (len(v) - 1) * dt))
+        vs.append(v)
+        t_now += len(v) * dt
+
+    def tail(sign):
+        tt = np.arange(int(round(creep_time * fs))) * dt
+        add(sign * creep * (1 - tt / creep_time) ** 2 * (1 + 0.3 * np.sin(2 * np.pi * 1.3 * tt)), "tail")
+
+    half = 0.5 * (move - 2 * creep_time)
+    # 1. minimum-jerk there and back: v = A/T * 30 s^2 (1-s)^2
+    for sign in (1, -1):
+        s = np.arange(int(round(half * fs))) * dt / half
+        add(sign * amplitude / half * 30 * s ** 2 * (1 - s) ** 2)
+        tail(sign)
+    # 2. cruise between half-cosine ramps, there and back
+    for sign in (1, -1):
+        ramp = 0.8
+        r = np.arange(int(round(ramp * fs))) * dt / ramp
+        up = cruise_speed * 0.5 * (1 - np.cos(np.pi * r))
+        add(sign * up)
+        add(np.full(int(round((half - 2 * ramp) * fs)), sign * cruise_speed), "cruise", cruise_speed)
+        add(sign * up[::-1])
+        tail(sign)
+    # 3. sum of sines with a window that starts and ends at rest
+    T = move - creep_time
+    tt = np.arange(int(round(T * fs))) * dt
+    w = np.sin(np.pi * tt / T) ** 2
+    v3 = w * sum(a * np.sin(2 * np.pi * f * tt) for f, a in sines)
+    add(v3)
+    tail(np.sign(v3[np.flatnonzero(np.abs(v3) > 1e-3)[-1]]) or 1.0)
+    v = np.concatenate(vs)
+    n = len(v)
+    t = np.arange(n) * dt
+    theta = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1])) * dt))
+    acc = np.gradient(v, dt)
+    torque = np.sign(v) * (level + viscous * np.abs(v)) + inertia * acc + rng.normal(0.0, noise, n)
+    meas = theta + rng.normal(0.0, position_noise, n)
+    rec = Recording.from_arrays(t=t, theta=meas, torque=torque, gear=gear, unit=unit, source="synthetic-excitation")
+    return rec, {"velocity": v, "acceleration": acc, "cruise": cruise, "tails": tails}

@@ -146,7 +146,7 @@ class SegmentSpectrum:
 
     def to_dict(self) -> dict:
         s = self.segment
-        return {"direction": s.direction, "speed": s.speed, "n": s.n, "run": s.run,
+        return {"direction": s.direction, "speed": s.speed, "n": s.n, "run": s.run, "kind": s.kind,
                 "start": s.start, "stop": s.stop, "level": self.level, "sigma": self.sigma,
                 "span": self.span, "nyquist": self.nyquist, "nuisance_degree": self.degree,
                 "peaks": [p.to_dict() for p in self.peaks], "skipped_lines": self.skipped,
@@ -812,7 +812,8 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     n_workers = _n_workers(workers, seg)
 
     def one(s: Segment) -> SegmentSpectrum:
-        y = tau[s.rows]
+        # a quasi-static sweep was taken at rest: its torque is analysed as measured (no J thetadd)
+        y = (rec.tau if s.kind == "quasi_static" else tau)[s.rows]
         if s.direction < 0:  # the friction magnitude (a view of the torque when it is the torque)
             y = -y
         return analyze_segment(theta[s.rows], y, gear, segment=s, **options)
