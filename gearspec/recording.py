@@ -24,12 +24,15 @@ import pandas as pd
 from .errors import InputError, warn
 from .gears import GearTrain, load_gear
 
-__all__ = ["Recording", "load_recording", "CANONICAL", "parse_assignments"]
+__all__ = ["Recording", "load_recording", "CANONICAL", "parse_assignments", "auto_max_gap"]
 
 CANONICAL = ("t", "theta", "torque", "current", "velocity", "load", "temperature", "run")
 _NUMERIC_REQUIRED = ("t", "theta", "torque", "current")
 _SUFFIXES = {".csv": "csv", ".txt": "csv", ".dat": "csv", ".tsv": "csv", ".parquet": "parquet",
              ".pq": "parquet", ".mat": "mat", ".npz": "npz"}
+#: rows repeating a time stamp (and not copies of their predecessor) in at least this fraction of a
+#: run's rows are read as a coarse logger clock and spread; rarer ones are isolated and excluded
+CLOCK_BURST_FRACTION = 0.01
 #: largest plausible speed of a rotary reference shaft, rad/s (about 19 000 rpm)
 MAX_PLAUSIBLE_RAD_S = 2000.0
 #: largest plausible speed of a linear axis, m/s
@@ -60,6 +63,9 @@ class Recording:
         Scalars found in the source files (e.g. ``gtau`` in a .mat file).
     gear : GearTrain or None
     sources : list of str
+    max_gap : float or None
+        Longest time step (s) still taken as continuous sampling; a longer step is a gap that splits a
+        run (:meth:`pieces`).  None: chosen per run from the data (:func:`auto_max_gap`).
     """
 
     data: pd.DataFrame
@@ -71,7 +77,10 @@ class Recording:
     meta: dict = field(default_factory=dict)
     gear: GearTrain | None = None
     sources: list[str] = field(default_factory=list)
+    max_gap: float | None = None
     _tau: np.ndarray | None = field(default=None, repr=False)
+    _pieces_cache: tuple | None = field(default=None, repr=False)
+    _auto_gaps: dict = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------------ views
     @property
@@ -113,29 +122,30 @@ class Recording:
     def __len__(self) -> int:
         return len(self.data)
 
-    def pieces(self, gap_factor: float = 5.0) -> list[tuple[int, int, int]]:
+    def gap_limits(self) -> dict[int, float]:
+        """The longest step (s) taken as continuous sampling, per run: :attr:`max_gap` when it is set,
+        otherwise :func:`auto_max_gap` of the run's time steps."""
+        return self._gaps()[1]
+
+    def pieces(self, max_gap: float | None = None) -> list[tuple[int, int, int]]:
         """Contiguous stretches ``(run, start, stop)``: split at run boundaries and at time gaps.
 
-        A gap is a step in ``t`` longer than ``gap_factor`` times the run's median step; nothing
-        downstream treats data on both sides of a gap as continuous.
+        A gap is a step in ``t`` longer than ``max_gap`` seconds (default: the recording's rule,
+        :meth:`gap_limits`); nothing downstream treats data on both sides of a gap as continuous.
         """
-        run = self.run
-        t = self.t
-        out = []
-        if len(run) == 0:
-            return out
-        cuts = np.flatnonzero(np.diff(run) != 0) + 1
-        bounds = np.concatenate(([0], cuts, [len(run)]))
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            dt = np.diff(t[a:b])
-            if len(dt):
-                med = np.median(dt)
-                gaps = np.flatnonzero(dt > gap_factor * med) + a + 1
+        if max_gap is not None:
+            return _split_pieces(self.t, self.run, lambda dt, r: float(max_gap))[0]
+        return list(self._gaps()[0])
+
+    def _gaps(self):
+        key = (id(self.data), len(self.data), self.max_gap)
+        if self._pieces_cache is None or self._pieces_cache[0] != key:
+            if self.max_gap is not None:
+                rule = lambda dt, r: float(self.max_gap)  # noqa: E731
             else:
-                gaps = np.array([], dtype=int)
-            edges = np.concatenate(([a], gaps, [b]))
-            out += [(int(run[a]), int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e > s]
-        return out
+                rule = lambda dt, r: self._auto_gaps[r] if r in self._auto_gaps else auto_max_gap(dt)  # noqa: E731
+            self._pieces_cache = (key,) + _split_pieces(self.t, self.run, rule)
+        return self._pieces_cache[1], self._pieces_cache[2]
 
     def summary(self) -> str:
         n_runs = len(np.unique(self.run)) if len(self) else 0
@@ -150,10 +160,11 @@ class Recording:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_arrays(cls, *, gear=None, unit: str | None = None, signal: str | None = None,
-                    source: str = "arrays", **columns) -> "Recording":
+                    source: str = "arrays", max_gap: float | None = None, **columns) -> "Recording":
         """A recording from arrays (``t=..., theta=..., torque=...``), validated like a file."""
         frame = pd.DataFrame({k: np.asarray(v) for k, v in columns.items() if v is not None})
-        return _assemble([(source, frame, {})], gear=load_gear(gear), unit=unit, signal=signal, fs=None)
+        return _assemble([(source, frame, {})], gear=load_gear(gear), unit=unit, signal=signal, fs=None,
+                         max_gap=max_gap)
 
     def save(self, path: str | Path) -> Path:
         """Write the recording in the recording format (.csv, .parquet or .npz by suffix)."""
@@ -169,6 +180,66 @@ class Recording:
         else:
             raise InputError(f"cannot write recordings as '{path.suffix}' (use .csv, .parquet or .npz)")
         return path
+
+
+# ---------------------------------------------------------------------- gaps
+#: a step longer than this many times the run's 99th-percentile step is a gap (see auto_max_gap)
+GAP_FACTOR = 5.0
+#: quantile of the steps that stands for "the longest regular step" of a run
+GAP_QUANTILE = 0.99
+
+
+def auto_max_gap(dt: np.ndarray) -> float:
+    """The default longest continuous step (s) of a run with time steps ``dt`` (all > 0).
+
+    A gap is an *outlier* of the run's own step distribution: a step more than ``GAP_FACTOR`` (5)
+    times longer than the run's 99th-percentile step (the lower order statistic, so that at least
+    the longest step is always left out of it).  A steady log (1 kHz with jitter) has its 99th
+    percentile near the nominal period, so a dropout of more than about 5 periods splits it, as
+    before; a logger whose steps are broadly spread (rows stored only at rest: many short steps and
+    many long ones) has a long 99th percentile, so its regular long steps do not split it: only a
+    pause far beyond any regular step does.  A dropout is rare (under 1 % of the steps); steps that
+    are more common than that are part of how the file was logged.
+    """
+    dt = np.asarray(dt, dtype=float)
+    if len(dt) == 0:
+        return math.inf
+    if len(dt) == 1:
+        return GAP_FACTOR * float(dt[0])
+    return GAP_FACTOR * float(np.quantile(dt, GAP_QUANTILE, method="lower"))
+
+
+def _logged_gap_limits(frame: pd.DataFrame) -> dict[int, float]:
+    """:func:`auto_max_gap` per run from the distinct finite stamps of every row the file holds."""
+    t = frame["t"].to_numpy(dtype=float)
+    runs = frame["run"].to_numpy()
+    out = {}
+    one = len(runs) == 0 or runs[0] == runs[-1] and np.all(runs == runs[0])
+    for rid in ([runs[0]] if one and len(runs) else np.unique(runs)):
+        tr = t if one else t[runs == rid]
+        tr = tr[np.isfinite(tr)]
+        d = np.diff(tr)
+        steps = d[d > 0] if np.all(d >= 0) else np.diff(np.unique(tr))
+        out[int(rid)] = auto_max_gap(steps)
+    return out
+
+
+def _split_pieces(t: np.ndarray, run: np.ndarray, rule) -> tuple[list, dict]:
+    """Pieces ``(run, start, stop)`` and the gap limit used per run (``rule(steps, run) -> seconds``)."""
+    out: list = []
+    limits: dict = {}
+    if len(run) == 0:
+        return out, limits
+    cuts = np.flatnonzero(np.diff(run) != 0) + 1
+    bounds = np.concatenate(([0], cuts, [len(run)]))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        dt = np.diff(t[a:b])
+        limit = rule(dt, int(run[a]))
+        limits[int(run[a])] = limit
+        gaps = np.flatnonzero(dt > limit) + a + 1
+        edges = np.concatenate(([a], gaps, [b]))
+        out += [(int(run[a]), int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e > s]
+    return out, limits
 
 
 # ---------------------------------------------------------------------- parsing helpers
@@ -348,7 +419,7 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
                    map: Mapping[str, str] | str | None = None, scale: Mapping[str, float | str] | str | None = None,
                    fs: float | None = None, sep: str | None = None, header: bool = True,
                    names: Sequence[str] | str | None = None, signal: str | None = None,
-                   max_bad_fraction: float = 0.05) -> Recording:
+                   max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
     """Load one or more recording files (or folders of them) into a validated :class:`Recording`.
 
     Parameters
@@ -374,6 +445,10 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
     max_bad_fraction : float
         Rows with NaN/inf, duplicate or backward times are excluded and counted; if more than this
         fraction of a file's rows are bad, the file is refused instead.
+    max_gap : float, optional
+        A time step longer than this (s) is a gap that splits a run.  Default: chosen per run from
+        its own step distribution (:func:`auto_max_gap`: 5 x its 99th-percentile step) and reported
+        in ``notes``.
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]
@@ -408,7 +483,8 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
         frame, meta = _read_file(path, sep, header, names)
         frame = _map_and_scale(path, frame, meta, mapping, scaling)
         parts.append((str(path), frame, meta))
-    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction)
+    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction,
+                     max_gap=max_gap)
 
 
 def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, scaling: dict) -> pd.DataFrame:
@@ -463,8 +539,15 @@ def _numeric_column(path, frame: pd.DataFrame, col: str) -> pd.Series:
 
 
 def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
-              max_bad_fraction: float = 0.05) -> Recording:
+              max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
     unit = unit or (gear.unit if gear is not None else "rad")
+    if max_gap is not None:
+        try:
+            max_gap = float(max_gap)
+        except (TypeError, ValueError):
+            raise InputError(f"--max-gap must be a time in seconds, got {max_gap!r}") from None
+        if not (math.isfinite(max_gap) and max_gap > 0):
+            raise InputError(f"--max-gap must be a positive time in seconds, got {max_gap:g}")
     if unit not in ("rad", "m"):
         raise InputError(f"unit must be 'rad' or 'm', got '{unit}'")
     if fs is not None and not (math.isfinite(fs) and fs > 0):
@@ -478,6 +561,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
     n_read = 0
     sig_used = None
     run_offset = 0
+    auto_gaps: dict = {}
     for path, frame, meta in parts:
         frame = frame.reset_index(drop=True)  # index = data row - 1, kept through exclusions for messages
         n_read += len(frame)
@@ -531,6 +615,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
             frame["run"] = run_offset
             run_offset += 1
         frame["run"] = frame["run"].astype(np.int64)
+        auto_gaps.update(_logged_gap_limits(frame))
         # --- NaN / inf in the columns the analysis needs
         need = ["t", "theta", this_sig]
         finite = np.ones(n, bool)
@@ -549,34 +634,8 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
             excluded["nan_or_inf"] += n_bad
             warn(f"{path}: {n_bad} rows with NaN or inf in {', '.join(need)} excluded")
             frame = frame.loc[finite]
-        # --- time: duplicates and backward steps, per run
-        keep = np.ones(len(frame), bool)
-        t = frame["t"].to_numpy()
-        runs = frame["run"].to_numpy()
-        for rid in np.unique(runs):
-            idx = np.flatnonzero(runs == rid)
-            tr = t[idx]
-            prev_max = np.concatenate(([-np.inf], np.maximum.accumulate(tr)[:-1]))
-            dup = tr == prev_max
-            back = tr < prev_max
-            if back.mean() > max_bad_fraction:
-                first = idx[np.flatnonzero(back)[0]]
-                raise InputError(
-                    f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
-                    f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
-                    "several experiments, give each its own file or a 'run' column")
-            if dup.mean() > max_bad_fraction:
-                raise InputError(f"{path}: column 't' repeats the previous time in {int(dup.sum())} of {len(tr)} rows; "
-                                 "is the time column in the right unit (not rounded to whole seconds)?")
-            keep[idx[dup]] = False
-            keep[idx[back]] = False
-            if dup.any():
-                excluded["duplicate_time"] += int(dup.sum())
-            if back.any():
-                excluded["non_increasing_time"] += int(back.sum())
-        if not keep.all():
-            warn(f"{path}: {int((~keep).sum())} rows with duplicate or backward time excluded")
-            frame = frame.loc[keep]
+        # --- time: backward steps, copies, repeated stamps of a coarse clock; per run
+        frame = _clean_times(path, frame, this_sig, excluded, notes, max_bad_fraction)
         # --- saturation of the analysed signal
         frame, n_sat = _exclude_saturation(path, frame, this_sig)
         if n_sat:
@@ -586,7 +645,8 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
         frames.append(frame)
     data = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0].reset_index(drop=True)
     rec = Recording(data=data, unit=unit, signal=sig_used, excluded=excluded, n_read=n_read, notes=notes,
-                    meta=meta_all, gear=gear, sources=[p for p, _, _ in parts])
+                    meta=meta_all, gear=gear, sources=[p for p, _, _ in parts], max_gap=max_gap,
+                    _auto_gaps=auto_gaps)
     _check_time_unit(rec)
     _check_motion(rec)
     _check_units(rec)
@@ -596,8 +656,107 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
                          + (f" x ratio {gear.total_ratio:g}, ideal gear" if gear.reference == "output" else "") + ")")
     n_gaps = len(rec.pieces()) - len(np.unique(rec.run))
     if n_gaps:
-        rec.notes.append(f"{n_gaps} time gap(s) longer than 5 sample periods; nothing is analysed across them")
+        rec.notes.append(_gap_note(rec, n_gaps))
     return rec
+
+
+def _gap_note(rec: Recording, n_gaps: int) -> str:
+    limits = [v for v in rec.gap_limits().values() if math.isfinite(v)]
+    lo, hi = min(limits), max(limits)
+    span = f"{lo:.3g} s" if math.isclose(lo, hi, rel_tol=1e-3) else f"{lo:.3g} to {hi:.3g} s (per run)"
+    how = ("--max-gap" if rec.max_gap is not None else
+           f"{GAP_FACTOR:g} x the run's {GAP_QUANTILE:.0%} step; set it with --max-gap")
+    return f"gaps longer than {span} ({how}) split runs: {n_gaps} gap(s); nothing is analysed across them"
+
+
+def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: list[str],
+                 max_bad_fraction: float) -> pd.DataFrame:
+    """Backward and repeated time stamps, per run.
+
+    * A row stamped before an earlier row (``t`` below the running maximum) is excluded
+      (``non_increasing_time``); more than ``max_bad_fraction`` of them is refused (a file holding
+      several experiments without a ``run`` column).
+    * A row that repeats the previous row's stamp *and* its position and signal is a copy of it:
+      excluded (``duplicate_time``).
+    * Other rows that repeat a stamp are samples of a logger whose clock is coarser than its sample
+      rate.  When they are systematic (at least ``CLOCK_BURST_FRACTION`` of the run's rows), each
+      burst of rows sharing a stamp is spread evenly from that stamp towards the next distinct one
+      (no further than the run's typical sample period), with a note; nothing is lost.  When they
+      are isolated (rarer than that) there is no clock to read them by: excluded (``duplicate_time``).
+    * Times in whole seconds of a fast log (many repeats, distinct stamps 1 s or more apart) are the
+      unit mistake they look like: refused.
+    """
+    t = frame["t"].to_numpy()
+    runs = frame["run"].to_numpy()
+    cols = [frame[c].to_numpy() for c in ("theta", sig)]
+    keep = np.ones(len(frame), bool)
+    new_t = t.astype(float, copy=True)
+    n_spread = 0
+    n_copy = n_isolated = n_back = 0
+    for rid in np.unique(runs):
+        idx = np.flatnonzero(runs == rid)
+        tr = t[idx]
+        prev_max = np.concatenate(([-np.inf], np.maximum.accumulate(tr)[:-1]))
+        back = tr < prev_max
+        if back.mean() > max_bad_fraction:
+            first = idx[np.flatnonzero(back)[0]]
+            raise InputError(
+                f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
+                f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
+                "several experiments, give each its own file or a 'run' column")
+        keep[idx[back]] = False
+        n_back += int(back.sum())
+        ok = idx[~back]  # non-decreasing stamps from here on
+        to = t[ok]
+        rep = np.concatenate(([False], to[1:] == to[:-1]))
+        if not rep.any():
+            continue
+        same = np.concatenate(([False], np.all([c[ok][1:] == c[ok][:-1] for c in cols], axis=0)))
+        copy = rep & same
+        keep[ok[copy]] = False
+        n_copy += int(copy.sum())
+        ok, to, rep = ok[~copy], to[~copy], rep[~copy]
+        n_rep = int(rep.sum())
+        if not n_rep:
+            continue
+        distinct = np.unique(to)
+        med_step = float(np.median(np.diff(distinct))) if len(distinct) > 1 else math.inf
+        if med_step >= 1.0 and n_rep > max_bad_fraction * len(idx):
+            raise InputError(f"{path}: column 't' repeats the previous time in {n_rep} of {len(idx)} rows; "
+                             "is the time column in the right unit (not rounded to whole seconds)?")
+        if n_rep < CLOCK_BURST_FRACTION * len(idx) or len(distinct) < 2:
+            keep[ok[rep]] = False
+            n_isolated += n_rep
+            continue
+        # bursts: rows [s, e) share the stamp to[s]; spread them towards the next distinct stamp
+        starts = np.flatnonzero(~rep)
+        ends = np.concatenate((starts[1:], [len(to)]))
+        size = ends - starts
+        nxt = np.concatenate((to[starts[1:]], [np.nan]))
+        span = nxt - to[starts]
+        period = float(np.median(span[:-1] / size[:-1]))  # the typical sample period of the run
+        even = span / size
+        # a burst before a gap (or the last one) takes the typical period, not the gap
+        step = np.where(np.isfinite(even) & (even <= 2 * period), even, period)
+        offset = np.arange(len(to)) - np.repeat(starts, size)
+        new_t[ok] = to + offset * np.repeat(step, size)
+        n_spread += n_rep
+    n_drop = n_copy + n_isolated
+    if n_copy:
+        excluded["duplicate_time"] += n_copy
+    if n_isolated:
+        excluded["duplicate_time"] += n_isolated
+    if n_back:
+        excluded["non_increasing_time"] += n_back
+    if n_drop or n_back:
+        warn(f"{path}: {n_drop + n_back} rows with duplicate or backward time excluded")
+    if n_spread:
+        notes.append(f"{path}: {n_spread} rows repeat the time stamp of the row before (a logger clock coarser than "
+                     "its sample rate); each burst of equal stamps is spread evenly up to the next stamp, no row lost")
+    if n_spread or not keep.all():
+        frame = frame.copy() if keep.all() else frame.loc[keep].copy()
+        frame["t"] = new_t[keep]
+    return frame
 
 
 def _exclude_saturation(path, frame: pd.DataFrame, col: str):
