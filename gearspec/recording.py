@@ -268,6 +268,27 @@ def parse_assignments(text: str | None, option: str, numeric: bool = False) -> d
     return out
 
 
+def _names(names, limit: int = 12) -> str:
+    """Names for a message, at most ``limit`` of them (a message listing thousands helps nobody)."""
+    names = [str(n) for n in names]
+    if len(names) <= limit:
+        return ", ".join(names)
+    return ", ".join(names[:limit]) + f", ... ({len(names)} in all)"
+
+
+def _refuse_duplicate_names(path, names, where: str = "header") -> None:
+    seen: dict = {}
+    for raw in names:
+        key = str(raw).strip()
+        if key == "":
+            continue  # pandas names an empty header field 'Unnamed: k'
+        if key in seen:
+            same = "" if str(raw) == seen[key] else f" ('{seen[key]}' and '{raw}' differ only in blanks)"
+            raise InputError(f"{path}: column '{key}' appears twice in the {where}{same}; give every column "
+                             "its own name")
+        seen[key] = str(raw)
+
+
 def _sniff_sep(path: Path) -> str:
     with open(path, "r", errors="replace") as fh:
         for line in fh:
@@ -294,9 +315,13 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
         raise InputError(f"{path}: unknown file type '{path.suffix}' (accepted: .csv, .parquet, .mat, .npz)")
     meta: dict = {}
     if kind == "csv":
+        if sep == "":
+            raise InputError(f"{path}: the separator given with --sep is empty")
         sep = sep if sep is not None else _sniff_sep(path)
         if sep in (" ", "whitespace", r"\s+"):
             sep = r"\s+"
+        if names is not None:
+            _refuse_duplicate_names(path, names, "--names")
         if names is not None and header:
             raise InputError(f"{path}: --names is for files without a header row; add --no-header")
         if not header and names is None:
@@ -314,9 +339,14 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
                              "if the file uses another separator, give --sep")
     elif kind == "parquet":
         try:
+            import pyarrow.parquet as pq
+
+            _refuse_duplicate_names(path, pq.read_schema(path).names, "file's schema")
             frame = pd.read_parquet(path)
-        except Exception as exc:  # pyarrow raises many types
-            raise InputError(f"{path}: cannot be read as parquet ({exc})") from None
+        except InputError:
+            raise
+        except Exception as exc:  # pyarrow raises many types, with messages of many lines
+            raise InputError(f"{path}: cannot be read as parquet ({str(exc).strip().splitlines()[0][:200]})") from None
         if not isinstance(frame.index, pd.RangeIndex) or any(n is not None for n in frame.index.names):
             frame = frame.reset_index()  # a stored index (e.g. time) is a column like any other
         frame.columns = [str(c) for c in frame.columns]
@@ -352,6 +382,8 @@ def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -
     refused.
     """
     kw = dict(sep=sep, skipinitialspace=True)
+    if len(sep) > 1 and sep != r"\s+":
+        kw["engine"] = "python"  # a separator of several characters is a regular expression to pandas
     if not header:
         frame = pd.read_csv(path, header=None, **kw)
         if names is not None:
@@ -361,6 +393,8 @@ def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -
                 raise InputError(f"{path}: --names gives {len(names)} names but the file has {frame.shape[1]} columns")
             frame.columns = list(names)
         return frame
+    header_row = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, **kw)
+    _refuse_duplicate_names(path, header_row.iloc[0].tolist() if len(header_row) else [])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", pd.errors.ParserWarning)
         frame = pd.read_csv(path, header=0, index_col=False, **kw)
@@ -386,21 +420,25 @@ def _vectors_to_frame(path: Path, arrays: Mapping[str, np.ndarray]):
         elif v.ndim == 1 or (v.ndim == 2 and 1 in v.shape):
             vectors[k] = v.reshape(-1)
         elif v.ndim == 2:
+            if v.shape[1] > v.shape[0]:
+                warn(f"{path}: variable '{k}' is a {v.shape[0]} x {v.shape[1]} matrix; read as {v.shape[1]} rows of "
+                     f"{v.shape[0]} columns ({k}_0 ... {k}_{v.shape[0] - 1}), one row per sample")
+                v = v.T
             for j in range(v.shape[1]):
                 vectors[f"{k}_{j}"] = v[:, j]
         else:
             other.append(k)
     if not vectors:
-        raise InputError(f"{path}: holds no numeric vectors (variables: {', '.join(arrays) or 'none'})")
+        raise InputError(f"{path}: holds no numeric vectors (variables: {_names(arrays) or 'none'})")
     n = max(len(v) for v in vectors.values())
     short = sorted(k for k, v in vectors.items() if len(v) != n)
     frame = pd.DataFrame({k: v for k, v in vectors.items() if len(v) == n})
     for k in short:
         meta[k] = vectors[k]
     if short:
-        warn(f"{path}: variables {', '.join(short)} are not vectors of length {n}; kept in meta, not as columns")
+        warn(f"{path}: variables {_names(short)} are not vectors of length {n}; kept in meta, not as columns")
     if other:
-        warn(f"{path}: variables {', '.join(other)} are not numeric vectors or matrices (text, structs, cells, "
+        warn(f"{path}: variables {_names(other)} are not numeric vectors or matrices (text, structs, cells, "
              "3-D arrays); ignored")
     return frame, meta
 
@@ -492,7 +530,7 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
     rename = {}
     for canon, src in mapping.items():
         if src not in frame.columns:
-            raise InputError(f"{path}: no column '{src}' (given in --map {canon}={src}); columns are: {', '.join(cols)}")
+            raise InputError(f"{path}: no column '{src}' (given in --map {canon}={src}); columns are: {_names(cols)}")
         rename[src] = canon
     clash = [c for c in rename.values() if c in frame.columns and c not in rename]
     if clash:
@@ -504,7 +542,7 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
             hint = "".join(f"; --scale applies after --map: use --scale {canon}=..." for canon, src in mapping.items()
                            if src == col)
             raise InputError(f"{path}: --scale names column '{col}', which is not there "
-                             f"(columns: {', '.join(frame.columns)}){hint}")
+                             f"(columns: {_names(frame.columns)}){hint}")
         given = factor
         if isinstance(factor, str):
             try:
@@ -569,16 +607,16 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
         cols = list(frame.columns)
         # --- required columns
         if "theta" not in frame:
-            raise InputError(f"{path}: no column 'theta' (position); columns are: {', '.join(cols)}; "
+            raise InputError(f"{path}: no column 'theta' (position); columns are: {_names(cols)}; "
                              "name the position column with --map theta=NAME")
         has_t = "t" in frame
         if not has_t and fs is None:
-            raise InputError(f"{path}: no time column 't' and no --fs; columns are: {', '.join(cols)}; "
+            raise InputError(f"{path}: no time column 't' and no --fs; columns are: {_names(cols)}; "
                              "map the time column with --map t=NAME or give the sample rate with --fs HZ")
         if has_t and fs is not None:
             warn(f"{path}: has a time column 't'; --fs {fs:g} is ignored")
         if "torque" not in frame and "current" not in frame:
-            raise InputError(f"{path}: neither 'torque' nor 'current' is there; columns are: {', '.join(cols)}; "
+            raise InputError(f"{path}: neither 'torque' nor 'current' is there; columns are: {_names(cols)}; "
                              "map one with --map torque=NAME or --map current=NAME")
         this_sig = signal or ("torque" if "torque" in frame else "current")
         if this_sig not in frame:
@@ -649,6 +687,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
                     _auto_gaps=auto_gaps)
     _check_time_unit(rec)
     _check_motion(rec)
+    _check_signal(rec)
     _check_units(rec)
     if sig_used == "current":
         factor = gear.torque_constant * (gear.total_ratio if gear.reference == "output" else 1.0)
@@ -841,12 +880,36 @@ def _check_time_unit(rec: Recording) -> None:
              "use --scale t=0.001 or --fs HZ")
 
 
+#: smallest change of position any encoder resolves (rad or m): a 32-bit encoder's count is 1.5e-9 rad,
+#: an interferometer's 1e-12 m; a theta whose whole range is below this is in the wrong unit or noise
+MIN_POSITION_RANGE = 1e-12
+#: a signal whose range is below this fraction of its magnitude (or below 1e-15 absolute) never changes
+MIN_SIGNAL_CHANGE = 1e-12
+
+
+def _check_signal(rec: Recording) -> None:
+    """The analysed channel must change: a constant (or denormal) torque holds no friction to fit."""
+    col = rec.signal
+    v = rec.data[col].to_numpy(dtype=float)
+    src = ", ".join(rec.sources)
+    rng = float(np.ptp(v))
+    if rng == 0:
+        raise InputError(f"{src}: column '{col}' never changes (always {v[0]:g}); it holds no friction to analyse: "
+                         "check which column is mapped to it")
+    if rng < max(1e-15, MIN_SIGNAL_CHANGE * float(np.max(np.abs(v)))):
+        raise InputError(f"{src}: column '{col}' changes only by {rng:.3g} in all (below any sensor's resolution); "
+                         "check the column and its unit (--scale)")
+
+
 def _check_motion(rec: Recording) -> None:
     theta = rec.theta
     src = ", ".join(rec.sources)
     if np.ptp(theta) == 0:
         raise InputError(f"{src}: column 'theta' never changes (always {theta[0]:g}): the drive did not move, "
                          "or the wrong column is mapped to theta")
+    if np.ptp(theta) < MIN_POSITION_RANGE:
+        raise InputError(f"{src}: column 'theta' moves by only {np.ptp(theta):.3g} {rec.unit} in all, less than any "
+                         "encoder step: the drive did not move, or theta is in the wrong unit (--scale)")
     moved = False
     pieces = rec.pieces()
     longest = max(e - s for _, s, e in pieces)
