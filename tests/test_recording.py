@@ -958,12 +958,14 @@ def test_trajectory_on_jittered_stamps_is_resampled_and_matches_the_uniform_log(
     assert any("resampled to a uniform grid at its median step" in n for n in out["jittered"].notes)
     # on its own grid each is the same trajectory: compare at the uniform log's times.  Linear
     # interpolation over a 1 ms step errs by h^2/8 |theta''| <= 1.1e-5 rad (|theta''| <= 70 rad/s^2);
-    # the 20 Hz filter passes that on, differentiated twice: expect well under 1 % of the rms of v and acc.
-    for name in ("v", "acc", "y"):
+    # the 20 Hz filter passes that on, differentiated twice: measured 2e-5 (v) and 7e-5 (acc) of their rms;
+    # the torque is not filtered and its Coulomb step (tanh(v/0.01): ~0.2 ms wide at a reversal, less than
+    # the +-0.3 ms jitter) is smeared by the interpolation: measured 0.9 % of its rms.
+    for name, tol in (("v", 1e-3), ("acc", 1e-3), ("y", 0.02)):
         a, b = getattr(uni, name), np.interp(uni.t, jit.t, getattr(jit, name))
         inner = (uni.t > jit.t[0] + 0.1) & (uni.t < jit.t[-1] - 0.1)
         rel = np.sqrt(np.mean((a[inner] - b[inner]) ** 2)) / np.sqrt(np.mean(a[inner] ** 2))
-        assert rel < 0.01, (name, rel)
+        assert rel < tol, (name, rel)
 
 
 def test_trajectory_refuses_a_step_too_long_to_resample_across():
