@@ -317,6 +317,7 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
     if kind == "csv":
         if sep == "":
             raise InputError(f"{path}: the separator given with --sep is empty")
+        given_sep = sep
         sep = sep if sep is not None else _sniff_sep(path)
         if sep in (" ", "whitespace", r"\s+"):
             sep = r"\s+"
@@ -334,8 +335,9 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
             raise InputError(f"{path}: cannot be read as a table ({str(exc).splitlines()[0]}); "
                              "check --sep") from None
         frame.columns = [str(c).strip() for c in frame.columns]
-        if frame.shape[1] == 1 and len(frame) and sep == ",":
-            raise InputError(f"{path}: only one column ('{frame.columns[0]}') was found; "
+        if frame.shape[1] == 1 and len(frame):
+            how = "with the separator sniffed" if given_sep is None else f"with --sep '{given_sep}'"
+            raise InputError(f"{path}: only one column ('{str(frame.columns[0])[:60]}') was found {how}; "
                              "if the file uses another separator, give --sep")
     elif kind == "parquet":
         try:

@@ -137,7 +137,7 @@ def test_csv_more_fields_than_header_names_is_refused(tmp_path):
 
 def test_csv_wrong_separator_gives_one_column_and_suggests_sep(tmp_path):
     path = write_csv(tmp_path / "a.csv", drive(), sep=";")
-    with pytest.raises(InputError, match=r"only one column \('t;theta;torque'\) was found; .*give --sep"):
+    with pytest.raises(InputError, match=r"only one column \('t;theta;torque'\) was found with --sep ','; .*give --sep"):
         load_recording(path, sep=",")
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
-import os
+import tempfile
 import sys
 import traceback
 import warnings
@@ -82,6 +82,10 @@ def number(low: float | None = None, high: float | None = None, *, integer: bool
 def _window(text: str):
     if text == "auto":
         return text
+    try:
+        float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is neither 'auto' nor a time in s") from None
     return number(0, low_open=True, what="(a speed window in s, or 'auto')")(text)
 
 
@@ -114,8 +118,11 @@ def check_outputs(args) -> None:
             probe = probe.parent
         if not probe.is_dir():
             raise InputError(f"--{option} {value}: cannot be written ({probe} is not a folder)")
-        if not os.access(probe, os.W_OK | os.X_OK):
-            raise InputError(f"--{option} {value}: cannot be written (no permission to write in {probe})")
+        try:  # the one sure test (permissions, read-only and virtual file systems): write a file there
+            with tempfile.TemporaryFile(dir=probe):
+                pass
+        except OSError as exc:
+            raise InputError(f"--{option} {value}: cannot be written ({probe}: {exc.strerror})") from None
 
 
 def stages(args):
