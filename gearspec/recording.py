@@ -877,11 +877,16 @@ def _check_time_unit(rec: Recording) -> None:
         if e - s > 1:
             dts.append(np.median(np.diff(t[s:e])))
     med = float(np.median(dts)) if dts else 0.0
+    if dts and med < MIN_TIME_STEP:
+        raise InputError(f"{', '.join(rec.sources)}: column 't' steps by {med:.3g} s (median), faster than any logger "
+                         "samples; the time column is in the wrong unit (--scale t=...) or is not a time")
     if med >= 1.0:
         warn(f"{', '.join(rec.sources)}: the median time step is {med:g} s; if 't' is in ms or sample numbers, "
              "use --scale t=0.001 or --fs HZ")
 
 
+#: shortest plausible sample period, s (a 1 GHz logger): below it the time column is not in seconds
+MIN_TIME_STEP = 1e-9
 #: smallest change of position any encoder resolves (rad or m): a 32-bit encoder's count is 1.5e-9 rad,
 #: an interferometer's 1e-12 m; a theta whose whole range is below this is in the wrong unit or noise
 MIN_POSITION_RANGE = 1e-12
