@@ -932,14 +932,18 @@ def _check_motion(rec: Recording) -> None:
         nz = np.abs(d[d != 0])
         quantum = nz.min() if len(nz) else 0.0
         noise = 1.4826 * np.median(np.abs(np.diff(d) - np.median(np.diff(d)))) / math.sqrt(6) if len(d) > 2 else 0.0
-        block = max(10, len(th) // 200)
-        disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
-        # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
-        # means too (averaging takes jitter down, a steady drift stays)
-        nb = len(th) // block
-        means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
-        if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
-            moved = True
+        # two block lengths (not multiples of each other): a back-and-forth motion whose period is the
+        # block length returns to the same place every block and would look like no motion at one
+        for block in {max(10, len(th) // 200), max(10, len(th) // 1409)}:
+            disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
+            # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
+            # means too (averaging takes jitter down, a steady drift stays)
+            nb = len(th) // block
+            means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
+            if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
+                moved = True
+                break
+        if moved:
             break
     if not moved:
         raise InputError(f"{src}: no motion: 'theta' only jitters (range {np.ptp(theta):.3g} {rec.unit}) without "

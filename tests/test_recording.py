@@ -982,3 +982,13 @@ def test_trajectory_refuses_a_step_too_long_to_resample_across():
     with pytest.raises(InputError, match=r"run 0: the sample times are not uniform and the step of 0\.003 s at "
                                          r"t = 2\.999 s is longer than a quarter period of the 100 Hz filter"):
         trajectory_data(rec, cutoff=100.0)
+
+
+def test_back_and_forth_with_the_period_of_the_motion_check_block_is_motion():
+    # 2e6 rows at 1 kHz turning 5 s forward, 5 s back: the motion check's block (n // 200 = 10 000 rows
+    # = 10 s) is exactly one period, so block displacements and block means alone see no motion
+    n = 2_000_000
+    t = np.arange(n) / FS
+    theta = np.cumsum(np.where((t // 5) % 2 == 0, 0.04, -0.04))
+    rec = Recording.from_arrays(t=t, theta=theta, torque=0.01 + 1e-4 * np.sin(7 * theta))
+    assert len(rec) == n
