@@ -209,14 +209,27 @@ def auto_max_gap(dt: np.ndarray) -> float:
     return GAP_FACTOR * float(np.quantile(dt, GAP_QUANTILE, method="lower"))
 
 
+def _run_rows(runs: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``(run id, row indices)`` per run; fast when each run's rows are contiguous (the usual case)."""
+    n = len(runs)
+    if n == 0:
+        return []
+    cuts = np.flatnonzero(runs[1:] != runs[:-1]) + 1
+    starts = np.concatenate(([0], cuts))
+    ends = np.concatenate((cuts, [n]))
+    ids = runs[starts]
+    if len(set(ids.tolist())) == len(ids):
+        return [(int(r), np.arange(a, b)) for r, a, b in zip(ids, starts, ends)]
+    return [(int(r), np.flatnonzero(runs == r)) for r in np.unique(runs)]
+
+
 def _logged_gap_limits(frame: pd.DataFrame) -> dict[int, float]:
     """:func:`auto_max_gap` per run from the distinct finite stamps of every row the file holds."""
     t = frame["t"].to_numpy(dtype=float)
     runs = frame["run"].to_numpy()
     out = {}
-    one = len(runs) == 0 or runs[0] == runs[-1] and np.all(runs == runs[0])
-    for rid in ([runs[0]] if one and len(runs) else np.unique(runs)):
-        tr = t if one else t[runs == rid]
+    for rid, idx in _run_rows(runs):
+        tr = t[idx]
         tr = tr[np.isfinite(tr)]
         d = np.diff(tr)
         steps = d[d > 0] if np.all(d >= 0) else np.diff(np.unique(tr))
@@ -695,7 +708,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
         factor = gear.torque_constant * (gear.total_ratio if gear.reference == "output" else 1.0)
         rec.notes.append(f"torque = {factor:g} Nm/A x current (torque constant {gear.torque_constant:g} Nm/A"
                          + (f" x ratio {gear.total_ratio:g}, ideal gear" if gear.reference == "output" else "") + ")")
-    n_gaps = len(rec.pieces()) - len(np.unique(rec.run))
+    n_gaps = len(rec.pieces()) - len(rec.gap_limits())
     if n_gaps:
         rec.notes.append(_gap_note(rec, n_gaps))
     return rec
@@ -734,8 +747,7 @@ def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: 
     new_t = t.astype(float, copy=True)
     n_spread = 0
     n_copy = n_isolated = n_back = 0
-    for rid in np.unique(runs):
-        idx = np.flatnonzero(runs == rid)
+    for rid, idx in _run_rows(runs):
         tr = t[idx]
         prev_max = np.concatenate(([-np.inf], np.maximum.accumulate(tr)[:-1]))
         back = tr < prev_max
@@ -837,8 +849,7 @@ def _unwrap_theta(path, frame: pd.DataFrame, unit: str, notes: list[str]) -> pd.
     runs = frame["run"].to_numpy()
     out = theta.copy()
     changed = False
-    for rid in np.unique(runs):
-        idx = np.flatnonzero(runs == rid)
+    for rid, idx in _run_rows(runs):
         th = theta[idx]
         if len(th) < 3:
             continue
