@@ -47,6 +47,11 @@ _WAVE_MULTIPLES = (1, 2, 4)
 _KIND_RANK = {"shaft": 0, "wave": 1, "mesh": 2, "harmonic": 3, "sideband": 4, "found": 5, "alias": 6}
 _TOP_KEYS = {"name", "reference", "unit", "torque_constant", "inertia", "stages", "description"}
 _STAGE_KEYS = {"name", "kind", "ratio", "teeth", "lead"}
+#: most stages of a gear train (robot drives have one to four; more is a spec mistake)
+MAX_STAGES = 8
+#: largest total ratio (motor turns per output turn) and its inverse the smallest; beyond it the output
+#: shaft's lines lie below any recording's resolution and the line fits become singular
+MAX_TOTAL_RATIO = 1e6
 
 
 @dataclass(frozen=True)
@@ -63,14 +68,15 @@ class Stage:
         where = f"stage '{self.name}'"
         if self.kind not in KINDS:
             raise InputError(f"{where}: unknown kind '{self.kind}' (expected one of {', '.join(KINDS)})")
-        if not (isinstance(self.ratio, (int, float)) and math.isfinite(self.ratio) and self.ratio > 0):
+        if not (_is_number(self.ratio) and math.isfinite(self.ratio) and self.ratio > 0):
             raise InputError(f"{where}: ratio must be a positive number (input turns per output turn), got {self.ratio!r}")
-        if self.teeth is not None and (int(self.teeth) != self.teeth or self.teeth < 1):
+        if self.teeth is not None and (not _is_number(self.teeth) or not math.isfinite(self.teeth)
+                                       or int(self.teeth) != self.teeth or self.teeth < 1):
             raise InputError(f"{where}: teeth must be a positive integer, got {self.teeth!r}")
         if self.lead is not None:
             if self.kind not in _LINEAR_KINDS:
                 raise InputError(f"{where}: 'lead' is only meaningful for a ballscrew or belt stage, not '{self.kind}'")
-            if not (math.isfinite(self.lead) and self.lead > 0):
+            if not (_is_number(self.lead) and math.isfinite(self.lead) and self.lead > 0):
                 raise InputError(f"{where}: lead must be a positive length in m per turn, got {self.lead!r}")
 
 
@@ -117,14 +123,14 @@ class GearTrain:
     source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
-        where = f"gear spec '{self.name}'"
+        where = f"gear spec {self.source}" if self.source else f"gear spec '{self.name}'"
         if self.reference not in ("motor", "output"):
             raise InputError(f"{where}: reference must be 'motor' or 'output', got '{self.reference}'")
         if self.unit not in ("rad", "m"):
             raise InputError(f"{where}: unit must be 'rad' (rotary) or 'm' (linear), got '{self.unit}'")
         for key in ("torque_constant", "inertia"):
             value = getattr(self, key)
-            if value is not None and not (math.isfinite(value) and value > 0):
+            if value is not None and not (_is_number(value) and math.isfinite(value) and value > 0):
                 raise InputError(f"{where}: {key} must be a positive number, got {value!r}")
         names = [s.name for s in self.stages]
         if len(set(names)) != len(names):
@@ -137,11 +143,19 @@ class GearTrain:
                     "stage with 'lead' (m per turn), so that shaft frequencies per metre are known")
         elif linear:
             raise InputError(f"{where}: 'lead' given on a rotary axis (unit = 'rad'); use unit = 'm' for a linear axis")
+        if len(self.stages) > MAX_STAGES:
+            raise InputError(f"{where}: {len(self.stages)} stages; a gear train has at most {MAX_STAGES}")
+        total = math.prod(s.ratio for s in self.stages if s.lead is None)
+        if not (1 / MAX_TOTAL_RATIO <= total <= MAX_TOTAL_RATIO):
+            raise InputError(f"{where}: the stages' ratios multiply to {total:.3g}, outside 1e-6 to 1e6 turns per "
+                             "output turn; check the ratios (input turns per output turn of each stage)")
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_dict(cls, spec: dict, source: str = "") -> "GearTrain":
         where = f"gear spec {source or spec.get('name', '')}".strip()
+        if not isinstance(spec, dict):
+            raise InputError(f"{where}: must be a table of keys (name, reference, unit, stages, ...)")
         unknown = set(spec) - _TOP_KEYS
         if unknown:
             warn(f"{where}: ignoring unknown keys {sorted(unknown)}")
@@ -149,36 +163,51 @@ class GearTrain:
         raw_stages = spec.get("stages", [])
         if not isinstance(raw_stages, list):
             raise InputError(f"{where}: 'stages' must be a list of [[stages]] tables")
+        if len(raw_stages) > MAX_STAGES:
+            raise InputError(f"{where}: {len(raw_stages)} stages; a gear train has at most {MAX_STAGES} "
+                             "(list the stages that put lines into friction, or use a total 'other' stage)")
         for i, st in enumerate(raw_stages):
+            if not isinstance(st, dict):
+                raise InputError(f"{where}: stage {i + 1} must be a [[stages]] table, got {st!r}")
             extra = set(st) - _STAGE_KEYS
             if extra:
                 warn(f"{where}: stage {i + 1} ignores unknown keys {sorted(extra)}")
             if "kind" not in st:
                 raise InputError(f"{where}: stage {i + 1} has no 'kind'")
             kind = st["kind"]
+            label = f"stage {i + 1} ('{st.get('name', kind)}')"
+            if not isinstance(kind, str):
+                raise InputError(f"{where}: {label}: 'kind' must be a name such as \"planetary\", got {kind!r}")
             if "ratio" not in st and kind not in _LINEAR_KINDS:
-                raise InputError(f"{where}: stage {i + 1} ('{st.get('name', kind)}') has no 'ratio'")
-            stages.append(Stage(name=str(st.get("name", f"{kind}{i + 1}")), kind=kind,
-                                ratio=float(st.get("ratio", 1.0)), teeth=st.get("teeth"),
-                                lead=None if st.get("lead") is None else float(st["lead"])))
-        try:
-            return cls(name=str(spec.get("name", Path(source).stem if source else "unnamed")),
-                       reference=spec.get("reference", "motor"), unit=spec.get("unit", "rad"),
-                       torque_constant=_opt_float(spec.get("torque_constant")),
-                       inertia=_opt_float(spec.get("inertia")), stages=tuple(stages),
-                       description=str(spec.get("description", "")), source=source)
-        except (TypeError, ValueError) as exc:
-            if isinstance(exc, InputError):
-                raise
-            raise InputError(f"{where}: {exc}") from None
+                raise InputError(f"{where}: {label} has no 'ratio'")
+            ratio = _spec_number(where, label, "ratio", st.get("ratio", 1.0))
+            teeth = _spec_number(where, label, "teeth", st.get("teeth"), integer=True)
+            lead = _spec_number(where, label, "lead", st.get("lead"))
+            try:
+                stages.append(Stage(name=str(st.get("name", f"{kind}{i + 1}")), kind=kind, ratio=ratio,
+                                    teeth=teeth, lead=lead))
+            except InputError as exc:
+                raise InputError(f"{where}: {exc}") from None
+        for key in ("reference", "unit", "name", "description"):
+            if key in spec and not isinstance(spec[key], str):
+                raise InputError(f"{where}: '{key}' must be a text, got {spec[key]!r}")
+        return cls(name=str(spec.get("name", Path(source).stem if source else "unnamed")),
+                   reference=spec.get("reference", "motor"), unit=spec.get("unit", "rad"),
+                   torque_constant=_spec_number(where, "", "torque_constant", spec.get("torque_constant")),
+                   inertia=_spec_number(where, "", "inertia", spec.get("inertia")), stages=tuple(stages),
+                   description=str(spec.get("description", "")), source=source)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "GearTrain":
         path = Path(path)
         try:
-            text = path.read_text()
+            raw = path.read_bytes()
         except OSError as exc:
             raise InputError(f"gear spec {path}: cannot be read ({exc.strerror})") from None
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise InputError(f"gear spec {path}: is not UTF-8 text (byte {exc.start}); TOML files are UTF-8") from None
         try:
             spec = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
@@ -406,6 +435,26 @@ def _candidates(gear: "GearTrain", max_harmonic: int) -> tuple[Line, ...]:
 
 def _opt_float(x):
     return None if x is None else float(x)
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _spec_number(where: str, label: str, key: str, value, integer: bool = False):
+    """A number from a spec (None stays None); a text, a list or true/false is refused naming the field."""
+    if value is None:
+        return None
+    field_ = f"{label}: '{key}'" if label else f"'{key}'"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        kind = "a whole number" if integer else "a number"
+        got = {str: "a text", list: "a list", dict: "a table", bool: "true/false"}.get(type(value), type(value).__name__)
+        raise InputError(f"{where}: {field_} must be {kind}, got {value!r} ({got})")
+    if integer:
+        if value != int(value) if math.isfinite(value) else True:
+            raise InputError(f"{where}: {field_} must be a whole number, got {value!r}")
+        return int(value)
+    return float(value)
 
 
 # ---------------------------------------------------------------------- presets

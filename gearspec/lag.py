@@ -279,7 +279,7 @@ def lag_option(rec, value, *, say=print, **segment_options):
             except ValueError:
                 raise InputError(f"--window takes seconds or 'auto', got '{opts['window']}'") from None
         est = estimate_lag(rec, segmentation=None, **opts)
-        say(f"lag (--lag auto): {1e3 * est.lag:.4g} ms +- {1e3 * est.se:.2g} ms ({est.describe()})")
+        say(f"--lag auto: {est.describe()}")
         out = apply_lag(rec, est.lag)
         out.meta["lag_se"] = est.se
         out.meta["lag_estimate"] = est.to_dict()

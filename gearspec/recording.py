@@ -24,12 +24,15 @@ import pandas as pd
 from .errors import InputError, warn
 from .gears import GearTrain, load_gear
 
-__all__ = ["Recording", "load_recording", "CANONICAL", "parse_assignments"]
+__all__ = ["Recording", "load_recording", "CANONICAL", "parse_assignments", "auto_max_gap"]
 
 CANONICAL = ("t", "theta", "torque", "current", "velocity", "load", "temperature", "run")
 _NUMERIC_REQUIRED = ("t", "theta", "torque", "current")
 _SUFFIXES = {".csv": "csv", ".txt": "csv", ".dat": "csv", ".tsv": "csv", ".parquet": "parquet",
              ".pq": "parquet", ".mat": "mat", ".npz": "npz"}
+#: rows repeating a time stamp (and not copies of their predecessor) in at least this fraction of a
+#: run's rows are read as a coarse logger clock and spread; rarer ones are isolated and excluded
+CLOCK_BURST_FRACTION = 0.01
 #: largest plausible speed of a rotary reference shaft, rad/s (about 19 000 rpm)
 MAX_PLAUSIBLE_RAD_S = 2000.0
 #: largest plausible speed of a linear axis, m/s
@@ -60,6 +63,9 @@ class Recording:
         Scalars found in the source files (e.g. ``gtau`` in a .mat file).
     gear : GearTrain or None
     sources : list of str
+    max_gap : float or None
+        Longest time step (s) still taken as continuous sampling; a longer step is a gap that splits a
+        run (:meth:`pieces`).  None: chosen per run from the data (:func:`auto_max_gap`).
     """
 
     data: pd.DataFrame
@@ -71,7 +77,10 @@ class Recording:
     meta: dict = field(default_factory=dict)
     gear: GearTrain | None = None
     sources: list[str] = field(default_factory=list)
+    max_gap: float | None = None
     _tau: np.ndarray | None = field(default=None, repr=False)
+    _pieces_cache: tuple | None = field(default=None, repr=False)
+    _auto_gaps: dict = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------------ views
     @property
@@ -113,29 +122,30 @@ class Recording:
     def __len__(self) -> int:
         return len(self.data)
 
-    def pieces(self, gap_factor: float = 5.0) -> list[tuple[int, int, int]]:
+    def gap_limits(self) -> dict[int, float]:
+        """The longest step (s) taken as continuous sampling, per run: :attr:`max_gap` when it is set,
+        otherwise :func:`auto_max_gap` of the run's time steps."""
+        return self._gaps()[1]
+
+    def pieces(self, max_gap: float | None = None) -> list[tuple[int, int, int]]:
         """Contiguous stretches ``(run, start, stop)``: split at run boundaries and at time gaps.
 
-        A gap is a step in ``t`` longer than ``gap_factor`` times the run's median step; nothing
-        downstream treats data on both sides of a gap as continuous.
+        A gap is a step in ``t`` longer than ``max_gap`` seconds (default: the recording's rule,
+        :meth:`gap_limits`); nothing downstream treats data on both sides of a gap as continuous.
         """
-        run = self.run
-        t = self.t
-        out = []
-        if len(run) == 0:
-            return out
-        cuts = np.flatnonzero(np.diff(run) != 0) + 1
-        bounds = np.concatenate(([0], cuts, [len(run)]))
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            dt = np.diff(t[a:b])
-            if len(dt):
-                med = np.median(dt)
-                gaps = np.flatnonzero(dt > gap_factor * med) + a + 1
+        if max_gap is not None:
+            return _split_pieces(self.t, self.run, lambda dt, r: float(max_gap))[0]
+        return list(self._gaps()[0])
+
+    def _gaps(self):
+        key = (id(self.data), len(self.data), self.max_gap)
+        if self._pieces_cache is None or self._pieces_cache[0] != key:
+            if self.max_gap is not None:
+                rule = lambda dt, r: float(self.max_gap)  # noqa: E731
             else:
-                gaps = np.array([], dtype=int)
-            edges = np.concatenate(([a], gaps, [b]))
-            out += [(int(run[a]), int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e > s]
-        return out
+                rule = lambda dt, r: self._auto_gaps[r] if r in self._auto_gaps else auto_max_gap(dt)  # noqa: E731
+            self._pieces_cache = (key,) + _split_pieces(self.t, self.run, rule)
+        return self._pieces_cache[1], self._pieces_cache[2]
 
     def summary(self) -> str:
         n_runs = len(np.unique(self.run)) if len(self) else 0
@@ -150,10 +160,11 @@ class Recording:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_arrays(cls, *, gear=None, unit: str | None = None, signal: str | None = None,
-                    source: str = "arrays", **columns) -> "Recording":
+                    source: str = "arrays", max_gap: float | None = None, **columns) -> "Recording":
         """A recording from arrays (``t=..., theta=..., torque=...``), validated like a file."""
         frame = pd.DataFrame({k: np.asarray(v) for k, v in columns.items() if v is not None})
-        return _assemble([(source, frame, {})], gear=load_gear(gear), unit=unit, signal=signal, fs=None)
+        return _assemble([(source, frame, {})], gear=load_gear(gear), unit=unit, signal=signal, fs=None,
+                         max_gap=max_gap)
 
     def save(self, path: str | Path) -> Path:
         """Write the recording in the recording format (.csv, .parquet or .npz by suffix)."""
@@ -169,6 +180,79 @@ class Recording:
         else:
             raise InputError(f"cannot write recordings as '{path.suffix}' (use .csv, .parquet or .npz)")
         return path
+
+
+# ---------------------------------------------------------------------- gaps
+#: a step longer than this many times the run's 99th-percentile step is a gap (see auto_max_gap)
+GAP_FACTOR = 5.0
+#: quantile of the steps that stands for "the longest regular step" of a run
+GAP_QUANTILE = 0.99
+
+
+def auto_max_gap(dt: np.ndarray) -> float:
+    """The default longest continuous step (s) of a run with time steps ``dt`` (all > 0).
+
+    A gap is an *outlier* of the run's own step distribution: a step more than ``GAP_FACTOR`` (5)
+    times longer than the run's 99th-percentile step (the lower order statistic, so that at least
+    the longest step is always left out of it).  A steady log (1 kHz with jitter) has its 99th
+    percentile near the nominal period, so a dropout of more than about 5 periods splits it, as
+    before; a logger whose steps are broadly spread (rows stored only at rest: many short steps and
+    many long ones) has a long 99th percentile, so its regular long steps do not split it: only a
+    pause far beyond any regular step does.  A dropout is rare (under 1 % of the steps); steps that
+    are more common than that are part of how the file was logged.
+    """
+    dt = np.asarray(dt, dtype=float)
+    if len(dt) == 0:
+        return math.inf
+    if len(dt) == 1:
+        return GAP_FACTOR * float(dt[0])
+    return GAP_FACTOR * float(np.quantile(dt, GAP_QUANTILE, method="lower"))
+
+
+def _run_rows(runs: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``(run id, row indices)`` per run; fast when each run's rows are contiguous (the usual case)."""
+    n = len(runs)
+    if n == 0:
+        return []
+    cuts = np.flatnonzero(runs[1:] != runs[:-1]) + 1
+    starts = np.concatenate(([0], cuts))
+    ends = np.concatenate((cuts, [n]))
+    ids = runs[starts]
+    if len(set(ids.tolist())) == len(ids):
+        return [(int(r), np.arange(a, b)) for r, a, b in zip(ids, starts, ends)]
+    return [(int(r), np.flatnonzero(runs == r)) for r in np.unique(runs)]
+
+
+def _logged_gap_limits(frame: pd.DataFrame) -> dict[int, float]:
+    """:func:`auto_max_gap` per run from the distinct finite stamps of every row the file holds."""
+    t = frame["t"].to_numpy(dtype=float)
+    runs = frame["run"].to_numpy()
+    out = {}
+    for rid, idx in _run_rows(runs):
+        tr = t[idx]
+        tr = tr[np.isfinite(tr)]
+        d = np.diff(tr)
+        steps = d[d > 0] if np.all(d >= 0) else np.diff(np.unique(tr))
+        out[int(rid)] = auto_max_gap(steps)
+    return out
+
+
+def _split_pieces(t: np.ndarray, run: np.ndarray, rule) -> tuple[list, dict]:
+    """Pieces ``(run, start, stop)`` and the gap limit used per run (``rule(steps, run) -> seconds``)."""
+    out: list = []
+    limits: dict = {}
+    if len(run) == 0:
+        return out, limits
+    cuts = np.flatnonzero(np.diff(run) != 0) + 1
+    bounds = np.concatenate(([0], cuts, [len(run)]))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        dt = np.diff(t[a:b])
+        limit = rule(dt, int(run[a]))
+        limits[int(run[a])] = limit
+        gaps = np.flatnonzero(dt > limit) + a + 1
+        edges = np.concatenate(([a], gaps, [b]))
+        out += [(int(run[a]), int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e > s]
+    return out, limits
 
 
 # ---------------------------------------------------------------------- parsing helpers
@@ -197,6 +281,27 @@ def parse_assignments(text: str | None, option: str, numeric: bool = False) -> d
     return out
 
 
+def _names(names, limit: int = 12) -> str:
+    """Names for a message, at most ``limit`` of them (a message listing thousands helps nobody)."""
+    names = [str(n) for n in names]
+    if len(names) <= limit:
+        return ", ".join(names)
+    return ", ".join(names[:limit]) + f", ... ({len(names)} in all)"
+
+
+def _refuse_duplicate_names(path, names, where: str = "header") -> None:
+    seen: dict = {}
+    for raw in names:
+        key = str(raw).strip()
+        if key == "":
+            continue  # pandas names an empty header field 'Unnamed: k'
+        if key in seen:
+            same = "" if str(raw) == seen[key] else f" ('{seen[key]}' and '{raw}' differ only in blanks)"
+            raise InputError(f"{path}: column '{key}' appears twice in the {where}{same}; give every column "
+                             "its own name")
+        seen[key] = str(raw)
+
+
 def _sniff_sep(path: Path) -> str:
     with open(path, "r", errors="replace") as fh:
         for line in fh:
@@ -223,9 +328,14 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
         raise InputError(f"{path}: unknown file type '{path.suffix}' (accepted: .csv, .parquet, .mat, .npz)")
     meta: dict = {}
     if kind == "csv":
+        if sep == "":
+            raise InputError(f"{path}: the separator given with --sep is empty")
+        given_sep = sep
         sep = sep if sep is not None else _sniff_sep(path)
         if sep in (" ", "whitespace", r"\s+"):
             sep = r"\s+"
+        if names is not None:
+            _refuse_duplicate_names(path, names, "--names")
         if names is not None and header:
             raise InputError(f"{path}: --names is for files without a header row; add --no-header")
         if not header and names is None:
@@ -238,14 +348,20 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
             raise InputError(f"{path}: cannot be read as a table ({str(exc).splitlines()[0]}); "
                              "check --sep") from None
         frame.columns = [str(c).strip() for c in frame.columns]
-        if frame.shape[1] == 1 and len(frame) and sep == ",":
-            raise InputError(f"{path}: only one column ('{frame.columns[0]}') was found; "
+        if frame.shape[1] == 1 and len(frame):
+            how = "with the separator sniffed" if given_sep is None else f"with --sep '{given_sep}'"
+            raise InputError(f"{path}: only one column ('{str(frame.columns[0])[:60]}') was found {how}; "
                              "if the file uses another separator, give --sep")
     elif kind == "parquet":
         try:
+            import pyarrow.parquet as pq
+
+            _refuse_duplicate_names(path, pq.read_schema(path).names, "file's schema")
             frame = pd.read_parquet(path)
-        except Exception as exc:  # pyarrow raises many types
-            raise InputError(f"{path}: cannot be read as parquet ({exc})") from None
+        except InputError:
+            raise
+        except Exception as exc:  # pyarrow raises many types, with messages of many lines
+            raise InputError(f"{path}: cannot be read as parquet ({str(exc).strip().splitlines()[0][:200]})") from None
         if not isinstance(frame.index, pd.RangeIndex) or any(n is not None for n in frame.index.names):
             frame = frame.reset_index()  # a stored index (e.g. time) is a column like any other
         frame.columns = [str(c) for c in frame.columns]
@@ -281,6 +397,8 @@ def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -
     refused.
     """
     kw = dict(sep=sep, skipinitialspace=True)
+    if len(sep) > 1 and sep != r"\s+":
+        kw["engine"] = "python"  # a separator of several characters is a regular expression to pandas
     if not header:
         frame = pd.read_csv(path, header=None, **kw)
         if names is not None:
@@ -290,6 +408,8 @@ def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -
                 raise InputError(f"{path}: --names gives {len(names)} names but the file has {frame.shape[1]} columns")
             frame.columns = list(names)
         return frame
+    header_row = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, **kw)
+    _refuse_duplicate_names(path, header_row.iloc[0].tolist() if len(header_row) else [])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", pd.errors.ParserWarning)
         frame = pd.read_csv(path, header=0, index_col=False, **kw)
@@ -315,21 +435,25 @@ def _vectors_to_frame(path: Path, arrays: Mapping[str, np.ndarray]):
         elif v.ndim == 1 or (v.ndim == 2 and 1 in v.shape):
             vectors[k] = v.reshape(-1)
         elif v.ndim == 2:
+            if v.shape[1] > v.shape[0]:
+                warn(f"{path}: variable '{k}' is a {v.shape[0]} x {v.shape[1]} matrix; read as {v.shape[1]} rows of "
+                     f"{v.shape[0]} columns ({k}_0 ... {k}_{v.shape[0] - 1}), one row per sample")
+                v = v.T
             for j in range(v.shape[1]):
                 vectors[f"{k}_{j}"] = v[:, j]
         else:
             other.append(k)
     if not vectors:
-        raise InputError(f"{path}: holds no numeric vectors (variables: {', '.join(arrays) or 'none'})")
+        raise InputError(f"{path}: holds no numeric vectors (variables: {_names(arrays) or 'none'})")
     n = max(len(v) for v in vectors.values())
     short = sorted(k for k, v in vectors.items() if len(v) != n)
     frame = pd.DataFrame({k: v for k, v in vectors.items() if len(v) == n})
     for k in short:
         meta[k] = vectors[k]
     if short:
-        warn(f"{path}: variables {', '.join(short)} are not vectors of length {n}; kept in meta, not as columns")
+        warn(f"{path}: variables {_names(short)} are not vectors of length {n}; kept in meta, not as columns")
     if other:
-        warn(f"{path}: variables {', '.join(other)} are not numeric vectors or matrices (text, structs, cells, "
+        warn(f"{path}: variables {_names(other)} are not numeric vectors or matrices (text, structs, cells, "
              "3-D arrays); ignored")
     return frame, meta
 
@@ -348,7 +472,7 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
                    map: Mapping[str, str] | str | None = None, scale: Mapping[str, float | str] | str | None = None,
                    fs: float | None = None, sep: str | None = None, header: bool = True,
                    names: Sequence[str] | str | None = None, signal: str | None = None,
-                   max_bad_fraction: float = 0.05) -> Recording:
+                   max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
     """Load one or more recording files (or folders of them) into a validated :class:`Recording`.
 
     Parameters
@@ -374,6 +498,10 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
     max_bad_fraction : float
         Rows with NaN/inf, duplicate or backward times are excluded and counted; if more than this
         fraction of a file's rows are bad, the file is refused instead.
+    max_gap : float, optional
+        A time step longer than this (s) is a gap that splits a run.  Default: chosen per run from
+        its own step distribution (:func:`auto_max_gap`: 5 x its 99th-percentile step) and reported
+        in ``notes``.
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]
@@ -408,7 +536,8 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
         frame, meta = _read_file(path, sep, header, names)
         frame = _map_and_scale(path, frame, meta, mapping, scaling)
         parts.append((str(path), frame, meta))
-    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction)
+    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction,
+                     max_gap=max_gap)
 
 
 def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, scaling: dict) -> pd.DataFrame:
@@ -416,7 +545,7 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
     rename = {}
     for canon, src in mapping.items():
         if src not in frame.columns:
-            raise InputError(f"{path}: no column '{src}' (given in --map {canon}={src}); columns are: {', '.join(cols)}")
+            raise InputError(f"{path}: no column '{src}' (given in --map {canon}={src}); columns are: {_names(cols)}")
         rename[src] = canon
     clash = [c for c in rename.values() if c in frame.columns and c not in rename]
     if clash:
@@ -428,7 +557,7 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
             hint = "".join(f"; --scale applies after --map: use --scale {canon}=..." for canon, src in mapping.items()
                            if src == col)
             raise InputError(f"{path}: --scale names column '{col}', which is not there "
-                             f"(columns: {', '.join(frame.columns)}){hint}")
+                             f"(columns: {_names(frame.columns)}){hint}")
         given = factor
         if isinstance(factor, str):
             try:
@@ -463,8 +592,15 @@ def _numeric_column(path, frame: pd.DataFrame, col: str) -> pd.Series:
 
 
 def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
-              max_bad_fraction: float = 0.05) -> Recording:
+              max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
     unit = unit or (gear.unit if gear is not None else "rad")
+    if max_gap is not None:
+        try:
+            max_gap = float(max_gap)
+        except (TypeError, ValueError):
+            raise InputError(f"--max-gap must be a time in seconds, got {max_gap!r}") from None
+        if not (math.isfinite(max_gap) and max_gap > 0):
+            raise InputError(f"--max-gap must be a positive time in seconds, got {max_gap:g}")
     if unit not in ("rad", "m"):
         raise InputError(f"unit must be 'rad' or 'm', got '{unit}'")
     if fs is not None and not (math.isfinite(fs) and fs > 0):
@@ -478,6 +614,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
     n_read = 0
     sig_used = None
     run_offset = 0
+    auto_gaps: dict = {}
     for path, frame, meta in parts:
         frame = frame.reset_index(drop=True)  # index = data row - 1, kept through exclusions for messages
         n_read += len(frame)
@@ -485,16 +622,16 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
         cols = list(frame.columns)
         # --- required columns
         if "theta" not in frame:
-            raise InputError(f"{path}: no column 'theta' (position); columns are: {', '.join(cols)}; "
+            raise InputError(f"{path}: no column 'theta' (position); columns are: {_names(cols)}; "
                              "name the position column with --map theta=NAME")
         has_t = "t" in frame
         if not has_t and fs is None:
-            raise InputError(f"{path}: no time column 't' and no --fs; columns are: {', '.join(cols)}; "
+            raise InputError(f"{path}: no time column 't' and no --fs; columns are: {_names(cols)}; "
                              "map the time column with --map t=NAME or give the sample rate with --fs HZ")
         if has_t and fs is not None:
             warn(f"{path}: has a time column 't'; --fs {fs:g} is ignored")
         if "torque" not in frame and "current" not in frame:
-            raise InputError(f"{path}: neither 'torque' nor 'current' is there; columns are: {', '.join(cols)}; "
+            raise InputError(f"{path}: neither 'torque' nor 'current' is there; columns are: {_names(cols)}; "
                              "map one with --map torque=NAME or --map current=NAME")
         this_sig = signal or ("torque" if "torque" in frame else "current")
         if this_sig not in frame:
@@ -531,6 +668,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
             frame["run"] = run_offset
             run_offset += 1
         frame["run"] = frame["run"].astype(np.int64)
+        auto_gaps.update(_logged_gap_limits(frame))
         # --- NaN / inf in the columns the analysis needs
         need = ["t", "theta", this_sig]
         finite = np.ones(n, bool)
@@ -549,34 +687,8 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
             excluded["nan_or_inf"] += n_bad
             warn(f"{path}: {n_bad} rows with NaN or inf in {', '.join(need)} excluded")
             frame = frame.loc[finite]
-        # --- time: duplicates and backward steps, per run
-        keep = np.ones(len(frame), bool)
-        t = frame["t"].to_numpy()
-        runs = frame["run"].to_numpy()
-        for rid in np.unique(runs):
-            idx = np.flatnonzero(runs == rid)
-            tr = t[idx]
-            prev_max = np.concatenate(([-np.inf], np.maximum.accumulate(tr)[:-1]))
-            dup = tr == prev_max
-            back = tr < prev_max
-            if back.mean() > max_bad_fraction:
-                first = idx[np.flatnonzero(back)[0]]
-                raise InputError(
-                    f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
-                    f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
-                    "several experiments, give each its own file or a 'run' column")
-            if dup.mean() > max_bad_fraction:
-                raise InputError(f"{path}: column 't' repeats the previous time in {int(dup.sum())} of {len(tr)} rows; "
-                                 "is the time column in the right unit (not rounded to whole seconds)?")
-            keep[idx[dup]] = False
-            keep[idx[back]] = False
-            if dup.any():
-                excluded["duplicate_time"] += int(dup.sum())
-            if back.any():
-                excluded["non_increasing_time"] += int(back.sum())
-        if not keep.all():
-            warn(f"{path}: {int((~keep).sum())} rows with duplicate or backward time excluded")
-            frame = frame.loc[keep]
+        # --- time: backward steps, copies, repeated stamps of a coarse clock; per run
+        frame = _clean_times(path, frame, this_sig, excluded, notes, max_bad_fraction)
         # --- saturation of the analysed signal
         frame, n_sat = _exclude_saturation(path, frame, this_sig)
         if n_sat:
@@ -586,18 +698,118 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
         frames.append(frame)
     data = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0].reset_index(drop=True)
     rec = Recording(data=data, unit=unit, signal=sig_used, excluded=excluded, n_read=n_read, notes=notes,
-                    meta=meta_all, gear=gear, sources=[p for p, _, _ in parts])
+                    meta=meta_all, gear=gear, sources=[p for p, _, _ in parts], max_gap=max_gap,
+                    _auto_gaps=auto_gaps)
     _check_time_unit(rec)
     _check_motion(rec)
+    _check_signal(rec)
     _check_units(rec)
     if sig_used == "current":
         factor = gear.torque_constant * (gear.total_ratio if gear.reference == "output" else 1.0)
         rec.notes.append(f"torque = {factor:g} Nm/A x current (torque constant {gear.torque_constant:g} Nm/A"
                          + (f" x ratio {gear.total_ratio:g}, ideal gear" if gear.reference == "output" else "") + ")")
-    n_gaps = len(rec.pieces()) - len(np.unique(rec.run))
+    n_gaps = len(rec.pieces()) - len(rec.gap_limits())
     if n_gaps:
-        rec.notes.append(f"{n_gaps} time gap(s) longer than 5 sample periods; nothing is analysed across them")
+        rec.notes.append(_gap_note(rec, n_gaps))
     return rec
+
+
+def _gap_note(rec: Recording, n_gaps: int) -> str:
+    limits = [v for v in rec.gap_limits().values() if math.isfinite(v)]
+    lo, hi = min(limits), max(limits)
+    span = f"{lo:.3g} s" if math.isclose(lo, hi, rel_tol=1e-3) else f"{lo:.3g} to {hi:.3g} s (per run)"
+    how = ("--max-gap" if rec.max_gap is not None else
+           f"{GAP_FACTOR:g} x the run's {GAP_QUANTILE:.0%} step; set it with --max-gap")
+    return f"gaps longer than {span} ({how}) split runs: {n_gaps} gap(s); nothing is analysed across them"
+
+
+def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: list[str],
+                 max_bad_fraction: float) -> pd.DataFrame:
+    """Backward and repeated time stamps, per run.
+
+    * A row stamped before an earlier row (``t`` below the running maximum) is excluded
+      (``non_increasing_time``); more than ``max_bad_fraction`` of them is refused (a file holding
+      several experiments without a ``run`` column).
+    * A row that repeats the previous row's stamp *and* its position and signal is a copy of it:
+      excluded (``duplicate_time``).
+    * Other rows that repeat a stamp are samples of a logger whose clock is coarser than its sample
+      rate.  When they are systematic (at least ``CLOCK_BURST_FRACTION`` of the run's rows), each
+      burst of rows sharing a stamp is spread evenly from that stamp towards the next distinct one
+      (no further than the run's typical sample period), with a note; nothing is lost.  When they
+      are isolated (rarer than that) there is no clock to read them by: excluded (``duplicate_time``).
+    * Times in whole seconds of a fast log (many repeats, distinct stamps 1 s or more apart) are the
+      unit mistake they look like: refused.
+    """
+    t = frame["t"].to_numpy()
+    runs = frame["run"].to_numpy()
+    cols = [frame[c].to_numpy() for c in ("theta", sig)]
+    keep = np.ones(len(frame), bool)
+    new_t = t.astype(float, copy=True)
+    n_spread = 0
+    n_copy = n_isolated = n_back = 0
+    for rid, idx in _run_rows(runs):
+        tr = t[idx]
+        prev_max = np.concatenate(([-np.inf], np.maximum.accumulate(tr)[:-1]))
+        back = tr < prev_max
+        if back.mean() > max_bad_fraction:
+            first = idx[np.flatnonzero(back)[0]]
+            raise InputError(
+                f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
+                f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
+                "several experiments, give each its own file or a 'run' column")
+        keep[idx[back]] = False
+        n_back += int(back.sum())
+        ok = idx[~back]  # non-decreasing stamps from here on
+        to = t[ok]
+        rep = np.concatenate(([False], to[1:] == to[:-1]))
+        if not rep.any():
+            continue
+        same = np.concatenate(([False], np.all([c[ok][1:] == c[ok][:-1] for c in cols], axis=0)))
+        copy = rep & same
+        keep[ok[copy]] = False
+        n_copy += int(copy.sum())
+        ok, to, rep = ok[~copy], to[~copy], rep[~copy]
+        n_rep = int(rep.sum())
+        if not n_rep:
+            continue
+        distinct = np.unique(to)
+        med_step = float(np.median(np.diff(distinct))) if len(distinct) > 1 else math.inf
+        if med_step >= 1.0 and n_rep > max_bad_fraction * len(idx):
+            raise InputError(f"{path}: column 't' repeats the previous time in {n_rep} of {len(idx)} rows; "
+                             "is the time column in the right unit (not rounded to whole seconds)?")
+        if n_rep < CLOCK_BURST_FRACTION * len(idx) or len(distinct) < 2:
+            keep[ok[rep]] = False
+            n_isolated += n_rep
+            continue
+        # bursts: rows [s, e) share the stamp to[s]; spread them towards the next distinct stamp
+        starts = np.flatnonzero(~rep)
+        ends = np.concatenate((starts[1:], [len(to)]))
+        size = ends - starts
+        nxt = np.concatenate((to[starts[1:]], [np.nan]))
+        span = nxt - to[starts]
+        period = float(np.median(span[:-1] / size[:-1]))  # the typical sample period of the run
+        even = span / size
+        # a burst before a gap (or the last one) takes the typical period, not the gap
+        step = np.where(np.isfinite(even) & (even <= 2 * period), even, period)
+        offset = np.arange(len(to)) - np.repeat(starts, size)
+        new_t[ok] = to + offset * np.repeat(step, size)
+        n_spread += n_rep
+    n_drop = n_copy + n_isolated
+    if n_copy:
+        excluded["duplicate_time"] += n_copy
+    if n_isolated:
+        excluded["duplicate_time"] += n_isolated
+    if n_back:
+        excluded["non_increasing_time"] += n_back
+    if n_drop or n_back:
+        warn(f"{path}: {n_drop + n_back} rows with duplicate or backward time excluded")
+    if n_spread:
+        notes.append(f"{path}: {n_spread} rows repeat the time stamp of the row before (a logger clock coarser than "
+                     "its sample rate); each burst of equal stamps is spread evenly up to the next stamp, no row lost")
+    if n_spread or not keep.all():
+        frame = frame.copy() if keep.all() else frame.loc[keep].copy()
+        frame["t"] = new_t[keep]
+    return frame
 
 
 def _exclude_saturation(path, frame: pd.DataFrame, col: str):
@@ -637,8 +849,7 @@ def _unwrap_theta(path, frame: pd.DataFrame, unit: str, notes: list[str]) -> pd.
     runs = frame["run"].to_numpy()
     out = theta.copy()
     changed = False
-    for rid in np.unique(runs):
-        idx = np.flatnonzero(runs == rid)
+    for rid, idx in _run_rows(runs):
         th = theta[idx]
         if len(th) < 3:
             continue
@@ -677,9 +888,35 @@ def _check_time_unit(rec: Recording) -> None:
         if e - s > 1:
             dts.append(np.median(np.diff(t[s:e])))
     med = float(np.median(dts)) if dts else 0.0
+    if dts and med < MIN_TIME_STEP:
+        raise InputError(f"{', '.join(rec.sources)}: column 't' steps by {med:.3g} s (median), faster than any logger "
+                         "samples; the time column is in the wrong unit (--scale t=...) or is not a time")
     if med >= 1.0:
         warn(f"{', '.join(rec.sources)}: the median time step is {med:g} s; if 't' is in ms or sample numbers, "
              "use --scale t=0.001 or --fs HZ")
+
+
+#: shortest plausible sample period, s (a 1 GHz logger): below it the time column is not in seconds
+MIN_TIME_STEP = 1e-9
+#: smallest change of position any encoder resolves (rad or m): a 32-bit encoder's count is 1.5e-9 rad,
+#: an interferometer's 1e-12 m; a theta whose whole range is below this is in the wrong unit or noise
+MIN_POSITION_RANGE = 1e-12
+#: a signal whose range is below this fraction of its magnitude (or below 1e-15 absolute) never changes
+MIN_SIGNAL_CHANGE = 1e-12
+
+
+def _check_signal(rec: Recording) -> None:
+    """The analysed channel must change: a constant (or denormal) torque holds no friction to fit."""
+    col = rec.signal
+    v = rec.data[col].to_numpy(dtype=float)
+    src = ", ".join(rec.sources)
+    rng = float(np.ptp(v))
+    if rng == 0:
+        raise InputError(f"{src}: column '{col}' never changes (always {v[0]:g}); it holds no friction to analyse: "
+                         "check which column is mapped to it")
+    if rng < max(1e-15, MIN_SIGNAL_CHANGE * float(np.max(np.abs(v)))):
+        raise InputError(f"{src}: column '{col}' changes only by {rng:.3g} in all (below any sensor's resolution); "
+                         "check the column and its unit (--scale)")
 
 
 def _check_motion(rec: Recording) -> None:
@@ -688,6 +925,9 @@ def _check_motion(rec: Recording) -> None:
     if np.ptp(theta) == 0:
         raise InputError(f"{src}: column 'theta' never changes (always {theta[0]:g}): the drive did not move, "
                          "or the wrong column is mapped to theta")
+    if np.ptp(theta) < MIN_POSITION_RANGE:
+        raise InputError(f"{src}: column 'theta' moves by only {np.ptp(theta):.3g} {rec.unit} in all, less than any "
+                         "encoder step: the drive did not move, or theta is in the wrong unit (--scale)")
     moved = False
     pieces = rec.pieces()
     longest = max(e - s for _, s, e in pieces)
@@ -703,14 +943,18 @@ def _check_motion(rec: Recording) -> None:
         nz = np.abs(d[d != 0])
         quantum = nz.min() if len(nz) else 0.0
         noise = 1.4826 * np.median(np.abs(np.diff(d) - np.median(np.diff(d)))) / math.sqrt(6) if len(d) > 2 else 0.0
-        block = max(10, len(th) // 200)
-        disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
-        # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
-        # means too (averaging takes jitter down, a steady drift stays)
-        nb = len(th) // block
-        means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
-        if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
-            moved = True
+        # two block lengths (not multiples of each other): a back-and-forth motion whose period is the
+        # block length returns to the same place every block and would look like no motion at one
+        for block in {max(10, len(th) // 200), max(10, len(th) // 1409)}:
+            disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
+            # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
+            # means too (averaging takes jitter down, a steady drift stays)
+            nb = len(th) // block
+            means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
+            if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
+                moved = True
+                break
+        if moved:
             break
     if not moved:
         raise InputError(f"{src}: no motion: 'theta' only jitters (range {np.ptp(theta):.3g} {rec.unit}) without "

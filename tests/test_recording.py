@@ -137,7 +137,7 @@ def test_csv_more_fields_than_header_names_is_refused(tmp_path):
 
 def test_csv_wrong_separator_gives_one_column_and_suggests_sep(tmp_path):
     path = write_csv(tmp_path / "a.csv", drive(), sep=";")
-    with pytest.raises(InputError, match=r"only one column \('t;theta;torque'\) was found; .*give --sep"):
+    with pytest.raises(InputError, match=r"only one column \('t;theta;torque'\) was found with --sep ','; .*give --sep"):
         load_recording(path, sep=",")
 
 
@@ -780,7 +780,8 @@ def test_time_gap_is_noted_and_splits_pieces():
     d["t"][1000:] += 1.0
     rec = quiet(Recording.from_arrays, **d)
     assert rec.pieces() == [(0, 0, 1000), (0, 1000, 2000)]
-    assert any("1 time gap(s) longer than 5 sample periods" in n for n in rec.notes)
+    assert any("gaps longer than 0.005 s (5 x the run's 99% step; set it with --max-gap) split runs: 1 gap(s)" in n
+               for n in rec.notes)
 
 
 def test_unknown_unit_and_signal_are_refused():
@@ -816,3 +817,178 @@ def test_malformed_map_reaches_the_user_through_load_recording(tmp_path):
     path = write_csv(tmp_path / "a.csv", drive())
     with pytest.raises(InputError, match=r"--scale: 'torque:2' is not of the form name=value"):
         load_recording(path, scale="torque:2")
+
+
+# ---------------------------------------------------------------------- irregular stamps, gaps, coarse clocks
+def _jittered(n=6000, seed=11):
+    """A 1 kHz log whose steps are uniform in [0.5, 1.5] ms (jitter of +-50 %)."""
+    rng = np.random.default_rng(seed)
+    dt = rng.uniform(0.5e-3, 1.5e-3, n - 1)
+    return dt
+
+
+def _from_steps(dt, speed=2.0):
+    t = np.concatenate(([0.0], np.cumsum(dt)))
+    theta = 0.3 + speed * t
+    torque = 0.2 + 0.02 * np.sin(5 * theta)
+    return {"t": t, "theta": theta, "torque": torque}
+
+
+def test_jittered_log_splits_exactly_at_the_gaps_longer_than_max_gap():
+    dt = _jittered()
+    at = {1000: 0.002, 2000: 0.004, 3000: 0.020, 4000: 0.100}  # gaps of known lengths, s
+    for i, g in at.items():
+        dt[i] = g
+    rec = quiet(Recording.from_arrays, **_from_steps(dt), max_gap=0.01)
+    assert rec.pieces() == [(0, 0, 3001), (0, 3001, 4001), (0, 4001, 6000)]  # the two gaps > 10 ms
+    assert rec.pieces(max_gap=0.003) == [(0, 0, 2001), (0, 2001, 3001), (0, 3001, 4001), (0, 4001, 6000)]
+    assert "gaps longer than 0.01 s (--max-gap) split runs: 2 gap(s)" in " ".join(rec.notes)
+    # default rule: 5 x the 99th-percentile step; the 99th percentile of U(0.5, 1.5) ms is 1.49 ms
+    # (sampling error of the quantile over 6000 steps ~ 0.002 ms), so the limit is 7.45 ms +- 0.05
+    auto = quiet(Recording.from_arrays, **_from_steps(dt))
+    assert auto.gap_limits()[0] == pytest.approx(5 * 1.49e-3, rel=0.01)
+    assert auto.pieces() == [(0, 0, 3001), (0, 3001, 4001), (0, 4001, 6000)]  # 20 and 100 ms split, 2 and 4 ms not
+    assert_ledger(auto)
+
+
+def test_broad_step_distribution_of_rows_stored_at_rest_is_not_shredded():
+    # a quasi-static map: 60 % of the steps 13 ms (rows at rest), 40 % 0.1-1 s (the shaft moving to the
+    # next point); the old rule (5 x median = 65 ms) cut it into ~1600 pieces.  One pause of 60 s
+    # (the operator stopping the sweep) is a real gap.
+    rng = np.random.default_rng(3)
+    n = 4000
+    dt = np.where(rng.random(n - 1) < 0.6, 0.013, rng.uniform(0.1, 1.0, n - 1))
+    dt[2500] = 60.0
+    t = np.concatenate(([0.0], np.cumsum(dt)))
+    theta = 0.002 * np.cumsum(dt > 0.05)  # steps of 2 mrad between rests
+    theta = np.concatenate(([0.0], theta))
+    torque = 0.05 * np.sign(np.sin(theta)) + 0.01 * np.sin(72 * theta) + 1e-3 * rng.standard_normal(n)
+    rec = Recording.from_arrays(t=t, theta=theta, torque=torque)
+    assert rec.pieces() == [(0, 0, 2501), (0, 2501, n)]
+    assert 1.0 < rec.gap_limits()[0] <= 5.0  # 5 x the 99th percentile (~0.99 s) of the steps
+    assert len(rec.pieces(max_gap=5 * 0.013)) > 1000  # the old rule, for contrast
+
+
+def test_rows_excluded_by_gearspec_leave_gaps_measured_against_the_logged_steps():
+    d = _from_steps(np.full(3999, 1e-3))
+    d["torque"][1000:1030] = np.nan  # 30 rows lost to NaN: a 31 ms hole in a 1 ms log
+    rec = Recording.from_arrays(**d)
+    assert rec.gap_limits()[0] == pytest.approx(5e-3)
+    assert rec.pieces() == [(0, 0, 1000), (0, 1000, 3970)]
+    assert_ledger(rec)
+
+
+def test_max_gap_must_be_positive():
+    with pytest.raises(InputError, match=r"--max-gap must be a positive time in seconds, got -1"):
+        Recording.from_arrays(**drive(), max_gap=-1)
+
+
+def test_coarse_clock_bursts_are_spread_to_the_true_times_and_nothing_is_lost():
+    # a 1 kHz log stamped by a 4 ms clock: every stamp repeated by 4 rows
+    d = drive(n=4000)
+    true_t = d["t"].copy()
+    d["t"] = np.floor(np.round(true_t / 1e-3) / 4) * 4e-3
+    rec = quiet(Recording.from_arrays, **d)
+    assert len(rec) == 4000 and not rec.excluded
+    np.testing.assert_allclose(rec.t, true_t, rtol=0, atol=1e-12)  # even spreading is exact for a steady log
+    assert any("3000 rows repeat the time stamp" in n and "no row lost" in n for n in rec.notes)
+    assert rec.pieces() == [(0, 0, 4000)]
+    assert_ledger(rec)
+
+
+def test_coarse_clock_burst_before_a_gap_is_spread_over_one_period_only():
+    d = drive(n=4000)
+    true_t = d["t"].copy()
+    true_t[2000:] += 0.5  # a half-second dropout after row 1999
+    d["t"] = np.floor(np.round(true_t / 1e-3) / 4) * 4e-3
+    rec = quiet(Recording.from_arrays, **d)
+    np.testing.assert_allclose(rec.t, true_t, rtol=0, atol=1e-12)
+    assert rec.pieces() == [(0, 0, 2000), (0, 2000, 4000)]
+
+
+def test_copied_rows_are_excluded_even_when_many():
+    d = drive(n=2000)
+    idx = np.sort(np.concatenate((np.arange(2000), np.arange(0, 2000, 10))))  # every 10th row written twice
+    d = {k: v[idx] for k, v in d.items()}
+    with pytest.warns(GearspecWarning, match=r"200 rows with duplicate or backward time excluded"):
+        rec = Recording.from_arrays(**d)
+    assert rec.excluded == {"duplicate_time": 200} and len(rec) == 2000
+    assert_ledger(rec)
+
+
+def test_jitter_rounded_to_a_clock_tick_is_spread_not_dropped():
+    # 1 kHz with +-0.45 ms jitter stamped by a 1 ms clock (truncated): about a quarter of the stamps
+    # repeat, as many ms are skipped; the order of the samples is kept
+    rng = np.random.default_rng(2)
+    n = 5000
+    true_t = 0.01 + np.arange(n) * 1e-3 + rng.uniform(-0.45e-3, 0.45e-3, n)
+    d = drive(n=n)
+    d["t"] = np.floor(true_t * 1e3 + 1e-9) / 1e3
+    assert np.mean(np.diff(d["t"]) == 0) > 0.2
+    rec = quiet(Recording.from_arrays, **d)
+    assert len(rec) == n and not rec.excluded
+    assert (np.diff(rec.t) > 0).all()
+    # each spread time stays within the clock tick (1 ms) of the true time
+    assert np.max(np.abs(rec.t - true_t)) < 1.5e-3
+
+
+def _excitation(t):
+    """A whole trajectory (sum of sines, 0.3-3 Hz) with its analytic velocity and acceleration."""
+    w = 2 * np.pi * np.array([0.3, 1.1, 2.9])
+    amp = np.array([1.0, 0.3, 0.05])
+    theta = (amp * np.sin(np.outer(t, w))).sum(axis=1)
+    v = (amp * w * np.cos(np.outer(t, w))).sum(axis=1)
+    acc = -(amp * w ** 2 * np.sin(np.outer(t, w))).sum(axis=1)
+    torque = 0.3 * np.tanh(v / 0.01) + 0.05 * v + 0.02 * acc
+    return theta, v, acc, torque
+
+
+def test_trajectory_on_jittered_stamps_is_resampled_and_matches_the_uniform_log():
+    from gearspec.diagnose import trajectory_data
+
+    n, fs = 8000, 1000.0
+    rng = np.random.default_rng(4)
+    t_uni = np.arange(n) / fs
+    t_jit = t_uni + rng.uniform(-0.3e-3, 0.3e-3, n)  # +-30 % jitter of a 1 kHz logger
+    out = {}
+    for name, t in (("uniform", t_uni), ("jittered", t_jit)):
+        theta, v, acc, torque = _excitation(t)
+        rec = quiet(Recording.from_arrays, t=t, theta=theta, torque=torque)
+        out[name] = trajectory_data(rec, cutoff=20.0, decimate_by=1)
+    uni, jit = out["uniform"].fit, out["jittered"].fit
+    assert not any("resampled" in n for n in out["uniform"].notes)
+    assert any("resampled to a uniform grid at its median step" in n for n in out["jittered"].notes)
+    # on its own grid each is the same trajectory: compare at the uniform log's times.  Linear
+    # interpolation over a 1 ms step errs by h^2/8 |theta''| <= 1.1e-5 rad (|theta''| <= 70 rad/s^2);
+    # the 20 Hz filter passes that on, differentiated twice: measured 2e-5 (v) and 7e-5 (acc) of their rms;
+    # the torque is not filtered and its Coulomb step (tanh(v/0.01): ~0.2 ms wide at a reversal, less than
+    # the +-0.3 ms jitter) is smeared by the interpolation: measured 0.9 % of its rms.
+    for name, tol in (("v", 1e-3), ("acc", 1e-3), ("y", 0.02)):
+        a, b = getattr(uni, name), np.interp(uni.t, jit.t, getattr(jit, name))
+        inner = (uni.t > jit.t[0] + 0.1) & (uni.t < jit.t[-1] - 0.1)
+        rel = np.sqrt(np.mean((a[inner] - b[inner]) ** 2)) / np.sqrt(np.mean(a[inner] ** 2))
+        assert rel < tol, (name, rel)
+
+
+def test_trajectory_refuses_a_step_too_long_to_resample_across():
+    from gearspec.diagnose import trajectory_data
+
+    t = np.arange(6000) / 1000.0
+    t[3000:] += 0.002  # a 3 ms step in a 1 kHz log (below the gap rule's 5 ms): uniform no longer
+    theta, v, acc, torque = _excitation(t)
+    rec = quiet(Recording.from_arrays, t=t, theta=theta, torque=torque)
+    assert len(rec.pieces()) == 1
+    trajectory_data(rec, cutoff=20.0)  # 3 ms < a quarter period of 20 Hz (12.5 ms): resampled
+    with pytest.raises(InputError, match=r"run 0: the sample times are not uniform and the step of 0\.003 s at "
+                                         r"t = 2\.999 s is longer than a quarter period of the 100 Hz filter"):
+        trajectory_data(rec, cutoff=100.0)
+
+
+def test_back_and_forth_with_the_period_of_the_motion_check_block_is_motion():
+    # 2e6 rows at 1 kHz turning 5 s forward, 5 s back: the motion check's block (n // 200 = 10 000 rows
+    # = 10 s) is exactly one period, so block displacements and block means alone see no motion
+    n = 2_000_000
+    t = np.arange(n) / FS
+    theta = np.cumsum(np.where((t // 5) % 2 == 0, 0.04, -0.04))
+    rec = Recording.from_arrays(t=t, theta=theta, torque=0.01 + 1e-4 * np.sin(7 * theta))
+    assert len(rec) == n

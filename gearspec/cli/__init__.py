@@ -1,34 +1,137 @@
 """The ``gearspec`` command line (``CONTRACTS.md`` section 4).  A leaf: nothing imports it.
 
 One module per command (``spectrum``, ``fit``, ...), each with ``register(subparsers)``; this
-module holds the options every analysing command shares and :func:`main`.
+module holds the options every analysing command shares, the checks of option values (at parse
+time, one sentence each), and :func:`main`.
 
-Exit status: 0 on success, 2 on bad input (one message on stderr), 1 on an internal failure.
+Exit status: 0 on success, 2 on bad input (one line on stderr), 1 on an internal failure.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import math
+import tempfile
 import sys
 import traceback
 import warnings
+from pathlib import Path
 
 from .. import __version__
 from ..errors import GearspecWarning, InputError
 
-__all__ = ["main", "build_parser", "COMMANDS"]
+__all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs"]
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
 COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo")
+#: longest message printed for a refusal (a message listing thousands of names helps nobody)
+MAX_MESSAGE = 600
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     stream = sys.stderr if file is None else file
     if issubclass(category, GearspecWarning):
-        print(f"gearspec: warning: {message}", file=stream)
+        print(f"gearspec: warning: {_one_line(message)}", file=stream)
     else:
-        print(f"warning: {category.__name__}: {message}", file=stream)
+        print(f"warning: {category.__name__}: {_one_line(message)}", file=stream)
+
+
+def _one_line(message) -> str:
+    text = " ".join(str(message).split())
+    return text if len(text) <= MAX_MESSAGE else text[:MAX_MESSAGE - 5] + " ..."
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with gearspec's one-line refusals (exit 2) instead of usage + message."""
+
+    def error(self, message):
+        self.exit(2, f"gearspec: error: {self.prog}: {_one_line(message)} (see {self.prog} --help)\n")
+
+
+# ---------------------------------------------------------------------- option value types
+def number(low: float | None = None, high: float | None = None, *, integer: bool = False,
+           low_open: bool = False, high_open: bool = False, what: str = ""):
+    """An argparse ``type`` for a number within bounds, refused at parse time with one sentence.
+
+    ``number(0, low_open=True)``: a positive number; ``number(0, 1, low_open=True, high_open=True)``:
+    a probability strictly between 0 and 1; ``number(1, 64, integer=True)``: an integer from 1 to 64.
+    """
+
+    def parse(text: str):
+        kind = "an integer" if integer else "a number"
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not {kind}") from None
+        if not integer and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
+        bad_low = low is not None and (value <= low if low_open else value < low)
+        bad_high = high is not None and (value >= high if high_open else value > high)
+        if bad_low or bad_high:
+            lo = "" if low is None else f"{'above' if low_open else 'at least'} {low:g}"
+            hi = "" if high is None else f"{'below' if high_open else 'at most'} {high:g}"
+            rng = " and ".join(x for x in (lo, hi) if x)
+            raise argparse.ArgumentTypeError(f"must be {rng}{' ' + what if what else ''}, got {text}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"
+    return parse
+
+
+def _window(text: str):
+    if text == "auto":
+        return text
+    try:
+        float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is neither 'auto' nor a time in s") from None
+    return number(0, low_open=True, what="(a speed window in s, or 'auto')")(text)
+
+
+def _separator(text: str) -> str:
+    if text == "":
+        raise argparse.ArgumentTypeError("the separator is empty; give a character such as ';' or 'whitespace'")
+    return text
+
+
+#: positive numbers
+POSITIVE = number(0, low_open=True)
+#: strictly between 0 and 1 (probabilities, levels)
+PROBABILITY = number(0, 1, low_open=True, high_open=True)
+
+
+def check_outputs(args) -> None:
+    """Refuse, before any analysis, an ``--out`` folder or a ``--json`` file that cannot be written."""
+    for option, kind in (("json", "file"), ("out", "folder")):
+        value = getattr(args, option, None)
+        if not value:
+            continue
+        path = Path(value)
+        if kind == "file" and path.is_dir():
+            raise InputError(f"--json {value}: is a folder; give a file name")
+        if kind == "folder" and path.exists() and not path.is_dir():
+            raise InputError(f"--out {value}: is a file, not a folder")
+        # the nearest existing folder must be a folder we may write into
+        probe = path if (kind == "folder" and path.is_dir()) else path.parent
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if not probe.is_dir():
+            raise InputError(f"--{option} {value}: cannot be written ({probe} is not a folder)")
+        try:  # the one sure test (permissions, read-only and virtual file systems): write a file there
+            with tempfile.TemporaryFile(dir=probe):
+                pass
+        except OSError as exc:
+            raise InputError(f"--{option} {value}: cannot be written ({probe}: {exc.strerror})") from None
+
+
+def stages(args):
+    """The :class:`~gearspec.progress.Stages` of this run (silent with ``--quiet``)."""
+    from ..progress import Stages
+
+    if getattr(args, "_stages", None) is None:
+        args._stages = Stages(enabled=not getattr(args, "quiet", False))
+    return args._stages
 
 
 # ---------------------------------------------------------------------- shared options
@@ -42,8 +145,11 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--map", metavar="CANON=NAME,...", help="source column for canonical columns, e.g. theta=qm,torque=vir")
     g.add_argument("--scale", metavar="COL=FACTOR,...",
                    help="multiply columns after mapping, e.g. torque=35.15 (a factor may name a scalar in a .mat file)")
-    g.add_argument("--fs", type=float, metavar="HZ", help="sample rate when the files have no time column")
-    g.add_argument("--sep", help="csv separator (default: sniffed; 'whitespace' for blanks)")
+    g.add_argument("--fs", type=POSITIVE, metavar="HZ", help="sample rate when the files have no time column")
+    g.add_argument("--max-gap", type=POSITIVE, metavar="SECONDS",
+                   help="a time step longer than this splits a run (default: per run, 5 x its 99th-percentile "
+                        "step; reported)")
+    g.add_argument("--sep", type=_separator, help="csv separator (default: sniffed; 'whitespace' for blanks)")
     g.add_argument("--no-header", action="store_true", help="csv files have no header row (give --names)")
     g.add_argument("--names", metavar="A,B,...", help="column names for --no-header files")
     g.add_argument("--signal", choices=("torque", "current"), help="channel to analyse when both are present")
@@ -60,24 +166,30 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
 
 def add_segment_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("segments")
-    g.add_argument("--window", default="auto", help="speed window in s, or 'auto' (default)")
-    g.add_argument("--rel-tol", type=float, default=0.15, help="allowed relative speed change (default 0.15)")
-    g.add_argument("--min-speed", type=float, help="speeds below this (unit/s) are standstill")
-    g.add_argument("--min-duration", type=float, help="shortest segment kept, s")
+    g.add_argument("--window", type=_window, default="auto", help="speed window in s, or 'auto' (default)")
+    g.add_argument("--rel-tol", type=number(0, 1, low_open=True), default=0.15,
+                   help="allowed relative speed change (default 0.15)")
+    g.add_argument("--min-speed", type=POSITIVE, help="speeds below this (unit/s) are standstill")
+    g.add_argument("--min-duration", type=POSITIVE, help="shortest segment kept, s")
     g.add_argument("--no-inertia", action="store_true", help="do not subtract J*thetadd even if the spec gives J")
     g.add_argument("--quasi-static", action=argparse.BooleanOptionalAction, default=None,
                    help="every monotonic sweep of each run is a quasi-static segment (rows taken at rest: torque "
                         "against position, no time derivative); --no-quasi-static: plateaus only; default: recognised")
 
 
-def load_from_args(args):
-    """The recording named by the recording options."""
+def load_from_args(args, paths=None):
+    """The recording named by the recording options (``paths``: other files read with the same options)."""
     from ..recording import load_recording
 
     from ..lag import lag_option
 
-    rec = load_recording(args.recordings, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
-                         header=not args.no_header, names=args.names, signal=args.signal)
+    paths = args.recordings if paths is None else paths
+    st = stages(args)
+    st.start(f"loading {len(paths)} path(s)")
+    rec = load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
+                         header=not args.no_header, names=args.names, signal=args.signal,
+                         max_gap=getattr(args, "max_gap", None))
+    st.done(f"loaded {rec.n_read:,} rows from {len(rec.sources)} file(s), {len(rec):,} usable")
     return lag_option(rec, getattr(args, "lag", None), say=lambda s: getattr(args, "quiet", False) or print(s),
                       **{k: getattr(args, k, None) for k in ("window", "rel_tol", "min_speed", "min_duration")})
 
@@ -96,15 +208,18 @@ def segments_from_args(rec, args):
     """Constant-speed segments with the segment options."""
     from ..segment import find_segments
 
-    return find_segments(rec, window=args.window if args.window == "auto" else float(args.window),
-                         rel_tol=args.rel_tol, min_speed=args.min_speed, min_duration=args.min_duration,
-                         quasi_static=getattr(args, "quasi_static", None))
+    st = stages(args)
+    st.start("finding segments")
+    seg = find_segments(rec, window=args.window if args.window == "auto" else float(args.window),
+                        rel_tol=args.rel_tol, min_speed=args.min_speed, min_duration=args.min_duration,
+                        quasi_static=getattr(args, "quasi_static", None))
+    st.done(f"{len(seg)} segment(s) found, {sum(s.n for s in seg):,} of {rec.n_read:,} rows in them")
+    return seg
 
 
 # ---------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="gearspec", description="Spectral analysis and modelling of friction in "
-                                "robot gear drives.")
+    p = _Parser(prog="gearspec", description="Spectral analysis and modelling of friction in robot gear drives.")
     p.add_argument("--version", action="version", version=f"gearspec {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
@@ -114,25 +229,35 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a refused option value (one line printed)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
-    check = getattr(args, "check", None)
-    if check is not None:
-        check(parser, args)
-    warnings.showwarning = _show_warning
-    warnings.simplefilter("always", GearspecWarning)
-    try:
-        return int(args.func(args) or 0)
-    except InputError as exc:
-        print(f"gearspec: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("gearspec: interrupted", file=sys.stderr)
-        return 1
-    except Exception:  # an internal failure, not the user's fault
-        traceback.print_exc()
-        print("gearspec: internal error (a bug in gearspec; please report it with the command line above)",
-              file=sys.stderr)
-        return 1
+    import numpy as np
+
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.showwarning = _show_warning
+        warnings.simplefilter("always", GearspecWarning)
+        # numerical noise of runs that succeed (empty means, 0/0 already handled) is not the
+        # user's business; what matters reaches them as a GearspecWarning or an InputError
+        warnings.simplefilter("ignore", RuntimeWarning)
+        try:
+            check = getattr(args, "check", None)
+            if check is not None:
+                check(parser, args)
+            check_outputs(args)
+            return int(args.func(args) or 0)
+        except InputError as exc:
+            print(f"gearspec: error: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("gearspec: interrupted", file=sys.stderr)
+            return 1
+        except Exception:  # an internal failure, not the user's fault
+            traceback.print_exc()
+            print("gearspec: internal error (a bug in gearspec; please report it with the command line above)",
+                  file=sys.stderr)
+            return 1

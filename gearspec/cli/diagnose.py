@@ -9,12 +9,16 @@ import sys
 import time
 
 from . import (
+    POSITIVE,
+    PROBABILITY,
     add_output_options,
     add_recording_options,
     add_segment_options,
     load_from_args,
+    number,
     parse_lines,
     segments_from_args,
+    stages,
 )
 
 LAWS = ("silo4", "stribeck", "coulomb_viscous", "lola8", "lola11")
@@ -42,18 +46,18 @@ def register(sub) -> None:
                    help="use every sample of the whole trajectory (inverse dynamic model: filtered position, central "
                         "differences, decimation) instead of the constant-speed segments; the baseline is then "
                         "--law coulomb_viscous with an inertia term")
-    g.add_argument("--cutoff", type=float, default=100.0, help="--trajectory: Butterworth cut-off, Hz (default 100)")
-    g.add_argument("--decimate", type=int, default=10, help="--trajectory: decimation factor (default 10)")
+    g.add_argument("--cutoff", type=POSITIVE, default=100.0, help="--trajectory: Butterworth cut-off, Hz (default 100)")
+    g.add_argument("--decimate", type=number(1, integer=True), default=10, help="--trajectory: decimation factor (default 10)")
     g.add_argument("--offset", action="store_true", help="--trajectory: the baseline has a constant force offset too")
     a = p.add_argument_group("acceptance")
     a.add_argument("--holdout", default="segment", choices=("segment", "run"),
                    help="held-out unit: whole segments (default) or runs (trajectories: whole moves)")
-    a.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
-    a.add_argument("--alpha", type=float, default=0.01,
+    a.add_argument("--folds", type=number(2, 100, integer=True), default=5, help="cross-validation folds (default 5)")
+    a.add_argument("--alpha", type=PROBABILITY, default=0.01,
                    help="family-wise level of the held-out test per round (default 0.01)")
-    a.add_argument("--min-gain", type=float, default=0.005,
+    a.add_argument("--min-gain", type=number(0, 1, high_open=True), default=0.005,
                    help="smallest relative fall of the held-out rmse worth a term (default 0.005)")
-    a.add_argument("--max-rounds", type=int, default=8, help="at most this many terms are added (default 8)")
+    a.add_argument("--max-rounds", type=number(0, 100, integer=True), default=8, help="at most this many terms are added (default 8)")
     a.add_argument("--kinds", metavar="K,K,...", help=f"only these effect kinds ({', '.join(KINDS)})")
     a.add_argument("--validate", metavar="RECORDING", nargs="+",
                    help="independent recording(s), read with the same column options: every accepted term must also "
@@ -66,14 +70,6 @@ def run(args) -> int:
     from ..errors import InputError
 
     t0 = time.perf_counter()
-    if args.folds < 2:
-        raise InputError(f"--folds must be at least 2, got {args.folds}")
-    if not 0 < args.alpha < 1:
-        raise InputError(f"--alpha must lie between 0 and 1, got {args.alpha}")
-    if args.max_rounds < 0:
-        raise InputError(f"--max-rounds must be 0 or more, got {args.max_rounds}")
-    if args.decimate < 1:
-        raise InputError(f"--decimate must be 1 or more, got {args.decimate}")
     kinds = None
     if args.kinds:
         kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
@@ -89,13 +85,13 @@ def run(args) -> int:
     if args.trajectory:
         data = dg.trajectory_data(rec, cutoff=args.cutoff, decimate_by=args.decimate)
         if args.validate:
-            validation = dg.trajectory_data(_load_other(args, args.validate), cutoff=args.cutoff,
+            validation = dg.trajectory_data(load_from_args(args, args.validate), cutoff=args.cutoff,
                                             decimate_by=args.decimate)
     else:
         seg = segments_from_args(rec, args)
         data = dg.DiagnoseData.from_recording(rec, seg, by=args.holdout, inertia=not args.no_inertia)
         if args.validate:
-            other = _load_other(args, args.validate)
+            other = load_from_args(args, args.validate)
             validation = dg.DiagnoseData.from_recording(other, segments_from_args(other, args), by=args.holdout,
                                                         inertia=not args.no_inertia)
     model = None
@@ -114,6 +110,7 @@ def run(args) -> int:
                        folds=args.folds, alpha=args.alpha, min_gain=args.min_gain, max_rounds=args.max_rounds,
                        kinds=kinds, validation=validation,
                        progress=None if args.quiet else (lambda s: print(s, flush=True)))
+    stages(args).done(f"diagnosis: {sum(e.accepted for e in diag.effects)} effect(s) accepted")
     if args.json:
         from pathlib import Path
 
@@ -147,16 +144,6 @@ def run(args) -> int:
         if args.json:
             print(f"json: {args.json}")
     return 0
-
-
-def _load_other(args, paths):
-    from ..recording import load_recording
-
-    from ..lag import lag_option
-
-    other = load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
-                           header=not args.no_header, names=args.names, signal=args.signal)
-    return lag_option(other, args.lag, say=lambda s: args.quiet or print("validation " + s))
 
 
 def _json_default(o):

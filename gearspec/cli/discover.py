@@ -7,7 +7,16 @@ import sys
 import time
 from pathlib import Path
 
-from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+from . import (
+    PROBABILITY,
+    add_output_options,
+    add_recording_options,
+    add_segment_options,
+    load_from_args,
+    number,
+    segments_from_args,
+    stages,
+)
 
 
 def register(sub) -> None:
@@ -27,27 +36,27 @@ def register(sub) -> None:
     g.add_argument("--no-declared", action="store_true", help="leave out the gear spec's declared lines")
     g.add_argument("--no-spectrum", action="store_true",
                    help="do not run the spectrum analysis for lines the gear spec does not declare")
-    g.add_argument("--spectrum-fap", type=float, default=1e-3,
+    g.add_argument("--spectrum-fap", type=PROBABILITY, default=1e-3,
                    help="false-alarm probability for a found line to enter the library (default 1e-3)")
     g.add_argument("--families", metavar="NAME,...",
                    help="library families to use (default: all the data allow; see the report for the names)")
-    g.add_argument("--stribeck-grid", type=int, default=5, help="Stribeck velocities per shape (default 5)")
-    g.add_argument("--decay-grid", type=int, default=3, help="decay constants per ripple amplitude law (default 3)")
+    g.add_argument("--stribeck-grid", type=number(1, 50, integer=True), default=5, help="Stribeck velocities per shape (default 5)")
+    g.add_argument("--decay-grid", type=number(1, 50, integer=True), default=3, help="decay constants per ripple amplitude law (default 3)")
     g.add_argument("--symmetric", action="store_true", help="symmetric terms only (no direction dependence)")
     g.add_argument("--no-acceleration-term", dest="no_inertia_term", action="store_true",
                    help="no residual-inertia (acceleration) column in the library")
     s = sp.add_argument_group("search and selection")
     s.add_argument("--optimizer", choices=("stlsq", "sr3"), default="stlsq", help="pysindy optimiser (default stlsq)")
-    s.add_argument("--alpha", type=float, default=1e-4, help="STLSQ ridge weight, relative (default 1e-4)")
-    s.add_argument("--thresholds", type=int, default=24, help="thresholds on the path (default 24)")
-    s.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    s.add_argument("--alpha", type=number(0), default=1e-4, help="STLSQ ridge weight, relative (default 1e-4)")
+    s.add_argument("--thresholds", type=number(2, 1000, integer=True), default=24, help="thresholds on the path (default 24)")
+    s.add_argument("--folds", type=number(2, 100, integer=True), default=5, help="cross-validation folds (default 5)")
     s.add_argument("--by", choices=("segment", "run"), default="segment",
                    help="hold out whole segments or whole runs (default segment)")
-    s.add_argument("--se-rule", type=float, default=4.0,
+    s.add_argument("--se-rule", type=number(0), default=4.0,
                    help="select the simplest law within this many standard errors of the best held-out error "
                         "(default 4)")
-    s.add_argument("--max-terms", type=int, default=12, help="most terms in a law (default 12)")
-    s.add_argument("--bootstrap", type=int, default=50,
+    s.add_argument("--max-terms", type=number(1, 200, integer=True), default=12, help="most terms in a law (default 12)")
+    s.add_argument("--bootstrap", type=number(0, 10000, integer=True), default=50,
                    help="segment-bootstrap replicates for inclusion probabilities (default 50; 0: none)")
     s.add_argument("--no-local-search", action="store_true", help="only the sparse-regression path's laws")
     s.add_argument("--compare", default="coulomb_viscous,stribeck,silo4,lola8,lola11",
@@ -55,7 +64,7 @@ def register(sub) -> None:
     s.add_argument("--no-published", action="store_true", help="leave out published models of the data set (EMPS)")
     s.add_argument("--seed", type=int, default=0, help="of the bootstrap")
     add_output_options(sp)
-    sp.add_argument("--top", type=int, default=8, help="laws shown on stdout (default 8)")
+    sp.add_argument("--top", type=number(1, integer=True), default=8, help="laws shown on stdout (default 8)")
     sp.set_defaults(func=run)
 
 
@@ -86,10 +95,6 @@ def run(args) -> int:
     bad = [c for c in compare if c not in PAPER_LAWS]
     if bad:
         raise InputError(f"--compare: unknown law(s) {', '.join(bad)} (known: {', '.join(PAPER_LAWS)}, or 'none')")
-    for name, value, low in (("--folds", args.folds, 2), ("--thresholds", args.thresholds, 2),
-                             ("--max-terms", args.max_terms, 1), ("--bootstrap", args.bootstrap, 0)):
-        if value < low:
-            raise InputError(f"{name} must be at least {low}, got {value}")
     rec = load_from_args(args)
     seg = segments_from_args(rec, args)
     data = FitData.from_recording(rec, seg, inertia=not args.no_inertia)
@@ -109,6 +114,7 @@ def run(args) -> int:
                       max_parts=args.max_terms, se_rule=args.se_rule, local_search=not args.no_local_search,
                       references=compare, published=None if args.no_published else published_models(rec.gear),
                       inertia=not args.no_inertia_term and "auto", seed=args.seed)
+    stages(args).done(f"{len(result.candidates)} laws scored")
     if args.json:
         result.to_json(args.json)
     if args.out:

@@ -8,12 +8,15 @@ import sys
 import time
 
 from . import (
+    POSITIVE,
     add_output_options,
     add_recording_options,
     add_segment_options,
     load_from_args,
+    number,
     parse_lines,
     segments_from_args,
+    stages,
 )
 
 LAWS = ("silo4", "stribeck", "lola8", "lola11", "coulomb_viscous")
@@ -34,29 +37,27 @@ def register(sub) -> None:
                    help="frequencies (cycles per unit of theta) of the lines to fit instead of the gear's declared ones")
     g.add_argument("--holdout", default="segment", choices=("segment", "run"),
                    help="held-out error leaves out whole segments (default) or runs")
-    g.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    g.add_argument("--folds", type=number(2, 100, integer=True), default=5, help="cross-validation folds (default 5)")
     g.add_argument("--se", default="covariance", choices=("covariance", "bootstrap"),
                    help="standard errors from the fit's covariance (default) or a bootstrap over segments")
     g.add_argument("--no-published", action="store_true", help="skip the SILO4 published procedure")
-    g.add_argument("--load-ratio", type=float, metavar="N",
+    g.add_argument("--load-ratio", type=POSITIVE, metavar="N",
                    help="subtract |load|/N from the torque (default for lola laws: the gear's total ratio)")
     add_output_options(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..errors import InputError
     from ..identify import identify_recording
 
     t0 = time.perf_counter()
-    if args.folds < 2:
-        raise InputError(f"--folds must be at least 2, got {args.folds}")
     rec = load_from_args(args)
     seg = segments_from_args(rec, args)
     harmonics = parse_lines(args.lines)
     result = identify_recording(rec, args.law, segmentation=seg, harmonics=harmonics,
                                 published=False if args.no_published else None, holdout=args.holdout,
                                 folds=args.folds, se=args.se, load_ratio=args.load_ratio)
+    stages(args).done(f"fitted {args.law}")
     if args.json:
         from pathlib import Path
 

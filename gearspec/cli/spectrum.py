@@ -7,7 +7,23 @@ import sys
 import time
 from pathlib import Path
 
-from . import add_output_options, add_recording_options, add_segment_options, load_from_args, segments_from_args
+from . import (
+    POSITIVE,
+    PROBABILITY,
+    add_output_options,
+    add_recording_options,
+    add_segment_options,
+    load_from_args,
+    number,
+    segments_from_args,
+    stages,
+)
+
+#: highest harmonic of the declared lines: the line count (and the time of the harmonic fit, which
+#: grows faster than linearly in it) grows with it, and beyond this no drive's ripple is resolved
+MAX_HARMONICS = 16
+#: most undeclared peaks per segment
+MAX_PEAKS = 64
 
 
 def register(sub) -> None:
@@ -18,11 +34,14 @@ def register(sub) -> None:
     add_recording_options(sp)
     add_segment_options(sp)
     g = sp.add_argument_group("spectra")
-    g.add_argument("--max-frequency", type=float, help="highest frequency searched, cycles per unit of theta")
-    g.add_argument("--min-cycles", type=float, default=1.0, help="cycles a declared line must complete in a segment")
-    g.add_argument("--harmonics", type=int, default=1, help="fit declared lines up to this harmonic (default 1)")
-    g.add_argument("--fap", type=float, default=0.01, help="false-alarm probability for a found peak (default 0.01)")
-    g.add_argument("--max-peaks", type=int, default=8, help="most undeclared peaks per segment (default 8)")
+    g.add_argument("--max-frequency", type=POSITIVE, help="highest frequency searched, cycles per unit of theta")
+    g.add_argument("--min-cycles", type=POSITIVE, default=1.0, help="cycles a declared line must complete in a segment")
+    g.add_argument("--harmonics", type=number(1, MAX_HARMONICS, integer=True), default=1,
+                   help=f"fit declared lines up to this harmonic (default 1, at most {MAX_HARMONICS})")
+    g.add_argument("--fap", type=PROBABILITY, default=0.01,
+                   help="false-alarm probability for a found peak, between 0 and 1 (default 0.01)")
+    g.add_argument("--max-peaks", type=number(0, MAX_PEAKS, integer=True), default=8,
+                   help=f"most undeclared peaks per segment (default 8, at most {MAX_PEAKS})")
     g.add_argument("--method", default="auto", choices=("auto", "nifty", "astropy", "scipy"),
                    help="Lomb-Scargle implementation")
     add_output_options(sp)
@@ -40,6 +59,7 @@ def run(args) -> int:
                      min_cycles=args.min_cycles, harmonics=args.harmonics, fap_threshold=args.fap,
                      max_peaks=args.max_peaks, method=args.method, keep_spectra=bool(args.out),
                      progress=None if not args.quiet else False)
+    stages(args).done(f"spectra of {len(result.segments)} segment(s)")
     if args.json:
         result.to_json(args.json)
     if args.out:

@@ -349,36 +349,60 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
     relative errors are those of the reference procedure (EMPS: 4.08 %, 3.11 %).
 
     Held-out unit: the *moves* (:func:`moves`), one motion between standstills or reversals each.
-    ``t`` must be uniform within a run; ``fs`` (Hz) gives the nominal sample rate the filter and
-    the differences use (default: from the median time step; EMPS's clock steps are 1.00002 ms,
-    its reference procedure uses 1 ms).  ``decimate_by=1`` keeps every sample.
+    ``fs`` (Hz) gives the nominal sample rate the filter and the differences use (default: from
+    the median time step; EMPS's clock steps are 1.00002 ms, its reference procedure uses 1 ms).
+    ``decimate_by=1`` keeps every sample.
+
+    The filter and the differences need a uniform grid.  A piece whose steps differ from their
+    median by more than 1 % (a logger's jitter, repeated or dropped stamps) is first resampled to a
+    uniform grid at its median step, every column used (position, torque, load, temperature)
+    linearly interpolated, and the notes say so.  It is refused only when a step within it is longer
+    than a quarter period of the filter's cut-off (``0.25 / cutoff``): interpolating across it would
+    invent motion the filter keeps.
     """
     pieces = rec.pieces()
     if not pieces:
         raise InputError("the recording has no samples")
-    th_all, v_all, a_all, y_all, t_all, run_all, idx_all = [], [], [], [], [], [], []
-    keep_rows = []
+    th_all, v_all, a_all, y_all, t_all, run_all = [], [], [], [], [], []
+    extra = [c for c in ("load", "temperature") if c in rec.data]
+    extra_all: dict = {c: [] for c in extra}
+    resampled = []
     for run, a, b in pieces:
         t = rec.t[a:b]
         if b - a <= border + 4 * max(decimate_by, 1):
             continue
-        dt = float(np.median(np.diff(t)))
-        if np.max(np.abs(np.diff(t) - dt)) > 0.01 * dt:
-            raise InputError(f"run {run}: the sample times are not uniform; a whole-trajectory (IDIM) analysis "
-                             "needs uniform sampling")
+        steps = np.diff(t)
+        dt = float(np.median(steps))
+        cols = {"theta": rec.theta[a:b], "y": rec.tau[a:b]}
+        cols.update({c: rec.data[c].to_numpy(dtype=float)[a:b] for c in extra})
+        if np.max(np.abs(steps - dt)) > 0.01 * dt:
+            k = int(np.argmax(steps))
+            if steps[k] > 0.25 / cutoff:
+                raise InputError(
+                    f"{', '.join(rec.sources)}: run {run}: the sample times are not uniform and the step of "
+                    f"{steps[k]:.3g} s at t = {t[k]:.6g} s is longer than a quarter period of the {cutoff:g} Hz filter "
+                    f"({0.25 / cutoff:.3g} s), too long to resample across honestly; lower --cutoff, or split the run "
+                    "there with --max-gap")
+            grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+            cols = {c: np.interp(grid, t, x) for c, x in cols.items()}
+            resampled.append((run, float(steps.min()), float(steps.max()), dt))
+            t = grid
+            if len(t) <= border + 4 * max(decimate_by, 1):
+                continue
         if fs is not None:
             dt = 1.0 / float(fs)
-        qf = butter_filtfilt(rec.theta[a:b], cutoff, 1.0 / dt, order)
+        qf = butter_filtfilt(cols["theta"], cutoff, 1.0 / dt, order)
         dq = central_difference(qf, dt)
         ddq = central_difference(dq, dt)
         sl = slice(border, None)
         th_all.append(qf[sl])
         v_all.append(dq[sl])
         a_all.append(ddq[sl])
-        y_all.append(rec.tau[a:b][sl])
+        y_all.append(cols["y"][sl])
         t_all.append(t[sl])
-        run_all.append(np.full(b - a - border, run))
-        keep_rows.append(np.arange(a, b)[sl])
+        run_all.append(np.full(len(t) - border, run))
+        for c in extra:
+            extra_all[c].append(cols[c][sl])
     if not th_all:
         raise InputError("every run is too short for the filter and decimation")
     theta = np.concatenate(th_all)
@@ -387,9 +411,17 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
     y = np.concatenate(y_all)
     t = np.concatenate(t_all)
     run = np.concatenate(run_all)
-    rows = np.concatenate(keep_rows)
+    notes_resampled = []
+    if resampled:
+        lo = min(r[1] for r in resampled)
+        hi = max(r[2] for r in resampled)
+        notes_resampled.append(
+            f"sample times not uniform (steps {lo:.3g} to {hi:.3g} s) in {len(resampled)} piece(s): each resampled to a "
+            f"uniform grid at its median step ({', '.join(f'{r[3]:.4g}' for r in resampled[:5])}"
+            f"{', ...' if len(resampled) > 5 else ''} s) by linear interpolation of position, torque"
+            + "".join(f", {c}" for c in extra) + " before filtering")
     mv = moves(v, run, min_speed)
-    get = lambda c: rec.data[c].to_numpy(dtype=float)[rows] if c in rec.data else None  # noqa: E731
+    get = lambda c: np.concatenate(extra_all[c]) if c in extra_all else None  # noqa: E731
     seg_rows = []
     for m in np.unique(mv):
         sel = np.flatnonzero(mv == m)
@@ -402,7 +434,7 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
                  segment=mv, unit=rec.unit, segments=pd.DataFrame(seg_rows),
                  notes=[f"whole trajectory: position filtered ({order}th-order Butterworth, {cutoff:g} Hz, "
                         f"zero phase), central differences, first {border} samples of each run dropped, "
-                        f"decimation by {decimate_by}; {len(np.unique(mv))} moves"])
+                        f"decimation by {decimate_by}; {len(np.unique(mv))} moves"] + notes_resampled)
     # the reduction: decimate each run piece (a linear map), observations = kept samples
     runs = np.unique(run)
     bounds = [(np.flatnonzero(run == r)[0], np.flatnonzero(run == r)[-1] + 1) for r in runs]

@@ -1,0 +1,60 @@
+"""Progress of a command's stages on stderr (loading, segmenting, analysing, writing).
+
+One line per finished stage, ``gearspec: loaded 1,200,000 rows from 3 file(s) (2.1 s)``, so that the
+log of a batch job shows where the time went.  On a terminal the stage under way is shown too
+(``gearspec: loading 3 file(s) ...``) and overwritten by its line when it is done.  Silent when
+disabled (``--quiet``).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+__all__ = ["Stages"]
+
+
+class Stages:
+    """Stage lines for one command run.
+
+    Parameters
+    ----------
+    enabled : bool
+        False prints nothing (``--quiet``).
+    stream : file, optional
+        Default ``sys.stderr`` (looked up at each call, so that redirection and capture work).
+    """
+
+    def __init__(self, enabled: bool = True, stream=None):
+        self.enabled = enabled
+        self._stream = stream
+        self._t0 = time.perf_counter()
+        self._pending = False
+
+    @property
+    def stream(self):
+        return self._stream if self._stream is not None else sys.stderr
+
+    def _tty(self) -> bool:
+        try:
+            return bool(self.stream.isatty())
+        except (AttributeError, ValueError):
+            return False
+
+    def start(self, what: str) -> None:
+        """A stage begins: shown on a terminal only (a log gets the line of :meth:`done`)."""
+        self._t0 = time.perf_counter()
+        if self.enabled and self._tty():
+            print(f"gearspec: {what} ...", end="\r", file=self.stream, flush=True)
+            self._pending = True
+
+    def done(self, text: str) -> None:
+        """The stage is done: one line with its duration."""
+        if not self.enabled:
+            return
+        line = f"gearspec: {text} ({time.perf_counter() - self._t0:.1f} s)"
+        if self._pending:
+            line += "\033[K"  # clear what remains of the 'under way' line
+            self._pending = False
+        print(line, file=self.stream, flush=True)
+        self._t0 = time.perf_counter()
