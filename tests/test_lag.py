@@ -188,7 +188,7 @@ def test_cli_lag_auto(base, tmp_path, capsys):
     out = tmp_path / "fit.json"
     assert main(["fit", str(csv), "--gear", str(spec), "--lag", "auto", "--json", str(out), "--no-published"]) == 0
     text = capsys.readouterr().out
-    assert "lag (--lag auto): 2.0" in text
+    assert "--lag auto: lag 2.0" in text
     d = json.loads(out.read_text())
     assert abs(d["lag"] - 2e-3) < 0.1e-3 and d["lag_se"] < 0.05e-3
     assert main(["spectrum", str(csv), "--gear", str(spec), "--lag", "0.002", "--quiet"]) == 0

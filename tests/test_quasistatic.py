@@ -58,8 +58,13 @@ def test_map_recognised_as_two_quasi_static_sweeps():
     # the sweeps are split at the reversal: the turning row ends the forward sweep
     assert [(s.start, s.stop) for s in qs] == [tuple(x[:2]) for x in truth["sweeps"]]
     assert seg.segments[0].to_dict()["kind"] == "quasi_static"
-    # the gap rule plays no part: the same recording cut into many pieces by pauses
-    assert len(rec.pieces()) > 50
+    # the gap rule plays no part: the same recording cut into many pieces by a tight --max-gap
+    # (the default rule keeps a broad step distribution whole) gives the same sweeps
+    assert len(rec.pieces(max_gap=0.05)) > 50
+    cut = Recording.from_arrays(t=rec.t, theta=rec.theta, torque=rec.tau, gear=GEAR, max_gap=0.05)
+    assert len(cut.pieces()) > 50
+    assert [(s.start, s.stop, s.kind) for s in find_segments(cut) if s.kind == "quasi_static"] == \
+        [(s.start, s.stop, s.kind) for s in qs]
     # --quasi-static gives the same segments; --no-quasi-static none of them
     forced = find_segments(rec, quasi_static=True)
     assert forced.segments == seg.segments
@@ -182,7 +187,7 @@ def _jittered_clock(speed, seed=0):
     rng = np.random.default_rng(seed)
     dt = rng.choice([0.001, 0.002], 20000, p=[0.7, 0.3]) * (1 + 0.01 * rng.standard_normal(20000))
     t = np.cumsum(dt)
-    return Recording.from_arrays(t=t, theta=np.round(speed * t / 1e-4) * 1e-4, torque=0.1 + 0 * t)
+    return Recording.from_arrays(t=t, theta=np.round(speed * t / 1e-4) * 1e-4, torque=0.1 + 1e-3 * np.sin(t))
 
 
 def test_plateau_recordings_are_never_quasi_static():
@@ -190,7 +195,7 @@ def test_plateau_recordings_are_never_quasi_static():
     t = np.arange(0, 8, 1 / fs)
     v = 0.05 * (1 + 0.9 * np.sign(np.sin(2 * np.pi * 4 * t)))      # stick-slip plateau
     v[t < 1] = 0.05 * t[t < 1]
-    stick = Recording.from_arrays(t=t, theta=np.cumsum(v) / fs, torque=0.1 + 0 * t)
+    stick = Recording.from_arrays(t=t, theta=np.cumsum(v) / fs, torque=0.1 + 1e-3 * np.sin(t))
     slow, _ = plateau_recording([0.02, -0.02], level=0.1, duration=4.0, fs=500, noise=0.001, quantum=2e-5, seed=2)
     ripple, _ = plateau_recording([2.0, -5.0], ripples=[Ripple(0.8, 0.05)], level=0.3, duration=2.0, fs=1000,
                                   speed_ripple=0.08, noise=0.01, seed=3)
@@ -230,7 +235,7 @@ def test_piece_too_short_for_the_derivative_filter_gets_no_derivative():
     # (savgol_filter raised here before: fit and diagnose exited 1)
     dt = np.concatenate([np.full(39, 0.013), [1.0], np.array([13, 13, 13, 13, 1.3, 1.3, 1.3]) * 1e-3])
     t = np.concatenate(([0.0], np.cumsum(dt)))
-    tau = np.full(len(t), 0.2)
+    tau = 0.2 + 0.01 * np.sin(t)  # varies: a constant torque channel is refused at load
     rec = Recording.from_arrays(t=t, theta=0.1 * t + 0.01 * t ** 2, torque=tau, gear={"name": "g", "inertia": 0.01})
     assert [(a, b) for _, a, b in rec.pieces()] == [(0, 40), (40, 48)]
     vel, acc = derivatives(rec)
@@ -243,15 +248,16 @@ def test_piece_too_short_for_the_derivative_filter_gets_no_derivative():
 def test_fit_and_diagnose_on_a_map_cut_into_short_pieces(tmp_path, capsys):
     # pauses in 10 % of the steps: the gap rule cuts the map into hundreds of short jittered
     # pieces (fit and diagnose exited 1 here before, in the derivative filter)
+    # (the default gap rule keeps such a map whole now: --max-gap 0.05 cuts it as the old rule did)
     rec, truth = _map(seed=2, dt_spread=0.7, gap_probability=0.1, gear=dict(GEAR, inertia=0.01))
-    assert len(rec.pieces()) > 300
+    assert len(rec.pieces(max_gap=0.05)) > 300
     csv = _write(tmp_path, rec, "hard")
-    rc, d = _fit_cli(tmp_path, csv)
+    rc, d = _fit_cli(tmp_path, csv, "--max-gap", "0.05")
     assert rc == 0
     assert d["directions"]["positive"]["tau_c"] == pytest.approx(0.05, abs=4 * d["directions"]["positive"]["tau_c_se"])
     capsys.readouterr()
     for extra in ([], ["--no-quasi-static"]):
-        rc = main(["diagnose", str(csv[0]), "--gear", str(csv[1]), "--quiet", *extra])
+        rc = main(["diagnose", str(csv[0]), "--gear", str(csv[1]), "--quiet", "--max-gap", "0.05", *extra])
         err = capsys.readouterr().err
         assert rc == 0 or (rc == 2 and _one_sentence(err))
 
