@@ -155,3 +155,24 @@ def test_a_line_found_at_slow_speed_explains_its_alias_at_fast_speed():
     assert p_fast.label.startswith("alias of line at 11.9") and p_fast.label.endswith("cycles/rad")
     assert p_fast.aliased_from["frequency"] == pytest.approx(11.9, abs=1e-3)
     assert slow.peaks[-1].label is None or slow.peaks[-1].declared   # the measured one stays as it was
+
+
+def test_diagnose_line_hint_at_a_high_multiple_needs_the_line_own_precision():
+    # a line at 72 x the shaft of a bare motor (the 72-per-turn cogging), fitted to
+    # 1e-6 cycles/rad: the loop's loose tolerance (0.5 % of the frequency, 0.057 cycles/rad) would
+    # match some multiple of the 0.159 cycles/rad shaft by chance in 72 % of cases, so it gives no
+    # hint; the line's own three standard errors do
+    from gearspec.diagnose.candidates import PeriodicCandidate
+    from gearspec.gears import GearTrain
+
+    gear = GearTrain.from_dict({"name": "bare motor", "reference": "motor"})
+    f = 72 / (2 * np.pi)
+    c = PeriodicCandidate(f + 2e-6, 1e-3, gear=gear)
+    assert c.hint is None                      # before the fit: resolution only, no hint
+    c.relabel(f + 2e-6, 1e-6)
+    assert c.hint == "72x shaft"
+    c.relabel(f + 0.03, 1e-6)                  # 0.26 % off the exact order: nothing
+    assert c.hint is None
+    # a low multiple keeps its loose tolerance (a filtered signal shifts a frequency a little)
+    c.relabel(7 / (2 * np.pi) * 1.003, None)
+    assert c.hint == "7x shaft"

@@ -303,8 +303,14 @@ class PeriodicCandidate(Candidate):
         ln = self.gear.label(f, tol) if self.gear is not None else None
         self.label = None if ln is None else ln.label
         # an integer relation to a shaft is looser: a filtered or delayed signal shifts a fitted
-        # frequency by a few tenths of a percent, and neighbouring multiples (6x, 8x) are far apart
-        self.hint = None if (self.gear is None or ln is not None) else integer_hint(self.gear, f, max(tol, 5e-3 * f))
+        # frequency by a few tenths of a percent, and neighbouring multiples (6x, 8x) are far apart;
+        # a high multiple (72x) needs the line's own precision instead, where the loose tolerance
+        # would match a multiple by chance (integer_hint refuses such a tolerance)
+        self.hint = None
+        if self.gear is not None and ln is None:
+            self.hint = integer_hint(self.gear, f, max(tol, 5e-3 * f))
+            if self.hint is None and se is not None and np.isfinite(se) and se > 0:
+                self.hint = integer_hint(self.gear, f, 3 * se)
 
     def propose(self, rnd, train):
         dd = rnd.dd
