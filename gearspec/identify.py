@@ -52,7 +52,7 @@ from .errors import InputError, warn
 from .fitdata import FitData
 from .gears import GearTrain, load_gear
 from .model import LAWS, RPM, FrictionModel
-from .spectrum import position_nyquist
+from .spectrum import MEASURABLE_FRACTION, position_nyquist
 
 __all__ = ["fit", "silo4_published", "holdout_rmse", "holdout", "compare", "refit", "harmonic_specs", "fit_efficiency",
            "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError", "segment_errors", "identify_recording", "FitResult",
@@ -173,7 +173,7 @@ class SegmentStats:
 
 
 def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: float = 1.0,
-                  nyquist_fraction: float = 0.8) -> SegmentStats:
+                  nyquist_fraction: float = MEASURABLE_FRACTION) -> SegmentStats:
     """One pass over the samples of ``data`` (one direction): see :class:`SegmentStats`.
 
     Results are cached per segment on ``data`` (and shared with its whole-segment subsets), so

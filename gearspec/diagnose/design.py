@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel
-from ..spectrum import position_nyquist
+from ..spectrum import MEASURABLE_FRACTION, position_nyquist
 from ..terms import TERMS, amplitude_law, clamp_speed, evaluate_term
 from .data import DiagnoseData
 
@@ -764,7 +764,7 @@ def segment_nyquist(dd: DiagnoseData) -> np.ndarray:
     return out
 
 
-def resolved(dd: DiagnoseData, frequency: float, fraction: float = 0.8) -> np.ndarray:
+def resolved(dd: DiagnoseData, frequency: float, fraction: float = MEASURABLE_FRACTION) -> np.ndarray:
     """Samples whose segment resolves a line at ``frequency`` (below ``fraction`` of its position
     Nyquist frequency)."""
     return frequency < fraction * segment_nyquist(dd)

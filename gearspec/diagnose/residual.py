@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from ..spectrum import LombScargle, false_alarm_probability, local_noise
+from ..spectrum import MEASURABLE_FRACTION, LombScargle, false_alarm_probability, local_noise
 from .data import DiagnoseData
 
 __all__ = ["ResidualSpectrum", "position_spectra", "speed_groups", "speed_analysis", "channel_analysis",
@@ -137,7 +137,7 @@ def _spectrum(dd: DiagnoseData, r: np.ndarray, idx: np.ndarray, *, oversample: f
     if not (span > 0 and longest > 0 and np.isfinite(step) and step > 0) or len(idx) < 32:
         return None
     nyq = 0.5 / step
-    f_hi = 0.8 * nyq if fmax is None else min(fmax, 0.8 * nyq)
+    f_hi = MEASURABLE_FRACTION * nyq if fmax is None else min(fmax, MEASURABLE_FRACTION * nyq)
     f_lo = max(2.0 / longest, 1.0 / span)   # slower lines cannot be told from a level or a drift
     df = 1.0 / (span * oversample)
     nf = int((f_hi - f_lo) / df) + 1

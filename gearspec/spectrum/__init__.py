@@ -4,12 +4,12 @@
 so that they can be used on any signal over position.
 """
 
-from .analysis import Peak, SegmentSpectrum, SpectrumResult, analyze, analyze_segment, position_nyquist
+from .analysis import Peak, SegmentSpectrum, SpectrumResult, analyze, analyze_segment, position_nyquist, MEASURABLE_FRACTION
 from .fft import order_spectrum
 from .harmonic import HarmonicFit, harmonic_fit, min_degree_for_cycles
 from .periodogram import LombScargle, false_alarm_probability, local_noise
 from .resample import resample_over_position
 
-__all__ = ["analyze", "analyze_segment", "position_nyquist", "Peak", "SegmentSpectrum", "SpectrumResult", "order_spectrum",
+__all__ = ["analyze", "analyze_segment", "position_nyquist", "MEASURABLE_FRACTION", "Peak", "SegmentSpectrum", "SpectrumResult", "order_spectrum",
            "HarmonicFit", "harmonic_fit", "min_degree_for_cycles", "LombScargle", "false_alarm_probability",
            "local_noise", "resample_over_position"]

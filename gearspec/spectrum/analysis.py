@@ -286,12 +286,13 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
             skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "too_slow",
                             "reason": f"{cycles:.3g} cycles in the segment (< {min_cycles:g}); absorbed by the nuisance polynomial"})
             slow_cycles.append(cycles)
-        elif ln.frequency > 0.9 * nyquist:
+        elif ln.frequency >= MEASURABLE_FRACTION * nyquist:
             # not measurable here: never fitted; where it shows up (its alias at the mean spacing)
             # is said, and a peak found there is labelled 'alias of <label>'
             skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "above_nyquist",
                             "alias": alias_frequency(ln.frequency, span / (n - 1)) if ln.frequency > nyquist else None,
-                            "reason": f"above 0.9 x the position Nyquist frequency ({nyquist:.4g}): not measured"})
+                            "reason": f"above {MEASURABLE_FRACTION:g} x the position Nyquist frequency ({nyquist:.4g}): "
+                                      "not measured"})
         else:
             fitted.append(ln)
     deg = (max(1, min_degree_for_cycles(max(slow_cycles))) if slow_cycles else 1) if degree == "auto" else int(degree)
@@ -520,6 +521,13 @@ def _ls_threads() -> int | None:
     """finufft's threads for a periodogram: one inside analyze's worker threads (the workers
     already share the CPUs; OpenMP teams on top would oversubscribe them), else its default."""
     return 1 if getattr(_local, "in_pool", False) else None
+
+
+#: a line is measurable in a segment when it lies below this fraction of the segment's position
+#: Nyquist frequency (:func:`position_nyquist`): the one margin of the spectrum, the joint fit
+#: (``identify``) and the closed loop (``diagnose``), so that a line is "measured" in one place
+#: exactly where its amplitude law may be fitted in the others
+MEASURABLE_FRACTION = 0.8
 
 
 def position_nyquist(theta: np.ndarray) -> float:
