@@ -102,3 +102,17 @@ def test_negative_viscous_coefficient_is_warned_and_flagged(tmp_path, capsys):
     warned = [ln for ln in cap.err.splitlines() if ln.startswith("gearspec: warning:") and "negative" in ln]
     assert len(warned) == 2                     # one sentence per direction, not one per fold
     assert "warning: coulomb_viscous" in cap.out  # and in print(model)
+
+
+def test_comparison_text_prints_a_missing_held_out_rmse_as_n_a_with_its_reason():
+    import pandas as pd
+
+    from gearspec.cli.fit import comparison_text
+
+    # no model could be cross-validated (one sweep per direction): the column holds only None
+    comp = pd.DataFrame({"model": ["a", "b"], "rmse": [0.5, 0.25], "rmse_holdout": [None, None],
+                         "rmse_holdout_reason": ["2 segments only", "2 segments only"]})
+    text = comparison_text(comp)
+    assert "None" not in text
+    assert [ln.split()[-1] for ln in text.splitlines()[1:3]] == ["n/a", "n/a"]
+    assert "held-out rmse n/a for a: 2 segments only" in text

@@ -88,7 +88,12 @@ def run(args) -> int:
 def comparison_text(comp) -> str:
     """The comparison table as printed: a missing held-out rmse shows as n/a, with its reason below
     (never a number in its place)."""
+    import pandas as pd
+
     show = comp.drop(columns=["rmse_holdout_reason"], errors="ignore")
+    for col in ("rmse", "rmse_holdout"):  # None (an object column) prints as n/a like NaN
+        if col in show:
+            show[col] = pd.to_numeric(show[col], errors="coerce")
     lines = [show.to_string(index=False, na_rep="n/a", float_format=lambda x: f"{x:.4g}")]
     for _, r in comp.iterrows():
         why = r.get("rmse_holdout_reason")
