@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 GEARSPEC_DATA ?= $(abspath ../shared/datasets)
 export GEARSPEC_DATA
 
-.PHONY: demo test bench clean
+.PHONY: demo test test-fast mutation bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -25,8 +25,19 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
 
+# the quick tier: everything not marked slow (under 4 minutes on 2 cores); not a set-up command
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2 -m "not slow"
+
+# mutation score of the core modules against the quick tier (hours; not run in CI): tests/MUTATION.md.
+# MUTANTS narrows it to mutant names (globs), e.g. make mutation MUTANTS='gearspec.laws.*'
+mutation: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[test,mutation]"
+	MPLBACKEND=Agg $(BIN)/mutmut run $(MUTANTS) || true
+	$(BIN)/python benchmarks/mutation_report.py
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_spectrum.py
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache
+	rm -rf $(VENV) demo-out .pytest_cache mutants

@@ -18,6 +18,7 @@ def recording_csv(tmp_path):
     return rec.save(tmp_path / "rec.csv")
 
 
+@pytest.mark.slow
 def test_spectrum_writes_report_and_json(recording_csv, tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["spectrum", str(recording_csv), "--gear", "silo4-joint3", "--out", str(out),
@@ -64,6 +65,7 @@ def test_gears_command_lists_presets(capsys):
     assert "287" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_console_script_runs_demo(tmp_path):
     # the installed entry point, as `make demo` calls it: the SILO4 reproduction on its twin (11 speeds
     # per direction, 3 repetitions), analysed through the recording files it writes

@@ -25,6 +25,7 @@ def recording_csv(tmp_path_factory):
     return rec.save(tmp_path_factory.mktemp("fit") / "rec.csv")
 
 
+@pytest.mark.slow
 def test_fit_writes_contract_json_and_report(recording_csv, tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["fit", str(recording_csv), "--law", "silo4", "--lines", "0.8", "--out", str(out),

@@ -94,6 +94,7 @@ def check(d, kind, model, rec, *, frequency=None, symmetric=None):
 
 
 # ---------------------------------------------------------------------- one effect kind at a time
+@pytest.mark.slow
 def test_periodic_cogging_unknown_order_with_integer_hint():
     rec, model = recording([fx.cogging(count=7, amplitude=1e-3)])
     d = dg.diagnose(rec, law="silo4", gear=GEAR)
@@ -105,6 +106,7 @@ def test_periodic_cogging_unknown_order_with_integer_hint():
     assert all(hh["law"] == "const" for hh in h.values())
 
 
+@pytest.mark.slow
 def test_periodic_decaying_line_gets_its_amplitude_law_from_the_data():
     rec, model = recording([fx.extra_order(frequency=0.7, amplitude=3e-3, decay=0.15, law="exp")])
     d = dg.diagnose(rec, law="silo4", gear=GEAR)
@@ -115,6 +117,7 @@ def test_periodic_decaying_line_gets_its_amplitude_law_from_the_data():
         assert h["amplitude"] == pytest.approx(3e-3, rel=0.1)
 
 
+@pytest.mark.slow
 def test_speed_law_nonlinear_viscous():
     rec, model = recording([fx.nonlinear_viscous(coefficient=8e-3, exponent=0.5)])
     d = dg.diagnose(rec, law="silo4", gear=GEAR)
@@ -122,6 +125,7 @@ def test_speed_law_nonlinear_viscous():
     assert {e.kind for e in d.accepted} == {"speed_law"}
 
 
+@pytest.mark.slow
 def test_speed_law_amplitude_decay_of_a_declared_line():
     rec, model = recording([fx.decay_shape(target="spur tooth mesh", law="rational", decay=0.25, direction=1)],
                            amp=1.5e-2)
@@ -133,6 +137,7 @@ def test_speed_law_amplitude_decay_of_a_declared_line():
     assert h["law"] == "rational" and h["decay"] == pytest.approx(0.25, rel=0.1)
 
 
+@pytest.mark.slow
 def test_load_meshing_amplitude_eq14():
     loads = [0, 5, 10, 15, 20] * 4
     rec, model = recording([fx.load_meshing(target="motor shaft", coefficient=5e-5)], load=loads)
@@ -142,6 +147,7 @@ def test_load_meshing_amplitude_eq14():
     assert k == pytest.approx([5e-5, 5e-5], rel=0.05)
 
 
+@pytest.mark.slow
 def test_temperature():
     eff = [fx.warming(coefficient=-4e-4, rise=15, time_constant=10.0)]
     rec, model = recording(eff, temperature=fx.channel_function(eff, "temperature"))
@@ -152,6 +158,7 @@ def test_temperature():
     assert not any(x.accepted for x in drift)         # the recorded temperature explains it, not time
 
 
+@pytest.mark.slow
 def test_drift():
     rec, model = recording([fx.drift(coefficient=2e-4)])
     d = dg.diagnose(rec, law="silo4", gear=GEAR)
@@ -179,6 +186,7 @@ def test_inertia():
 @pytest.mark.parametrize("effect,param", [(fx.hysteresis(scale=8e-3, length=1.0), ("length", 1.0)),
                                           (fx.backlash(scale=4e-3, gap=0.4), ("gap", 0.4))],
                          ids=["presliding", "backlash"])
+@pytest.mark.slow
 def test_hysteresis_near_reversals(effect, param):
     rec, model = recording([effect])
     d = dg.diagnose(rec, law="silo4", gear=GEAR)
@@ -188,6 +196,7 @@ def test_hysteresis_near_reversals(effect, param):
                t[param[0]] == pytest.approx(param[1], rel=0.1) for t in terms), terms
 
 
+@pytest.mark.slow
 def test_twin_cogging_found_in_the_closed_loop_silo4_twin():
     """The SILO4 joint-3 twin (closed-loop speed control, encoder, Bessel-filtered and sampled
     current, 1 % friction scatter between repetitions) with undeclared cogging: found within 1 %
@@ -206,6 +215,7 @@ def test_twin_cogging_found_in_the_closed_loop_silo4_twin():
 
 
 # ---------------------------------------------------------------------- several at once
+@pytest.mark.slow
 def test_several_effects_in_one_recording_are_all_found():
     eff = [fx.cogging(count=7, amplitude=1e-3), fx.drift(coefficient=1e-4), fx.hysteresis(scale=5e-3, length=1.0)]
     rec, model = recording(eff)
@@ -221,6 +231,7 @@ def test_several_effects_in_one_recording_are_all_found():
 FDR_SEEDS = 16
 
 
+@pytest.mark.slow
 def test_complete_models_get_nothing_added_over_many_seeds():
     """False-discovery rate: on recordings whose model is complete (the baseline law is the truth's
     law, every line declared), over FDR_SEEDS seeds; the rule is built for alpha = 1 % per round
@@ -302,6 +313,7 @@ def test_json_contract_and_model_round_trip(tmp_path):
 
 
 # ---------------------------------------------------------------------- command line
+@pytest.mark.slow
 def test_cli_diagnose_writes_report_and_json(tmp_path, capsys):
     rec, _ = recording([fx.cogging(count=7, amplitude=1e-3)])
     path = rec.save(tmp_path / "run.csv")

@@ -245,6 +245,7 @@ def twin_csv(tmp_path):
     return rec.save(tmp_path / "twin.csv")
 
 
+@pytest.mark.slow
 def test_cli_writes_contract_json_and_report(twin_csv, tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["discover", str(twin_csv), "--gear", "silo4-joint3", "--out", str(out), "--json",
@@ -305,6 +306,7 @@ def test_emps_discovered_law_beats_the_papers_laws_and_idim_ls(data_dir):
     assert inertia and 60 < inertia[0] < 130             # residual inertia near IDIM-LS's M = 95 kg
 
 
+@pytest.mark.slow
 @pytest.mark.realdata
 def test_kinova_discovered_law_beats_coulomb_viscous(data_dir):
     import gearspec.datasets as ds

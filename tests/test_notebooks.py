@@ -16,6 +16,7 @@ def test_notebooks_are_stored_without_outputs():
                 assert not cell.get("outputs") and cell.get("execution_count") is None, f"{path.name} has outputs"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
 def test_notebook_executes(path, tmp_path, data_dir):
     nbformat = pytest.importorskip("nbformat")

@@ -37,6 +37,7 @@ def _png_ok(path):
 
 
 # ---------------------------------------------------------------------- SILO4
+@pytest.mark.slow
 def test_silo4_reproduction(tmp_path):
     """One run (about 40 s), every check on it: one test, so that parallel workers do not each run it."""
     import paper_repro.silo4 as s4
@@ -125,6 +126,7 @@ def test_silo4_audit_arithmetic():
 
 
 # ---------------------------------------------------------------------- Lola/CROPS
+@pytest.mark.slow
 def test_lola_reproduction(tmp_path):
     """The full reproduction (about 20 s), every check on it in one test."""
     import os

@@ -13,6 +13,7 @@ import gearspec.diagnose as dg
 pytestmark = pytest.mark.realdata
 
 
+@pytest.mark.slow
 def test_emps_reproduction(data_dir, tmp_path):
     """One test (the reproduction runs once, ~25 s): IDIM-LS replicated, the loop judged on the
     cross-test, the ball-screw line reported in cycles/m."""
@@ -74,6 +75,7 @@ def _emps_ball_screw_line_reported_in_cycles_per_metre(emps_out):
     assert "lead is 2.5 mm" in report.read_text()
 
 
+@pytest.mark.slow
 def test_kinova_loop_finds_the_seven_per_motor_turn_line_growing_with_speed(data_dir, tmp_path):
     from gearspec.report.diagnose import write_diagnose_report
 

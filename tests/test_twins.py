@@ -120,6 +120,7 @@ def test_silo4_repetitions_scatter_below_three_percent(silo4_short):
     assert np.allclose(runs["velocity_mean"], runs["velocity"], rtol=0.01)
 
 
+@pytest.mark.slow
 def test_silo4_stick_slip_at_the_lowest_speed():
     rec, truth = stick_slip_run(duration=8.0, seed=3)
     row = truth.runs.iloc[0]
@@ -224,6 +225,7 @@ def test_every_effect_reports_ground_truth_and_round_trips():
     assert len(back.meta["effects"]) == 5
 
 
+@pytest.mark.slow
 def test_cogging_shows_as_an_unexplained_peak_at_its_frequency():
     eff = fx.cogging(count=7, amplitude=3e-4)
     found = {}
@@ -346,6 +348,7 @@ def test_cli_simulate_writes_files_spectrum_reads(tmp_path, capsys):
     assert "unknown effect" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_render_twin_figure(tmp_path):
     """Fig. 3 (stick-slip) and a speed/current trace, rendered for a person to look at."""
     import matplotlib.pyplot as plt
