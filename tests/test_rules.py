@@ -1,0 +1,262 @@
+"""Known-answer tests of the toolbox's decision rules and estimators, one rule at a time.
+
+Each test pins a rule to a number that follows from its definition (a tabulated t quantile, a
+closed-form statistic, an exact DFT bin, an exact derivative, a counted row), so that a
+deliberate bug in that rule -- a Bonferroni correction dropped, a gate switched off, folds dealt
+by sample, a factor 2 lost, an inertia torque added instead of subtracted, a row counted twice --
+fails here, fast, instead of surviving behind the end-to-end tests.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from gearspec import identify
+from gearspec.diagnose.data import DiagnoseData
+from gearspec.diagnose.loop import _decide, _Folds, critical_z, folds_of
+from gearspec.fitdata import FitData
+
+
+# ====================================================================== 1. acceptance rule of the loop
+# One-sided upper t quantiles t_{1-p, dof} from a printed table (3 decimals: Student's t table,
+# e.g. NIST/SEMATECH e-Handbook 1.3.6.7.2); the tolerance 5e-4 is the table's rounding.
+T_TABLE = {(0.01, 9): 2.821, (0.005, 9): 3.250, (0.0025, 9): 3.690, (0.001, 9): 4.297,
+           (0.0005, 9): 4.781, (0.01, 10): 2.764, (0.01, 4): 3.747, (0.01, 1): 31.821}
+
+
+@pytest.mark.parametrize("alpha, candidates, groups, p", [
+    (0.01, 1, 10, 0.01),       # one candidate: no correction, 9 dof
+    (0.01, 2, 10, 0.005),      # Bonferroni: alpha / 2
+    (0.01, 4, 10, 0.0025),     # t_{1-0.01/4, 9}
+    (0.01, 10, 10, 0.001),
+    (0.01, 20, 10, 0.0005),
+    (0.01, 1, 11, 0.01),       # 10 dof
+    (0.01, 1, 5, 0.01),        # 4 dof
+    (0.01, 1, 2, 0.01),        # 1 dof
+    (0.01, 1, 1, 0.01),        # one group: dof floored at 1
+    (0.01, 0, 10, 0.01),       # no candidate (validation with nothing accepted): as one
+])
+def test_critical_z_is_the_bonferroni_t_quantile(alpha, candidates, groups, p):
+    dof = max(groups - 1, 1)
+    assert critical_z(alpha, candidates, groups) == pytest.approx(T_TABLE[(p, dof)], abs=5e-4)
+
+
+def test_critical_z_rises_with_the_number_of_candidates():
+    z = [critical_z(0.01, m, 10) for m in (1, 2, 4, 10, 20, 100)]
+    assert all(b > a for a, b in zip(z, z[1:]))
+    # and falls towards the normal quantile with many groups (t -> normal): z_{0.99} = 2.326
+    assert critical_z(0.01, 1, 10_000) == pytest.approx(2.326, abs=1e-3)
+
+
+def _decide_case(z_target: float, *, G: int = 10, s: float = 1.0, fold_of_group=None):
+    """The smallest inputs of ``_decide`` whose numbers are known in closed form.
+
+    G groups of 8 rows (np.array_split into 8 blocks: one row per block).  The model as it stands
+    predicts p0 = 0, so y = r0.  The candidate predicts a constant correction Delta = d on every
+    row; the held-out residual is r0_g = d + e_g with e_g = +s (even g), -s (odd g), so r1 = e_g.
+    Per group: <r0, Delta> = 8 d (d + e_g); <r1, Delta>^2 = 64 e^2 d^2 (whole group) beats the sum
+    over blocks 8 e^2 d^2, so V_g = 64 s^2 d^2.  With sum_g e_g = 0 (G even):
+
+        Z = sum 8 d (d + e_g) / sqrt(64 G s^2 d^2) = sqrt(G) d / s,
+        rmse before^2 = d^2 + s^2, after = s, gain = 1 - s / sqrt(d^2 + s^2).
+
+    Folds: pairs (2i, 2i+1) by default: every fold's drop 16 d^2 > 0, consistency 1.
+    ``d`` is set from the Z wanted: d = Z s / sqrt(G)."""
+    d = z_target * s / math.sqrt(G)
+    n = 8
+    e = np.where(np.arange(G) % 2 == 0, s, -s)
+    r0 = np.repeat(d + e, n)
+    v = np.repeat(1.0 + 0.1 * np.arange(G), n)
+    fd = FitData(theta=np.arange(G * n, dtype=float), v=v, y=r0.copy(), segment=np.repeat(np.arange(G), n))
+    dd = DiagnoseData.from_fitdata(fd)
+    fold = np.arange(G) // 2 if fold_of_group is None else np.asarray(fold_of_group)
+    rnd = SimpleNamespace(dd=dd, fold=fold, K=int(fold.max()) + 1)
+    fr = _Folds(r0=r0, p1=np.full(G * n, d), proposals=[], contribution=None, n_par=2)
+    return rnd, fr, d
+
+
+def test_decide_z_equals_the_closed_form():
+    rnd, fr, d = _decide_case(3.0)
+    ev = _decide(rnd, fr, None, z_crit=2.0, min_gain=0.01)
+    assert ev.z == pytest.approx(math.sqrt(10) * d / 1.0, rel=1e-12)   # = 3.0; float rounding only
+    assert ev.z == pytest.approx(3.0, rel=1e-12)
+    assert ev.gain == pytest.approx(1 - 1 / math.sqrt(d * d + 1), rel=1e-12)
+    assert ev.rmse_holdout_before == pytest.approx(math.sqrt(d * d + 1), rel=1e-12)
+    assert ev.rmse_holdout_after == pytest.approx(1.0, rel=1e-12)
+    assert ev.consistency == 1.0
+    assert ev.drop == pytest.approx(10 * 8 * d * d, rel=1e-12)       # sum_g 8 (d^2 + 2 d e_g)
+    np.testing.assert_allclose(ev.fold_drops, 16 * d * d, rtol=1e-12)
+    assert ev.passed
+
+
+@pytest.mark.parametrize("m", [1, 4])
+def test_decide_z_just_above_passes_just_below_fails(m):
+    zc = critical_z(0.01, m, 10)
+    for factor, passed in ((1 + 1e-6, True), (1 - 1e-6, False)):
+        rnd, fr, d = _decide_case(zc * factor)
+        ev = _decide(rnd, fr, None, z_crit=zc, min_gain=0.01, consistency=0.9)
+        # the other two gates are far from their thresholds: only the Z rule decides
+        assert ev.consistency == 1.0 and ev.gain > 0.2
+        assert ev.z == pytest.approx(zc * factor, rel=1e-9)
+        assert ev.passed is passed, (m, factor, ev.reason)
+        if not passed:
+            assert "held-out Z" in ev.reason and "folds" not in ev.reason and "rmse" not in ev.reason
+
+
+def test_decide_z_between_uncorrected_and_bonferroni_fails_with_many_candidates():
+    # t_{0.99, 9} = 2.821 < Z = 3.2 < t_{1-0.01/4, 9} = 3.690
+    rnd, fr, _ = _decide_case(3.2)
+    one = _decide(rnd, fr, None, z_crit=critical_z(0.01, 1, rnd.dd.n_groups), min_gain=0.01)
+    four = _decide(rnd, fr, None, z_crit=critical_z(0.01, 4, rnd.dd.n_groups), min_gain=0.01)
+    assert one.passed
+    assert not four.passed and "held-out Z 3.20 below 3.69" in four.reason
+
+
+def test_decide_consistency_gate():
+    # d = s: Z = sqrt(10) = 3.16 > 2.82 and gain 1 - 1/sqrt(2) = 0.29, both pass; the groups that
+    # gain (drop 8 (d^2 + 2 d s) = 24) all in folds 0-1, those that lose (8 (d^2 - 2 d s) = -8)
+    # in folds 2-4: consistency 5 x 24 / (5 x 24 + 5 x 8) = 0.75 < 0.9
+    fold = np.array([0, 2, 0, 2, 1, 3, 1, 3, 1, 4])
+    rnd, fr, d = _decide_case(math.sqrt(10), fold_of_group=fold)
+    assert d == pytest.approx(1.0)
+    ev = _decide(rnd, fr, None, z_crit=critical_z(0.01, 1, 10), min_gain=0.01, consistency=0.9)
+    assert ev.consistency == pytest.approx(0.75, rel=1e-12)
+    assert ev.z > ev.z_crit and ev.gain > 0.01
+    assert not ev.passed and "folds carrying only 75 %" in ev.reason
+    assert _decide(rnd, fr, None, z_crit=ev.z_crit, min_gain=0.01, consistency=0.7).passed
+
+
+def test_decide_gain_gate():
+    # d = s with paired folds: Z = 3.16, consistency 1, gain 1 - 1/sqrt(2) = 0.2929
+    rnd, fr, _ = _decide_case(math.sqrt(10))
+    zc = critical_z(0.01, 1, 10)
+    below = _decide(rnd, fr, None, z_crit=zc, min_gain=0.30)
+    above = _decide(rnd, fr, None, z_crit=zc, min_gain=0.29)
+    assert below.gain == pytest.approx(1 - 1 / math.sqrt(2), rel=1e-12)
+    assert below.z > zc and below.consistency == 1.0
+    assert not below.passed and "needs a fall of 30 %" in below.reason
+    assert above.passed
+
+
+# ====================================================================== 2. fold rules
+def _segments_data(n_pos: int, n_neg: int, sizes=None, levels=None, sigma: float = 0.0, seed: int = 0):
+    """FitData of n_pos positive then n_neg negative constant-speed segments (distinct speeds),
+    segment g with sizes[g] rows and friction level levels[g] plus white noise sigma."""
+    G = n_pos + n_neg
+    sizes = np.full(G, 50) if sizes is None else np.asarray(sizes)
+    levels = np.zeros(G) if levels is None else np.asarray(levels, float)
+    speed = np.concatenate([1.0 + 0.5 * np.arange(n_pos), 1.0 + 0.5 * np.arange(n_neg)])
+    sign = np.concatenate([np.ones(n_pos), -np.ones(n_neg)])
+    rng = np.random.default_rng(seed)
+    seg = np.repeat(np.arange(G), sizes)
+    v = np.repeat(sign * speed, sizes)
+    y = np.repeat(levels, sizes) + sigma * rng.standard_normal(len(seg))
+    theta = np.cumsum(np.abs(v)) * 1e-3
+    return FitData(theta=theta, v=v, y=y, segment=seg)
+
+
+def _check_fold_rules(fold_rows: np.ndarray, fd: FitData, k: int):
+    """Every segment in exactly one fold; per direction the folds' group counts differ by at most
+    one; both directions in every fold when each has at least k groups."""
+    seg = fd.segment
+    fold_of_seg = {}
+    for g in np.unique(seg):
+        f = np.unique(fold_rows[seg == g])
+        assert len(f) == 1, f"segment {g} is split over folds {f}"
+        fold_of_seg[g] = int(f[0])
+    assert set(fold_of_seg.values()) == set(range(k))
+    dirs = {g: int(fd.direction[seg == g][0]) for g in fold_of_seg}
+    for d in (1, -1):
+        gs = [g for g in fold_of_seg if dirs[g] == d]
+        counts = np.bincount([fold_of_seg[g] for g in gs], minlength=k)
+        assert counts.max() - counts.min() <= 1, (d, counts)
+        if len(gs) >= k:
+            assert counts.min() >= 1, (d, counts)
+    return fold_of_seg
+
+
+@pytest.mark.parametrize("n_pos, n_neg, k", [(9, 10, 5), (9, 9, 5), (5, 5, 5), (12, 7, 3), (3, 2, 2)])
+def test_identify_folds_deal_whole_segments_by_direction(n_pos, n_neg, k):
+    G = n_pos + n_neg
+    sizes = 30 + 7 * np.arange(G)  # unequal segments: dealing rows would split them
+    fd = _segments_data(n_pos, n_neg, sizes)
+    fold = identify._folds(fd, "segment", k)
+    assert fold.shape == (len(fd),)
+    _check_fold_rules(fold, fd, k)
+
+
+def test_identify_folds_the_issue_case_nine_positive_ten_negative():
+    fd = _segments_data(9, 10, 40 + 3 * np.arange(19))
+    fold_of_seg = _check_fold_rules(identify._folds(fd, "segment", 5), fd, 5)
+    pos = np.bincount([fold_of_seg[g] for g in range(9)], minlength=5)
+    neg = np.bincount([fold_of_seg[g] for g in range(9, 19)], minlength=5)
+    assert sorted(pos) == [1, 2, 2, 2, 2] and sorted(neg) == [2, 2, 2, 2, 2]
+    # round-robin over speed: neighbouring speeds of a direction go to different folds
+    assert len({fold_of_seg[g] for g in range(5)}) == 5 and len({fold_of_seg[g] for g in range(9, 14)}) == 5
+
+
+@pytest.mark.parametrize("n_pos, n_neg, k", [(9, 10, 5), (9, 9, 5), (5, 5, 5), (12, 7, 3), (2, 2, 5), (3, 1, 4)])
+def test_loop_folds_of_deal_whole_groups_balanced(n_pos, n_neg, k):
+    G = n_pos + n_neg
+    fd = _segments_data(n_pos, n_neg, 30 + 7 * np.arange(G))
+    dd = DiagnoseData.from_fitdata(fd)
+    fog = folds_of(dd, k)
+    assert fog.shape == (dd.n_groups,) == (G,)
+    kk = max(2, min(k, G))
+    _check_fold_rules(fog[dd.group], dd.fit, kk)
+    # the rotation of the negative direction: the folds' total group counts differ by at most one
+    total = np.bincount(fog, minlength=kk)
+    assert total.max() - total.min() <= 1, total
+
+
+def _memoriser_case(G_pos=9, G_neg=10, n=200, s=1.0, sigma=0.1, seed=3):
+    """Segments with levels of spread exactly s (mean 0, mean square s^2) and white noise sigma."""
+    rng = np.random.default_rng(seed)
+    mu = rng.standard_normal(G_pos + G_neg)
+    mu = s * (mu - mu.mean()) / np.sqrt(np.mean((mu - mu.mean()) ** 2))
+    return _segments_data(G_pos, G_neg, np.full(G_pos + G_neg, n), mu, sigma, seed), mu
+
+
+def _memorise(train: FitData) -> dict:
+    return {int(g): float(np.mean(train.y[train.segment == g])) for g in np.unique(train.segment)}
+
+
+def _recall(means: dict, data: FitData) -> np.ndarray:
+    return np.array([means.get(int(g), 0.0) for g in data.segment])  # an unseen segment: the prior mean 0
+
+
+def test_holdout_by_segment_does_not_leak_a_memorised_segment_mean():
+    # known answer: a model that memorises every segment's mean has in-sample error sigma
+    # sqrt(1 - 1/n) (~ sigma); held out by whole segments it has never seen the segment and predicts
+    # 0, so its error is sqrt(s^2 + sigma^2) (levels of mean square exactly s^2).  Tolerance 2 %:
+    # the noise's sample variance over 3800 rows is within 3 x sqrt(2/3800) = 7 % of sigma^2 = 1 %
+    # of s^2 + sigma^2, and the cross term 2 <mu, e>/N ~ 3 x 2 s sigma / sqrt(3800) = 1 %.
+    s, sigma = 1.0, 0.1
+    fd, _ = _memoriser_case(s=s, sigma=sigma)
+    residual = lambda m, t: t.y - _recall(m, t)  # noqa: E731
+    inside = float(np.sqrt(np.mean(residual(_memorise(fd), fd) ** 2)))
+    held, why = identify.holdout(_memorise, fd, by="segment", folds=5, residual=residual)
+    assert why is None
+    assert inside == pytest.approx(sigma, rel=0.05)      # 3 x 1/sqrt(2 x 3800) = 3.4 % on an rmse
+    assert held == pytest.approx(math.hypot(s, sigma), rel=0.02)
+    assert held > 5 * inside
+
+
+def test_loop_folds_do_not_leak_a_memorised_segment_mean():
+    # the same known answer as above, with the closed loop's folds (folds_of over DiagnoseData)
+    s, sigma = 1.0, 0.1
+    fd, _ = _memoriser_case(s=s, sigma=sigma)
+    dd = DiagnoseData.from_fitdata(fd)
+    rows_fold = folds_of(dd, 5)[dd.group]
+    f = dd.fit
+    r = np.empty(len(f))
+    for k in range(5):
+        test = rows_fold == k
+        r[test] = f.y[test] - _recall(_memorise(f.subset(~test)), f.subset(test))
+    held = float(np.sqrt(np.mean(r ** 2)))
+    assert held == pytest.approx(math.hypot(s, sigma), rel=0.02)
