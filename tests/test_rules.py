@@ -275,3 +275,70 @@ def test_loop_folds_do_not_leak_a_memorised_segment_mean():
         r[test] = f.y[test] - _recall(_memorise(f.subset(~test)), f.subset(test))
     held = float(np.sqrt(np.mean(r ** 2)))
     assert held == pytest.approx(math.hypot(s, sigma), rel=0.02)
+
+
+# ====================================================================== 3. amplitude of the FFT spectra
+# A sinusoid A sin(2 pi f0 x + phi) whose frequency is exactly bin k of the transform has, under a
+# window w, the DFT (A/2i) [e^{i phi} W(0) - e^{-i phi} W(2k)] with W(0) = sum(w): the amplitude
+# read as |X_k| 2 / sum(w) is A up to the window's leakage from the image at -f0, W(2k)/W(0), which
+# for the Hann window ~1000 resolution bins away is below 1e-8.  So the known answer is A, to
+# rounding: 1e-9 relative in double precision, 1e-5 in single precision (float32 rounding ~6e-8 per
+# value, accumulated over a 4096-point transform: ~1e-6).
+N_SP, H_SP = 4096, 2.0 ** -6         # samples and spacing (rad): theta = m h exactly in binary
+A_SP, PHI_SP = 0.37, 0.8
+
+
+def _bin_sinusoid(nfft: int, k: int, level: float = 0.5):
+    x = np.arange(N_SP) * H_SP
+    f0 = k / (nfft * H_SP)
+    return x, f0, level + A_SP * np.sin(2 * np.pi * f0 * x + PHI_SP)
+
+
+def test_order_spectrum_reads_a_bin_sinusoid_at_its_amplitude():
+    from gearspec.spectrum.fft import order_spectrum
+    import scipy.fft
+    nfft = scipy.fft.next_fast_len(N_SP, real=True)
+    for k in (300, 1000, 1700):
+        x, f0, y = _bin_sinusoid(nfft, k)
+        freq, amp = order_spectrum(y, H_SP)
+        assert freq[k] == pytest.approx(f0, rel=1e-12)
+        assert amp[k] == pytest.approx(A_SP, rel=1e-9)
+    # and with padding (the bins of a 4x longer transform)
+    x, f0, y = _bin_sinusoid(scipy.fft.next_fast_len(4 * N_SP, real=True), 4000)
+    freq, amp = order_spectrum(y, H_SP, pad=4)
+    assert freq[4000] == pytest.approx(f0, rel=1e-12) and amp[4000] == pytest.approx(A_SP, rel=1e-9)
+    # the mean (bin 0 has no image to share with): a constant c reads c, not 2c, when not detrended
+    _, amp = order_spectrum(np.full(N_SP, 0.5), H_SP, detrend=False)
+    assert amp[0] == pytest.approx(0.5, rel=1e-12)
+
+
+def test_hann_spectrum_and_its_single_precision_twin_give_the_amplitude():
+    from gearspec.spectrum.fft import hann_fft_length, hann_spectrum, hann_spectrum32
+    from scipy.signal import get_window
+    nfft = hann_fft_length(N_SP, 2.0)
+    k = 1000
+    x, f0, y = _bin_sinusoid(nfft, k, level=0.0)
+    spec, df, wsum, enbw = hann_spectrum(y, H_SP, pad=2.0)
+    assert df * k == pytest.approx(f0, rel=1e-12)
+    assert wsum == pytest.approx(get_window("hann", N_SP, fftbins=False).sum(), rel=1e-12)
+    assert wsum == pytest.approx((N_SP - 1) / 2, rel=1e-12)          # closed form of the symmetric Hann
+    assert enbw == pytest.approx(1.5 * N_SP / (N_SP - 1), rel=1e-12)  # n sum w^2 / (sum w)^2
+    assert abs(spec[k]) * 2 / wsum == pytest.approx(A_SP, rel=1e-9)
+    spec32, df32, wsum32, enbw32 = hann_spectrum32(y, H_SP, pad=2.0)
+    assert spec32.dtype == np.complex64 and len(spec32) == len(spec)
+    assert (df32, wsum32) == (pytest.approx(df, rel=1e-12), pytest.approx(wsum, rel=1e-12))
+    assert enbw32 == pytest.approx(enbw, rel=1e-12)
+    assert abs(spec32[k]) * 2 / wsum32 == pytest.approx(A_SP, rel=1e-5)
+
+
+def test_analyze_segment_fft_amplitude_is_the_sinusoid_amplitude():
+    from gearspec.spectrum import analyze_segment
+    from gearspec.spectrum.fft import hann_fft_length
+    nfft = hann_fft_length(N_SP, 2.0)   # analyze_segment's default oversample 2 on a grid of N_SP points
+    k = 1000
+    x, f0, y = _bin_sinusoid(nfft, k)
+    s = analyze_segment(x, y, None, keep_spectra=True, periodogram="fft", max_peaks=0)
+    assert s.fft_frequency[k] == pytest.approx(f0, rel=1e-6)          # float32 frequencies
+    assert s.fft_amplitude[k] == pytest.approx(A_SP, rel=1e-5)
+    # the peak is at the bin: its neighbours (half a resolution step off at padding 2) read lower
+    assert s.fft_amplitude[k - 1] < A_SP and s.fft_amplitude[k + 1] < A_SP
