@@ -387,3 +387,92 @@ def test_inertia_torque_is_subtracted_at_the_known_acceleration():
     raw = FitData.from_recording(rec, seg, inertia=False)
     np.testing.assert_array_equal(raw.y, rec.tau[rows])
     np.testing.assert_allclose(raw.y - fd.y, J * acc[rows], rtol=0, atol=1e-8)
+
+
+# ====================================================================== 5. the exclusion ledger
+def _ledger_drive(n: int = 4000, fs: float = 1000.0, seed: int = 9) -> dict:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    theta = 0.3 + 2.0 * t
+    torque = 0.2 + 0.02 * np.sin(5 * theta) + 0.005 * rng.standard_normal(n)
+    return {"t": t, "theta": theta, "torque": torque}
+
+
+def _spoil(d: dict) -> tuple[dict, Counter, set]:
+    """Known faults: which rows go under which reason (0-based rows of the file)."""
+    bad = {}
+    # NaN / inf in t, theta or torque: 5 rows (row 100 has two bad cells: counted once)
+    for col, i in (("torque", 100), ("t", 100), ("torque", 101), ("theta", 400), ("torque", 900), ("t", 1300)):
+        d[col][i] = np.nan if col != "theta" else np.inf
+        bad[i] = "nan_or_inf"
+    # exact copies of the row before (t, theta and torque): 3 rows, two of them in a row
+    for i in (1500, 2200, 2201):
+        for col in d:
+            d[col][i] = d[col][i - 1]
+        bad[i] = "duplicate_time"
+    # isolated repeated stamps with new values (2 of 4000 rows, below the 1 % of a coarse clock)
+    for i in (1700, 3100):
+        d["t"][i] = d["t"][i - 1]
+        bad[i] = "duplicate_time"
+    # stamped before the row before: 3 rows
+    for i in (2500, 2800, 2801):
+        d["t"][i] -= 0.0105
+        bad[i] = "non_increasing_time"
+    # the torque stuck at its maximum for 10 rows (>= 5 in a row, >= 0.2 % of the rows): saturation
+    d["torque"][3300:3310] = np.nanmax(d["torque"]) + 0.05
+    for i in range(3300, 3310):
+        bad[i] = "saturation"
+    return d, Counter(bad.values()), set(bad)
+
+
+def test_loader_ledger_counts_every_reason_exactly():
+    from gearspec.errors import GearspecWarning
+    from gearspec.recording import Recording
+    d, expected, rows = _spoil(_ledger_drive())
+    assert expected == {"nan_or_inf": 5, "duplicate_time": 5, "non_increasing_time": 3, "saturation": 10}
+    marker = np.arange(4000, dtype=float)       # an extra channel naming each row of the file
+    with pytest.warns(GearspecWarning):
+        rec = Recording.from_arrays(**d, row=marker)
+    assert rec.excluded == expected
+    assert rec.n_read == 4000 and len(rec) == 4000 - 23
+    assert rec.n_read == len(rec) + sum(rec.excluded.values())
+    # and they are exactly the rows that were spoiled
+    assert set(range(4000)) - set(rec.data["row"].astype(int)) == rows
+
+
+def test_loader_ledger_adds_up_over_files(tmp_path):
+    from gearspec.errors import GearspecWarning
+    from gearspec.recording import load_recording
+    d1, e1, _ = _spoil(_ledger_drive())
+    d2 = _ledger_drive(n=1000, seed=2)
+    d2["torque"][[10, 20]] = np.nan
+    np.savez(tmp_path / "a.npz", **d1)
+    np.savez(tmp_path / "b.npz", **d2)
+    with pytest.warns(GearspecWarning):
+        rec = load_recording([tmp_path / "a.npz", tmp_path / "b.npz"])
+    assert rec.excluded == e1 + Counter({"nan_or_inf": 2})
+    assert rec.n_read == 5000 and len(rec) == 5000 - 25
+
+
+def test_segmentation_ledger():
+    from gearspec.recording import Recording
+    from gearspec.segment import Segment, Segmentation, find_segments
+    # check_ledger itself: one row too many or too few is a broken ledger
+    ok = Segmentation([Segment(0, 10, 90, 1, 1.0)], Counter({"transient": 15, "standstill": 5}), 100)
+    ok.check_ledger()
+    for excluded in ({"transient": 14, "standstill": 5}, {"transient": 16, "standstill": 5}, {"transient": 15}):
+        with pytest.raises(AssertionError, match="row ledger broken"):
+            Segmentation(ok.segments, Counter(excluded), 100).check_ledger()
+    # a run too short for any speed window (30 rows < 9 blocks of the shortest window) is all
+    # 'transient': the ledger of a recording with it is the one without it plus exactly 30
+    d = _ledger_drive()
+    d["theta"] = 0.3 + np.where(d["t"] < 2.0, 2.0 * d["t"], 4.0 - 1.5 * (d["t"] - 2.0))  # forth and back
+    base = Recording.from_arrays(**d)
+    short = _ledger_drive(n=30, seed=4)
+    both = Recording.from_arrays(**{k: np.concatenate([d[k], short[k] + (10.0 if k == "t" else 0.0)]) for k in d},
+                                 run=np.repeat([0, 1], [4000, 30]))
+    s0, s1 = find_segments(base), find_segments(both)
+    assert {s.direction for s in s0} == {1, -1}
+    assert [(s.start, s.stop, s.direction) for s in s1] == [(s.start, s.stop, s.direction) for s in s0]
+    assert s1.excluded == s0.excluded + Counter({"transient": 30})
+    assert s1.n_rows == 4030 == sum(s.n for s in s1) + sum(s1.excluded.values())
