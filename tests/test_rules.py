@@ -23,8 +23,9 @@ from gearspec.fitdata import FitData
 
 
 # ====================================================================== 1. acceptance rule of the loop
-# One-sided upper t quantiles t_{1-p, dof} from a printed table (3 decimals: Student's t table,
-# e.g. NIST/SEMATECH e-Handbook 1.3.6.7.2); the tolerance 5e-4 is the table's rounding.
+# One-sided upper t quantiles t_{1-p, dof}, written as numbers from a printed Student's t table
+# (3 decimals; p = 0.0025 and 0.0005 are the table's two-sided 0.005 and 0.001 columns); the
+# tolerance 5e-4 is the table's rounding.
 T_TABLE = {(0.01, 9): 2.821, (0.005, 9): 3.250, (0.0025, 9): 3.690, (0.001, 9): 4.297,
            (0.0005, 9): 4.781, (0.01, 10): 2.764, (0.01, 4): 3.747, (0.01, 1): 31.821}
 
@@ -171,7 +172,8 @@ def _segments_data(n_pos: int, n_neg: int, sizes=None, levels=None, sigma: float
 
 def _check_fold_rules(fold_rows: np.ndarray, fd: FitData, k: int):
     """Every segment in exactly one fold; per direction the folds' group counts differ by at most
-    one; both directions in every fold when each has at least k groups."""
+    one, both directions in every fold when each has at least k groups, and any k neighbouring
+    speeds of a direction in k different folds (dealt round-robin over speed)."""
     seg = fd.segment
     fold_of_seg = {}
     for g in np.unique(seg):
