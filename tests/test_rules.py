@@ -21,7 +21,6 @@ from gearspec.diagnose.data import DiagnoseData
 from gearspec.diagnose.loop import _decide, _Folds, critical_z, folds_of
 from gearspec.fitdata import FitData
 
-
 # ====================================================================== 1. acceptance rule of the loop
 # One-sided upper t quantiles t_{1-p, dof}, written as numbers from a printed Student's t table
 # (3 decimals; p = 0.0025 and 0.0005 are the table's two-sided 0.005 and 0.001 columns); the
@@ -49,7 +48,7 @@ def test_critical_z_is_the_bonferroni_t_quantile(alpha, candidates, groups, p):
 
 def test_critical_z_rises_with_the_number_of_candidates():
     z = [critical_z(0.01, m, 10) for m in (1, 2, 4, 10, 20, 100)]
-    assert all(b > a for a, b in zip(z, z[1:]))
+    assert np.all(np.diff(z) > 0)
     # and falls towards the normal quantile with many groups (t -> normal): z_{0.99} = 2.326
     assert critical_z(0.01, 1, 10_000) == pytest.approx(2.326, abs=1e-3)
 
@@ -99,7 +98,7 @@ def test_decide_z_equals_the_closed_form():
 def test_decide_z_just_above_passes_just_below_fails(m):
     zc = critical_z(0.01, m, 10)
     for factor, passed in ((1 + 1e-6, True), (1 - 1e-6, False)):
-        rnd, fr, d = _decide_case(zc * factor)
+        rnd, fr, _ = _decide_case(zc * factor)
         ev = _decide(rnd, fr, None, z_crit=zc, min_gain=0.01, consistency=0.9)
         # the other two gates are far from their thresholds: only the Z rule decides
         assert ev.consistency == 1.0 and ev.gain > 0.2
@@ -255,7 +254,9 @@ def test_holdout_by_segment_does_not_leak_a_memorised_segment_mean():
     # of s^2 + sigma^2, and the cross term 2 <mu, e>/N ~ 3 x 2 s sigma / sqrt(3800) = 1 %.
     s, sigma = 1.0, 0.1
     fd, _ = _memoriser_case(s=s, sigma=sigma)
-    residual = lambda m, t: t.y - _recall(m, t)  # noqa: E731
+    def residual(m, t):
+        return t.y - _recall(m, t)
+
     inside = float(np.sqrt(np.mean(residual(_memorise(fd), fd) ** 2)))
     held, why = identify.holdout(_memorise, fd, by="segment", folds=5, residual=residual)
     assert why is None
@@ -297,16 +298,17 @@ def _bin_sinusoid(nfft: int, k: int, level: float = 0.5):
 
 
 def test_order_spectrum_reads_a_bin_sinusoid_at_its_amplitude():
-    from gearspec.spectrum.fft import order_spectrum
     import scipy.fft
+
+    from gearspec.spectrum.fft import order_spectrum
     nfft = scipy.fft.next_fast_len(N_SP, real=True)
     for k in (300, 1000, 1700):
-        x, f0, y = _bin_sinusoid(nfft, k)
+        _, f0, y = _bin_sinusoid(nfft, k)
         freq, amp = order_spectrum(y, H_SP)
         assert freq[k] == pytest.approx(f0, rel=1e-12)
         assert amp[k] == pytest.approx(A_SP, rel=1e-9)
     # and with padding (the bins of a 4x longer transform)
-    x, f0, y = _bin_sinusoid(scipy.fft.next_fast_len(4 * N_SP, real=True), 4000)
+    _, f0, y = _bin_sinusoid(scipy.fft.next_fast_len(4 * N_SP, real=True), 4000)
     freq, amp = order_spectrum(y, H_SP, pad=4)
     assert freq[4000] == pytest.approx(f0, rel=1e-12) and amp[4000] == pytest.approx(A_SP, rel=1e-9)
     # the mean (bin 0 has no image to share with): a constant c reads c, not 2c, when not detrended
@@ -315,11 +317,12 @@ def test_order_spectrum_reads_a_bin_sinusoid_at_its_amplitude():
 
 
 def test_hann_spectrum_and_its_single_precision_twin_give_the_amplitude():
-    from gearspec.spectrum.fft import hann_fft_length, hann_spectrum, hann_spectrum32
     from scipy.signal import get_window
+
+    from gearspec.spectrum.fft import hann_fft_length, hann_spectrum, hann_spectrum32
     nfft = hann_fft_length(N_SP, 2.0)
     k = 1000
-    x, f0, y = _bin_sinusoid(nfft, k, level=0.0)
+    _, f0, y = _bin_sinusoid(nfft, k, level=0.0)
     spec, df, wsum, enbw = hann_spectrum(y, H_SP, pad=2.0)
     assert df * k == pytest.approx(f0, rel=1e-12)
     assert wsum == pytest.approx(get_window("hann", N_SP, fftbins=False).sum(), rel=1e-12)
@@ -409,8 +412,8 @@ def _spoil(d: dict) -> tuple[dict, Counter, set]:
         bad[i] = "nan_or_inf"
     # exact copies of the row before (t, theta and torque): 3 rows, two of them in a row
     for i in (1500, 2200, 2201):
-        for col in d:
-            d[col][i] = d[col][i - 1]
+        for values in d.values():
+            values[i] = values[i - 1]
         bad[i] = "duplicate_time"
     # isolated repeated stamps with new values (2 of 4000 rows, below the 1 % of a coarse clock)
     for i in (1700, 3100):
