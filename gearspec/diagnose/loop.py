@@ -81,6 +81,13 @@ def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
     return out
 
 
+def critical_z(alpha: float, candidates: int, groups: int) -> float:
+    """The value the held-out Z must reach: the one-sided t quantile at ``alpha / candidates``
+    (Bonferroni over the round's candidates, at least one) with ``groups - 1`` degrees of freedom
+    (at least one)."""
+    return float(stats.t.isf(alpha / max(candidates, 1), max(groups - 1, 1)))
+
+
 def relative_error(y, prediction) -> float:
     """``100 ||y - prediction|| / ||y||`` (percent), the EMPS benchmark's figure of merit."""
     y = np.asarray(y, float)
@@ -794,7 +801,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             rounds.append({"round": k, "candidates": 0, "accepted": None})
             break
         G = dd.n_groups
-        z_crit = float(stats.t.isf(alpha / len(cands), max(G - 1, 1)))
+        z_crit = critical_z(alpha, len(cands), G)
         evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
         for c, ev in evals:
             _bar_reentry(effects, c, ev)
@@ -1085,7 +1092,7 @@ def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, mi
             rm0 = float(np.sqrt(np.mean(r0 ** 2)))
             rm1 = float(np.sqrt(np.mean(r1 ** 2)))
             gain = (rm0 - rm1) / rm0 if rm0 > 0 else 0.0
-            zc = float(stats.t.isf(alpha / max(len(accepted), 1), max(vd.n_groups - 1, 1)))
+            zc = critical_z(alpha, len(accepted), vd.n_groups)
             ok = zv >= zc and gain >= min_gain
             e.validation = {"z": zv, "z_crit": zc, "rmse_without": rm0, "rmse_with": rm1, "gain": gain,
                             "relative_error_without": relative_error(vd.y, p_wo),
