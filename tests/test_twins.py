@@ -67,10 +67,13 @@ def test_lola_tables_modules_and_gears():
         assert mod["nominal_output_torque"] == pytest.approx(tnom)
         assert lola.module_gear(key).torque_constant == mod["torque_constant"]
     m = lola.table4_model("B")
-    t4 = lola.PAPER_TABLE4["B"]
-    v, load = np.array([20.0, -20.0]), np.array([30.0, -30.0])
-    expect = laws.lola11(v, load, t4["t_f0"], t4["mu"], t4["b"], t4["t_fs"], t4["v_s"])
-    assert np.allclose(m.evaluate(None, v, load=load), expect, rtol=1e-12)
+    # Table IV, module B, law (11): T_f0 0.479 Nm, mu 1.20e-2, b 4.275e-4 Nm s/rad, T_fS 0.078 Nm, v_S 31.525 rad/s;
+    # friction = sgn(v) [T_f0 + mu |T_l| + (T_fS - T_f0) / (1 + (v/v_S)^2)] + b v, by hand (10 digits), e.g. at
+    # v = 20, T_l = 30: 0.479 + 0.36 - 0.401 / (1 + 0.4024848) + 0.00855 = 0.5616289576
+    v = np.array([20.0, -20.0, 100.0, -5.0, 1000.0])
+    load = np.array([30.0, -30.0, 0.0, 50.0, -60.0])
+    hand = np.array([0.5616289576, -0.5616289576, 0.4855001913, -0.6899772604, 1.626101872])
+    assert m.evaluate(None, v, load=load) == pytest.approx(hand, rel=1e-9)      # rel 1e-9: the 10-digit rounding
     assert lola.table3_model("C").evaluate(None, [10.0], load=[5.0])[0] == pytest.approx(
         0.067 + 4.4e-3 * 5 + 2.26e-4 * 10)
 
