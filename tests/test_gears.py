@@ -1,6 +1,7 @@
 """Gear trains: frequencies of shafts, meshes, wave generators; labels; specs and their errors."""
 
 import math
+import re
 
 import pytest
 
@@ -99,9 +100,49 @@ def test_toml_file_and_unknown_preset(tmp_path):
         load_gear(str(bad))
 
 
-def test_every_preset_loads_and_describes():
+# what each preset's description must say (whitespace collapsed): stages and ratios, the total, and
+# every declared line at its frequency by hand, 6 digits: shaft of order k at k / (2 pi N) cycles/rad
+# of motor position (N the total ratio) or k / (2 pi) of output position
+DESCRIBED = {
+    "silo4-joint3": ["reference: motor, theta in rad", "stage planetary planetary ratio 14",
+                     "stage worm worm ratio 20.5", "total ratio 287",
+                     "0.000554547 cycles/rad order 1 output shaft",                 # 1 / (2 pi 287)
+                     "0.0113682 cycles/rad order 20.5 planetary output shaft",      # 20.5 / (2 pi 287) = 1 / (2 pi 14)
+                     "0.159155 cycles/rad order 287 motor shaft"],                  # 1 / (2 pi)
+    "lola-a": ["k_m 0.13 Nm/A", "nominal 7 A", "stage HFUC-25-100 harmonic ratio 100", "total ratio 100",
+               "0.00159155 cycles/rad order 1 output shaft",
+               "0.159155 cycles/rad order 100 motor shaft (= HFUC-25-100 1x wave generator)",
+               "0.31831 cycles/rad order 200 HFUC-25-100 2x wave generator",
+               "0.63662 cycles/rad order 400 HFUC-25-100 4x wave generator"],
+    "lola-b": ["k_m 0.097 Nm/A", "nominal 15 A", "stage CSG-32-50 harmonic ratio 50", "total ratio 50",
+               "0.0031831 cycles/rad order 1 output shaft", "0.31831 cycles/rad order 100 CSG-32-50 2x wave generator"],
+    "lola-c": ["k_m 0.075 Nm/A", "nominal 3.5 A", "stage CSD-20-100 harmonic ratio 100", "total ratio 100",
+               "0.63662 cycles/rad order 400 CSD-20-100 4x wave generator"],
+    "direct-drive": ["reference: motor", "0.159155 cycles/rad order 1 shaft"],
+    "kinova-gen3-joint7": ["reference: output, theta in rad", "stage strain-wave harmonic ratio 100",
+                           "0.159155 cycles/rad order 1 output shaft",
+                           "15.9155 cycles/rad order 100 motor shaft",              # 100 / (2 pi)
+                           "31.831 cycles/rad order 200 strain-wave 2x wave generator",
+                           "63.662 cycles/rad order 400 strain-wave 4x wave generator"],
+    "emps": ["reference: output, theta in m", "lead is not published"],
+}
+
+
+@pytest.mark.parametrize("name", sorted(DESCRIBED))
+def test_every_preset_loads_and_describes(name):
     ps = presets()
-    for name in ("silo4-joint3", "lola-a", "lola-b", "lola-c", "direct-drive", "kinova-gen3-joint7", "emps"):
-        assert name in ps
-        assert ps[name].describe()
+    assert name in ps
+    raw = ps[name].describe()
+    text = " ".join(raw.split())
+    for fact in DESCRIBED[name]:
+        assert fact in text, (fact, text)
+    # one row per stage and one per declared line
+    rows = raw.splitlines()
+    assert sum(bool(re.match(r"\s+[0-9.e+-]+ cycles/(rad|m)\b", r)) for r in rows) == len(ps[name].declared_lines())
+    assert sum(r.lstrip().startswith("stage ") for r in rows) == len(ps[name].stages)
+    assert ("total ratio" in text) == bool(ps[name].stages)
+
+
+def test_presets_ratios_and_constants():
+    ps = presets()
     assert ps["lola-b"].total_ratio == 50 and ps["lola-a"].torque_constant == 0.13

@@ -106,7 +106,15 @@ def test_standard_errors_cover_the_truth():
         assert np.mean(np.abs(v) < 1.96) >= 0.75, (k, np.mean(np.abs(v) < 1.96))
 
 
-def test_bootstrap_standard_errors_agree_with_covariance():
+# The band a bootstrap se over segments may take around the covariance se (which is the sampling sd:
+# test_covariance_standard_errors_equal_the_sampling_spread): with n = 11 segments its relative sd is
+# 1 / sqrt(2 (n - 1)) = 0.224, plus the noise of B = 150 resamples 1 / sqrt(2 B) = 0.058, together
+# sqrt(0.224^2 + 0.058^2) = 0.231; 3 of those on a log scale: exp(+-3 x 0.231) = 0.50 .. 2.0.
+BOOT_BAND = (math.exp(-3 * 0.231), math.exp(3 * 0.231))
+
+
+@pytest.fixture(scope="module")
+def boot_ratios():
     rng = np.random.default_rng(3)
     truth = random_truth(rng)
     data = FitData.from_recording(twin(truth, 5, noise_rel=0.05, fs=500, both=False))
@@ -114,9 +122,43 @@ def test_bootstrap_standard_errors_agree_with_covariance():
     boot = identify.fit(data, "silo4", harmonics=SPECS, holdout=None, se="bootstrap", bootstrap=150)
     pc, pb = cov.params("positive"), boot.params("positive")
     assert pb["se_method"].startswith("bootstrap")
-    # eleven segments only: a bootstrap se is itself uncertain by ~ +-30 %; same order of magnitude
-    for k in ("tau_c", "viscous", "v_s"):
-        assert 0.3 < pb[k + "_se"] / pc[k + "_se"] < 3.0, k
+    return {k: pb[k + "_se"] / pc[k + "_se"] for k in ("tau_c", "viscous", "v_s")}
+
+
+def test_bootstrap_standard_errors_agree_with_covariance(boot_ratios):
+    """The lower edge of BOOT_BAND holds; the upper edge is the old 3.0: the segment bootstrap is
+    biased high here (1.4 / 2.5 / 1.7 x the covariance se, which equals the sampling sd), see
+    test_bootstrap_standard_errors_within_their_sampling_band."""
+    for k, r in boot_ratios.items():
+        assert BOOT_BAND[0] < r < 3.0, (k, r)
+
+
+@pytest.mark.xfail(strict=True, reason="the segment bootstrap over 11 plateaus at 11 distinct speeds overestimates "
+                   "the se: a resample holds ~7 distinct speeds and loses the high-leverage ones (viscous: "
+                   "bootstrap 2.6e-6, covariance 1.05e-6, sd over 40 twins 1.0e-6)")
+def test_bootstrap_standard_errors_within_their_sampling_band(boot_ratios):
+    for k, r in boot_ratios.items():
+        assert BOOT_BAND[0] < r < BOOT_BAND[1], (k, r)
+
+
+@pytest.mark.slow
+def test_covariance_standard_errors_equal_the_sampling_spread():
+    """The twin of the bootstrap test recorded 40 times: the sd of the estimates over the twins
+    against the median covariance se.  The sd of 40 values is uncertain by 1 / sqrt(2 x 39) = 0.113
+    relative; 3 of those on a log scale: 0.71 .. 1.40."""
+    rng = np.random.default_rng(3)
+    truth = random_truth(rng)
+    est, se = {}, {}
+    for seed in range(100, 140):
+        p = identify.fit(FitData.from_recording(twin(truth, seed, noise_rel=0.05, fs=500, both=False)), "silo4",
+                         harmonics=SPECS, holdout=None).params("positive")
+        for k in ("tau_c", "viscous", "v_s"):
+            est.setdefault(k, []).append(p[k])
+            se.setdefault(k, []).append(p[k + "_se"])
+    lo, hi = math.exp(-3 / math.sqrt(78)), math.exp(3 / math.sqrt(78))
+    for k in est:
+        r = np.std(est[k], ddof=1) / np.median(se[k])
+        assert lo < r < hi, (k, r)
 
 
 def test_published_procedure_is_biased_where_the_joint_fit_is_not():
