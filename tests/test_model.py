@@ -149,16 +149,19 @@ def test_friction_mean_level_leave_out_what_is_not_friction():
     # asymmetric Coulomb + viscous, an offset, inertia and a position ripple
     pos = {"tau_c": 1.0, "viscous": 0.1, "harmonics": [{"frequency": 0.25, "amplitude": 0.2}]}
     neg = {"tau_c": 1.5, "viscous": 0.2}
+    # (+ a nonlinear viscous 0.05 |v|^2, a magnitude term that does not depend on position)
     m = FrictionModel("coulomb_viscous", pos, neg).with_terms({"kind": "offset", "offset": 0.5},
-                                                               {"kind": "inertia", "inertia": 0.01})
+                                                               {"kind": "inertia", "inertia": 0.01},
+                                                               {"kind": "viscous_power", "coefficient": 0.05,
+                                                                "exponent": 2.0})
     theta, v, acc = np.array([1.0, 1.0]), np.array([2.0, -2.0]), np.array([10.0, 10.0])
     # evaluate: friction (ripple 0.2 sin(pi/2) forwards) + offset + J acc; friction(): without the last two
-    assert m.evaluate(theta, v, acc=acc) == pytest.approx([1.2 + 0.2 + 0.5 + 0.1, -1.9 + 0.5 + 0.1], rel=1e-12)
-    assert m.friction(theta, v, acc=acc) == pytest.approx([1.2 + 0.2, -1.9], rel=1e-12)
-    # mean level over position: the base law of each direction, a magnitude, at the given speeds
-    assert m.mean_level([1.0, 3.0], "negative") == pytest.approx([1.7, 2.1], rel=1e-12)
-    assert m.mean_level([1.0, 3.0], -1) == pytest.approx([1.7, 2.1], rel=1e-12)
-    assert m.mean_level(2.0, "positive") == pytest.approx([1.2], rel=1e-12)
+    assert m.evaluate(theta, v, acc=acc) == pytest.approx([1.4 + 0.2 + 0.5 + 0.1, -2.1 + 0.5 + 0.1], rel=1e-12)
+    assert m.friction(theta, v, acc=acc) == pytest.approx([1.4 + 0.2, -2.1], rel=1e-12)
+    # mean level over position: base law + 0.05 v^2 of each direction, a magnitude, without the ripple
+    assert m.mean_level([1.0, 3.0], "negative") == pytest.approx([1.75, 2.55], rel=1e-12)
+    assert m.mean_level([1.0, 3.0], -1) == pytest.approx([1.75, 2.55], rel=1e-12)
+    assert m.mean_level(2.0, "positive") == pytest.approx([1.4], rel=1e-12)
 
 
 def test_constant_amplitude_law_needs_no_speed_range():

@@ -1,13 +1,14 @@
 """Friction term kinds (gearspec.terms) against hand-computed values: a newcomer's registered kind,
-and the reversal rule of the backlash term across runs."""
+the reversal rule of the backlash term across runs, the amplitude laws of periodic terms."""
 
 import json
 
 import numpy as np
 import pytest
 
+from gearspec.errors import InputError
 from gearspec.model import FrictionModel
-from gearspec.terms import TERMS, register_term
+from gearspec.terms import TERMS, amplitude_law, register_term
 
 
 @pytest.fixture
@@ -65,3 +66,16 @@ def test_backlash_model_at_one_standstill_sample():
                       terms=[{"kind": "backlash", "scale": 2.0, "gap": 0.01}, {"kind": "offset", "offset": 0.25}])
     assert m.evaluate(0.3, 0.0, run=0).tolist() == [0.25]
     assert m.evaluate(0.3, 2.0, run=0).tolist() == [5.0 + 0.2 + 0.25]   # no reversal yet: no gap
+
+
+def test_amplitude_laws_at_hand_computed_speeds():
+    # g(|v|) of a periodic term, one value per speed (what plots and fits lay against speed);
+    # decay 0.5 s/rad at |v| = 0 and 2 rad/s, closed forms to rounding (rel 1e-12)
+    speed = np.array([0.0, 2.0])
+    expect = {"exp": [1.0, np.exp(-1.0)], "const": [1.0, 1.0], "rational": [1.0, 0.5], "power": [1.0, 3 ** -0.5]}
+    for law, values in expect.items():
+        g = amplitude_law(law, speed, 0.5)
+        assert g.shape == (2,) and g.dtype == float, law
+        assert g.tolist() == pytest.approx(values, rel=1e-12), law
+    with pytest.raises(InputError, match="unknown amplitude law 'cubic'"):
+        amplitude_law("cubic", speed, 0.5)
