@@ -173,3 +173,26 @@ def test_constant_amplitude_law_needs_no_speed_range():
     # the same harmonic with the default exp law: said once per direction
     m_exp = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.0, "harmonics": [dict(h, law="exp")]})
     assert str(m_exp).count("no speed range recorded") == 2
+
+
+def test_what_is_missing_is_named():
+    # a direction the data could not identify: motion that way is refused with the reason recorded
+    m = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.1}, {"tau_c": None, "viscous": None},
+                      not_identified={"negative.tau_c": "no backward motion in the recording"})
+    assert m.evaluate(None, 2.0).tolist() == [1.2]
+    with pytest.raises(InputError, match=r"no negative-direction value for tau_c "
+                                         r"\(not identified: no backward motion in the recording\)"):
+        m.evaluate(None, -2.0)
+    with pytest.raises(InputError, match="a harmonic of the model lacks frequency, amplitude"):
+        FrictionModel("none", {"harmonics": [{"decay": 0.1}]})
+    rippled = FrictionModel("none", {"harmonics": [{"frequency": 0.25, "amplitude": 0.2}]})
+    with pytest.raises(InputError, match="position-locked harmonics and needs theta"):
+        rippled.evaluate(None, 1.0)
+
+
+def test_a_harmonic_not_identified_is_left_out_and_the_next_still_counts():
+    # the first line's amplitude was not identified (None): it adds nothing; the second adds
+    # 0.2 sin(2 pi 0.25 1) = 0.2 (exact up to rounding)
+    hs = [{"frequency": 0.1, "amplitude": None}, {"frequency": 0.25, "amplitude": 0.2}]
+    m = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.0, "harmonics": hs})
+    assert m.evaluate(1.0, np.array([3.0, -3.0])) == pytest.approx([1.2, -1.2], rel=1e-12)
