@@ -42,6 +42,28 @@ def test_table_in_paper_units():
     assert t.loc["viscous", "positive_paper"] == pytest.approx(0.0134)
     assert t.loc["worm decay", "negative_paper"] == pytest.approx(1.12e-4)
     assert t.loc["worm amplitude", "positive_paper"] == pytest.approx(0.576)
+    # the units printed beside the numbers: SI and the paper's
+    assert t.loc["tau_c", ["unit", "paper_unit"]].tolist() == ["Nm", "mNm"]
+    assert t.loc["v_s", ["unit", "paper_unit"]].tolist() == ["rad/s", "rpm"]
+    assert t.loc["viscous", ["unit", "paper_unit"]].tolist() == ["Nm s/rad", "mNm/rpm"]
+    assert t.loc["worm decay", ["unit", "paper_unit"]].tolist() == ["s/rad", "1/rpm"]
+    assert t.loc["worm phase", ["unit", "paper_unit", "positive", "negative"]].tolist() == \
+        ["rad", "rad", math.pi / 2, math.pi / 2]
+    # an extra term is one row named by its description
+    t2 = FrictionModel("silo4", POS, NEG).with_terms({"kind": "offset", "offset": 0.5}).table()
+    assert t2["parameter"].iloc[-1] == "offset 0.5" and t2["unit"].iloc[-1] == ""
+
+
+def test_linear_axis_says_N_and_m():
+    # on a linear axis (theta in m) torques are forces: the table and the printed summary say N, m
+    p = {"tau_c": 2.0, "tau_s": 3.0, "v_s": 0.5, "viscous": 0.25,
+         "harmonics": [{"frequency": 0.5, "amplitude": 0.1, "decay": 0.2}]}
+    m = FrictionModel("stribeck", p, unit="m", rmse=0.0123)
+    t = m.table().set_index("parameter")
+    rows = ["tau_c", "tau_s", "v_s", "viscous", "harmonic 1 amplitude", "harmonic 1 decay"]
+    assert t.loc[rows, "unit"].tolist() == ["N", "N", "m/s", "N s/m", "N", "s/m"]
+    assert "paper_unit" not in t                      # the paper's mNm/rpm are for a rotary axis
+    assert "rmse 0.0123, held-out rmse n/a (N)" in m.describe().splitlines()
 
 
 def test_lola_laws_in_drive_convention():
@@ -114,3 +136,63 @@ def test_amplitude_law_is_held_at_the_edge_of_its_speed_range(tmp_path):
     assert "no speed range recorded" in str(m_old)
     with pytest.raises(InputError, match="speed_range"):
         FrictionModel("none", {"harmonics": [dict(h, speed_range=[5.0])]})
+
+
+def test_lola11_without_its_stribeck_part_is_law8_without_coupling():
+    # T_fS and v_S not identified: law (11) keeps T_f0 + mu |T_l| + b |v| (hand-computed)
+    m = FrictionModel("lola11", {"t_f0": 0.174, "mu": 3.1e-3, "b": 4.41e-5, "t_fs": None, "v_s": None})
+    got = m.evaluate(None, np.array([-100.0, 50.0]), load=np.array([20.0, -10.0]))
+    assert got == pytest.approx([-(0.174 + 0.062 + 4.41e-3), 0.174 + 0.031 + 2.205e-3], rel=1e-12)
+
+
+def test_friction_mean_level_leave_out_what_is_not_friction():
+    # asymmetric Coulomb + viscous, an offset, inertia and a position ripple
+    pos = {"tau_c": 1.0, "viscous": 0.1, "harmonics": [{"frequency": 0.25, "amplitude": 0.2}]}
+    neg = {"tau_c": 1.5, "viscous": 0.2}
+    # (+ a nonlinear viscous 0.05 |v|^2, a magnitude term that does not depend on position)
+    m = FrictionModel("coulomb_viscous", pos, neg).with_terms({"kind": "offset", "offset": 0.5},
+                                                               {"kind": "inertia", "inertia": 0.01},
+                                                               {"kind": "viscous_power", "coefficient": 0.05,
+                                                                "exponent": 2.0})
+    theta, v, acc = np.array([1.0, 1.0]), np.array([2.0, -2.0]), np.array([10.0, 10.0])
+    # evaluate: friction (ripple 0.2 sin(pi/2) forwards) + offset + J acc; friction(): without the last two
+    assert m.evaluate(theta, v, acc=acc) == pytest.approx([1.4 + 0.2 + 0.5 + 0.1, -2.1 + 0.5 + 0.1], rel=1e-12)
+    assert m.friction(theta, v, acc=acc) == pytest.approx([1.4 + 0.2, -2.1], rel=1e-12)
+    # mean level over position: base law + 0.05 v^2 of each direction, a magnitude, without the ripple
+    assert m.mean_level([1.0, 3.0], "negative") == pytest.approx([1.75, 2.55], rel=1e-12)
+    assert m.mean_level([1.0, 3.0], -1) == pytest.approx([1.75, 2.55], rel=1e-12)
+    assert m.mean_level(2.0, "positive") == pytest.approx([1.4], rel=1e-12)
+
+
+def test_constant_amplitude_law_needs_no_speed_range():
+    # a const-law harmonic is the same at every speed: print(model) warns of no missing speed range
+    h = {"frequency": 0.25, "amplitude": 0.2, "law": "const"}
+    m = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.0, "harmonics": [h]})
+    assert m.evaluate(np.ones(2), np.array([0.1, 100.0])) == pytest.approx([1.2, 1.2], rel=1e-12)
+    assert "no speed range recorded" not in str(m)
+    # the same harmonic with the default exp law: said once per direction
+    m_exp = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.0, "harmonics": [dict(h, law="exp")]})
+    assert str(m_exp).count("no speed range recorded") == 2
+
+
+def test_what_is_missing_is_named():
+    # a direction the data could not identify: motion that way is refused with the reason recorded
+    m = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.1}, {"tau_c": None, "viscous": None},
+                      not_identified={"negative.tau_c": "no backward motion in the recording"})
+    assert m.evaluate(None, 2.0).tolist() == [1.2]
+    with pytest.raises(InputError, match=r"no negative-direction value for tau_c "
+                                         r"\(not identified: no backward motion in the recording\)"):
+        m.evaluate(None, -2.0)
+    with pytest.raises(InputError, match="a harmonic of the model lacks frequency, amplitude"):
+        FrictionModel("none", {"harmonics": [{"decay": 0.1}]})
+    rippled = FrictionModel("none", {"harmonics": [{"frequency": 0.25, "amplitude": 0.2}]})
+    with pytest.raises(InputError, match="position-locked harmonics and needs theta"):
+        rippled.evaluate(None, 1.0)
+
+
+def test_a_harmonic_not_identified_is_left_out_and_the_next_still_counts():
+    # the first line's amplitude was not identified (None): it adds nothing; the second adds
+    # 0.2 sin(2 pi 0.25 1) = 0.2 (exact up to rounding)
+    hs = [{"frequency": 0.1, "amplitude": None}, {"frequency": 0.25, "amplitude": 0.2}]
+    m = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.0, "harmonics": hs})
+    assert m.evaluate(1.0, np.array([3.0, -3.0])) == pytest.approx([1.2, -1.2], rel=1e-12)
