@@ -372,6 +372,8 @@ class FrictionModel:
             for key, u in (("amplitude", "Nm"), ("decay", "s/rad"), ("phase", "rad")):
                 r = _row(f"{lab} {key}", u, {d: hs[d] for d in hs}, lambda h, key=key: (h.get(key), h.get(key + "_se")),
                          self.unit)
+                if key == "phase":
+                    r["unit"] = "rad"      # an angle of sin(2 pi f x + phi) on any axis, not a length
                 r["frequency"] = f
                 rows.append(r)
             # the speeds the amplitude law was fitted on (held at the edges outside)

@@ -60,8 +60,9 @@ def test_linear_axis_says_N_and_m():
          "harmonics": [{"frequency": 0.5, "amplitude": 0.1, "decay": 0.2}]}
     m = FrictionModel("stribeck", p, unit="m", rmse=0.0123)
     t = m.table().set_index("parameter")
-    rows = ["tau_c", "tau_s", "v_s", "viscous", "harmonic 1 amplitude", "harmonic 1 decay"]
-    assert t.loc[rows, "unit"].tolist() == ["N", "N", "m/s", "N s/m", "N", "s/m"]
+    rows = ["tau_c", "tau_s", "v_s", "viscous", "harmonic 1 amplitude", "harmonic 1 decay", "harmonic 1 phase"]
+    # the phase of sin(2 pi f x + phi) is an angle on a linear axis too
+    assert t.loc[rows, "unit"].tolist() == ["N", "N", "m/s", "N s/m", "N", "s/m", "rad"]
     assert "paper_unit" not in t                      # the paper's mNm/rpm are for a rotary axis
     assert "rmse 0.0123, held-out rmse n/a (N)" in m.describe().splitlines()
 
