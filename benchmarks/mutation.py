@@ -45,6 +45,10 @@ SCOPE = {
                             ["x_folds_of__*", "x__decide__*", "x_critical_z__*", "x_low_power_note__*"]),
 }
 
+#: survivors judged equivalent (no input a user can give behaves differently) or cosmetic (only a
+#: human-readable message changes), each with its reason: left out of the adjusted score and not re-run
+JUDGED = Path(__file__).with_name("mutation_judged.json")
+
 #: mutmut's exit codes (mutmut.stats.status_by_exit_code): 1 and 3 killed, 0 survived, timeouts
 #: (SIGXCPU) count as detected; "no tests" (no quick test calls the function) counts as survived
 KILLED = {1, 3, 24, -24, 152, 255, 36}
@@ -62,6 +66,10 @@ def _mangled(name: str, src: str) -> str:
     """The part of a mutant's name after its module: ``x__folds__mutmut_3``."""
     mod = src[:-3].replace("/", ".")
     return name[len(mod) + 1:]
+
+
+def _judged() -> dict:
+    return json.loads(JUDGED.read_text()) if JUDGED.exists() else {}
 
 
 def in_scope(module: str) -> list[str]:
@@ -97,7 +105,8 @@ def run(args) -> None:
             for f in files:
                 status.update(_meta(f))
         keep = (lambda c: c is None) if args.only == "unchecked" else (lambda c: c not in KILLED)  # noqa: E731
-        names = [m for m in names if keep(status.get(m))]
+        judged = _judged()
+        names = [m for m in names if keep(status.get(m)) and m not in judged]
     print(f"{len(names)} mutants to test", flush=True)
     subprocess.run([sys.executable, "-c", _FASTEST_FIRST, *names], cwd=ROOT)
 
@@ -120,10 +129,12 @@ cli(["run", *sys.argv[1:]])
 
 
 def report(args) -> None:
-    lines = ["| module | mutants in scope | sampled | killed | survived | not run | score |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+    judged = _judged()
+    lines = ["| module | mutants in scope | sampled | killed | survived | of which equivalent or cosmetic | not run "
+             "| score | adjusted score |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     survivors = []
-    tot_k = tot_n = 0
+    tot_k = tot_n = tot_e = 0
     for mod in SCOPE:
         status = {}
         for f in SCOPE[mod][0]:
@@ -133,14 +144,17 @@ def report(args) -> None:
         k = sum(c in KILLED for c in codes)
         s = sum(c in SURVIVED for c in codes)
         nr = sum(c is None for c in codes)
+        e = sum(c in SURVIVED and m in judged for m, c in zip(names, codes))
         n = k + s
         tot_k += k
         tot_n += n
-        score = f"{100 * k / n:.0f} % +- {100 * math.sqrt(k * (n - k) / n) / n:.0f}" if n else "-"
-        lines.append(f"| {mod} | {len(in_scope(mod))} | {len(names)} | {k} | {s} | {nr} | {score} |")
+        tot_e += e
+        lines.append(f"| {mod} | {len(in_scope(mod))} | {len(names)} | {k} | {s} | {e} | {nr} | {_score(k, n)} "
+                     f"| {_score(k, n - e)} |")
         survivors += [m for m, c in zip(names, codes) if c in SURVIVED]
     if tot_n:
-        lines.append(f"| **all** | | | {tot_k} | {tot_n - tot_k} | | {100 * tot_k / tot_n:.0f} % |")
+        lines.append(f"| **all** | | | {tot_k} | {tot_n - tot_k} | {tot_e} | | {_score(tot_k, tot_n)} "
+                     f"| {_score(tot_k, tot_n - tot_e)} |")
     out = "\n".join(lines)
     if args.diffs and survivors:
         parts = []
@@ -148,11 +162,18 @@ def report(args) -> None:
             diff = subprocess.run([sys.executable, "-m", "mutmut", "show", m], cwd=ROOT, capture_output=True,
                                   text=True).stdout
             body = [ln for ln in diff.splitlines() if ln.startswith(("+", "-")) and not ln.startswith(("+++", "---"))]
-            parts.append(f"- `{m}`\n" + "\n".join(f"      {ln}" for ln in body))
+            why = f" -- {judged[m]}" if m in judged else " -- not yet killed nor judged"
+            parts.append(f"- `{m}`{why}\n" + "\n".join(f"      {ln}" for ln in body))
         out += "\n\nSurviving mutants:\n\n" + "\n".join(parts)
     elif survivors:
-        out += "\n\nSurviving mutants:\n\n" + "\n".join(f"- `{m}`" for m in survivors)
+        out += "\n\nSurviving mutants:\n\n" + "\n".join(f"- `{m}` -- {judged.get(m, 'not yet killed nor judged')}"
+                                                        for m in survivors)
     print(out)
+
+
+def _score(k: int, n: int) -> str:
+    """Killed over total, with its binomial standard error."""
+    return f"{100 * k / n:.0f} % +- {100 * math.sqrt(k * (n - k) / n) / n:.0f}" if n else "-"
 
 
 def main(argv=None) -> None:
