@@ -191,3 +191,16 @@ def test_no_segment_on_ramps_bell_tops_or_creeping_tails(seed):
         hits = [s for s in seg if t[s.start] < t1 and t[s.stop - 1] > t0]
         assert len(hits) == 1 and hits[0].speed == pytest.approx(speed, rel=0.005)
         assert t[hits[0].stop - 1] - t[hits[0].start] > 0.9 * (t1 - t0)
+
+
+def test_sweeps_see_a_reversal_at_the_second_row():
+    # hand-traced: a log that starts one step before a turning point.  Rows 0-1 go one way by more
+    # than the hysteresis tol, then the motion reverses; the turning row (1) ends the first sweep
+    # (exact integer positions: no tolerance involved)
+    from gearspec.segment import _sweeps
+    assert _sweeps(np.array([0.0, 5.0, 4.0, 3.0, 2.0, 1.0]), 0.5) == [(0, 2, 1), (2, 6, -1)]
+    assert _sweeps(np.array([0.0, -1.0, 0.0, 1.0, 2.0]), 0.5) == [(0, 2, -1), (2, 5, 1)]
+    # a return smaller than tol right after the first row is jitter: one sweep
+    assert _sweeps(np.array([0.0, 0.3, 0.1, 1.0, 2.0]), 0.5) == [(0, 5, 1)]
+    # every row in one sweep: the bounds tile the rows
+    assert _sweeps(np.array([0.0, 1.0, 0.0, -1.0, 0.0, 1.0, 2.0]), 0.5) == [(0, 2, 1), (2, 4, -1), (4, 7, 1)]
