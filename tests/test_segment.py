@@ -242,3 +242,18 @@ def test_position_noise_of_a_long_log_from_chunks():
     q = 2 * np.pi / 2 ** 16
     theta = np.round((0.3 + 0.1 * q * np.arange(n)) / q) * q
     assert _position_noise(theta) == pytest.approx(q / math.sqrt(12), rel=1e-9)
+
+
+def test_quasi_static_sweep_speed_is_travel_over_time_between_its_end_rows():
+    # a position map (rows stored at rest after each step, 13 ms median step): each quasi-static
+    # sweep's speed is |theta(last row) - theta(first row)| / (t(last row) - t(first row)), to rounding
+    from gearspec.simulate.synthetic import quasi_static_recording
+    gear = {"name": "bare motor", "stages": [{"name": "cogging", "kind": "other", "ratio": 1.0, "teeth": 6}]}
+    rec, _ = quasi_static_recording(ripples=[Ripple(6 / (2 * np.pi), 0.01, 0.3)], levels=(0.05, 0.04), noise=0.002,
+                                    dt_spread=0.5, gap_probability=0.03, max_gap=1.0, repeat_probability=0.05,
+                                    seed=1, gear=gear)
+    qs = [s for s in find_segments(rec) if s.kind == "quasi_static"]
+    assert [s.direction for s in qs] == [1, -1]
+    for s in qs:
+        travel = abs(rec.theta[s.stop - 1] - rec.theta[s.start])
+        assert s.speed == pytest.approx(travel / (rec.t[s.stop - 1] - rec.t[s.start]), rel=1e-12)
