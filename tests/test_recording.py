@@ -1023,3 +1023,13 @@ def test_a_row_major_matrix_note_names_the_columns_it_makes(tmp_path):
         rec = load_recording(path, map="t=data_0,theta=data_1,torque=data_2")
     assert_same_drive(rec, d)
     assert len(rec) == 1500
+
+
+def test_a_recording_of_exactly_twenty_moving_rows_loads():
+    # 20 contiguous rows is the shortest stretch that is analysed: a drive turning at 2 rad/s for
+    # 20 rows at 1 kHz (travel 0.038 rad, far above its zero noise and its one step of 2 mrad) moved
+    d = drive(n=20)
+    rec = quiet(Recording.from_arrays, **d)
+    assert len(rec) == 20 and rec.n_read == 20
+    with pytest.raises(InputError, match=r"no stretch of at least 20 contiguous usable rows \(longest 19"):
+        Recording.from_arrays(**drive(n=19))
