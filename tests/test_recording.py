@@ -1033,3 +1033,15 @@ def test_a_recording_of_exactly_twenty_moving_rows_loads():
     assert len(rec) == 20 and rec.n_read == 20
     with pytest.raises(InputError, match=r"no stretch of at least 20 contiguous usable rows \(longest 19"):
         Recording.from_arrays(**drive(n=19))
+
+
+def test_a_run_whose_rows_are_interleaved_is_checked_as_one_run():
+    # run 0's rows come in two blocks around one row of run 1; run 0's second block is stamped
+    # back at 10 ms after its first reached 49 ms: 39 of its 100 rows go backwards in time (39 %
+    # > the 5 % allowed), which only a check of all of run 0's rows together sees
+    t = np.concatenate([np.arange(50), [0.0], np.arange(10, 60)]) / FS
+    run = np.repeat([0, 1, 0], [50, 1, 50])
+    theta = 0.3 + 2.0 * np.arange(101) / FS
+    torque = 0.2 + 0.02 * np.sin(5 * theta)
+    with pytest.raises(InputError, match=r"column 't' goes backwards in 39 of 100 rows"):
+        Recording.from_arrays(t=t, theta=theta, torque=torque, run=run)
