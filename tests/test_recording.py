@@ -992,3 +992,56 @@ def test_back_and_forth_with_the_period_of_the_motion_check_block_is_motion():
     theta = np.cumsum(np.where((t // 5) % 2 == 0, 0.04, -0.04))
     rec = Recording.from_arrays(t=t, theta=theta, torque=0.01 + 1e-4 * np.sin(7 * theta))
     assert len(rec) == n
+
+
+# ---------------------------------------------------------------------- refusals and notes name what to do
+def test_no_files_is_refused_in_a_sentence():
+    with pytest.raises(InputError, match=r"^no recording files given$"):
+        load_recording([])
+
+
+def test_a_file_pandas_cannot_tokenise_names_the_file_and_the_separator(tmp_path):
+    # a quote opened in row 2 and never closed: pandas' tokeniser gives up; the sentence names the
+    # file, what went wrong (pandas' first line) and the first thing to check, the separator
+    path = tmp_path / "q.csv"
+    path.write_text('t,theta,torque\n0,0.1,0.2\n0.001,0.2,"0.3\n0.002,0.3,0.4\n')
+    with pytest.raises(InputError) as info:
+        load_recording(path)
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: cannot be read as a table (")
+    assert "EOF inside string" in msg and msg.endswith("; check --sep")
+
+
+def test_a_row_major_matrix_note_names_the_columns_it_makes(tmp_path):
+    # a 3 x 1500 matrix (one row per channel) is read as 1500 samples of 3 columns data_0, data_1,
+    # data_2; the note names exactly the columns a --map can then use (first and last)
+    d = drive(n=1500)
+    path = tmp_path / "m.npz"
+    np.savez(path, data=np.vstack([d["t"], d["theta"], d["torque"]]))
+    with pytest.warns(GearspecWarning, match=r"'data' is a 3 x 1500 matrix; read as 1500 rows of 3 columns "
+                                             r"\(data_0 \.\.\. data_2\), one row per sample"):
+        rec = load_recording(path, map="t=data_0,theta=data_1,torque=data_2")
+    assert_same_drive(rec, d)
+    assert len(rec) == 1500
+
+
+def test_a_recording_of_exactly_twenty_moving_rows_loads():
+    # 20 contiguous rows is the shortest stretch that is analysed: a drive turning at 2 rad/s for
+    # 20 rows at 1 kHz (travel 0.038 rad, far above its zero noise and its one step of 2 mrad) moved
+    d = drive(n=20)
+    rec = quiet(Recording.from_arrays, **d)
+    assert len(rec) == 20 and rec.n_read == 20
+    with pytest.raises(InputError, match=r"no stretch of at least 20 contiguous usable rows \(longest 19"):
+        Recording.from_arrays(**drive(n=19))
+
+
+def test_a_run_whose_rows_are_interleaved_is_checked_as_one_run():
+    # run 0's rows come in two blocks around one row of run 1; run 0's second block is stamped
+    # back at 10 ms after its first reached 49 ms: 39 of its 100 rows go backwards in time (39 %
+    # > the 5 % allowed), which only a check of all of run 0's rows together sees
+    t = np.concatenate([np.arange(50), [0.0], np.arange(10, 60)]) / FS
+    run = np.repeat([0, 1, 0], [50, 1, 50])
+    theta = 0.3 + 2.0 * np.arange(101) / FS
+    torque = 0.2 + 0.02 * np.sin(5 * theta)
+    with pytest.raises(InputError, match=r"column 't' goes backwards in 39 of 100 rows"):
+        Recording.from_arrays(t=t, theta=theta, torque=torque, run=run)

@@ -481,3 +481,103 @@ def test_segmentation_ledger():
     assert [(s.start, s.stop, s.direction) for s in s1] == [(s.start, s.stop, s.direction) for s in s0]
     assert s1.excluded == s0.excluded + Counter({"transient": 30})
     assert s1.n_rows == 4030 == sum(s.n for s in s1) + sum(s1.excluded.values())
+
+
+# ====================================================================== 6. the held-out error, edge cases
+def _memoriser_levels(G_pos=9, G_neg=10, n=50):
+    """Segments of n rows whose friction is exactly +1 or -1 (alternating), no noise: a model that
+    memorises the training segments' means predicts 0 for an unseen one, so every held-out
+    residual is exactly +-1 and the held-out rmse over any set of rows is exactly 1."""
+    G = G_pos + G_neg
+    return _segments_data(G_pos, G_neg, np.full(G, n), np.where(np.arange(G) % 2 == 0, 1.0, -1.0))
+
+
+def _residual(m, t):
+    return t.y - _recall(m, t)
+
+
+def test_holdout_defaults_hold_out_whole_segments():
+    # by="segment" and five folds are the defaults: the value is the memoriser's held-out error 1
+    fd = _memoriser_levels()
+    rmse, why = identify.holdout(_memorise, fd, residual=_residual)
+    assert why is None and rmse == pytest.approx(1.0, rel=1e-12)
+    assert identify.holdout_rmse(_memorise, fd, residual=_residual) == pytest.approx(1.0, rel=1e-12)
+    # in sample the same model is exact: the held-out value is not the in-sample one
+    assert np.all(_residual(_memorise(fd), fd) == 0.0)
+
+
+def test_holdout_runs_with_two_segments_and_refuses_one():
+    # two segments (one direction): two folds, each predicted from the other: rmse exactly 1
+    fd = _memoriser_levels(2, 0)
+    rmse, why = identify.holdout(_memorise, fd, by="segment", folds=5, residual=_residual)
+    assert why is None and rmse == pytest.approx(1.0, rel=1e-12)
+    one = _memoriser_levels(1, 0)
+    assert identify.holdout(_memorise, one, residual=_residual) == (
+        None, "cross-validation needs two held-out segments or more; the data have 1")
+    assert identify.holdout_rmse(_memorise, one, residual=_residual) is None
+
+
+def test_holdout_with_a_fold_that_cannot_be_fitted_says_how_much_it_covers():
+    # a fit that needs segment 0 in its training data fails in the one fold holding segment 0:
+    # the rmse comes from the other 4 folds (still exactly 1) and the reason counts the samples
+    # they cover and the folds that failed out of those that ran
+    from gearspec.errors import InputError
+    fd = _memoriser_levels()
+    fold = identify._folds(fd, "segment", 5)
+    left_out = int(np.count_nonzero(fold == fold[fd.segment == 0][0]))
+    assert left_out in (150, 200)        # 19 segments of 50 rows in 5 folds: 4 or 3 per fold
+
+    def needs_segment_0(train):
+        if not np.any(train.segment == 0):
+            raise InputError("segment 0 is needed")
+        return _memorise(train)
+
+    rmse, why = identify.holdout(needs_segment_0, fd, residual=_residual)
+    assert rmse == pytest.approx(1.0, rel=1e-12)
+    assert why == (f"from {950 - left_out} of 950 samples: 1 of 5 folds could not be fitted without their "
+                   "segments (segment 0 is needed)")
+    assert identify.holdout_rmse(needs_segment_0, fd, residual=_residual) == pytest.approx(1.0, rel=1e-12)
+
+
+# ====================================================================== 7. acceptance: ties, the null case, the sentences
+def test_decide_accepts_at_exactly_the_consistency_and_gain_asked():
+    # each gate is ">=": a candidate exactly at the threshold passes.  _decide_case(3): consistency
+    # exactly 1 (every fold gains), gain 1 - 1/sqrt(1.9) = 0.27452 (d^2 = 0.9, s = 1)
+    rnd, fr, _ = _decide_case(3.0)
+    ev = _decide(rnd, fr, None, z_crit=2.0, min_gain=0.01, consistency=0.9)
+    assert ev.consistency == 1.0 and ev.gain == pytest.approx(1 - 1 / math.sqrt(1.9), rel=1e-12)
+    assert _decide(rnd, fr, None, z_crit=2.0, min_gain=0.01, consistency=1.0).passed
+    at_gain = _decide(rnd, fr, None, z_crit=2.0, min_gain=ev.gain, consistency=0.9)
+    assert at_gain.passed, at_gain.reason
+    assert not _decide(rnd, fr, None, z_crit=2.0, min_gain=math.nextafter(ev.gain, 1.0), consistency=0.9).passed
+    # the sentence of an acceptance gives Z, the critical value and the fall of the held-out rmse
+    assert ev.reason == "accepted: held-out Z 3.0 >= 2.00, rmse -27.45 %"
+
+
+def test_decide_when_the_model_already_predicts_every_held_out_row():
+    # r0 = 0 everywhere and the candidate changes nothing: no error before, none after, no Z (0),
+    # a gain of 0 (not a division by zero), rejected
+    rnd, _, _ = _decide_case(3.0)
+    N = len(rnd.dd)
+    fr = _Folds(r0=np.zeros(N), p1=rnd.dd.y.copy(), proposals=[], contribution=None, n_par=2)
+    ev = _decide(rnd, fr, None, z_crit=2.0, min_gain=0.01)
+    assert (ev.z, ev.gain, ev.rmse_holdout_before, ev.rmse_holdout_after) == (0.0, 0.0, 0.0, 0.0)
+    assert not ev.passed and ev.reason.startswith("held-out Z 0.00 below 2.00")
+
+
+def test_low_power_note_by_the_number_of_held_out_groups():
+    # t_{0.99, dof} over z_{0.99} = 2.326: 10 groups 2.821 / 2.326 = 1.21 (<= 1.5: no note); 5 groups
+    # 3.747 / 2.326 = 1.61 and 3 groups 6.965 / 2.326 = 2.99 (little power); 2 groups 31.82 / 2.326
+    # = 13.7 (> 3: cannot reach significance)
+    from gearspec.diagnose.loop import low_power_note
+    assert low_power_note(critical_z(0.01, 1, 10), 10) == ""
+    five = low_power_note(critical_z(0.01, 1, 5), 5)
+    assert five.startswith("; with 5 held-out groups the test has little power: it needs Z above 3.7 (a t "
+                           "quantile with 4 degrees of freedom) where many groups would need 2.3")
+    assert "with 3 held-out groups the test has little power: it needs Z above 7.0" in low_power_note(
+        critical_z(0.01, 1, 3), 3)
+    assert ("with 2 held-out groups the test cannot reach significance in practice: it needs Z above 31.8"
+            in low_power_note(critical_z(0.01, 1, 2), 2))
+    # no note where there is no t quantile to compare: one group, or an infinite critical value
+    assert low_power_note(2.821, 1) == ""
+    assert low_power_note(math.inf, 10) == ""

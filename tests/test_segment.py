@@ -1,5 +1,7 @@
 """Constant-speed segments: found from position, per direction, tolerant of ripple and ramps."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -191,3 +193,67 @@ def test_no_segment_on_ramps_bell_tops_or_creeping_tails(seed):
         hits = [s for s in seg if t[s.start] < t1 and t[s.stop - 1] > t0]
         assert len(hits) == 1 and hits[0].speed == pytest.approx(speed, rel=0.005)
         assert t[hits[0].stop - 1] - t[hits[0].start] > 0.9 * (t1 - t0)
+
+
+def test_sweeps_see_a_reversal_at_the_second_row():
+    # hand-traced: a log that starts one step before a turning point.  Rows 0-1 go one way by more
+    # than the hysteresis tol, then the motion reverses; the turning row (1) ends the first sweep
+    # (exact integer positions: no tolerance involved)
+    from gearspec.segment import _sweeps
+    assert _sweeps(np.array([0.0, 5.0, 4.0, 3.0, 2.0, 1.0]), 0.5) == [(0, 2, 1), (2, 6, -1)]
+    assert _sweeps(np.array([0.0, -1.0, 0.0, 1.0, 2.0]), 0.5) == [(0, 2, -1), (2, 5, 1)]
+    # a return smaller than tol right after the first row is jitter: one sweep
+    assert _sweeps(np.array([0.0, 0.3, 0.1, 1.0, 2.0]), 0.5) == [(0, 5, 1)]
+    # every row in one sweep: the bounds tile the rows
+    assert _sweeps(np.array([0.0, 1.0, 0.0, -1.0, 0.0, 1.0, 2.0]), 0.5) == [(0, 2, 1), (2, 4, -1), (4, 7, 1)]
+
+
+def test_rest_is_counted_as_standstill_and_the_ramps_as_transient():
+    # 2 s at rest, 0.5 s ramp up, 3 s at 2 rad/s, 0.5 s ramp down, 2 s at rest (1 kHz, position
+    # noise 1 urad): 4000 rows at rest, 1000 on ramps, one plateau at rows 2500-5500.  Tolerance
+    # 100 rows: the chosen window is 20 ms (4 blocks of 5 rows); a window straddling a rest/ramp
+    # boundary is neither, at most two windows (40 rows) per boundary, two boundaries per class
+    fs = 1000.0
+    v = np.concatenate([np.zeros(2000), np.linspace(0, 2, 500), np.full(3000, 2.0), np.linspace(2, 0, 500),
+                        np.zeros(2000)])
+    rng = np.random.default_rng(0)
+    t = np.arange(len(v)) / fs
+    theta = 0.3 + np.cumsum(v) / fs + 1e-6 * rng.standard_normal(len(t))
+    rec = Recording.from_arrays(t=t, theta=theta, torque=0.1 + 0.01 * rng.standard_normal(len(t)))
+    seg = find_segments(rec)
+    (only,) = list(seg)
+    assert only.direction == 1 and abs(only.start - 2500) <= 20 and abs(only.stop - 5500) <= 20
+    assert only.speed == pytest.approx(2.0, rel=1e-3)
+    assert abs(seg.excluded["standstill"] - 4000) <= 100
+    assert abs(seg.excluded["transient"] + seg.excluded["short_plateau"] - 1000) <= 100
+    assert seg.n_rows == 8000 == sum(s.n for s in seg) + sum(seg.excluded.values())
+
+
+def test_position_noise_of_a_long_log_from_chunks():
+    # 200 000 rows (more than 20 chunks of 5000: the estimate reads chunks spread over the log)
+    from gearspec.segment import _position_noise
+    n = 200_000
+    rng = np.random.default_rng(1)
+    # at rest with white noise 1e-4 rad: second differences have sd 1e-4 sqrt(6); the MAD estimate
+    # from 100 000 of them is within ~0.5 % (1 sd): 3 % tolerance
+    assert _position_noise(0.3 + 1e-4 * rng.standard_normal(n)) == pytest.approx(1e-4, rel=0.03)
+    # a 16-bit encoder creeping at 0.1 count per row: no second-difference noise (the median of
+    # |d2| is 0); the floor is the quantum q / sqrt(12), q the smallest step, exactly
+    q = 2 * np.pi / 2 ** 16
+    theta = np.round((0.3 + 0.1 * q * np.arange(n)) / q) * q
+    assert _position_noise(theta) == pytest.approx(q / math.sqrt(12), rel=1e-9)
+
+
+def test_quasi_static_sweep_speed_is_travel_over_time_between_its_end_rows():
+    # a position map (rows stored at rest after each step, 13 ms median step): each quasi-static
+    # sweep's speed is |theta(last row) - theta(first row)| / (t(last row) - t(first row)), to rounding
+    from gearspec.simulate.synthetic import quasi_static_recording
+    gear = {"name": "bare motor", "stages": [{"name": "cogging", "kind": "other", "ratio": 1.0, "teeth": 6}]}
+    rec, _ = quasi_static_recording(ripples=[Ripple(6 / (2 * np.pi), 0.01, 0.3)], levels=(0.05, 0.04), noise=0.002,
+                                    dt_spread=0.5, gap_probability=0.03, max_gap=1.0, repeat_probability=0.05,
+                                    seed=1, gear=gear)
+    qs = [s for s in find_segments(rec) if s.kind == "quasi_static"]
+    assert [s.direction for s in qs] == [1, -1]
+    for s in qs:
+        travel = abs(rec.theta[s.stop - 1] - rec.theta[s.start])
+        assert s.speed == pytest.approx(travel / (rec.t[s.stop - 1] - rec.t[s.start]), rel=1e-12)

@@ -387,3 +387,148 @@ def test_an_empty_user_segmentation_is_refused_not_replaced_by_the_defaults():
     seg2 = find_segments(rec, window=0.2)
     res = analyze(rec, segmentation=seg2)
     assert res.settings["window"] == seg2.settings["window"] != "auto"
+
+
+# ---------------------------------------------------------------------- the search's rules, one at a time
+def test_search_excludes_slow_declared_and_taken_peaks_and_keeps_the_strongest_first():
+    """``_search`` on a flat noise power of exactly 1 with spikes: the local noise level is then 1
+    (the spikes are above 10 x the median / ln 2 and left out of every block), so z is the spike's
+    power and every spike of 1000 or more is significant (fap ~ 0); a spike between equal
+    neighbours is refined to its own bin.  Which spikes come back is decided by the rules alone."""
+    from gearspec.spectrum.analysis import _Grid, _LocalNoise, _search
+    span, oversample = 10.0, 2.0
+    df, base, nbin = 1 / (span * oversample), 1 / span, 400          # f(i) = 0.1 + 0.05 i, up to 20.05
+    grid = _Grid(base, df, 0, nbin)
+    power = np.ones(nbin)
+
+    def spike(f, p):
+        i = round((f - base) / df)
+        power[i] = p
+        return grid.at(i)
+
+    spike(0.15, 5000.0)   # 1.5 cycles in the segment: below f_found_min = 2 / span (the polynomial's)
+    spike(5.1, 4000.0)    # within 1.5 resolution steps (0.15) of the declared line at 5.0
+    spike(8.2, 3000.0)    # within the guard (3 steps = 0.3) of 8.0, found before
+    f_a = spike(3.0, 2000.0)
+    spike(3.2, 1500.0)    # within the guard of the stronger 3.0
+    f_b = spike(12.0, 1000.0)
+    noise = _LocalNoise(power, width=int(100 * oversample), min_width=int(20 * oversample), mask=None, enbw=1.0)
+    assert noise.level(np.array([10, 150, 390])) == pytest.approx([1.0, 1.0, 1.0], rel=1e-12)
+    kw = {"span": span, "guard": 3 / span, "f_found_min": 2 / span, "fap_threshold": 0.01,
+          "m_eff": nbin / oversample, "oversample": oversample}
+    found = _search(power, grid, noise, [5.0], [8.0], room=8, **kw)
+    assert found == [pytest.approx(f_a, rel=1e-12), pytest.approx(f_b, rel=1e-12)]
+    assert f_a == pytest.approx(3.0, rel=1e-12) and f_b == pytest.approx(12.0, rel=1e-12)
+    # room for one: the strongest allowed
+    assert _search(power, grid, noise, [5.0], [8.0], room=1, **kw) == [pytest.approx(3.0, rel=1e-12)]
+    # and without the declared / taken lines their spikes are found (the rules, not the powers, excluded them)
+    assert len(_search(power, grid, noise, [], [], room=8, **kw)) == 4
+
+
+def test_z_floor_is_the_known_level_bound_of_the_false_alarm_probability():
+    # a known noise level: P(one frequency > z) = exp(-z), over m: 1 - (1 - exp(-z))^m; the floor is
+    # the z where this equals the threshold: -ln(1 - (1 - fap)^(1/m)), lowered by 1e-9 for rounding
+    from gearspec.spectrum.analysis import _z_floor
+    from gearspec.spectrum.periodogram import false_alarm_probability
+    for fap, m, z in ((0.01, 1.0, 4.60517), (0.01, 1000.0, 11.50791), (0.001, 200.0, 12.20557)):
+        zf = _z_floor(fap, m)
+        assert zf == pytest.approx(-math.log(1 - (1 - fap) ** (1 / m)), rel=1e-8)
+        assert zf == pytest.approx(z, abs=1e-5)          # evaluated to 5 decimals
+        assert false_alarm_probability(zf, m) == pytest.approx(fap, rel=1e-6)
+        assert false_alarm_probability(zf * 1.001, m) < fap < false_alarm_probability(zf * 0.999, m)
+
+
+def test_local_noise_falls_back_to_the_median_where_no_block_has_a_level():
+    # every bin masked (all of them near fitted lines): no block has a level; the level is the
+    # median power everywhere (the documented fallback), and no bins are counted
+    from gearspec.spectrum.analysis import _LocalNoise
+    power = np.arange(1.0, 101.0)
+    nm = _LocalNoise(power, width=200, min_width=40, mask=np.ones(100, bool), enbw=1.0)
+    np.testing.assert_array_equal(nm.level(np.array([0, 50, 99])), [50.5, 50.5, 50.5])
+    np.testing.assert_array_equal(nm.bins(np.array([0, 99])), [0.0, 0.0])
+    assert nm.lowest() == 0.0
+
+
+def test_noise_blocks_fold_a_runt_last_block_into_its_neighbour():
+    # hand-computed edges for 985 bins, width 200, min_width 40, relative 0.3: growing blocks
+    # 0, 40, 80, 120, 160, 208, 270, 351, 456, 592, 769, one full block to 969, and 16 bins left
+    # (< min_width / 2 = 20): folded into the block before, which ends at 985
+    from gearspec.spectrum.periodogram import noise_blocks
+    centres, levels, counts = noise_blocks(np.ones(985), width=200, min_width=40)
+    edges = np.array([0, 40, 80, 120, 160, 208, 270, 351, 456, 592, 769, 985])
+    np.testing.assert_array_equal(centres, 0.5 * (edges[:-1] + edges[1:] - 1))
+    np.testing.assert_array_equal(counts[:-1], np.diff(edges)[:-1])
+    np.testing.assert_array_equal(levels, 1.0)
+    # 20 bins left (not a runt): a block of their own
+    c2, _, k2 = noise_blocks(np.ones(989), width=200, min_width=40)
+    np.testing.assert_array_equal(c2[-2:], [0.5 * (769 + 969 - 1), 0.5 * (969 + 989 - 1)])
+    assert k2[-1] == 20
+
+
+def test_autogrid_from_a_given_lowest_frequency():
+    # span 9.99: df = 1 / (2 x 9.99); the lowest frequency is the one asked, never below df (0 or
+    # a negative one would be the mean, not a line); nf counts the grid points up to fmax
+    theta = np.arange(1000) * 0.01
+    ls = LombScargle(theta, np.sin(2 * np.pi * 3 * theta))
+    df = 1 / (2 * 9.99)
+    assert ls.autogrid(oversample=2, fmax=5.0) == (pytest.approx(1 / 9.99), pytest.approx(df), 98)
+    assert ls.autogrid(oversample=2, fmax=5.0, fmin=1.3) == (1.3, pytest.approx(df), 74)
+    assert ls.autogrid(oversample=2, fmax=5.0, fmin=0.0) == (pytest.approx(df), pytest.approx(df), 99)
+
+
+def _two_lines(n=4000, h=0.01, seed=0):
+    """Lines of 0.02 at 3 and at 10 cycles per unit, white noise 0.002: amplitude se
+    0.002 sqrt(2 / 4000) = 4.5e-5."""
+    rng = np.random.default_rng(seed)
+    th = np.arange(n) * h
+    return th, 0.5 + 0.02 * np.sin(2 * np.pi * 3 * th + 0.3) + 0.02 * np.sin(2 * np.pi * 10 * th) \
+        + 0.002 * rng.standard_normal(n)
+
+
+def test_max_frequency_caps_the_search():
+    th, y = _two_lines()
+    both = analyze_segment(th, y)
+    assert sorted(round(p.frequency, 3) for p in both.peaks) == [3.0, 10.0]
+    capped = analyze_segment(th, y, max_frequency=5.0)
+    assert len(capped.peaks) == 1
+    p = capped.peaks[0]
+    # frequency se ~ sqrt(6) se_A / (pi A span) ~ 5e-5: 1e-3 is 20 se; amplitude 10 se
+    assert p.frequency == pytest.approx(3.0, abs=1e-3) and p.amplitude == pytest.approx(0.02, abs=5e-4)
+
+
+def test_auto_periodogram_is_lomb_scargle_up_to_the_limit_then_fft(monkeypatch):
+    from gearspec.spectrum import analysis
+    th, y = _two_lines()
+
+    def run(p):
+        s = analyze_segment(th, y, periodogram=p, keep_spectra=True)
+        return [(q.frequency, q.snr, q.fap) for q in s.peaks], s.ls_frequency
+
+    ls, fft = run("lombscargle"), run("fft")
+    assert ls[0] != fft[0]          # the two paths differ (noise level, grid): the comparison can tell them apart
+    auto = run("auto")              # 4000 samples <= LS_MAX_SAMPLES
+    assert auto[0] == ls[0] and np.array_equal(auto[1], ls[1])
+    monkeypatch.setattr(analysis, "LS_MAX_SAMPLES", 3999)
+    auto = run("auto")              # one sample over the limit
+    assert auto[0] == fft[0] and np.array_equal(auto[1], fft[1])
+
+
+def test_a_line_too_slow_for_the_segment_is_skipped_with_its_kind_and_cycles():
+    # spur 3:1 seen from the motor: output shaft 1/(6 pi) = 0.0531, motor shaft 1/(2 pi) = 0.159
+    # cycles/rad; over 40 rad they make 2.12 and 6.37 cycles: with min_cycles 3 the output shaft
+    # is skipped as too slow (and absorbed by the polynomial), the motor shaft measured
+    gear = GearTrain.from_dict({"name": "g", "reference": "motor", "stages": [{"name": "s", "kind": "spur", "ratio": 3.0}]})
+    rng = np.random.default_rng(4)
+    th = np.linspace(0.0, 40.0, 4000)
+    f_out, f_mot = 1 / (6 * np.pi), 1 / (2 * np.pi)
+    y = 0.5 + 0.01 * np.sin(2 * np.pi * f_out * th) + 0.02 * np.sin(2 * np.pi * f_mot * th + 0.4) \
+        + 0.002 * rng.standard_normal(th.size)
+    s = analyze_segment(th, y, gear, min_cycles=3.0, max_peaks=0)
+    assert len(s.skipped) == 1
+    sk = s.skipped[0]
+    assert (sk["label"], sk["kind"]) == ("output shaft", "too_slow")
+    assert sk["frequency"] == pytest.approx(f_out, rel=1e-12)
+    assert sk["reason"].startswith("2.12 cycles in the segment (< 3)")
+    assert [p.label for p in s.peaks] == ["motor shaft"]
+    assert s.peaks[0].amplitude == pytest.approx(0.02, abs=5e-4)   # se 4.5e-5 (noise 0.002, 4000 samples)
+    assert s.peaks[0].phase == pytest.approx(0.4, abs=0.03)         # se 2.2e-3 rad
