@@ -27,6 +27,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MUTANTS = ROOT / "mutants"
+#: where mutmut's results are read (``report --results DIR``: a saved copy of an earlier run)
+RESULTS = MUTANTS
 
 #: module -> (source files, function globs over mutmut's mangled names; "*" is the whole file).  The
 #: identification and the closed loop are large: their core rules (the held-out folds, the acceptance
@@ -56,7 +58,7 @@ SURVIVED = {0, 5, 33}
 
 
 def _meta(src: str) -> dict:
-    path = MUTANTS / (src + ".meta")
+    path = RESULTS / (src + ".meta")
     if not path.exists():
         return {}
     return json.loads(path.read_text())["exit_code_by_key"]
@@ -187,7 +189,11 @@ def main(argv=None) -> None:
         q.add_argument("--only", choices=["unchecked", "survivors"],
                        help="run: only the sampled mutants not yet tested, or not yet killed (after new tests)")
         q.add_argument("--diffs", action="store_true", help="report: print each survivor's diff")
+        q.add_argument("--results", type=Path, help="report: mutmut's results from a saved copy of mutants/")
     args = p.parse_args(argv)
+    if args.results:
+        global RESULTS
+        RESULTS = args.results
     if not MUTANTS.parent.joinpath("pyproject.toml").exists():
         sys.exit("run from the gearspec project")
     (run if args.cmd == "run" else report)(args)
