@@ -127,6 +127,10 @@ def test_amplitude_law_is_held_at_the_edge_of_its_speed_range(tmp_path):
     assert back.harmonics(1)[0]["speed_range"] == [6.0, 26.0]
     assert np.array_equal(back.evaluate(theta, v), got)
     assert "fitted on |v| 6..26 rad/s; held at the edge outside" in str(m)
+    t = m.table().set_index("parameter")                # and in the table, per direction, in rad/s and rpm
+    assert t.loc["harmonic 1 law fitted |v| min", "positive"] == 6.0
+    assert t.loc["harmonic 1 law fitted |v| max", "negative"] == 26.0
+    assert t.loc["harmonic 1 law fitted |v| max", "unit"] == "rad/s"
     # a model written before speed_range (no range): no clamp, and it says so
     old = m.to_dict()
     for p in old["directions"].values():

@@ -1045,3 +1045,16 @@ def test_a_run_whose_rows_are_interleaved_is_checked_as_one_run():
     torque = 0.2 + 0.02 * np.sin(5 * theta)
     with pytest.raises(InputError, match=r"column 't' goes backwards in 39 of 100 rows"):
         Recording.from_arrays(t=t, theta=theta, torque=torque, run=run)
+
+
+def test_signal_named_explicitly_and_a_text_current_column_refused(tmp_path):
+    t = np.arange(400) / 100.0
+    rec = Recording.from_arrays(t=t, theta=0.5 * t, torque=0.1 + 0.01 * np.sin(t), signal="torque")
+    assert rec.signal == "torque"
+    # a current column is checked like the others: its first non-number is named with its row
+    path = tmp_path / "cur.csv"
+    rows = ["t,theta,torque,current"] + [f"{a:.2f},{0.5 * a:.4f},{0.1 + 0.01 * np.sin(a):.5f},"
+                                         f"{'abc' if i == 7 else '0.2'}" for i, a in enumerate(t)]
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(InputError, match=r"column 'current', data row 8: 'abc' is not a number"):
+        load_recording(path)
