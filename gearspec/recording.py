@@ -705,7 +705,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
     _check_signal(rec)
     _check_units(rec)
     if sig_used == "current":
-        factor = gear.torque_constant * (gear.total_ratio if gear.reference == "output" else 1.0)
+        factor = float(gear.torque_from_current(1.0))   # the conversion tau uses, said once
         rec.notes.append(f"torque = {factor:g} Nm/A x current (torque constant {gear.torque_constant:g} Nm/A"
                          + (f" x ratio {gear.total_ratio:g}, ideal gear" if gear.reference == "output" else "") + ")")
     n_gaps = len(rec.pieces()) - len(rec.gap_limits())

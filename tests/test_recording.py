@@ -891,7 +891,7 @@ def test_coarse_clock_bursts_are_spread_to_the_true_times_and_nothing_is_lost():
     rec = quiet(Recording.from_arrays, **d)
     assert len(rec) == 4000 and not rec.excluded
     np.testing.assert_allclose(rec.t, true_t, rtol=0, atol=1e-12)  # even spreading is exact for a steady log
-    assert any("3000 rows repeat the time stamp" in n and "no row lost" in n for n in rec.notes)
+    assert any(n.startswith("arrays: 3000 rows repeat the time stamp") and "no row lost" in n for n in rec.notes)
     assert rec.pieces() == [(0, 0, 4000)]
     assert_ledger(rec)
 
@@ -1058,3 +1058,50 @@ def test_signal_named_explicitly_and_a_text_current_column_refused(tmp_path):
     path.write_text("\n".join(rows) + "\n")
     with pytest.raises(InputError, match=r"column 'current', data row 8: 'abc' is not a number"):
         load_recording(path)
+
+
+def test_saturation_at_the_minimum_only_is_excluded():
+    # torque clipped at its minimum only: the maximum (one row) is no saturation, the minimum is
+    t = np.arange(3000) / 1000.0
+    rng = np.random.default_rng(5)
+    tau = 0.1 * np.sin(2 * np.pi * 3 * t) + rng.normal(0, 1e-3, t.size)
+    floor = -0.08
+    clipped = int(np.sum(tau <= floor))
+    with pytest.warns(GearspecWarning, match=f"sits at its extreme value in {clipped} rows"):
+        rec = Recording.from_arrays(t=t, theta=0.5 * t, torque=np.maximum(tau, floor))
+    assert clipped > 100 and rec.excluded == {"saturation": clipped}
+
+
+def test_motor_current_at_an_output_reference_is_torque_constant_times_ratio():
+    from gearspec.gears import GearTrain
+    g = GearTrain.from_dict({"name": "out", "reference": "output", "torque_constant": 0.05,
+                             "stages": [{"name": "s", "kind": "spur", "ratio": 100.0}]})
+    t = np.arange(500) / 100.0
+    cur = 0.2 + 0.01 * np.sin(t)
+    rec = Recording.from_arrays(gear=g, t=t, theta=0.01 * t, current=cur)
+    np.testing.assert_allclose(rec.tau, 0.05 * 100.0 * cur, rtol=1e-12)   # k_M N I at the output
+    assert "torque = 5 Nm/A x current (torque constant 0.05 Nm/A x ratio 100, ideal gear)" in rec.notes
+
+
+def test_fast_motion_is_not_taken_for_a_wrap():
+    # 0.4 rad per sample (more than 5 % of a turn) seen modulo 2 pi: fast motion, not a wrapped
+    # encoder; theta is left as logged and nothing is said
+    from gearspec.recording import _unwrap_theta
+    th = np.mod(0.4 * np.arange(200), 2 * np.pi)
+    frame = pd.DataFrame({"theta": th, "run": np.zeros(200, int)})
+    notes = []
+    out = _unwrap_theta("f.csv", frame, "rad", notes)
+    assert np.array_equal(out["theta"].to_numpy(), th) and notes == []
+    slow = pd.DataFrame({"theta": np.mod(0.01 * np.arange(2000), 2 * np.pi), "run": np.zeros(2000, int)})
+    out = _unwrap_theta("f.csv", slow, "rad", notes)
+    np.testing.assert_allclose(out["theta"].to_numpy(), 0.01 * np.arange(2000), atol=1e-9)
+
+
+def test_summary_duration_and_pieces_follow_max_gap():
+    t = np.concatenate([np.arange(1000), 1500 + np.arange(1000)]) / 1000.0   # 0.5 s gap
+    rec = quiet(Recording.from_arrays, t=t, theta=0.5 * t, torque=0.1 + 0.01 * np.sin(t))
+    assert len(rec.pieces()) == 2
+    # two pieces of 0.999 s each
+    assert "2000 usable rows of 2000 read, 1 run(s), 1.998 s in all" in rec.summary()
+    rec.max_gap = 1.0                                # a larger limit joins them: the cache follows
+    assert len(rec.pieces()) == 1
