@@ -87,3 +87,22 @@ def test_from_recording_velocity_choice_and_load_carried_to_the_motor():
     rec2, seg2, _, _ = _two_run_recording(with_velocity=False)
     np.testing.assert_allclose(FitData.from_recording(rec2, seg2, velocity="measured").v,
                                np.repeat([2.0, -1.0], 160), rtol=0, atol=1e-9)
+
+
+def test_plateau_blocks_follow_time_order_when_segments_interleave():
+    # rows of two segments interleaved (as points taken alternately): each segment's blocks are its
+    # own rows in time order; segment 0 steps from 1 to 2 halfway, so its se is 1 / (2 sqrt 7)
+    # exactly as for a contiguous plateau, and segment 1 (constant 3) has se 0
+    n = 2000
+    seg = np.tile([0, 1], n // 2)
+    y = np.where(seg == 0, np.where(np.arange(n) < n // 2, 1.0, 2.0), 3.0)
+    data = FitData(theta=None, v=np.full(n, 0.5), y=y, segment=seg)
+    p = data.plateaus().set_index("segment")
+    assert p.loc[0, "level_se"] == pytest.approx(1 / (2 * math.sqrt(7)), rel=1e-12)
+    assert p.loc[1, "level_se"] == 0.0 and p.loc[1, "level"] == 3.0
+
+
+def test_no_points_is_refused_in_a_sentence():
+    from gearspec.errors import InputError
+    with pytest.raises(InputError, match="fit data: no points"):
+        FitData.from_points([], [])

@@ -52,6 +52,28 @@ def test_table_in_paper_units():
     # an extra term is one row named by its description
     t2 = FrictionModel("silo4", POS, NEG).with_terms({"kind": "offset", "offset": 0.5}).table()
     assert t2["parameter"].iloc[-1] == "offset 0.5" and t2["unit"].iloc[-1] == ""
+    # the columns a user reads, in this order, and no other (a term row adds none)
+    assert list(t2.columns) == ["parameter", "unit", "paper_unit", "positive", "positive_se", "positive_paper",
+                                "negative", "negative_se", "negative_paper", "frequency"]
+
+
+def test_direction_names_accepted_everywhere():
+    m = FrictionModel("coulomb_viscous", {"tau_c": 1.0, "viscous": 0.1}, {"tau_c": 2.0, "viscous": 0.2})
+    for name in ("positive", 1, 1.0, "+", "+1"):
+        assert m.params(name)["tau_c"] == 1.0, name
+    for name in ("negative", -1, -1.0, "-", "-1"):
+        assert m.params(name)["tau_c"] == 2.0, name
+    with pytest.raises(InputError, match="direction must be"):
+        m.params("up")
+
+
+def test_describe_says_whether_the_held_out_rmse_is_missing_or_partial():
+    p = {"tau_c": 1.0, "viscous": 0.1}
+    part = FrictionModel("coulomb_viscous", p, rmse=0.01, rmse_holdout=0.02,
+                         rmse_holdout_reason="from 900 of 1000 samples: 1 of 5 folds could not be fitted")
+    assert "held-out rmse partial: from 900 of 1000 samples" in part.describe()
+    none = FrictionModel("coulomb_viscous", p, rmse=0.01, rmse_holdout_reason="one segment per direction")
+    assert "held-out rmse not computed: one segment per direction" in none.describe()
 
 
 def test_linear_axis_says_N_and_m():
