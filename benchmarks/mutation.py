@@ -196,6 +196,10 @@ def main(argv=None) -> None:
         RESULTS = args.results
     if not MUTANTS.parent.joinpath("pyproject.toml").exists():
         sys.exit("run from the gearspec project")
+    if args.cmd == "report" and not RESULTS.is_dir():
+        print(f"{RESULTS}: no mutation results yet; run `python benchmarks/mutation.py run` (or make mutation) first",
+              file=sys.stderr)
+        sys.exit(2)
     (run if args.cmd == "run" else report)(args)
 
 
