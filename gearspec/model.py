@@ -43,6 +43,7 @@ import pandas as pd
 
 from . import laws
 from .errors import InputError
+from .jsonsafe import finite_or_none, plain
 from .terms import TERMS, evaluate_term
 
 __all__ = ["FrictionModel", "LAWS", "Law", "RPM", "DIRECTIONS"]
@@ -109,12 +110,7 @@ LAWS: dict[str, Law] = {
 HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
 
 
-def _f(x):
-    """float or None (for JSON: NaN/inf become None)."""
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
+
 
 
 class FrictionModel:
@@ -312,20 +308,7 @@ class FrictionModel:
     def to_dict(self) -> dict:
         """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready."""
 
-        def clean(obj):
-            if isinstance(obj, dict):
-                return {str(k): clean(v) for k, v in obj.items()}
-            if isinstance(obj, (list, tuple)):
-                return [clean(v) for v in obj]
-            if isinstance(obj, (bool, np.bool_)):
-                return bool(obj)
-            if isinstance(obj, (int, np.integer)):
-                return int(obj)
-            if isinstance(obj, (float, np.floating)):
-                return _f(obj)
-            return obj
-
-        return clean({"law": self.law, "name": self.name, "unit": self.unit,
+        return plain({"law": self.law, "name": self.name, "unit": self.unit,
                       "directions": self.directions, "terms": self.terms,
                       "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
                       "rmse_holdout_reason": self.rmse_holdout_reason,
@@ -460,8 +443,8 @@ def _row(name, unit, directions, get, axis_unit) -> dict:
         r["paper_unit"] = conv[0]
     for d, p in directions.items():
         val, se = get(p)
-        r[d] = _f(val)
-        r[d + "_se"] = _f(se)
+        r[d] = finite_or_none(val)
+        r[d + "_se"] = finite_or_none(se)
         if conv:
             r[d + "_paper"] = None if val is None else float(val) * conv[1]
     return r

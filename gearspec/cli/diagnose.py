@@ -3,11 +3,11 @@ error before and after on held-out data (CONTRACTS.md section 4)."""
 
 from __future__ import annotations
 
-import json
 import shlex
 import sys
 import time
 
+from ..jsonsafe import dumps
 from . import (
     POSITIVE,
     PROBABILITY,
@@ -118,7 +118,7 @@ def run(args) -> int:
         out = diag.to_dict()
         if "lag" in rec.meta:  # --lag: the lag applied before the loop (s)
             out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
-        Path(args.json).write_text(json.dumps(out, indent=1, default=_json_default))
+        Path(args.json).write_text(dumps(out, indent=1))
     if args.out:
         from ..report.diagnose import write_diagnose_report
 
@@ -144,15 +144,3 @@ def run(args) -> int:
         if args.json:
             print(f"json: {args.json}")
     return 0
-
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.floating):
-        return None if not np.isfinite(o) else float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)

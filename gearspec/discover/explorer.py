@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
+from ..jsonsafe import plain
 from ..fitdata import FitData
 from ..model import FrictionModel
 from .law import (LawFit, Part, canonical, cross_validate, cross_validate_linear, equation, fit_law, fold_ids,
@@ -160,7 +161,7 @@ class DiscoveryResult:
                  "rmse_holdout": r.rmse_holdout, "note": r.note,
                  "model": r.model.to_dict() if r.model is not None else None} for r in self.references]
         inc = self.inclusion.to_dict(orient="records") if len(self.inclusion) else []
-        return _clean({"candidates": cands, "selected": self.front.index(self.selected),
+        return plain({"candidates": cands, "selected": self.front.index(self.selected),
                        "unit": self.unit, "torque_unit": self.torque_unit,
                        "n_samples": self.moments.N, "n_segments": self.moments.S,
                        "frequencies": [{"frequency": float(f), "label": lab}
@@ -203,23 +204,6 @@ def _paired(a, b, groups, N):
     d = np.array([np.sum(a[groups == u]) - np.sum(b[groups == u]) for u in ug])
     se = math.sqrt(len(d)) * float(np.std(d, ddof=1)) / N if len(d) > 1 else float("nan")
     return {"delta_mse": float(np.sum(d)) / N, "delta_mse_se": se}
-
-
-def _clean(obj):
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        x = float(obj)
-        return x if math.isfinite(x) else None
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    return obj
 
 
 # ---------------------------------------------------------------------- frequencies

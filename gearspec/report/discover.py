@@ -8,9 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..plots.discover import plot_inclusion, plot_levels, plot_pareto
-import math
 
-import numpy as np
 
 from . import markdown_table
 
@@ -63,14 +61,14 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            f"`a` is the acceleration. Rule: the simplest law whose held-out error exceeds the best one's by at "
            f"most {result.settings['se_rule']:g} standard errors of the noise in that difference.", ""]
     coef = _coefficients(sel, M.frequencies)
-    md += [_table(coef), "", f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
+    md += [markdown_table(coef), "", f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
     if coef["at bound"].astype(bool).any():
         md += ["Parameters marked *at bound* ended at the edge of the range the plateau speeds can identify "
                "(Stribeck velocities from a fifth of the lowest to half the highest speed; decays from a 5 % to "
                "an e^-20 fall over the speeds): the data say the effect lies beyond the measured speeds, not "
                "where.", ""]
     md += ["## Pareto front: held-out error against complexity", "", f"![pareto]({figs['pareto'].name})", "",
-           _table(cand, ".5g"), ""]
+           markdown_table(cand, ".5g"), ""]
     # the laws on either side of the selection, with their coefficients
     k = result.front.index(result.selected)
     near = [i for i in result.front[max(k - 2, 0):k + 3] if i != result.selected]
@@ -79,20 +77,20 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
         for i in near:
             c = result.candidates[i]
             md += [f"Complexity {c.complexity}, held-out RMSE {c.rmse_holdout:.5g} {tu}:", "", "```", c.equation,
-                   "```", "", _table(_coefficients(c, M.frequencies)), "",
+                   "```", "", markdown_table(_coefficients(c, M.frequencies)), "",
                    f"Standard errors: {c.fit.se_method or 'n/a'}.", ""]
     md += ["## Compared with the papers' laws and published models", "",
            "Papers' laws fitted by `gearspec.identify.fit` (ordinary least squares, per direction) on the same "
            "folds as the candidates; published models scored as they are. `delta_mse`: held-out mean squared "
            "error minus the selected law's, with its standard error over held-out groups.", "",
-           _table(comp, ".5g"), "", f"![levels]({figs['levels'].name})", ""]
+           markdown_table(comp, ".5g"), "", f"![levels]({figs['levels'].name})", ""]
     md += ["## Inclusion probabilities", ""]
     if figs["inclusion"] is not None:
         md += [f"Fraction of {result.settings['n_models']} bootstrap replicates (whole {result.settings['by']}s "
                "resampled) in which the sparse regression selects each library term, at the largest threshold "
                "of each stage's path that selects as many terms as the chosen law has there.", "",
                f"![inclusion]({figs['inclusion'].name})", "",
-               _table(result.inclusion.head(25)[["term", "family", "variant", "probability", "stage"]]), ""]
+               markdown_table(result.inclusion.head(25)[["term", "family", "variant", "probability", "stage"]]), ""]
     else:
         md += ["_Not computed (--bootstrap 0)._", ""]
     md += ["## Method", "",
@@ -141,22 +139,3 @@ def _lin_name(p, basis: str) -> str:
     if basis.startswith("cos"):
         return "coefficient of cos"
     return "coefficient"
-
-
-def _table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
-    """A Markdown table whose cells may hold equations: '|' is escaped, not replaced (the shared
-    :func:`markdown_table` turns it into '/', which would change |v| into /v/)."""
-    if df.empty:
-        return "_(none)_\n"
-
-    def fmt(v):
-        if v is None or (isinstance(v, float) and math.isnan(v)):
-            return ""
-        if isinstance(v, (float, np.floating)):
-            return format(float(v), floatfmt)
-        return str(v).replace("|", "\\|")
-
-    lines = ["| " + " | ".join(str(c) for c in df.columns) + " |", "|" + "---|" * len(df.columns)]
-    for row in df.itertuples(index=False):
-        lines.append("| " + " | ".join(fmt(v) for v in row) + " |")
-    return "\n".join(lines) + "\n"

@@ -37,12 +37,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
-from typing import Callable, ClassVar, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Callable, ClassVar, Iterable, Mapping
 
 import numpy as np
 
 from ..errors import InputError
+from ..jsonsafe import plain
 from ..model import DIRECTIONS, FrictionModel
 from ..terms import AMPLITUDE_LAWS
 
@@ -131,24 +132,10 @@ class Effect:
         """Ground truth: one dict per component a detector should find."""
         d = _dir_int(getattr(self, "direction", 0))
         return [{"effect": self.name, "kind": self.kind, "frequency": f, "label": None, "direction": d,
-                 "description": self.describe(), "params": _jsonable(self.params())} for f in self.frequencies()]
+                 "description": self.describe(), "params": plain(self.params())} for f in self.frequencies()]
 
     def to_dict(self) -> dict:
-        return {"effect": self.name, **_jsonable(self.params())}
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (np.floating,)):
-        return float(obj)
-    if callable(obj):
-        return getattr(obj, "__name__", "callable")
-    return obj
+        return {"effect": self.name, **plain(self.params())}
 
 
 # ---------------------------------------------------------------------- position-locked

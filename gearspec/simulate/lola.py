@@ -54,7 +54,8 @@ from ..gears import GearTrain, load_gear
 from ..model import FrictionModel
 from ..recording import Recording
 from .effects import Effect, apply_effects, effect_channels, effects_truth
-from .silo4 import TwinTruth, _plain
+from ..jsonsafe import plain
+from .silo4 import TwinTruth
 
 __all__ = ["MODULES", "PAPER_TABLE3", "PAPER_TABLE4", "TESTBED", "table3_model", "table4_model", "lola_twin",
            "default_speeds", "default_loads", "module_gear"]
@@ -362,7 +363,7 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
                 "speeds": speeds, "loads": loads, "inertia_total": J}
     truth_info = TwinTruth(f"lola-{key}", model, gear, effects_truth(effects, gear),
                            points[["point", "campaign", "speed_cmd", "load_cmd", "t0", "t1", "friction_true",
-                                   "load_true", "efficiency_true", "level_true"]].copy(), _plain(settings))
+                                   "load_true", "efficiency_true", "level_true"]].copy(), plain(settings))
     points.attrs["truth"] = truth_info
     return rec, points
 

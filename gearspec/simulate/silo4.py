@@ -71,7 +71,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
@@ -80,6 +80,7 @@ import pandas as pd
 from scipy import signal
 
 from ..errors import InputError
+from ..jsonsafe import plain
 from .. import laws
 from ..gears import GearTrain, load_gear
 from ..model import RPM, FrictionModel
@@ -225,7 +226,7 @@ class TwinTruth:
             return None if df is None else json.loads(df.to_json(orient="records"))
 
         return {"twin": self.twin, "model": self.model.to_dict(), "gear": self.gear.to_dict(),
-                "effects": self.effects, "settings": _plain(self.settings), "runs": table(self.runs),
+                "effects": self.effects, "settings": plain(self.settings), "runs": table(self.runs),
                 "points": table(self.points)}
 
     def to_json(self, path) -> Path:
@@ -233,21 +234,6 @@ class TwinTruth:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
-
-
-def _plain(obj):
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        x = float(obj)
-        return x if math.isfinite(x) else None
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 # ---------------------------------------------------------------------- the friction inside the loop
@@ -727,7 +713,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     settings = {**P, "Kp": Kp, "Ki": Ki, "Kd": Kd, "electrical_damping": b_emf, "inertia_total": J,
                 "seed": seed, "repetitions": repetitions, "speeds_rpm": speeds_rpm,
                 "theta0": theta0 if not isinstance(theta0, str) else "auto",
-                "load": None if load is None or callable(load) else _plain(np.asarray(load).tolist())}
+                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist())}
     truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
     return rec, truth_info
 

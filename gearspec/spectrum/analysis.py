@@ -55,6 +55,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
+from ..jsonsafe import plain
 from ..gears import GearTrain, alias_frequency, alias_of, integer_order, load_gear
 from ..recording import Recording
 from ..segment import FrictionTorque, Segment, Segmentation, find_segments
@@ -177,7 +178,7 @@ class SpectrumResult:
     def to_json(self, path: str | Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(_clean(self.to_dict()), indent=1))
+        path.write_text(json.dumps(plain(self.to_dict()), indent=1))
         return path
 
     def peaks_table(self) -> pd.DataFrame:
@@ -210,26 +211,10 @@ class SpectrumResult:
 
 def _jsonable(v) -> bool:
     try:
-        json.dumps(_clean(v))
+        json.dumps(plain(v))
         return True
     except TypeError:
         return False
-
-
-def _clean(obj):
-    """NaN/inf -> None and numpy scalars -> Python, recursively, for strict JSON."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        x = float(obj)
-        return x if math.isfinite(x) else None
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    return obj
 
 
 # ---------------------------------------------------------------------- one segment

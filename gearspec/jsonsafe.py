@@ -1,0 +1,52 @@
+"""The one conversion of gearspec's results to strict JSON.
+
+Every ``to_dict`` / ``--json`` writer passes its result through :func:`plain`: numpy scalars and
+arrays become Python numbers and lists, tuples become lists, keys become strings, and NaN or
+infinity become ``None`` (``null``), because strict JSON has no NaN and a reader in another
+language must not meet ``NaN`` in a file. Callables (a load profile given as a function) are
+written by name.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+__all__ = ["plain", "dumps", "finite_or_none"]
+
+
+def finite_or_none(x):
+    """``float(x)``, or ``None`` for ``None``, NaN and infinity."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def plain(obj):
+    """``obj`` with every container and number converted to what :func:`json.dumps` writes as
+    strict JSON (see the module docstring). Strings and ``None`` pass through; an object of any
+    other type is returned unchanged (``json.dumps`` then says which)."""
+    if isinstance(obj, dict):
+        return {str(k): plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return plain(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return finite_or_none(obj)
+    if callable(obj):
+        return getattr(obj, "__name__", "callable")
+    return obj
+
+
+def dumps(obj, **kwargs) -> str:
+    """``json.dumps(plain(obj))`` with ``allow_nan=False``: a value :func:`plain` cannot convert is
+    reported by name rather than written as something a strict reader refuses. Objects of other
+    types are written as ``str(obj)``."""
+    return json.dumps(plain(obj), allow_nan=False, default=str, **kwargs)
