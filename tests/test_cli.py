@@ -71,7 +71,7 @@ def test_console_script_runs_demo(tmp_path):
     # per direction, 3 repetitions), analysed through the recording files it writes
     import pandas as pd
 
-    from gearspec.demo import DEMO_REPETITIONS, DEMO_SPEEDS_RPM
+    from paper_repro.demo import DEMO_REPETITIONS, DEMO_SPEEDS_RPM
 
     r = subprocess.run([sys.executable, "-m", "gearspec.cli", "demo", "--out", str(tmp_path / "demo")],
                        capture_output=True, text=True, timeout=300)

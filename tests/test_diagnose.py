@@ -23,11 +23,13 @@ import pytest
 
 import gearspec.diagnose as dg
 from gearspec.cli import main
+from gearspec.diagnose.data import moves, travel_since_reversal
 from gearspec.gears import GearTrain, integer_hint, load_gear
 from gearspec.model import FrictionModel
 from gearspec.recording import Recording
 from gearspec.simulate import effects as fx
 from gearspec.simulate import model_recording, silo4_twin, table2_model, twin_gear
+from gearspec.signals import decimate, decimation_index
 
 SIGMA = 1e-3
 GEAR = GearTrain.from_dict({"name": "test drive", "reference": "motor", "unit": "rad",
@@ -295,20 +297,20 @@ def test_residual_analysis_of_any_fitted_model():
 def test_travel_since_reversal_and_moves():
     theta = np.array([0, 1, 2, 3, 2.5, 2, 1, 1.5, 2.0])
     v = np.array([1, 1, 1, 1, -1, -1, -1, 1, 1])
-    tr = dg.travel_since_reversal(theta, v)
+    tr = travel_since_reversal(theta, v)
     assert np.all(np.isinf(tr[:4]))
     assert tr[4:7] == pytest.approx([0.5, 1.0, 2.0])      # from the turning point at 3
     assert tr[7:] == pytest.approx([0.5, 1.0])             # from the turning point at 1
-    mv = dg.moves(np.array([0, 1, 1, 0, 0, 1, 1, 0, -1, -1]), min_speed=0.5)
+    mv = moves(np.array([0, 1, 1, 0, 0, 1, 1, 0, -1, -1]), min_speed=0.5)
     assert list(mv) == [0, 0, 0, 0, 0, 1, 1, 1, 2, 2]
 
 
 def test_decimate_matches_matlab_alignment():
-    idx = dg.decimation_index(24792, 10)
+    idx = decimation_index(24792, 10)
     assert idx[0] == 1 and idx[-1] == 24791                # MATLAB keeps the last sample
     x = np.sin(np.linspace(0, 20, 2000))   # far below the cut-off: passes within the Chebyshev ripple
     # (0.05 dB each way of filtfilt: 1.2 %); the exact numbers are checked against EMPS's reference
-    assert dg.decimate(x, 10) == pytest.approx(x[dg.decimation_index(2000, 10)], abs=0.02)
+    assert decimate(x, 10) == pytest.approx(x[decimation_index(2000, 10)], abs=0.02)
 
 
 def test_integer_hint_is_public_and_conservative():

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from gearspec.cli import main
-from gearspec.discover import (Library, Part, Term, default_library, discover, fit_law, moments,
-                               published_models)
+from gearspec.discover import Library, Term, discover, published_models
+from gearspec.discover.law import Part, fit_law
+from gearspec.discover.library import default_library
+from gearspec.discover.moments import moments
 from gearspec.fitdata import FitData
 from gearspec.model import RPM, FrictionModel
 from gearspec.simulate import model_recording

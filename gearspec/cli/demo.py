@@ -1,6 +1,9 @@
-"""``gearspec demo``: the main analysis on built-in data (what ``make demo`` runs)."""
+"""``gearspec demo``: the main analysis on built-in data (what ``make demo`` runs): the SILO4
+reproduction in a small configuration (:mod:`paper_repro.demo`)."""
 
 from __future__ import annotations
+
+from .repro import reproductions
 
 
 def register(sub) -> None:
@@ -10,7 +13,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..demo import run_demo
+    reproductions("demo")
+    from paper_repro.demo import run_demo
 
     report = run_demo(args.out)
     print(f"demo report: {report}")

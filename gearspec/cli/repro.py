@@ -1,8 +1,14 @@
-"""``gearspec repro NAME --out DIR``: reproduce a paper's figures and tables (paper_repro/)."""
+"""``gearspec repro NAME --out DIR``: reproduce a paper's figures and tables (paper_repro/).
+
+The reproductions are scripts over the public API that ship beside the library, not in it: only
+this leaf of the command line (and ``gearspec demo``) imports them, through :func:`reproductions`.
+"""
 
 from __future__ import annotations
 
 import time
+
+from ..errors import InputError
 
 
 def register(sub) -> None:
@@ -16,11 +22,22 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def reproductions(command: str):
+    """The ``paper_repro`` package, or an :class:`InputError` naming ``command`` when it is not
+    installed (a wheel of the library alone)."""
+    try:
+        import paper_repro
+    except ModuleNotFoundError as exc:
+        if exc.name != "paper_repro":
+            raise
+        raise InputError(f"gearspec {command} needs the paper reproductions (the paper_repro folder of gearspec's "
+                         "source), which are not installed; install gearspec from its source folder "
+                         "(pip install -e .)") from None
+    return paper_repro
+
+
 def run(args) -> int:
-    import paper_repro
-
-    from ..errors import InputError
-
+    paper_repro = reproductions("repro")
     if args.name not in paper_repro.available():
         raise InputError(f"no reproduction '{args.name}' (available: {', '.join(paper_repro.available())})")
     t0 = time.perf_counter()

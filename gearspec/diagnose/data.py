@@ -26,69 +26,14 @@ from typing import Callable
 
 import numpy as np
 import pandas as pd
-from scipy import signal
 
 from ..errors import InputError
 from ..fitdata import FitData
 from ..recording import Recording
 from ..segment import Segmentation, find_segments
+from ..signals import butter_filtfilt, central_difference, decimate, decimation_index
 
-__all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "butter_filtfilt",
-           "central_difference", "decimate", "decimation_index", "moves"]
-
-
-# ---------------------------------------------------------------------- signal helpers (IDIM practice)
-def butter_filtfilt(x, cutoff: float, fs: float, order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass (``scipy.signal.butter`` + ``filtfilt``), with MATLAB's edge
-    padding (``3 * (order)`` samples, odd reflection), so that results match MATLAB's
-    ``filtfilt(butter(order, cutoff / (fs/2)), x)`` to rounding.
-
-    Parameters
-    ----------
-    x : ndarray
-    cutoff : float
-        Cut-off frequency, Hz.
-    fs : float
-        Sample rate, Hz.
-    order : int
-    """
-    if not 0 < cutoff < fs / 2:
-        raise InputError(f"filter cut-off must lie between 0 and half the sample rate ({fs / 2:g} Hz), got {cutoff:g}")
-    b, a = signal.butter(order, cutoff / (fs / 2))
-    return signal.filtfilt(b, a, np.asarray(x, dtype=float), padlen=3 * (max(len(a), len(b)) - 1))
-
-
-def central_difference(x, dt: float) -> np.ndarray:
-    """Derivative by central differences ``(x[k+1] - x[k-1]) / (2 dt)``, one-sided at the ends."""
-    x = np.asarray(x, dtype=float)
-    d = np.empty_like(x)
-    if len(x) < 2:
-        return np.zeros_like(x)
-    d[1:-1] = (x[2:] - x[:-2]) / (2 * dt)
-    d[0] = (x[1] - x[0]) / dt
-    d[-1] = (x[-1] - x[-2]) / dt
-    return d
-
-
-def decimation_index(n: int, q: int) -> np.ndarray:
-    """Indices MATLAB's ``decimate(x, q)`` keeps: every q-th sample, aligned so that the last
-    sample is kept (``nbeg = q - (q * nout - n)``, 1-based)."""
-    nout = int(math.ceil(n / q))
-    nbeg = q - (q * nout - n)
-    return np.arange(nbeg - 1, n, q)
-
-
-def decimate(x, q: int) -> np.ndarray:
-    """MATLAB-compatible ``decimate(x, q)``: 8th-order Chebyshev type I low-pass at 0.8 of the new
-    Nyquist frequency (0.05 dB ripple), zero-phase (``filtfilt`` with MATLAB's padding), then the
-    samples of :func:`decimation_index`.  Linear: decimating every column of a design matrix and
-    then combining them equals decimating the combination."""
-    x = np.asarray(x, dtype=float)
-    if q == 1:
-        return x.copy()
-    b, a = signal.cheby1(8, 0.05, 0.8 / q)
-    y = signal.filtfilt(b, a, x, padlen=3 * (max(len(a), len(b)) - 1))
-    return y[decimation_index(len(x), q)]
+__all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves"]
 
 
 # ---------------------------------------------------------------------- reversals

@@ -41,14 +41,19 @@ Coulomb or viscous friction); nonlinear parameters are bounded to what the plate
 identify and flagged when they end on a bound; a ripple line enters the library only when it
 completes a cycle in at least 3 segments; the speed laws need each segment's own velocity
 (``FitData(velocity="segment")``), which makes the reduction exact.
+
+The package exports what a user calls (:func:`discover`, its result, the terms to build a library
+of one's own); the engine's parts (moments, law fits, folds) are imported from their modules.
+``gearspec.discover(data)`` is :func:`discover` (the package is callable).
 """
 
-from .explorer import PAPER_LAWS, Candidate, DiscoveryResult, Reference, discover, spectrum_lines
-from .law import LawFit, Part, fit_law, fold_ids
-from .library import FAMILIES, Family, Library, Term, default_library
-from .moments import Moments, moments
+import sys
+
+from .. import _CallablePackage
+from .explorer import PAPER_LAWS, DiscoveryResult, discover
+from .library import FAMILIES, Library, Term
 from .published import published_models
 
-__all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS", "Library",
-           "Term", "Family", "FAMILIES", "default_library", "Moments", "moments", "Part", "LawFit", "fit_law",
-           "fold_ids", "published_models"]
+__all__ = ["discover", "DiscoveryResult", "PAPER_LAWS", "published_models", "Library", "Term", "FAMILIES"]
+
+sys.modules[__name__].__class__ = _CallablePackage

@@ -9,7 +9,7 @@ pipeline exactly as ``gearspec spectrum`` and ``gearspec fit --law silo4`` would
 per-segment spectra (``spectrum.json``), the joint fit beside the published procedure
 (``fit/report.md``), and the paper's figures and Tables 2-3 with the audit of its numbers
 (``report.md``).  ``gearspec repro silo4`` runs the full configuration (20 speeds, ten
-repetitions, as the paper).
+repetitions, as the paper).  It lives with the reproductions: the library never imports them.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ DEMO_REPETITIONS = 3
 
 def run_demo(out: str | Path = "demo-out", seed: int = 0) -> Path:
     """Run the SILO4 reproduction in the demo configuration into ``out``; returns ``out/report.md``."""
-    import paper_repro.silo4 as silo4
+    from . import silo4
 
     return silo4.run(out, seed=seed, speeds_rpm=DEMO_SPEEDS_RPM, repetitions=DEMO_REPETITIONS,
                      stick_slip_duration=5.0, control_repetitions=2)
