@@ -120,6 +120,16 @@ def test_library_does_not_import_paper_repro():
     assert bad == []
 
 
+@pytest.mark.parametrize("argv", [["demo"], ["repro", "silo4"]])
+def test_commands_without_the_reproductions_say_so(argv, tmp_path, monkeypatch, capsys):
+    from gearspec.cli import main
+
+    monkeypatch.setitem(sys.modules, "paper_repro", None)      # a library installed without paper_repro/
+    assert main(argv + ["--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"gearspec {argv[0]} needs the paper reproductions" in err and err.count("\n") == 1
+
+
 def test_leaves_are_not_imported_by_the_library():
     def rule(mod, name):
         return (any(_within(name, leaf) for leaf in LEAVES) and not any(_within(mod, leaf) for leaf in LEAVES))
