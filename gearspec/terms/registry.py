@@ -64,12 +64,13 @@ class Degraded:
 class Basis:
     """A law (or a degraded form) as ``sum_j lin_j * column_j(speed, load; nonlin)``:
     ``columns(speed, load, *nonlin) -> (n, len(lin))``; ``nonneg``: linear parameters the joint
-    fit constrains to >= 0."""
+    fit constrains to >= 0; ``search``: the :class:`Nonlinear` of each ``nonlin``."""
 
     lin: tuple[str, ...]
     nonlin: tuple[str, ...]
     columns: Callable
     nonneg: tuple[str, ...] = ()
+    search: tuple[Nonlinear, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -239,7 +240,7 @@ def basis(name: str) -> Basis:
     """The linear basis of a law or of a degraded form (``level``, ``lola8_nogamma``, ...) by name."""
     if name in BASE_LAWS:
         law = BASE_LAWS[name]
-        return Basis(law.linear, law.nonlinear_names, law.columns)
+        return Basis(law.linear, law.nonlinear_names, law.columns, search=law.nonlinear)
     for law in BASE_LAWS.values():
         for d in law.degraded:
             if d.name == name:
