@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel
 from ..spectrum import MEASURABLE_FRACTION, position_nyquist
-from ..terms import TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
+from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .data import DiagnoseData
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "Grams", "FittedState", "fit_state",
@@ -43,8 +43,8 @@ _TWO_PI = 2.0 * math.pi
 _DNAME = {1: "positive", -1: "negative"}
 
 #: linear and nonlinear parameters of every base law (the magnitude is linear in the first
-#: given the second), from the term registry (:mod:`gearspec.terms.registry`)
-LINEAR = {name: (law.linear, law.nonlinear_names) for name, law in LAWS.items()}
+#: given the second): the term registry's (:mod:`gearspec.terms.registry`)
+LINEAR = LAW_LINEAR
 
 
 def _inputs(dd: DiagnoseData) -> dict:

@@ -19,14 +19,14 @@ they follow (N, m/s, N s/m, s/m).  A magnitude takes ``speed = |v| >= 0``; the f
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
 from ..errors import InputError
 from .shapes import stribeck_shape
 
-__all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "basis", "register_law"]
+__all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "LAW_LINEAR", "basis", "register_law"]
 
 
 @dataclass(frozen=True)
@@ -246,3 +246,22 @@ def basis(name: str) -> Basis:
             if d.name == name:
                 return Basis(d.linear, (), d.columns)
     raise InputError(f"unknown friction law '{name}' (known: {', '.join(BASE_LAWS)})")
+
+
+class _LawLinear(Mapping):
+    """Live view ``law name -> (linear parameters, nonlinear parameters)`` of :data:`BASE_LAWS`."""
+
+    def __getitem__(self, name):
+        law = BASE_LAWS[name]
+        return law.linear, law.nonlinear_names
+
+    def __iter__(self):
+        return iter(BASE_LAWS)
+
+    def __len__(self):
+        return len(BASE_LAWS)
+
+
+#: linear and nonlinear parameters of every base law (the magnitude is linear in the first given
+#: the second); a law registered later is in it too
+LAW_LINEAR: Mapping[str, tuple] = _LawLinear()
