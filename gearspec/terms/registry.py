@@ -24,7 +24,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from ..errors import InputError
-from .shapes import stribeck_shape
+from .shapes import stribeck_shape, stribeck_term
 
 __all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "LAW_LINEAR", "basis", "register_law"]
 
@@ -154,7 +154,7 @@ def _stribeck_mag(speed, load, tau_c, tau_s, v_s, viscous):
         viscous = 0.0
     if tau_s is None or v_s is None:  # Stribeck part not identified: Coulomb + viscous
         return tau_c + viscous * speed
-    return tau_c + (tau_s - tau_c) * stribeck_shape("exp", speed, v_s) + viscous * speed
+    return tau_c + stribeck_term("exp", tau_s - tau_c, speed, v_s) + viscous * speed
 
 
 def _lola8_cols(s, load):
@@ -181,7 +181,7 @@ def _lola11_mag(speed, load, t_f0, mu, b, t_fs, v_s):
         return _lola8_mag(speed, load, t_f0, mu, b, 0.0)
     speed = np.asarray(speed, dtype=float)
     tl = np.abs(np.asarray(load, dtype=float))
-    return t_f0 + mu * tl + (t_fs - t_f0) * stribeck_shape("rational", speed, v_s) + b * speed
+    return t_f0 + mu * tl + stribeck_term("rational", t_fs - t_f0, speed, v_s) + b * speed
 
 
 def _vs_bounds(lo, hi):

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["STRIBECK_SHAPES", "AMPLITUDE_LAWS", "stribeck_shape", "amplitude_law", "clamp_speed", "sinusoid",
+__all__ = ["STRIBECK_SHAPES", "AMPLITUDE_LAWS", "stribeck_shape", "stribeck_term", "amplitude_law", "clamp_speed", "sinusoid",
            "load_amplitude"]
 
 _TWO_PI = 2.0 * np.pi
@@ -32,14 +32,17 @@ STRIBECK_SHAPES = ("exp", "gauss", "rational")
 AMPLITUDE_LAWS = ("exp", "const", "rational", "power")
 
 
-def stribeck_shape(shape: str, speed, v_s):
-    """Stribeck shape ``g(|v| / v_s)``, 1 at standstill and falling with speed.
+def stribeck_term(shape: str, height, speed, v_s):
+    """A Stribeck term ``h g(|v| / v_s)``: the height ``h`` at standstill, falling with speed.
 
     Parameters
     ----------
     shape : {"exp", "gauss", "rational"}
-        ``exp(-x)`` (SILO4 eq. 3), ``exp(-x^2)`` (Gaussian) or ``1 / (1 + x^2)`` (Lola/CROPS law
-        (11), Hess and Soom), with ``x = speed / v_s``.
+        ``g(x) = exp(-x)`` (SILO4 eq. 3), ``exp(-x^2)`` (Gaussian) or ``1 / (1 + x^2)`` (Lola/CROPS
+        law (11), Hess and Soom; evaluated as ``h / (1 + x^2)``, as the paper writes it), with
+        ``x = speed / v_s``.
+    height : float or array_like
+        h, Nm (N): e.g. static minus Coulomb friction.
     speed : array_like
         ``|v|``, rad/s (m/s).
     v_s : float or array_like
@@ -48,16 +51,22 @@ def stribeck_shape(shape: str, speed, v_s):
     Returns
     -------
     ndarray
-        Dimensionless factor in (0, 1].
+        The term, in the unit of ``height``.
     """
     x = np.asarray(speed, dtype=float) / v_s
     if shape == "exp":
-        return np.exp(-x)
+        return height * np.exp(-x)
     if shape == "gauss":
-        return np.exp(-x * x)
+        return height * np.exp(-x * x)
     if shape == "rational":
-        return 1.0 / (1.0 + x * x)
+        return height / (1.0 + x * x)
     raise InputError(f"unknown Stribeck shape '{shape}' (exp, gauss, rational)")
+
+
+def stribeck_shape(shape: str, speed, v_s):
+    """The dimensionless Stribeck shape ``g(|v| / v_s)`` in (0, 1] (:func:`stribeck_term` of
+    height 1); ``speed`` and ``v_s`` in rad/s (m/s)."""
+    return stribeck_term(shape, 1.0, speed, v_s)
 
 
 def amplitude_law(law: str, speed, decay):
