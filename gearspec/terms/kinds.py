@@ -25,6 +25,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from ..errors import InputError
+from .registry import LiveView
 from .shapes import amplitude_law, clamp_speed, load_amplitude, sinusoid, stribeck_shape
 
 __all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "TERM_LINEAR"]
@@ -67,24 +68,8 @@ def register_term(kind: str, *, signed: bool = False, needs=(), params=(), descr
     return deco
 
 
-class _TermLinear(Mapping):
-    """Live view ``kind -> linear parameter`` of the registered kinds the closed loop can refit."""
-
-    def __getitem__(self, kind):
-        tk = TERMS.get(kind)
-        if tk is None or tk.linear is None:
-            raise KeyError(kind)
-        return tk.linear
-
-    def __iter__(self):
-        return (k for k, tk in TERMS.items() if tk.linear is not None)
-
-    def __len__(self):
-        return sum(1 for _ in self)
-
-
 #: linear parameter of every term kind the closed loop fits (``"trig"``: amplitude and phase)
-TERM_LINEAR: Mapping[str, str] = _TermLinear()
+TERM_LINEAR: Mapping[str, str] = LiveView(TERMS, lambda tk: tk.linear)
 
 
 def term_names() -> list[str]:
@@ -205,41 +190,12 @@ def _hysteresis(term, *, theta, v, run=None, **_):
     Contribution to the magnitude: ``-scale * exp(-|theta - theta_rev| / length)``, where
     ``theta_rev`` is the position of the last reversal in the same run (none before the first one
     in a run).  ``scale`` is in torque units (the friction level it removes at the reversal).
-    Evaluated on ordered samples.
+    Evaluated on ordered samples, with the reversal rule of :func:`_travel_since_reversal`.
     """
-    theta = np.asarray(theta, dtype=float)
-    v = np.asarray(v, dtype=float)
-    s = np.sign(v)
-    n = len(theta)
-    idx = np.arange(n)
-    nz = s != 0
-    # last nonzero sign before each sample (forward fill)
-    last = np.where(nz, idx, -1)
-    last = np.maximum.accumulate(last)
-    prev_sign = np.where(last >= 0, s[np.maximum(last, 0)], 0)
-    rev = np.zeros(n, bool)
-    ps = np.concatenate(([0.0], prev_sign[:-1]))
-    rev[1:] = nz[1:] & (ps[1:] != 0) & (s[1:] != ps[1:])
-    if run is not None:
-        r = np.asarray(run)
-        rev[1:] &= r[1:] == r[:-1]
-        start = np.concatenate(([True], r[1:] != r[:-1]))
-    else:
-        start = np.zeros(n, bool)
-        start[0] = True
-    # index of the last reversal (reset at run starts)
-    # the turning point is the last sample before the new direction
-    mark = np.where(rev, idx - 1, np.where(start, -1, -2))
-    # forward fill of the last event (a reversal, or -1 at a run start)
-    last_rev = np.full(n, -1)
-    events = np.flatnonzero(mark != -2)
-    if len(events):
-        vals = mark[events]
-        fill = np.repeat(vals, np.diff(np.concatenate((events, [n]))))
-        last_rev[events[0]:] = fill
-    out = np.zeros(n)
-    has = last_rev >= 0
-    out[has] = -term["scale"] * np.exp(-np.abs(theta[has] - theta[last_rev[has]]) / term["length"])
+    d = _travel_since_reversal(theta, v, run)
+    out = np.zeros(len(d))
+    has = np.isfinite(d)
+    out[has] = -term["scale"] * np.exp(-d[has] / term["length"])
     return out
 
 
@@ -262,9 +218,9 @@ def _cogging(term, *, theta, v, **_):
 
 def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
     """Distance travelled since the last reversal of the motion, per sample (inf before the first
-    reversal of a run).  Same rule as the ``hysteresis`` term: a reversal is a sample whose sign
-    of v differs from the last nonzero sign before it in the same run, and the turning point is
-    the sample before it."""
+    reversal of a run): a reversal is a sample whose sign of v differs from the last nonzero sign
+    before it in the same run, and the turning point is the sample before it (``hysteresis`` and
+    ``backlash`` terms)."""
     theta = np.asarray(theta, dtype=float)
     s = np.sign(np.asarray(v, dtype=float))
     n = len(theta)

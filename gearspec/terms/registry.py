@@ -26,7 +26,8 @@ import numpy as np
 from ..errors import InputError
 from .shapes import stribeck_shape, stribeck_term
 
-__all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "LAW_LINEAR", "basis", "register_law"]
+__all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "LAW_LINEAR", "LiveView", "basis",
+           "register_law"]
 
 
 @dataclass(frozen=True)
@@ -248,20 +249,26 @@ def basis(name: str) -> Basis:
     raise InputError(f"unknown friction law '{name}' (known: {', '.join(BASE_LAWS)})")
 
 
-class _LawLinear(Mapping):
-    """Live view ``law name -> (linear parameters, nonlinear parameters)`` of :data:`BASE_LAWS`."""
+class LiveView(Mapping):
+    """A read-only mapping ``key -> value(source[key])`` over a registry, computed at each access
+    (so that what is registered later is in it too); keys whose value is None are left out."""
 
-    def __getitem__(self, name):
-        law = BASE_LAWS[name]
-        return law.linear, law.nonlinear_names
+    def __init__(self, source: Mapping, value: Callable):
+        self._source, self._value = source, value
+
+    def __getitem__(self, key):
+        out = self._value(self._source[key])
+        if out is None:
+            raise KeyError(key)
+        return out
 
     def __iter__(self):
-        return iter(BASE_LAWS)
+        return (k for k, x in list(self._source.items()) if self._value(x) is not None)
 
     def __len__(self):
-        return len(BASE_LAWS)
+        return sum(1 for _ in self)
 
 
 #: linear and nonlinear parameters of every base law (the magnitude is linear in the first given
-#: the second); a law registered later is in it too
-LAW_LINEAR: Mapping[str, tuple] = _LawLinear()
+#: the second)
+LAW_LINEAR: Mapping[str, tuple] = LiveView(BASE_LAWS, lambda law: (law.linear, law.nonlinear_names))
