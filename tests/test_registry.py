@@ -53,7 +53,7 @@ def test_columns_times_linear_equal_magnitude_laws_and_model(name, p, speed, loa
 
 
 def test_every_law_declared_once_and_shared_by_model_identify_and_design():
-    assert model.LAWS is BASE_LAWS and model.Law is BaseLaw
+    assert model.LAWS is BASE_LAWS and model.Law is BaseLaw and identify._basis is basis
     for name, law in BASE_LAWS.items():
         assert design.LINEAR[name] == (law.linear, law.nonlinear_names) == LAW_LINEAR[name]
         b = identify._basis(name)
