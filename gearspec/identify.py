@@ -53,6 +53,8 @@ from .fitdata import FitData
 from .gears import GearTrain, load_gear
 from .model import LAWS, RPM, FrictionModel
 from .spectrum import MEASURABLE_FRACTION, position_nyquist
+from .terms.registry import Basis as _Basis
+from .terms.registry import basis as _basis
 
 __all__ = ["fit", "silo4_published", "holdout_rmse", "holdout", "compare", "refit", "harmonic_specs", "fit_efficiency",
            "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError", "segment_errors", "identify_recording", "FitResult",
@@ -66,44 +68,6 @@ MIN_CYCLES = 0.1
 
 class ConvergenceError(InputError):
     """The fit did not converge (too few data for the law, or data the law cannot describe)."""
-
-
-# ---------------------------------------------------------------------- laws as linear bases
-@dataclass(frozen=True)
-class _Basis:
-    """A base law written as ``sum_j lin_j * column_j(speed, load; nonlin)``."""
-
-    lin: tuple[str, ...]
-    nonlin: tuple[str, ...]
-    columns: Callable          # (speed, load, *nonlin) -> (n, len(lin))
-    nonneg: tuple[str, ...] = ()   # linear parameters constrained >= 0 (eq. 10)
-
-
-def _stribeck_cols(s, load, v_s):
-    e = np.exp(-s / v_s)
-    return np.column_stack([1.0 - e, e, s])
-
-
-def _lola11_cols(s, load, v_s):
-    r = 1.0 / (1.0 + (s / v_s) ** 2)
-    tl = np.abs(load)
-    return np.column_stack([1.0 - r, tl, s, r])
-
-
-_BASES = {
-    "none": _Basis((), (), lambda s, load: np.zeros((len(s), 0))),
-    "coulomb_viscous": _Basis(("tau_c", "viscous"), (), lambda s, load: np.column_stack([np.ones_like(s), s])),
-    "stribeck": _Basis(("tau_c", "tau_s", "viscous"), ("v_s",), _stribeck_cols),
-    "silo4": _Basis(("tau_c", "tau_s", "viscous"), ("v_s",), _stribeck_cols),
-    "lola8": _Basis(("t_f0", "mu", "b", "gamma"), (),
-                    lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s, np.abs(load) * s])),
-    "lola11": _Basis(("t_f0", "mu", "b", "t_fs"), ("v_s",), _lola11_cols),
-    # the level alone (a quasi-static map: no speed dependence to identify)
-    "level": _Basis(("tau_c",), (), lambda s, load: np.ones((len(s), 1))),
-    # law (11) without its Stribeck part (when v_S is not identified)
-    "lola8_nogamma": _Basis(("t_f0", "mu", "b"), (),
-                            lambda s, load: np.column_stack([np.ones_like(s), np.abs(load), s])),
-}
 
 
 # ---------------------------------------------------------------------- harmonics to fit
@@ -322,7 +286,7 @@ class _Problem:
 
 
 def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
-    basis = _BASES[law]
+    basis = _basis(law)
     S, P = stats.g.shape
     if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
         w = 1.0 / stats.sigma2
@@ -365,14 +329,14 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     spd = st.speed[st.speed > 0]
     # grids for the start: Stribeck velocity over the plateau speeds, decays from 0
     lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
-    # a Stribeck velocity far outside the plateau speeds is not identifiable (the term is then a
-    # constant or a straight line; below lo/10 it has fallen by e^10 before the slowest plateau
-    # and its height is pure extrapolation): the search is bounded to [lo/10, 2 hi] and a result
+    # the Stribeck velocity is searched within the bounds and from the grid the registry declares
+    # (:class:`gearspec.terms.Nonlinear`: outside [lo/10, 2 hi] it is not identifiable); a result
     # on a bound is reported as not identified
-    vs_bounds = (math.log(lo / 10), math.log(2 * hi))
+    nl_lo, nl_hi = prob.basis.search[0].bounds(lo, hi) if nb_nl else (1.0, 1.0)
+    vs_bounds = (math.log(nl_lo), math.log(nl_hi))
     if nb_nl:
-        grid_vs = np.geomspace(lo / 10, hi * 2, 25)
-        if init and init.get("v_s") and lo / 10 < float(init["v_s"]) < 2 * hi:
+        grid_vs = prob.basis.search[0].grid(lo, hi)
+        if init and init.get("v_s") and nl_lo < float(init["v_s"]) < nl_hi:
             grid_vs = np.append(grid_vs, float(init["v_s"]))
     else:
         grid_vs = [None]
@@ -706,14 +670,14 @@ def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *
             lab = h.get("label") or f"{h['frequency']:.6g}"
             ni[f"{dname}.{lab}.decay"] = (f"the line completes a cycle within a segment at {len(speeds)} speed(s) "
                                           f"only: its amplitude is held constant")
-    basis = _BASES[law]
+    basis = _basis(law)
     distinct = len(np.unique(np.round(stats.speed, 9)))
     need = len(basis.lin) + len(basis.nonlin)
-    if law in ("lola8", "lola11"):
+    if LAWS[law].needs_load:
         distinct_load = len(np.unique(np.round(stats.load, 9))) if stats.load is not None else 0
         if distinct_load < 2:
             raise ConvergenceError(f"law {law} needs points at two loads or more in the {dname} direction")
-    if distinct < need - (1 if law in ("lola8", "lola11") else 0):
+    if distinct < need - (1 if LAWS[law].needs_load else 0):
         raise ConvergenceError(f"law {law} has {need} parameters per direction but the {dname} direction has "
                                f"plateaus at only {distinct} speed(s); fit a simpler law "
                                f"(e.g. coulomb_viscous) or record more speeds")
@@ -747,10 +711,10 @@ def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *
             why = (f"not identified by plateaus at {lo:.3g}..{hi:.3g} {sub.unit}/s (the fit went to v_s = "
                    f"{P['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
                    f"{hump:.3g} +- {P[top + '_se']:.2g}); record slower plateaus")
-            reduced = {"stribeck": "coulomb_viscous", "silo4": "coulomb_viscous", "lola11": "lola8_nogamma"}[law]
-            prob2 = _make_problem(stats, reduced, specs, weights)
+            reduced = LAWS[law].degraded_for("v_s")
+            prob2 = _make_problem(stats, reduced.name, specs, weights)
             P2 = _direction_params(prob2, _fit_direction(prob2, init=init))
-            drop = {"stribeck": ("tau_s", "v_s"), "silo4": ("tau_s", "v_s"), "lola11": ("t_fs", "v_s")}[law]
+            drop = reduced.dropped
             P = {**P2, **{k: None for k in drop}, **{k + "_se": None for k in drop}}
             for k in drop:
                 ni[f"{dname}.{k}"] = why
@@ -766,7 +730,8 @@ def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: 
     (``tau_c``, the direction offset) and the lines with constant amplitudes.  The speeds of the
     sweeps are nominal (travel over duration, at rest in between), so nothing that depends on
     speed (Stribeck, viscous, decay laws) is identifiable: those are None, with the reason."""
-    if LAWS[law].needs_load or law not in ("silo4", "stribeck", "coulomb_viscous", "none"):
+    quasi = LAWS[law].degraded_for("speed")
+    if LAWS[law].needs_load or quasi is None:
         raise ConvergenceError(f"law {law} needs plateaus at several speeds and loads; the {dname} direction "
                                f"has quasi-static sweeps only (fit silo4, stribeck or coulomb_viscous)")
     why = (f"the {dname} direction has quasi-static sweeps only (rows taken at rest; their speed is nominal): "
@@ -775,7 +740,7 @@ def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: 
         if h.get("decay", True) is not False and h.get("law", "exp") != "const":
             ni[f"{dname}.{h.get('label') or format(h['frequency'], '.6g')}.decay"] = why + "; amplitude held constant"
         h["decay"] = False
-    prob = _make_problem(stats, "none" if law == "none" else "level", specs, weights)
+    prob = _make_problem(stats, quasi.name, specs, weights)
     P = _direction_params(prob, _fit_direction(prob))
     for k in LAWS[law].params:
         if k not in P:
@@ -791,7 +756,7 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
     """Replace the standard errors by the spread of refits on segments resampled with replacement."""
     rng = np.random.default_rng(seed)
     S = len(stats.speed)
-    base_names = list(_BASES[law].lin) + list(_BASES[law].nonlin)
+    base_names = list(_basis(law).lin) + list(_basis(law).nonlin)
     draws = {k: [] for k in base_names}
     hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P["harmonics"]]
     for _ in range(B):
@@ -1188,7 +1153,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
                  "t_fs": float(np.median(tau_implied)), "v_s": float(np.median(v))}
         x0 = np.array([guess[k] for k in names])
     lo = np.full(len(names), -np.inf)
-    for k in ("t_f0", "mu", "b", "t_fs"):
+    for k in LAWS[law].nonneg:
         if k in names:
             lo[names.index(k)] = 0.0
     if "v_s" in names:

@@ -16,6 +16,10 @@ friction arising with gears", Int. J. Robotics Research 21(9), 2002 -- eqs. (3),
 (14).
 Lola/CROPS: "Experimental friction identification in robot drives" (the Lola/CROPS testbed
 paper) -- eqs. (8), (11), (12), (13).
+
+Each law is declared once in the term registry (:mod:`gearspec.terms.registry`: parameters,
+units, linear columns, degraded forms); these functions are its signed form,
+``sign(v) * magnitude(|v|)``, and the shapes they use are those of :mod:`gearspec.terms.shapes`.
 """
 
 from __future__ import annotations
@@ -24,12 +28,12 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from .terms.registry import BASE_LAWS
+from .terms.shapes import amplitude_law, load_amplitude, sinusoid
+
 __all__ = ["stribeck", "position_ripple", "meshing_ripple", "silo4_full", "load_dependent_amplitude",
            "lola8", "lola11", "friction_from_load_current", "efficiency", "efficiency_from_friction",
            "motor_torque_from_efficiency"]
-
-_TWO_PI = 2.0 * np.pi
-
 
 def stribeck(v, tau_c, tau_s, v_s, viscous):
     """Static + Stribeck + Coulomb + viscous friction (SILO4 eq. 3).
@@ -55,8 +59,7 @@ def stribeck(v, tau_c, tau_s, v_s, viscous):
         Friction torque with the sign of ``v`` (0 at v = 0).
     """
     v = np.asarray(v, dtype=float)
-    a = np.abs(v)
-    return (tau_c + (tau_s - tau_c) * np.exp(-a / v_s) + viscous * a) * np.sign(v)
+    return BASE_LAWS["stribeck"].magnitude(np.abs(v), None, tau_c, tau_s, v_s, viscous) * np.sign(v)
 
 
 def position_ripple(theta, amplitude, frequency, phase):
@@ -65,7 +68,7 @@ def position_ripple(theta, amplitude, frequency, phase):
     ``frequency`` in cycles per unit of theta (the paper's omega is ``2 pi f``).  A magnitude: in
     eq. 11 it is multiplied by sign(v) with the rest.
     """
-    return amplitude * np.sin(_TWO_PI * frequency * np.asarray(theta, dtype=float) + phase)
+    return amplitude * sinusoid(theta, frequency, phase)
 
 
 def meshing_ripple(theta, v, amplitude, decay, frequency, phase):
@@ -74,8 +77,7 @@ def meshing_ripple(theta, v, amplitude, decay, frequency, phase):
     ``decay`` b in s/rad (s/m); a magnitude, like :func:`position_ripple`.
     """
     v = np.asarray(v, dtype=float)
-    return amplitude * np.exp(-decay * np.abs(v)) * np.sin(_TWO_PI * frequency * np.asarray(theta, dtype=float)
-                                                              + phase)
+    return amplitude * amplitude_law("exp", np.abs(v), decay) * sinusoid(theta, frequency, phase)
 
 
 def _harmonic_sum(theta, v, harmonics: Iterable) -> np.ndarray:
@@ -135,8 +137,7 @@ def load_dependent_amplitude(load, amplitude0, load_coefficient):
     et al. (worm-gear friction ~ load^2) is used: ``A = A0 + k tau_L^2`` (k in 1/Nm).
     Use it as the ``amplitude`` of :func:`meshing_ripple`.
     """
-    load = np.asarray(load, dtype=float)
-    return amplitude0 + load_coefficient * load * load
+    return load_amplitude(load, amplitude0, load_coefficient)
 
 
 def lola8(v, load, t_f0, mu, b, gamma):
@@ -163,8 +164,7 @@ def lola8(v, load, t_f0, mu, b, gamma):
         Coupled load-speed coefficient, s/rad (Nm s/rad per Nm of load).
     """
     v = np.asarray(v, dtype=float)
-    tl = np.abs(np.asarray(load, dtype=float))
-    return np.sign(v) * (t_f0 + mu * tl) + (b + gamma * tl) * v
+    return np.sign(v) * BASE_LAWS["lola8"].magnitude(np.abs(v), load, t_f0, mu, b, gamma)
 
 
 def lola11(v, load, t_f0, mu, b, t_fs, v_s):
@@ -192,8 +192,7 @@ def lola11(v, load, t_f0, mu, b, t_fs, v_s):
         Stribeck velocity, rad/s (motor); > 0.
     """
     v = np.asarray(v, dtype=float)
-    tl = np.abs(np.asarray(load, dtype=float))
-    return np.sign(v) * (t_f0 + mu * tl + (t_fs - t_f0) / (1.0 + (v / v_s) ** 2)) + b * v
+    return np.sign(v) * BASE_LAWS["lola11"].magnitude(np.abs(v), load, t_f0, mu, b, t_fs, v_s)
 
 
 def friction_from_load_current(load, current, ratio, torque_constant):

@@ -34,17 +34,15 @@ from __future__ import annotations
 import copy
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Mapping
+from typing import Iterable, Mapping
 
 import numpy as np
 import pandas as pd
 
-from . import laws
 from .errors import InputError
 from .jsonsafe import finite_or_none, plain
-from .terms import TERMS, evaluate_term
+from .terms import BASE_LAWS, TERMS, BaseLaw, evaluate_term
 
 __all__ = ["FrictionModel", "LAWS", "Law", "RPM", "DIRECTIONS"]
 
@@ -53,64 +51,13 @@ RPM = 2.0 * math.pi / 60.0
 DIRECTIONS = ("positive", "negative")
 
 
-@dataclass(frozen=True)
-class Law:
-    """A base friction law: its parameters (SI units) and its magnitude ``f(speed, load, **p)``."""
-
-    name: str
-    params: tuple[str, ...]
-    units: tuple[str, ...]          # per parameter, for a rotary axis (Nm, rad/s, Nm s/rad, -, s/rad)
-    magnitude: Callable
-    needs_load: bool = False
-    description: str = ""
-    #: parameters that may be missing (not identified): the law then drops the part they define
-    optional: tuple[str, ...] = ()
-
-
-def _stribeck_mag(speed, load, tau_c, tau_s, v_s, viscous):
-    if viscous is None:  # not identified (a quasi-static map): the viscous part is left out
-        viscous = 0.0
-    if tau_s is None or v_s is None:  # Stribeck part not identified: Coulomb + viscous
-        return tau_c + viscous * np.asarray(speed, dtype=float)
-    return laws.stribeck(speed, tau_c, tau_s, v_s, viscous)
-
-
-def _cv_mag(speed, load, tau_c, viscous):
-    return tau_c + (0.0 if viscous is None else viscous) * speed
-
-
-def _lola8_mag(speed, load, t_f0, mu, b, gamma):
-    return laws.lola8(speed, load, t_f0, mu, b, gamma)
-
-
-def _lola11_mag(speed, load, t_f0, mu, b, t_fs, v_s):
-    if t_fs is None or v_s is None:  # Stribeck part not identified
-        return laws.lola8(speed, load, t_f0, mu, b, 0.0)
-    return laws.lola11(speed, load, t_f0, mu, b, t_fs, v_s)
-
-
-#: base laws by name; ``silo4`` is eq. 3 plus the harmonics of eq. 11
-LAWS: dict[str, Law] = {
-    "none": Law("none", (), (), lambda speed, load: np.zeros_like(speed), description="no base friction"),
-    "coulomb_viscous": Law("coulomb_viscous", ("tau_c", "viscous"), ("Nm", "Nm s/rad"), _cv_mag,
-                           description="Coulomb + viscous: tau_c + B|v|", optional=("viscous",)),
-    "stribeck": Law("stribeck", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
-                    description="SILO4 eq. 3: tau_c + (tau_s - tau_c) exp(-|v|/v_s) + B|v|",
-                    optional=("tau_s", "v_s", "viscous")),
-    "silo4": Law("silo4", ("tau_c", "tau_s", "v_s", "viscous"), ("Nm", "Nm", "rad/s", "Nm s/rad"), _stribeck_mag,
-                 description="SILO4 eq. 11: eq. 3 + position ripple + meshing ripple decaying as exp(-b|v|)",
-                 optional=("tau_s", "v_s", "viscous")),
-    "lola8": Law("lola8", ("t_f0", "mu", "b", "gamma"), ("Nm", "-", "Nm s/rad", "s/rad"), _lola8_mag, True,
-                 "Lola/CROPS law (8): T_f0 + mu|T_l| + (b + gamma|T_l|)|v|"),
-    "lola11": Law("lola11", ("t_f0", "mu", "b", "t_fs", "v_s"), ("Nm", "-", "Nm s/rad", "Nm", "rad/s"), _lola11_mag,
-                  True, "Lola/CROPS law (11), Stribeck term made odd: T_f0 + mu|T_l| + (T_fS - T_f0)/(1+(v/v_S)^2) + b|v|",
-                  optional=("t_fs", "v_s")),
-}
+#: a base friction law: its parameters (SI units), magnitude ``f(speed, load, *params)``, linear
+#: columns and degraded forms, declared once in the term registry (:mod:`gearspec.terms.registry`)
+Law = BaseLaw
+#: base laws by name (the registry's own objects); ``silo4`` is eq. 3 plus the harmonics of eq. 11
+LAWS: dict[str, Law] = BASE_LAWS
 
 HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
-
-
-
 
 
 class FrictionModel:

@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel
 from ..spectrum import MEASURABLE_FRACTION, position_nyquist
-from ..terms import TERMS, amplitude_law, clamp_speed, evaluate_term
+from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .data import DiagnoseData
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "Grams", "FittedState", "fit_state",
@@ -43,12 +43,8 @@ _TWO_PI = 2.0 * math.pi
 _DNAME = {1: "positive", -1: "negative"}
 
 #: linear and nonlinear parameters of every base law (the magnitude is linear in the first
-#: given the second)
-LINEAR = {"none": ((), ()), "coulomb_viscous": (("tau_c", "viscous"), ()),
-          "stribeck": (("tau_c", "tau_s", "viscous"), ("v_s",)), "silo4": (("tau_c", "tau_s", "viscous"), ("v_s",)),
-          "lola8": (("t_f0", "mu", "b", "gamma"), ()), "lola11": (("t_f0", "mu", "b", "t_fs"), ("v_s",))}
-#: what a law degrades to when its Stribeck part is not identified
-_DEGRADED = {"stribeck": ("tau_c", "viscous"), "silo4": ("tau_c", "viscous"), "lola11": ("t_f0", "mu", "b")}
+#: given the second): the term registry's (:mod:`gearspec.terms.registry`)
+LINEAR = LAW_LINEAR
 
 
 def _inputs(dd: DiagnoseData) -> dict:
@@ -166,21 +162,13 @@ class BaseBlock(Block):
         speed = np.abs(f.v)
         sgn = np.sign(f.v)
         law = LAWS[self.law]
-        load = f.load if f.load is not None else (np.zeros(len(f)) if law.needs_load else None)
+        load = f.load if f.load is not None else np.zeros(len(f))
         cols = []
         groups = [(0, np.ones(len(f), bool))] if self.symmetric else [(d, f.direction == d) for d in self.dirs]
         for d, sel in groups:
-            nl = self._nonlin(d)
-            for p in self._lin(d):
-                params = {k: 0.0 for k in law.params}
-                params.update({k: None for k in law.optional})
-                for k in LINEAR[self.law][1]:
-                    params[k] = nl.get(k)
-                for k in self._lin(d):
-                    params[k] = 1.0 if k == p else 0.0
-                mag = np.asarray(law.magnitude(speed, load, *[params[k] for k in law.params]), dtype=float)
-                cols.append(np.where(sel, sgn * np.broadcast_to(mag, speed.shape), 0.0))
-        return np.column_stack(cols) if cols else np.zeros((len(f), 0))
+            X = law.design(self._lin(d), self._nonlin(d), speed, load)
+            cols.append(np.where(sel[:, None], sgn[:, None] * X, 0.0))
+        return np.concatenate(cols, axis=1) if cols else np.zeros((len(f), 0))
 
     def write(self, model, coef, se):
         i = 0
@@ -194,13 +182,14 @@ class BaseBlock(Block):
             for nm in names:
                 for k, val in self._nonlin(d).items():
                     model.directions[nm][k] = val
-                full = LINEAR[self.law][0]
-                for k in full:
+                law = LAWS[self.law]
+                for k in law.linear:
                     if k not in self._lin(d):
                         model.directions[nm][k] = None
                         model.directions[nm][k + "_se"] = None
-                if self.law in _DEGRADED and tuple(self._lin(d)) == _DEGRADED[self.law]:
-                    for k in LINEAR[self.law][1]:
+                degraded = law.degraded_for("v_s")
+                if degraded is not None and tuple(self._lin(d)) == degraded.linear:
+                    for k in law.nonlinear_names:
                         model.directions[nm][k] = None
 
     def describe(self):
@@ -332,12 +321,6 @@ class HarmonicBlock(Block):
         laws = ", ".join(f"{_DNAME.get(d, 'both')}: {lw} (decay {dict(self.decay).get(d, 0.0):.3g})"
                          for d, lw in self.law)
         return f"line {self.label or ''} at {self.frequency:.6g} cycles/unit; {laws}"
-
-
-#: linear parameter of every term kind the loop fits ("trig": amplitude and phase as sin/cos)
-TERM_LINEAR = {"viscous_power": "coefficient", "stribeck_extra": "amplitude", "load_coulomb": "mu",
-               "load_viscous": "gamma", "temperature": "coefficient", "drift": "coefficient", "inertia": "inertia",
-               "offset": "offset", "hysteresis": "scale", "backlash": "scale", "periodic": "trig", "cogging": "trig"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -639,9 +622,11 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
     blocks: list[Block] = []
     lin_names, nonlin_names = LINEAR[law]
 
+    degraded = LAWS[law].degraded_for("v_s")
+
     def lin_of(p):
-        if any(p.get(k) is None for k in nonlin_names) and law in _DEGRADED:
-            return _DEGRADED[law]
+        if any(p.get(k) is None for k in nonlin_names) and degraded is not None:
+            return degraded.linear
         return lin_names
 
     if law != "none":

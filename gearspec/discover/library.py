@@ -29,11 +29,13 @@ numbers in those units, e.g. ``sign(v)*exp(-|v|/2.95)`` or ``exp(-0.0012|v|)*sin
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import numpy as np
 
 from ..errors import InputError
+from ..terms.shapes import amplitude_law, stribeck_shape
 from .moments import Moments
 
 __all__ = ["Family", "FAMILIES", "Term", "Library", "default_library", "GROUPS"]
@@ -90,11 +92,11 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
     Family("power", "1", lambda u, p: u ** p, lambda p, f: f"|v|^{_g(p, 3)}", "exponent",
            lambda lo, hi: (0.05, 4.0), group="power", description="power law |v|^p (sqrt: p = 0.5, |v|v: p = 2)",
            refine=False),
-    Family("stribeck_exp", "1", lambda u, p: np.exp(-u / p), lambda p, f: f"exp(-|v|/{_g(p)})", "v_s",
+    Family("stribeck_exp", "1", partial(stribeck_shape, "exp"), lambda p, f: f"exp(-|v|/{_g(p)})", "v_s",
            _VS_BOUNDS, group="stribeck", description="Stribeck, exponential (SILO4 eq. 3)"),
-    Family("stribeck_gauss", "1", lambda u, p: np.exp(-(u / p) ** 2), lambda p, f: f"exp(-(|v|/{_g(p)})^2)", "v_s",
+    Family("stribeck_gauss", "1", partial(stribeck_shape, "gauss"), lambda p, f: f"exp(-(|v|/{_g(p)})^2)", "v_s",
            _VS_BOUNDS, group="stribeck", description="Stribeck, Gaussian"),
-    Family("stribeck_rational", "1", lambda u, p: 1.0 / (1.0 + (u / p) ** 2), lambda p, f: f"1/(1+(|v|/{_g(p)})^2)",
+    Family("stribeck_rational", "1", partial(stribeck_shape, "rational"), lambda p, f: f"1/(1+(|v|/{_g(p)})^2)",
            "v_s", _VS_BOUNDS, group="stribeck",
            description="Stribeck, rational (Lola law (11))"),
     Family("load_coulomb", "load", lambda u, p: np.ones_like(u), lambda p, f: "|T_l|", group="load_coulomb",
@@ -105,11 +107,11 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
            description="friction level changing with temperature"),
     Family("inertia", "acc", lambda u, p: np.ones_like(u), lambda p, f: "a", group="inertia",
            description="residual inertia (acceleration; not friction)"),
-    Family("ripple_const", "ripple", lambda u, p: np.ones_like(u), _ripple_factor(""), group="ripple",
+    Family("ripple_const", "ripple", partial(amplitude_law, "const"), _ripple_factor(""), group="ripple",
            description="position ripple of constant amplitude (SILO4 eq. 6)"),
-    Family("ripple_exp", "ripple", lambda u, p: np.exp(-p * u), _ripple_factor("exp(-{p}*|v|)"), "decay",
+    Family("ripple_exp", "ripple", partial(amplitude_law, "exp"), _ripple_factor("exp(-{p}*|v|)"), "decay",
            _DECAY_BOUNDS, group="ripple", description="meshing ripple decaying exponentially with speed (SILO4 eq. 8)"),
-    Family("ripple_rational", "ripple", lambda u, p: 1.0 / (1.0 + (p * u) ** 2), _ripple_factor("1/(1+({p}*|v|)^2)"),
+    Family("ripple_rational", "ripple", partial(amplitude_law, "rational"), _ripple_factor("1/(1+({p}*|v|)^2)"),
            "decay", _DECAY_BOUNDS, group="ripple",
            description="ripple decaying as a Lorentzian of speed"),
 ]}

@@ -20,15 +20,15 @@ Units: SI, as everywhere (rad, rad/s, Nm, degC, s).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
-from . import laws
-from .errors import InputError
+from ..errors import InputError
+from .registry import LiveView
+from .shapes import amplitude_law, clamp_speed, load_amplitude, sinusoid, stribeck_shape
 
-__all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "amplitude_law", "AMPLITUDE_LAWS",
-           "clamp_speed"]
+__all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "TERM_LINEAR"]
 
 
 @dataclass(frozen=True)
@@ -37,7 +37,9 @@ class TermKind:
 
     ``signed``: the contribution is added to the drive torque as is (True) or to the friction
     magnitude (False).  ``needs``: the inputs it cannot do without.  ``params``: its parameters
-    (each may have ``<name>_se``).  ``describe(term)`` gives one readable line.
+    (each may have ``<name>_se``).  ``describe(term)`` gives one readable line.  ``linear``: the
+    parameter the term is linear in (the closed loop fits it by least squares with the others
+    fixed; ``"trig"``: amplitude and phase as a sin/cos pair; None: the loop does not refit it).
     """
 
     kind: str
@@ -46,21 +48,28 @@ class TermKind:
     needs: tuple[str, ...]
     params: tuple[str, ...]
     describe: Callable
+    linear: str | None = None
 
 
 #: every known kind of term, by name
 TERMS: dict[str, TermKind] = {}
 
 
-def register_term(kind: str, *, signed: bool = False, needs=(), params=(), describe=None):
-    """Decorator: register ``func(term, **inputs) -> array`` as the evaluation of ``kind``."""
+def register_term(kind: str, *, signed: bool = False, needs=(), params=(), describe=None, linear=None):
+    """Decorator: register ``func(term, **inputs) -> array`` as the evaluation of ``kind``
+    (``linear``: see :class:`TermKind`)."""
 
     def deco(func):
         TERMS[kind] = TermKind(kind, func, signed, tuple(needs), tuple(params),
-                               describe or (lambda t: f"{kind}: " + ", ".join(f"{p}={t.get(p, 0):.4g}" for p in params)))
+                               describe or (lambda t: f"{kind}: " + ", ".join(f"{p}={t.get(p, 0):.4g}" for p in params)),
+                               linear)
         return func
 
     return deco
+
+
+#: linear parameter of every term kind the closed loop fits (``"trig"``: amplitude and phase)
+TERM_LINEAR: Mapping[str, str] = LiveView(TERMS, lambda tk: tk.linear)
 
 
 def term_names() -> list[str]:
@@ -87,33 +96,8 @@ def evaluate_term(term: dict, **inputs) -> tuple[np.ndarray, bool]:
 
 
 # ---------------------------------------------------------------------- position-locked
-def amplitude_law(law: str, speed, decay):
-    """Amplitude factor of a periodic term against speed: SILO4's exponential decay and others."""
-    if law == "exp":
-        return np.exp(-decay * speed)
-    if law == "const":
-        return np.ones_like(speed)
-    if law == "rational":  # 1 / (1 + (b |v|)^2): a Lorentzian fall-off
-        return 1.0 / (1.0 + (decay * speed) ** 2)
-    if law == "power":  # (1 + |v|)^(-b): slow algebraic decay
-        return (1.0 + speed) ** (-decay)
-    raise InputError(f"unknown amplitude law '{law}' (exp, const, rational, power)")
-
-
-AMPLITUDE_LAWS = ("exp", "const", "rational", "power")
-
-
-def clamp_speed(speed, speed_range):
-    """``|v|`` held within ``speed_range`` (``[min, max]``, either may be None; None: unchanged):
-    where an amplitude law is evaluated outside the speeds it was fitted on, it gives the value at
-    the nearest edge of that range."""
-    if not speed_range:
-        return speed
-    lo, hi = speed_range
-    return np.clip(speed, -np.inf if lo is None else float(lo), np.inf if hi is None else float(hi))
-
-
 @register_term("periodic", needs=("theta",), params=("frequency", "amplitude", "decay", "phase", "load_coefficient"),
+               linear="trig",
                describe=lambda t: (f"periodic {t.get('label') or 'unlabelled'} at {t['frequency']:.6g} cycles/unit: "
                                    f"{t['amplitude']:.4g} x {t.get('law', 'exp')}(decay {t.get('decay', 0):.4g})"))
 def _periodic(term, *, theta, v, load=None, **_):
@@ -130,55 +114,51 @@ def _periodic(term, *, theta, v, load=None, **_):
     if k:
         if load is None:
             raise InputError("a periodic term with a load coefficient (SILO4 eq. 14) needs the 'load' channel")
-        amp = laws.load_dependent_amplitude(load, amp, k)
+        amp = load_amplitude(load, amp, k)
     g = amplitude_law(term.get("law", "exp"), speed, term.get("decay", 0.0))
-    return amp * g * np.sin(2 * np.pi * term["frequency"] * np.asarray(theta, dtype=float) + term.get("phase", 0.0))
+    return amp * g * sinusoid(theta, term["frequency"], term.get("phase", 0.0))
 
 
 # ---------------------------------------------------------------------- speed laws
-@register_term("viscous_power", params=("coefficient", "exponent"),
+@register_term("viscous_power", params=("coefficient", "exponent"), linear="coefficient",
                describe=lambda t: f"nonlinear viscous {t['coefficient']:.4g} |v|^{t['exponent']:.3g}")
 def _viscous_power(term, *, v, **_):
     """Nonlinear viscous friction ``c |v|^p`` (magnitude)."""
     return term["coefficient"] * np.abs(np.asarray(v, dtype=float)) ** term["exponent"]
 
 
-@register_term("stribeck_extra", params=("amplitude", "v_s", "shape"),
+@register_term("stribeck_extra", params=("amplitude", "v_s", "shape"), linear="amplitude",
                describe=lambda t: f"extra Stribeck dip {t['amplitude']:.4g} at v_s {t['v_s']:.4g} ({t.get('shape', 'exp')})")
 def _stribeck_extra(term, *, v, **_):
     """An additional Stribeck-like term ``A g(|v|/v_s)`` with g exp (exp(-x)), gauss (exp(-x^2)) or
     rational (1/(1+x^2), Lola's law (11))."""
-    x = np.abs(np.asarray(v, dtype=float)) / term["v_s"]
-    shape = term.get("shape", "exp")
-    g = {"exp": lambda: np.exp(-x), "gauss": lambda: np.exp(-x * x), "rational": lambda: 1.0 / (1.0 + x * x)}
-    if shape not in g:
-        raise InputError(f"unknown Stribeck shape '{shape}' (exp, gauss, rational)")
-    return term["amplitude"] * g[shape]()
+    speed = np.abs(np.asarray(v, dtype=float))
+    return term["amplitude"] * stribeck_shape(term.get("shape", "exp"), speed, term["v_s"])
 
 
 # ---------------------------------------------------------------------- load, temperature, time
-@register_term("load_coulomb", needs=("load",), params=("mu",),
+@register_term("load_coulomb", needs=("load",), params=("mu",), linear="mu",
                describe=lambda t: f"load-dependent Coulomb {t['mu']:.4g} |load|")
 def _load_coulomb(term, *, v, load, **_):
     """Coulomb friction growing with the output load, ``mu |T_l|`` (Lola law (8))."""
     return term["mu"] * np.abs(np.asarray(load, dtype=float))
 
 
-@register_term("load_viscous", needs=("load",), params=("gamma",),
+@register_term("load_viscous", needs=("load",), params=("gamma",), linear="gamma",
                describe=lambda t: f"load-speed coupling {t['gamma']:.4g} |load| |v|")
 def _load_viscous(term, *, v, load, **_):
     """Coupled load-speed friction ``gamma |T_l| |v|`` (Lola law (8))."""
     return term["gamma"] * np.abs(np.asarray(load, dtype=float)) * np.abs(np.asarray(v, dtype=float))
 
 
-@register_term("temperature", needs=("temperature",), params=("coefficient", "reference"),
+@register_term("temperature", needs=("temperature",), params=("coefficient", "reference"), linear="coefficient",
                describe=lambda t: f"temperature {t['coefficient']:.4g} per degC from {t.get('reference', 0):.3g} degC")
 def _temperature(term, *, v, temperature, **_):
     """Friction changing linearly with temperature, ``c (T - T_ref)`` (magnitude)."""
     return term["coefficient"] * (np.asarray(temperature, dtype=float) - term.get("reference", 0.0))
 
 
-@register_term("drift", needs=("t",), params=("coefficient", "reference"),
+@register_term("drift", needs=("t",), params=("coefficient", "reference"), linear="coefficient",
                describe=lambda t: f"slow drift {t['coefficient']:.4g} per s")
 def _drift(term, *, v, t, **_):
     """Slow linear change of the friction level with time, ``c (t - t_ref)`` (magnitude)."""
@@ -186,21 +166,22 @@ def _drift(term, *, v, t, **_):
 
 
 # ---------------------------------------------------------------------- signed terms
-@register_term("inertia", signed=True, needs=("acc",), params=("inertia",),
+@register_term("inertia", signed=True, needs=("acc",), params=("inertia",), linear="inertia",
                describe=lambda t: f"inertia {t['inertia']:.4g} x acceleration")
 def _inertia(term, *, v, acc, **_):
     """Inertia torque ``J thetadd`` (signed; not friction, but part of the drive torque)."""
     return term["inertia"] * np.asarray(acc, dtype=float)
 
 
-@register_term("offset", signed=True, params=("offset",), describe=lambda t: f"offset {t['offset']:.4g}")
+@register_term("offset", signed=True, params=("offset",), linear="offset",
+               describe=lambda t: f"offset {t['offset']:.4g}")
 def _offset(term, *, v, **_):
     """A constant torque independent of the motion (gravity, a sensor offset)."""
     return np.full(np.shape(v), float(term["offset"]))
 
 
 # ---------------------------------------------------------------------- hysteresis
-@register_term("hysteresis", needs=("theta",), params=("scale", "length"),
+@register_term("hysteresis", needs=("theta",), params=("scale", "length"), linear="scale",
                describe=lambda t: f"presliding over {t['length']:.4g} after a reversal (depth {t['scale']:.3g})")
 def _hysteresis(term, *, theta, v, run=None, **_):
     """Presliding near reversals: just after the motion reverses, friction builds up over a
@@ -209,47 +190,18 @@ def _hysteresis(term, *, theta, v, run=None, **_):
     Contribution to the magnitude: ``-scale * exp(-|theta - theta_rev| / length)``, where
     ``theta_rev`` is the position of the last reversal in the same run (none before the first one
     in a run).  ``scale`` is in torque units (the friction level it removes at the reversal).
-    Evaluated on ordered samples.
+    Evaluated on ordered samples, with the reversal rule of :func:`_travel_since_reversal`.
     """
-    theta = np.asarray(theta, dtype=float)
-    v = np.asarray(v, dtype=float)
-    s = np.sign(v)
-    n = len(theta)
-    idx = np.arange(n)
-    nz = s != 0
-    # last nonzero sign before each sample (forward fill)
-    last = np.where(nz, idx, -1)
-    last = np.maximum.accumulate(last)
-    prev_sign = np.where(last >= 0, s[np.maximum(last, 0)], 0)
-    rev = np.zeros(n, bool)
-    ps = np.concatenate(([0.0], prev_sign[:-1]))
-    rev[1:] = nz[1:] & (ps[1:] != 0) & (s[1:] != ps[1:])
-    if run is not None:
-        r = np.asarray(run)
-        rev[1:] &= r[1:] == r[:-1]
-        start = np.concatenate(([True], r[1:] != r[:-1]))
-    else:
-        start = np.zeros(n, bool)
-        start[0] = True
-    # index of the last reversal (reset at run starts)
-    # the turning point is the last sample before the new direction
-    mark = np.where(rev, idx - 1, np.where(start, -1, -2))
-    # forward fill of the last event (a reversal, or -1 at a run start)
-    last_rev = np.full(n, -1)
-    events = np.flatnonzero(mark != -2)
-    if len(events):
-        vals = mark[events]
-        fill = np.repeat(vals, np.diff(np.concatenate((events, [n]))))
-        last_rev[events[0]:] = fill
-    out = np.zeros(n)
-    has = last_rev >= 0
-    out[has] = -term["scale"] * np.exp(-np.abs(theta[has] - theta[last_rev[has]]) / term["length"])
+    d = _travel_since_reversal(theta, v, run)
+    out = np.zeros(len(d))
+    has = np.isfinite(d)
+    out[has] = -term["scale"] * np.exp(-d[has] / term["length"])
     return out
 
 
 # ---------------------------------------------------------------------- kinds added for the twins' effects
 # (gearspec.simulate.effects injects them into a truth model; any model may use them)
-@register_term("cogging", signed=True, needs=("theta",), params=("frequency", "amplitude", "phase"),
+@register_term("cogging", signed=True, needs=("theta",), params=("frequency", "amplitude", "phase"), linear="trig",
                describe=lambda t: (f"cogging (same sign both ways) at {t['frequency']:.6g} cycles/unit: "
                                    f"{t['amplitude']:.4g}"))
 def _cogging(term, *, theta, v, **_):
@@ -261,15 +213,14 @@ def _cogging(term, *, theta, v, **_):
     spectrum analyses (``direction * torque``) it shows at ``f`` with phases ``phi`` forwards and
     ``phi + pi`` backwards.
     """
-    return term["amplitude"] * np.sin(2 * np.pi * term["frequency"] * np.asarray(theta, dtype=float)
-                                      + term.get("phase", 0.0))
+    return term["amplitude"] * sinusoid(theta, term["frequency"], term.get("phase", 0.0))
 
 
 def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
     """Distance travelled since the last reversal of the motion, per sample (inf before the first
-    reversal of a run).  Same rule as the ``hysteresis`` term: a reversal is a sample whose sign
-    of v differs from the last nonzero sign before it in the same run, and the turning point is
-    the sample before it."""
+    reversal of a run): a reversal is a sample whose sign of v differs from the last nonzero sign
+    before it in the same run, and the turning point is the sample before it (``hysteresis`` and
+    ``backlash`` terms)."""
     theta = np.asarray(theta, dtype=float)
     s = np.sign(np.asarray(v, dtype=float))
     n = len(theta)
@@ -298,7 +249,7 @@ def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
     return out
 
 
-@register_term("backlash", needs=("theta",), params=("scale", "gap"),
+@register_term("backlash", needs=("theta",), params=("scale", "gap"), linear="scale",
                describe=lambda t: f"backlash: {t['scale']:.4g} less friction over {t['gap']:.4g} after a reversal")
 def _backlash(term, *, theta, v, run=None, **_):
     """Backlash seen from the motor: for a travel ``gap`` after every reversal of the motion the
