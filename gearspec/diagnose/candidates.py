@@ -110,6 +110,9 @@ class Candidate:
         self.hint = None
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
+        """The blocks to add (and drop), their nonlinear parameters searched on the groups where
+        ``train`` (a boolean mask over the round's groups) is true; None when the data there
+        cannot show the term."""
         raise NotImplementedError
 
 
