@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ..candidates import EXP_GRID, POW_GRID, RAT_GRID, DIRECTION_NAMES, Candidate, GridCandidate, per_direction
+from ..candidates import DIRECTION_NAMES, EXP_GRID, POW_GRID, RAT_GRID, Candidate, GridCandidate, per_direction
 from ..context import Round
 from .registry import register_detector
 
