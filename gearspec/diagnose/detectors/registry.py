@@ -16,7 +16,7 @@ from typing import Callable
 
 from ...errors import InputError
 
-__all__ = ["Detector", "register_detector", "unregister_detector", "detectors", "propose"]
+__all__ = ["Detector", "register_detector", "unregister_detector", "detectors", "propose", "LAST"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,9 @@ class Detector:
     function: Callable
     seq: int = 0
 
+
+#: the default place of a detector: after those of this package (their ``order`` is 10 to 150)
+LAST = 1000.0
 
 _REGISTRY: dict[str, Detector] = {}
 _SEQ = [0]
@@ -51,7 +54,8 @@ def register_detector(name: str, *, effect: str, order: float | None = None):
     order : float, optional
         Place among the detectors (the loop asks them by increasing ``order``; the candidates of a
         round keep that order, which decides ties between equally good candidates).  Default:
-        after every detector registered so far.
+        :data:`LAST`, after the detectors of this package (several at ``LAST``: in the order they
+        were registered).
 
     Returns
     -------
@@ -62,8 +66,7 @@ def register_detector(name: str, *, effect: str, order: float | None = None):
         if name in _REGISTRY:
             raise InputError(f"a detector named '{name}' is registered already")
         _SEQ[0] += 1
-        at = order if order is not None else max((d.order for d in _REGISTRY.values()), default=0.0) + 1.0
-        _REGISTRY[name] = Detector(name, effect, float(at), fn, _SEQ[0])
+        _REGISTRY[name] = Detector(name, effect, float(LAST if order is None else order), fn, _SEQ[0])
         return fn
     return decorate
 
