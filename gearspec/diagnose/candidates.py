@@ -168,12 +168,15 @@ class GridCandidate(Candidate):
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         best = None
+        keeps: dict = {}     # the grid's values mostly drop the same blocks (none, or one line)
         for i in range(len(self.grid)):
             p = self._prop(rnd, i)
             if p is None:
                 continue
-            keep = rnd.keep_mask(p.drop)
-            _, rss = train_fit(rnd, keep, p, train)
+            uids = tuple(getattr(d, "uid", d) for d in p.drop)
+            if uids not in keeps:
+                keeps[uids] = rnd.keep_mask(p.drop)
+            _, rss = train_fit(rnd, keeps[uids], p, train)
             if best is None or rss < best[0]:
                 best = (rss, p)
         return None if best is None else best[1]

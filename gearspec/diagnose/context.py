@@ -51,9 +51,9 @@ class Round:
         The keys of the model's blocks (``"hysteresis"``, ``"viscous_power+"``, ...).
     """
 
-    dd: DiagnoseData
-    state: State
-    fold: np.ndarray
+    dd: DiagnoseData = field(repr=False)
+    state: State = field(repr=False)
+    fold: np.ndarray = field(repr=False)
     fitted: FittedState = field(init=False, repr=False)
     X: np.ndarray = field(init=False, repr=False)
     grams: Grams = field(init=False, repr=False)
