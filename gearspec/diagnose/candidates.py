@@ -346,8 +346,6 @@ class PeriodicCandidate(Candidate):
         return f
 
 
-
-
 # ---------------------------------------------------------------------- lag
 @dataclass(frozen=True, eq=False)
 class LaggedHarmonicBlock(HarmonicBlock):
@@ -392,8 +390,6 @@ def lagged(blk: HarmonicBlock, lag: float) -> LaggedHarmonicBlock:
     cls = LaggedSidebandBlock if isinstance(blk, SidebandBlock) else LaggedHarmonicBlock
     kw = {f.name: getattr(blk, f.name) for f in dataclasses.fields(blk) if f.name not in ("uid", "coef", "lag")}
     return cls(**kw, coef=blk.coef, lag=float(lag))
-
-
 
 
 class LagCandidate(Candidate):
@@ -447,8 +443,7 @@ class _TaylorProposal(Proposal):
         return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
 
 
-
-
+# ---------------------------------------------------------------------- sidebands
 @dataclass(frozen=True, eq=False)
 class SidebandBlock(HarmonicBlock):
     """A sideband line (declared by the gear: carrier +- modulating shaft), pooled per direction
@@ -523,8 +518,6 @@ class SidebandCandidate(Candidate):
             xtc, ctc, cty = cross_grams(rnd, C)
             self._cache = {"round": rnd, "prop": Proposal(add, [], xtc, ctc, cty, self.name)}
         return self._cache["prop"]
-
-
 
 
 _MOVED = ("term_candidates", "lag_candidates", "sideband_candidates", "segment_phases", "SIDEBAND_CYCLES",
