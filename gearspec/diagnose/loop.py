@@ -50,12 +50,14 @@ from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
 from ..recording import Recording
-from .candidates import Candidate, FixedCandidate, PeriodicCandidate, term_candidates, train_fit
+from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
+from .context import Round
 from .data import DiagnoseData
-from .design import (FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, polish,
-                     predict_model, refine, solve_normal, state_from_model)
-from .residual import (acceleration_analysis, channel_analysis, magnitude_residual, position_spectra,
-                       reversal_analysis, speed_analysis)
+from .design import (FittedState, HarmonicBlock, State, fit_state, polish, predict_model, refine, solve_normal,
+                     state_from_model)
+from .detectors import analyse, term_candidates
+from .detectors import line_candidates as _periodic_candidates  # the loop's name for the spectrum's lines
+from .residual import acceleration_analysis, channel_analysis, position_spectra, reversal_analysis, speed_analysis
 
 __all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "folds_of", "baseline_model",
            "idim_model", "residual_analysis", "KINDS", "relative_error"]
@@ -95,83 +97,6 @@ def relative_error(y, prediction) -> float:
 
 
 # ---------------------------------------------------------------------- one round
-class Round:
-    """The model as it stands, fitted on all data and on the training part of every fold."""
-
-    def __init__(self, dd: DiagnoseData, state: State, folds: np.ndarray):
-        self.dd = dd
-        fitted = fit_state(state, dd)
-        self.state = state.refreshed(fitted.coef)
-        self.fitted = FittedState(self.state, fitted.coef, fitted.se, fitted.residual, fitted.rmse,
-                                  fitted.prediction, speed_ranges=fitted.speed_ranges)
-        # the held-out fits use the Taylor columns of every nonlinear parameter as well
-        self.X = self.state.design(dd, taylor=True)
-        self.grams = Grams.of(self.X, dd.y, dd)
-        G_all = self.grams.G.sum(0)
-        self.ref_diag = np.diag(G_all).copy()
-        self.fitted.nonlinear_se = nonlinear_standard_errors(self.state, dd, self.X, G_all)
-        self.fold = folds
-        self.K = int(folds.max()) + 1
-        self._sums = {}
-        self._beta = {}
-
-    def key(self, train):
-        return np.packbits(train).tobytes()
-
-    def train_sums(self, train):
-        k = self.key(train)
-        if k not in self._sums:
-            g = self.grams
-            self._sums[k] = (g.G[train].sum(0), g.b[train].sum(0), float(g.yy[train].sum()))
-        return self._sums[k]
-
-    def beta(self, train):
-        k = self.key(train)
-        if k not in self._beta:
-            G, b, _ = self.train_sums(train)
-            self._beta[k] = solve_normal(G, b, reference=self.ref_diag)
-        return self._beta[k]
-
-    def rows(self, train_groups: np.ndarray) -> np.ndarray:
-        return train_groups[self.dd.group]
-
-    def keep_mask(self, drop) -> np.ndarray:
-        keep = np.ones(self.X.shape[1], bool)
-        uids = {getattr(d, "uid", d) for d in drop}
-        for blk, (a, z) in zip(self.state.blocks, self.state.spans(self.dd, taylor=True)):
-            if blk.uid in uids:
-                keep[a:z] = False
-        return keep
-
-    def line_phases(self, blk: HarmonicBlock) -> tuple:
-        i = next(i for i, b in enumerate(self.state.blocks) if b.uid == blk.uid)
-        a, _ = self.state.spans()[i]
-        coef = self.fitted.coef
-        out, j = [], a
-        for d in ((0,) if blk.symmetric else blk.dirs):
-            out.append((d, float(math.atan2(coef[j + 1], coef[j]))))
-            j += 2 + (1 if d in dict(blk.load_phase) else 0)
-        return tuple(out)
-
-    def all_groups(self) -> np.ndarray:
-        return np.ones(self.dd.n_groups, bool)
-
-    def baseline_holdout(self) -> dict:
-        """Held-out sums of squares of the model as it stands, per group."""
-        dd = self.dd
-        sse = np.zeros(dd.n_groups)
-        pred = np.zeros(len(dd))
-        for f in range(self.K):
-            train = self.fold != f
-            beta = self.beta(train)
-            rows = ~self.rows(train)
-            pred[rows] = self.X[rows] @ beta
-        r = dd.y - pred
-        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-            sse[g] = float(r[a:z] @ r[a:z])
-        return {"sse": sse, "prediction": pred}
-
-
 @dataclass
 class Evaluation:
     """What the held-out test measured for one candidate in one round."""
@@ -355,114 +280,6 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         G = Xt.T @ Xt
         beta = solve_normal(G, Xt.T @ dd.y[tr_rows], reference=np.einsum("ij,ij->j", X, X))
         out[rows] = dd.y[rows] - X[rows] @ beta
-    return out
-
-
-# ---------------------------------------------------------------------- residual analyses
-def analyse(rnd: Round, *, fap: float = 0.01, per_segment: bool = True) -> dict:
-    """Every residual analysis of :mod:`.residual` on the round's residual."""
-    dd = rnd.dd
-    r = rnd.fitted.residual
-    out = {"spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment) if dd.at("theta") is not None
-           else {"pooled": [], "segments": []}}
-    base_params = max((len(b.names) // max(len(dd.directions()), 1) for b in rnd.state.blocks if b.key == "base"),
-                      default=0)
-    out["speed"] = speed_analysis(dd, r, n_params=base_params)
-    ld = channel_analysis(dd, r, "load", transform=np.abs)
-    if ld is not None:
-        out["load"] = ld
-    tp = channel_analysis(dd, r, "temperature")
-    if tp is not None:
-        out["temperature"] = tp
-    tt = channel_analysis(dd, r, "t")
-    if tt is not None:
-        out["t"] = tt
-    ac = acceleration_analysis(dd, r)
-    if ac is not None:
-        out["acc"] = ac
-    rv = reversal_analysis(dd, r)
-    if rv is not None:
-        out["reversal"] = rv
-    if dd.at("load") is not None and np.ptp(dd.at("load")) > 0:
-        out["load_lines"] = _load_line_analysis(rnd, r)
-    return out
-
-
-def _load_line_analysis(rnd: Round, r: np.ndarray) -> dict:
-    """Per line of the model: the residual projected on the line's own shape (its phase, its
-    amplitude law) per group, regressed on the group's mean load^2 (SILO4 eq. 14)."""
-    dd = rnd.dd
-    out = {}
-    theta = dd.at("theta")
-    load = dd.at("load")
-    m = magnitude_residual(dd, r)
-    s = np.abs(dd.at("v"))
-    d = dd.at("direction")
-    for blk in [b for b in rnd.state.blocks if isinstance(b, HarmonicBlock) and not b.load_phase]:
-        phases = dict(rnd.line_phases(blk))
-        rng = blk.ranges(dd)
-        xs, ys, ws = [], [], []
-        for a, z in zip(dd.starts, dd.stops):
-            dirn = int(d[a])
-            key = 0 if blk.symmetric else dirn
-            if key not in phases:
-                continue
-            g = blk._g(key, s[a:z], rng.get(key))
-            shape = g * np.sin(2 * np.pi * blk.frequency * theta[a:z] + phases[key])
-            shape = shape - shape.mean()
-            den = float(shape @ shape)
-            mm = m[a:z] - m[a:z].mean()
-            if den <= 0:
-                continue
-            coef = float(shape @ mm) / den
-            var = float(np.var(mm - coef * shape))
-            xs.append(float(np.mean(load[a:z] ** 2)))
-            ys.append(coef)
-            ws.append(den / var if var > 0 else 0.0)
-        xs, ys, ws = map(np.asarray, (xs, ys, ws))
-        if len(xs) >= 4 and np.ptp(xs) > 0 and np.all(ws > 0):
-            # weighted least squares of the in-phase amplitude error on load^2 (weights: precision)
-            A = np.column_stack([np.ones(len(xs)), xs]) * np.sqrt(ws)[:, None]
-            beta, *_ = np.linalg.lstsq(A, ys * np.sqrt(ws), rcond=None)
-            res = ys * np.sqrt(ws) - A @ beta
-            s2 = float(res @ res) / max(len(xs) - 2, 1)
-            cov = np.linalg.pinv(A.T @ A) * max(s2, 1.0)
-            t = beta[1] / math.sqrt(cov[1, 1]) if cov[1, 1] > 0 else 0.0
-            p = float(2 * stats.t.sf(abs(t), max(len(xs) - 2, 1)))
-            out[blk.key] = {"t": float(t), "p": p, "slope": float(beta[1]), "x": xs.tolist(), "y": ys.tolist()}
-    return out
-
-
-def _periodic_candidates(rnd: Round, analyses: dict, *, max_candidates: int = 6) -> list[Candidate]:
-    """Lines in the pooled residual spectra that no line of the model explains, merged across
-    speed groups and directions (within two resolution steps), strongest first."""
-    dd = rnd.dd
-    model_f = [b.frequency for b in rnd.state.blocks if isinstance(b, HarmonicBlock)]
-    peaks = []
-    for sp in analyses["spectra"]["pooled"]:
-        for _, p in sp.peaks.iterrows():
-            peaks.append((float(p["z"]), float(p["frequency"]), float(p["resolution"]), float(p["fap"]), sp))
-    peaks.sort(key=lambda x: -x[0])
-    chosen: list = []
-    for z, f, res, fp, sp in peaks:
-        if any(abs(f - fm) <= max(2 * res, 5e-3 * fm) for fm in model_f):   # a line the model has
-            continue
-        hit = next((c for c in chosen if abs(c["f"] - f) <= 2 * max(res, c["res"])), None)
-        if hit is not None:
-            hit["seen"].append((sp, z, fp))
-            continue
-        chosen.append({"f": f, "res": res, "z": z, "fap": fp, "sp": sp, "seen": [(sp, z, fp)]})
-        if len(chosen) >= max_candidates:
-            break
-    out = []
-    for c in chosen:
-        unit = "m" if dd.unit == "m" else "rad"
-        seen = "; ".join(f"{sp.label}: {z:.1f} x noise, FAP {fp:.1e}" for sp, z, fp in c["seen"][:4])
-        ev = f"residual spectrum peak at {c['f']:.6g} cycles/{unit} ({seen})"
-        cand = PeriodicCandidate(c["f"], c["res"], gear=dd.gear, evidence=ev, unit=unit,
-                                 detail={"analysis": "spectrum", "spectrum": c["sp"], "frequency": c["f"]},
-                                 gate_p=c["fap"])
-        out.append(cand)
     return out
 
 

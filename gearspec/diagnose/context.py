@@ -1,0 +1,148 @@
+"""What the candidates of one round of the closed loop read: the round's context.
+
+The loop builds one :class:`Round` per round (and one per model it compares against); the
+detectors (:mod:`.detectors`) and the candidates (:mod:`.candidates`) receive it and read it,
+never the loop itself.  It is read-only: the model as it stands, fitted on all data, its design
+with the Taylor columns of every nonlinear parameter and the per-group normal equations of that
+design, the held-out folds; the training sums and coefficients of a fold are derived from these
+(and cached: the candidates of a round ask for the same folds many times).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .data import DiagnoseData
+from .design import FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, solve_normal
+
+__all__ = ["Round"]
+
+
+@dataclass(frozen=True, eq=False)
+class Round:
+    """The model as it stands, fitted on all data and on the training part of every fold.
+
+    Parameters
+    ----------
+    dd : DiagnoseData
+        The observations (torque in Nm at every sample) and their held-out groups.
+    state : State
+        The model's blocks; the round keeps them refreshed with the coefficients fitted on all
+        data (``state``).
+    fold : ndarray of int
+        Fold of every held-out group.
+
+    Attributes
+    ----------
+    fitted : FittedState
+        The fit on all data (coefficients, standard errors, residual in Nm, prediction).
+    X : ndarray
+        The design on every observation, with the Taylor columns of every nonlinear parameter.
+    grams : Grams
+        Per-group normal equations of ``X`` and ``dd.y``.
+    ref_diag : ndarray
+        Diagonal of the normal equations of all data (the reference of :func:`solve_normal`).
+    K : int
+        Number of folds.
+    keys : frozenset of str
+        The keys of the model's blocks (``"hysteresis"``, ``"viscous_power+"``, ...).
+    """
+
+    dd: DiagnoseData = field(repr=False)
+    state: State = field(repr=False)
+    fold: np.ndarray = field(repr=False)
+    fitted: FittedState = field(init=False, repr=False)
+    X: np.ndarray = field(init=False, repr=False)
+    grams: Grams = field(init=False, repr=False)
+    ref_diag: np.ndarray = field(init=False, repr=False)
+    K: int = field(init=False)
+    keys: frozenset = field(init=False, repr=False)
+    _sums: dict = field(init=False, repr=False, default_factory=dict)
+    _beta: dict = field(init=False, repr=False, default_factory=dict)
+
+    def __post_init__(self):
+        dd = self.dd
+        fitted = fit_state(self.state, dd)
+        state = self.state.refreshed(fitted.coef)
+        fitted = FittedState(state, fitted.coef, fitted.se, fitted.residual, fitted.rmse, fitted.prediction,
+                             speed_ranges=fitted.speed_ranges)
+        # the held-out fits use the Taylor columns of every nonlinear parameter as well
+        X = state.design(dd, taylor=True)
+        grams = Grams.of(X, dd.y, dd)
+        G_all = grams.G.sum(0)
+        fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
+        for name, value in (("state", state), ("fitted", fitted), ("X", X), ("grams", grams),
+                            ("ref_diag", np.diag(G_all).copy()), ("K", int(self.fold.max()) + 1),
+                            ("keys", frozenset(b.key for b in state.blocks))):
+            object.__setattr__(self, name, value)
+
+    def key(self, train: np.ndarray) -> bytes:
+        """A hashable key of a boolean mask over the groups."""
+        return np.packbits(train).tobytes()
+
+    def train_sums(self, train: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(X^T X, X^T y, y^T y)`` summed over the groups where ``train`` is true."""
+        k = self.key(train)
+        if k not in self._sums:
+            g = self.grams
+            self._sums[k] = (g.G[train].sum(0), g.b[train].sum(0), float(g.yy[train].sum()))
+        return self._sums[k]
+
+    def beta(self, train: np.ndarray) -> np.ndarray:
+        """Coefficients of ``X`` fitted on the groups where ``train`` is true."""
+        k = self.key(train)
+        if k not in self._beta:
+            G, b, _ = self.train_sums(train)
+            self._beta[k] = solve_normal(G, b, reference=self.ref_diag)
+        return self._beta[k]
+
+    def rows(self, train_groups: np.ndarray) -> np.ndarray:
+        """Observations (boolean) of the groups where ``train_groups`` is true."""
+        return train_groups[self.dd.group]
+
+    def all_groups(self) -> np.ndarray:
+        """Every group (boolean mask)."""
+        return np.ones(self.dd.n_groups, bool)
+
+    def keep_mask(self, drop) -> np.ndarray:
+        """Columns of ``X`` that stay when the blocks ``drop`` (blocks or uids) go."""
+        keep = np.ones(self.X.shape[1], bool)
+        uids = {getattr(d, "uid", d) for d in drop}
+        for blk, (a, z) in zip(self.state.blocks, self.state.spans(self.dd, taylor=True)):
+            if blk.uid in uids:
+                keep[a:z] = False
+        return keep
+
+    def line_phases(self, blk: HarmonicBlock) -> tuple:
+        """``((direction, phase in rad), ...)`` of a line of the model, fitted on all data."""
+        i = next(i for i, b in enumerate(self.state.blocks) if b.uid == blk.uid)
+        a, _ = self.state.spans()[i]
+        coef = self.fitted.coef
+        out, j = [], a
+        for d in ((0,) if blk.symmetric else blk.dirs):
+            out.append((d, float(math.atan2(coef[j + 1], coef[j]))))
+            j += 2 + (1 if d in dict(blk.load_phase) else 0)
+        return tuple(out)
+
+    def lines(self) -> list[HarmonicBlock]:
+        """The lines of the model."""
+        return [b for b in self.state.blocks if isinstance(b, HarmonicBlock)]
+
+    def baseline_holdout(self) -> dict:
+        """Held-out sums of squares of the model as it stands, per group (Nm^2), and its held-out
+        prediction at every observation (Nm)."""
+        dd = self.dd
+        sse = np.zeros(dd.n_groups)
+        pred = np.zeros(len(dd))
+        for f in range(self.K):
+            train = self.fold != f
+            beta = self.beta(train)
+            rows = ~self.rows(train)
+            pred[rows] = self.X[rows] @ beta
+        r = dd.y - pred
+        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+            sse[g] = float(r[a:z] @ r[a:z])
+        return {"sse": sse, "prediction": pred}

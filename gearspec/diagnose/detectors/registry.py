@@ -1,0 +1,95 @@
+"""The registry of detectors: one per term kind (or family), each turning what the residual
+analyses of a round show into candidate terms.
+
+A detector is a function ``detector(rnd, analyses, *, gate) -> list[Candidate]``: ``rnd`` is the
+round's context (:class:`~gearspec.diagnose.context.Round`, read-only), ``analyses`` what
+:func:`~gearspec.diagnose.detectors.analyses.analyse` computed on the round's residual, ``gate``
+the p-value below which a detector that needs evidence proposes its candidates.  The loop asks
+every registered detector, in the order of their ``order`` numbers (then of registration), and
+tests every candidate they propose on held-out data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from ...errors import InputError
+
+__all__ = ["Detector", "register_detector", "unregister_detector", "detectors", "propose", "LAST"]
+
+
+@dataclass(frozen=True)
+class Detector:
+    """A registered detector: its ``name`` (the term kind it proposes, or its family), the effect
+    kind of ``CONTRACTS.md`` section 4 of every candidate it proposes (``effect``), its place in
+    the order the loop asks detectors (``order``) and the function."""
+
+    name: str
+    effect: str
+    order: float
+    function: Callable
+    seq: int = 0
+
+
+#: the default place of a detector: after those of this package (their ``order`` is 10 to 150)
+LAST = 1000.0
+
+_REGISTRY: dict[str, Detector] = {}
+_SEQ = [0]
+
+
+def register_detector(name: str, *, effect: str, order: float | None = None):
+    """Register a detector (decorator).
+
+    Parameters
+    ----------
+    name : str
+        Unique name: the term kind (:mod:`gearspec.terms`) whose candidates it proposes, or the
+        name of a family of them.
+    effect : str
+        The effect kind (``CONTRACTS.md`` section 4: ``periodic``, ``speed_law``, ``load``,
+        ``temperature``, ``drift``, ``asymmetry``, ``inertia``, ``hysteresis``, ``lag``,
+        ``other``) of every candidate it proposes; ``diagnose(kinds=...)`` selects by it.
+    order : float, optional
+        Place among the detectors (the loop asks them by increasing ``order``; the candidates of a
+        round keep that order, which decides ties between equally good candidates).  Default:
+        :data:`LAST`, after the detectors of this package (several at ``LAST``: in the order they
+        were registered).
+
+    Returns
+    -------
+    callable
+        The decorator; it returns the function unchanged.
+    """
+    def decorate(fn: Callable) -> Callable:
+        if name in _REGISTRY:
+            raise InputError(f"a detector named '{name}' is registered already")
+        _SEQ[0] += 1
+        _REGISTRY[name] = Detector(name, effect, float(LAST if order is None else order), fn, _SEQ[0])
+        return fn
+    return decorate
+
+
+def unregister_detector(name: str) -> None:
+    """Remove the detector ``name`` (a test's, or one to replace)."""
+    if name not in _REGISTRY:
+        raise InputError(f"no detector named '{name}' is registered")
+    del _REGISTRY[name]
+
+
+def detectors() -> list[Detector]:
+    """The registered detectors in the order the loop asks them."""
+    return sorted(_REGISTRY.values(), key=lambda d: (d.order, d.seq))
+
+
+def propose(rnd, analyses: dict, *, gate: float, kinds=None, skip=()) -> list:
+    """The candidates of every registered detector (but those named in ``skip``) for the round
+    ``rnd``, in the detectors' order; with ``kinds``, only detectors and candidates of those
+    effect kinds."""
+    out = []
+    for det in detectors():
+        if det.name in skip or (kinds is not None and det.effect not in kinds):
+            continue
+        out += [c for c in det.function(rnd, analyses, gate=gate) if kinds is None or c.kind in kinds]
+    return out
