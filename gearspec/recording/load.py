@@ -21,8 +21,8 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from .errors import InputError, warn
-from .gears import GearTrain, load_gear
+from ..errors import InputError, warn
+from ..gears import GearTrain, load_gear
 
 __all__ = ["Recording", "load_recording", "CANONICAL", "parse_assignments", "auto_max_gap"]
 
