@@ -55,8 +55,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.signal import savgol_filter
 
-from .errors import InputError
-from .recording import Recording
+from ..errors import InputError
+from ..recording import Recording
 
 __all__ = ["Segment", "Segmentation", "find_segments", "quasi_static_sweeps", "derivatives", "friction_torque",
            "FrictionTorque"]
