@@ -254,15 +254,7 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     key = _key(module)
     N, km = mod["ratio"], mod["torque_constant"]
     rng = np.random.default_rng(seed)
-    speeds = default_speeds(key) if speeds is None else [float(s) for s in np.atleast_1d(speeds)]
-    loads = default_loads(key) if loads is None else sorted(float(x) for x in np.atleast_1d(loads))
-    if not speeds or any(s == 0 or not math.isfinite(s) for s in speeds):
-        raise InputError("lola_twin: speeds must be nonzero finite motor speeds in rad/s")
-    if not loads or any(x < 0 or not math.isfinite(x) for x in loads):
-        raise InputError("lola_twin: loads must be finite torques >= 0 Nm at the output")
-    gmax = P["brake_max"] * P["testbed_gear"]
-    if max(loads) > gmax:
-        raise InputError(f"lola_twin: loads above {gmax:g} Nm are beyond the testbed's brake (17 Nm x gear 5)")
+    speeds, loads = _grid(key, speeds, loads, P)
     effects = list(effects or ())
     base = truth if truth is not None else table4_model(key)
     model = apply_effects(base, effects)
@@ -278,31 +270,7 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     n_avg = min(int(round(P["average"] * fs_)), int(0.6 * n_hold))
     if n_hold < 10:
         raise InputError("lola_twin: hold must be at least 10 samples")
-    campaigns = [(1, [x for x in loads if x <= P["brake_max"]], 1.0, P["sensor_ranges"][0]),
-                 (2, [x for x in loads if x > P["brake_max"]], P["testbed_gear"], P["sensor_ranges"][1])]
-    campaigns = [c for c in campaigns if c[1]]
-
-    # ---- per campaign: the brake of every speed block at once; then blocks one after another
-    pieces = []  # (campaign, block speed, v, T_actual, T_meas, point index per sample)
-    point_rows = []
-    v_prev = 0.0
-    for camp, levels, gear_ratio, rng_sensor in campaigns:
-        kb = P["brake_max"] * gear_ratio / P["brake_voltage"]
-        t_min = P["brake_min"] * gear_ratio
-        B = len(speeds)
-        T_init = np.full(B, max(levels))
-        T_init[0] = 0.0
-        act, meas = _brake(np.asarray(levels), n_hold, n_ramp, T_init, kb, P, rng, P["sensor_noise"] * rng_sensor,
-                           t_min)
-        for b, sp in enumerate(speeds):
-            v = np.concatenate((np.linspace(v_prev, sp, n_ramp, endpoint=False), np.full(n_hold * len(levels), sp)))
-            pt = np.concatenate((np.zeros(n_ramp, int), np.repeat(np.arange(len(levels)), n_hold)))
-            first = len(point_rows)
-            for j, lv in enumerate(levels):
-                point_rows.append({"campaign": camp, "speed_cmd": sp, "load_cmd": lv})
-            pieces.append((v, act[:, b], meas[:, b], pt + first))
-            v_prev = sp
-
+    pieces, point_rows = _operating_points(speeds, loads, P, n_hold, n_ramp, rng)
     v = np.concatenate([p[0] for p in pieces])
     T_act = np.concatenate([p[1] for p in pieces])
     T_meas = np.concatenate([p[2] for p in pieces])
@@ -326,35 +294,10 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     current = torque / km + noise_i * rng.standard_normal(n)
     q = 2 * math.pi / P["counts_per_rev"]
     theta_meas = np.floor(theta / q) * q
-
-    # ---- per point: low-pass (forwards and backwards) and mean over the settled end
-    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=fs_, output="sos")
-    cur_f = np.empty(n)
-    load_f = np.empty(n)
     starts = np.concatenate(([0], np.cumsum([len(p[0]) for p in pieces])))
-    for a, b in zip(starts[:-1], starts[1:]):
-        cur_f[a:b] = signal.sosfiltfilt(bq, current[a:b])
-        load_f[a:b] = signal.sosfiltfilt(bq, load_meas[a:b])
-    rows = []
-    ends = np.flatnonzero(np.diff(np.concatenate((run, [-1]))) != 0)  # last sample of each run
-    for pi, row in enumerate(point_rows):
-        e_ = ends[pi] + 1
-        s_ = e_ - n_avg
-        sl = slice(s_, e_)
-        I_m, L_m = float(cur_f[sl].mean()), float(load_f[sl].mean())
-        spd = float((theta_meas[e_ - 1] - theta_meas[s_]) / ((e_ - 1 - s_) * dt))
-        f_true = float(friction[sl].mean())
-        lt = float(load_true[sl].mean())
-        d = 1.0 if row["speed_cmd"] > 0 else -1.0
-        lvl = d * float(base.mean_level(abs(row["speed_cmd"]), d, load=np.array([row["load_cmd"]]))[0])
-        rows.append({"point": pi, "run": pi, **row, "speed": spd, "load": L_m, "current": I_m,
-                     "friction": float(laws.friction_from_load_current(L_m, I_m, N, km)),
-                     "efficiency": float(laws.efficiency(L_m, I_m, N, km)),
-                     "t0": float(t[s_]), "t1": float(t[e_ - 1]), "n": int(e_ - s_),
-                     "friction_true": f_true, "load_true": lt,
-                     "efficiency_true": float(lt / (N * (f_true + lt / N))), "level_true": lvl,
-                     **({"temperature": float(ch["temperature"][sl].mean())} if "temperature" in ch else {})})
-    points = pd.DataFrame(rows)
+    sim = {"t": t, "theta_meas": theta_meas, "current": current, "load_meas": load_meas, "load_true": load_true,
+           "friction": friction, "run": run, "temperature": ch.get("temperature")}
+    points = pd.DataFrame(_point_rows(point_rows, sim, starts, base, P, n_avg, N, km))
     data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run}
     for k in recorded:
         data[k] = ch[k]
@@ -368,3 +311,83 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     return rec, points
 
 
+def _grid(key: str, speeds, loads, P: dict) -> tuple[list[float], list[float]]:
+    """The speeds (rad/s, in order) and loads (Nm at the output, increasing) of the operating
+    points, given or the defaults, checked against the testbed's brake."""
+    speeds = default_speeds(key) if speeds is None else [float(s) for s in np.atleast_1d(speeds)]
+    loads = default_loads(key) if loads is None else sorted(float(x) for x in np.atleast_1d(loads))
+    if not speeds or any(s == 0 or not math.isfinite(s) for s in speeds):
+        raise InputError("lola_twin: speeds must be nonzero finite motor speeds in rad/s")
+    if not loads or any(x < 0 or not math.isfinite(x) for x in loads):
+        raise InputError("lola_twin: loads must be finite torques >= 0 Nm at the output")
+    gmax = P["brake_max"] * P["testbed_gear"]
+    if max(loads) > gmax:
+        raise InputError(f"lola_twin: loads above {gmax:g} Nm are beyond the testbed's brake (17 Nm x gear 5)")
+    return speeds, loads
+
+
+def _operating_points(speeds, loads, P: dict, n_hold: int, n_ramp: int, rng: np.random.Generator):
+    """The automatic mode's schedule: per campaign (loads up to the brake's 17 Nm, then those above
+    with the testbed gear) the brake of every speed block at once, then the blocks one after
+    another.  Returns ``pieces`` (per block: velocity, actual and measured brake torque, point
+    index per sample) and one row per point (``campaign, speed_cmd, load_cmd``)."""
+    campaigns = [(1, [x for x in loads if x <= P["brake_max"]], 1.0, P["sensor_ranges"][0]),
+                 (2, [x for x in loads if x > P["brake_max"]], P["testbed_gear"], P["sensor_ranges"][1])]
+    campaigns = [c for c in campaigns if c[1]]
+    pieces = []  # (v, T_actual, T_meas, point index per sample)
+    point_rows = []
+    v_prev = 0.0
+    for camp, levels, gear_ratio, rng_sensor in campaigns:
+        kb = P["brake_max"] * gear_ratio / P["brake_voltage"]
+        t_min = P["brake_min"] * gear_ratio
+        B = len(speeds)
+        T_init = np.full(B, max(levels))
+        T_init[0] = 0.0
+        act, meas = _brake(np.asarray(levels), n_hold, n_ramp, T_init, kb, P, rng, P["sensor_noise"] * rng_sensor,
+                           t_min)
+        for b, sp in enumerate(speeds):
+            v = np.concatenate((np.linspace(v_prev, sp, n_ramp, endpoint=False), np.full(n_hold * len(levels), sp)))
+            pt = np.concatenate((np.zeros(n_ramp, int), np.repeat(np.arange(len(levels)), n_hold)))
+            first = len(point_rows)
+            for j, lv in enumerate(levels):
+                point_rows.append({"campaign": camp, "speed_cmd": sp, "load_cmd": lv})
+            pieces.append((v, act[:, b], meas[:, b], pt + first))
+            v_prev = sp
+    return pieces, point_rows
+
+
+def _point_rows(point_rows: list[dict], sim: dict, starts: np.ndarray, base: FrictionModel, P: dict, n_avg: int,
+                N: float, km: float) -> list[dict]:
+    """Per operating point: current and load low-pass filtered (forwards and backwards, per speed
+    block) and averaged over the settled end of the point; friction (eq. 12) and efficiency
+    (eq. 13) from them, and the truth over the same samples."""
+    fs_ = P["fs"]
+    dt = 1.0 / fs_
+    t, theta_meas, run, temperature = sim["t"], sim["theta_meas"], sim["run"], sim["temperature"]
+    n = len(t)
+    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=fs_, output="sos")
+    cur_f = np.empty(n)
+    load_f = np.empty(n)
+    for a, b in zip(starts[:-1], starts[1:]):
+        cur_f[a:b] = signal.sosfiltfilt(bq, sim["current"][a:b])
+        load_f[a:b] = signal.sosfiltfilt(bq, sim["load_meas"][a:b])
+    rows = []
+    ends = np.flatnonzero(np.diff(np.concatenate((run, [-1]))) != 0)  # last sample of each run
+    for pi, row in enumerate(point_rows):
+        e_ = ends[pi] + 1
+        s_ = e_ - n_avg
+        sl = slice(s_, e_)
+        I_m, L_m = float(cur_f[sl].mean()), float(load_f[sl].mean())
+        spd = float((theta_meas[e_ - 1] - theta_meas[s_]) / ((e_ - 1 - s_) * dt))
+        f_true = float(sim["friction"][sl].mean())
+        lt = float(sim["load_true"][sl].mean())
+        d = 1.0 if row["speed_cmd"] > 0 else -1.0
+        lvl = d * float(base.mean_level(abs(row["speed_cmd"]), d, load=np.array([row["load_cmd"]]))[0])
+        rows.append({"point": pi, "run": pi, **row, "speed": spd, "load": L_m, "current": I_m,
+                     "friction": float(laws.friction_from_load_current(L_m, I_m, N, km)),
+                     "efficiency": float(laws.efficiency(L_m, I_m, N, km)),
+                     "t0": float(t[s_]), "t1": float(t[e_ - 1]), "n": int(e_ - s_),
+                     "friction_true": f_true, "load_true": lt,
+                     "efficiency_true": float(lt / (N * (f_true + lt / N))), "level_true": lvl,
+                     **({"temperature": float(temperature[sl].mean())} if temperature is not None else {})})
+    return rows

@@ -62,8 +62,9 @@ The unknowns, chosen (the paper does not give them)
   included); a moving motor whose velocity would change sign within a step stops instead.
 
 Performance: all runs are integrated together, one numpy step per control period over the
-vector of runs (runs that have finished drop out); the default twin (40 speeds x 10 repetitions)
-takes some seconds.
+vector of runs (runs that have finished drop out), the friction by the truth model's own
+:meth:`~gearspec.model.FrictionModel.evaluate` once per control period (most of the time); the
+default twin (40 speeds x 10 repetitions) takes some tens of seconds.
 """
 
 from __future__ import annotations
@@ -81,11 +82,10 @@ from scipy import signal
 
 from ..errors import InputError
 from ..jsonsafe import plain
-from .. import laws
 from ..gears import GearTrain, load_gear
 from ..model import RPM, FrictionModel
 from ..recording import Recording
-from ..terms import TERMS, evaluate_term
+from ..terms import TERMS
 from .effects import Effect, apply_effects, effect_channels, effects_truth
 
 __all__ = ["PAPER_TABLE2", "table2_model", "twin_gear", "silo4_twin", "stick_slip_run", "TwinTruth",
@@ -240,89 +240,44 @@ class TwinTruth:
 _HISTORY = ("hysteresis", "backlash")
 
 
-class _Pointwise:
-    """Evaluation of a model without signed or history terms, fast for small vectors.
+class _LoopFriction:
+    """A truth model split for step-by-step use in a closed loop; every part is evaluated by
+    :meth:`FrictionModel.evaluate` (the laws and terms have one source: the model's).
 
-    Same numbers as ``model.evaluate`` (a test checks it), with less overhead per call: the
-    base law of both directions on every sample then a select (instead of boolean indexing),
-    and the exponential-decay harmonics of each direction in one broadcast call of
-    :func:`gearspec.laws.meshing_ripple`.  Harmonics of other amplitude laws or with a load
-    coefficient go through the ``periodic`` term as in the model.
+    * pointwise friction (base law, harmonics, magnitude terms): ``pointwise``, per step;
+    * signed terms (cogging, offset): external torques (``external``), per step;
+    * inertia terms: added to the rotor inertia;
+    * history terms (hysteresis, backlash: they depend on the last reversal): evaluated on
+      two-sample sequences ``[turning point, now]`` per run, the turning point kept as state --
+      the same numbers as evaluating the whole trajectory at once.
     """
 
     def __init__(self, model: FrictionModel):
         self.model = model
-        self.law = model.law_spec
-        params, fast, self.slow = [], [], []
         for name in ("positive", "negative"):
             p = model.directions[name]
-            missing = [k for k in self.law.params if p.get(k) is None]
+            missing = [k for k in model.law_spec.params if p.get(k) is None]
             if missing:
                 raise InputError(f"the truth model has no {name}-direction value for {', '.join(missing)}")
-            params.append([float(p[k]) for k in self.law.params])
-            hs = [h for h in p["harmonics"] if h.get("amplitude") is not None]
-            fast.append([h for h in hs if h.get("law", "exp") == "exp" and not h.get("load_coefficient")])
-            self.slow.append([h for h in hs if not (h.get("law", "exp") == "exp" and not h.get("load_coefficient"))])
-        # parameters of both directions stacked along a first axis of length 2
-        self.params = [np.array(col)[:, None] for col in zip(*params)] if params[0] else []
-        n_h = max(len(f) for f in fast)
-        self.harm = None
-        if n_h:
-            def stack(key, default):
-                return np.array([[[h.get(key, default)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast], dtype=float)
-            # padding harmonics have zero amplitude
-            self.harm = (stack("amplitude", 0.0), stack("decay", 0.0), stack("frequency", 0.0), stack("phase", 0.0))
-        self.terms = list(model.terms)
-
-    def __call__(self, theta, v, *, load=None, temperature=None, t=None, run=None):
-        speed = np.abs(v)
-        sign = np.sign(v)
-        ld = None if load is None else load[None, :]
-        m = np.asarray(self.law.magnitude(speed[None, :], ld, *self.params), dtype=float)
-        if self.harm is not None:
-            m = m + laws.meshing_ripple(theta[None, None, :], v[None, None, :], *self.harm).sum(axis=1)
-        mag = np.where(sign > 0, m[0], m[-1]) if m.ndim == 2 else np.broadcast_to(m, speed.shape)
-        for d, hs in ((1.0, self.slow[0]), (-1.0, self.slow[1])):
-            for h in hs:
-                mag = mag + (sign == d) * evaluate_term({"kind": "periodic", **h}, theta=theta, v=v, load=load)[0]
-        for term in self.terms:
-            mag = mag + evaluate_term(term, theta=theta, v=v, load=load, temperature=temperature, t=t, acc=None,
-                                      run=run)[0]
-        return sign * mag
-
-
-class _LoopFriction:
-    """A truth model split for step-by-step use in a closed loop.
-
-    * pointwise friction (base law, harmonics, magnitude terms): :class:`_Pointwise` per step;
-    * signed terms (cogging, offset): external torques, ``evaluate_term`` per step;
-    * inertia terms: added to the rotor inertia;
-    * history terms (hysteresis, backlash: they depend on the last reversal): evaluated with the
-      term's own function on two-sample sequences ``[turning point, now]`` per run, the turning
-      point kept as state -- the same numbers as evaluating the whole trajectory at once.
-    """
-
-    def __init__(self, model: FrictionModel):
-        self.model = model
-        pointwise = model.copy()
-        pointwise.terms = [t for t in model.terms if not TERMS[t["kind"]].signed and t["kind"] not in _HISTORY]
-        self.pointwise = _Pointwise(pointwise)
+        self.pointwise = model.copy()
+        self.pointwise.terms = [t for t in model.terms if not TERMS[t["kind"]].signed and t["kind"] not in _HISTORY]
         self.signed = [t for t in model.terms if TERMS[t["kind"]].signed and t["kind"] != "inertia"]
         self.history = [t for t in model.terms if t["kind"] in _HISTORY]
         self.extra_inertia = float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
+        # the signed and the history terms alone: models without a base law
+        self._signed = FrictionModel("none", {}, terms=self.signed, unit=model.unit)
+        self._history = FrictionModel("none", {}, terms=self.history, unit=model.unit)
 
     def external(self, theta, v, **kw):
-        out = 0.0
-        for term in self.signed:
-            out = out + evaluate_term(term, theta=theta, v=v, **kw)[0]
-        return out
+        """The signed terms' torque at (theta, v): added to the drive as it is."""
+        return self._signed.evaluate(theta, v, **kw)
 
     def friction(self, theta, v, turn_theta, last_sign, prev_theta=None, **kw):
         """Signed friction at (theta, v); ``turn_theta``/``last_sign`` per run: the turning point of
         the last reversal (NaN: none yet) and the last nonzero direction of motion; ``prev_theta``:
         the position one step before (the turning point if the motion reverses now; default
         theta, as in the twin, where a reversing motor always stops for a step first)."""
-        f = self.pointwise(theta, v, **kw)
+        f = self.pointwise.evaluate(theta, v, **kw)
         if self.history:
             s = np.sign(v)
             now_rev = (s != 0) & (last_sign != 0) & (s != last_sign)
@@ -335,11 +290,7 @@ class _LoopFriction:
                 th2 = np.column_stack((tt, theta[idx])).ravel()
                 v2 = np.column_stack((old, s[idx])).ravel()
                 run2 = np.repeat(np.arange(len(idx)), 2)
-                extra = np.zeros(len(idx))
-                for term in self.history:
-                    extra += evaluate_term(term, theta=th2, v=v2, run=run2)[0][1::2]
-                f = f.copy()
-                f[idx] += s[idx] * extra
+                f[idx] += self._history.evaluate(th2, v2, run=run2)[1::2]
         return f
 
 
@@ -476,8 +427,69 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     base = truth if truth is not None else table2_model()
     model = apply_effects(base, effects)
     lf = _LoopFriction(model)
+    runs = _schedule(speeds_rpm, repetitions, duration, P, rng)
+    bench = _Bench(P, lf.extra_inertia, runs.dt)
+    channels = _Channels(effects, load, runs.t_start, runs.rep)
+    _, ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
+    missing = {n for e in effects for n in e.needs} - set(ch0)
+    if missing:
+        raise InputError(f"silo4_twin: an effect needs the {', '.join(sorted(missing))} channel, which this twin "
+                         "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
+    if model.law_spec.needs_load and "load" not in ch0:
+        raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
+    channels.dynamic = callable(load) or any(e.name == "warming" for e in effects)
+    if isinstance(theta0, str):
+        if theta0 != "auto":
+            raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
+        starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc)
+    else:
+        starts = np.full(runs.n, float(theta0))
+    out = _ClosedLoop(runs, bench, lf, channels, ch0, starts).run()
+    cols, rows = _twin_columns(runs, out, model, P, rng, speeds_rpm, repetitions, starts)
+    data = {k: cols[k] for k in ("t", "theta", "current", "run")}
+    data.update({k: cols[k] for k in out.out_ch if k in recorded})
+    if record_velocity:
+        data["velocity"] = cols["velocity"]
+    gear = twin_gear(bench.kM, float(P["inertia"]))
+    rec = Recording.from_arrays(gear=gear, source="silo4 twin", **data)
+    settings = {**P, "Kp": bench.Kp, "Ki": bench.Ki, "Kd": bench.Kd, "electrical_damping": bench.b_emf,
+                "inertia_total": bench.J, "seed": seed, "repetitions": repetitions, "speeds_rpm": speeds_rpm,
+                "theta0": theta0 if not isinstance(theta0, str) else "auto",
+                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist())}
+    truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
+    return rec, truth_info
 
-    # ---- runs: (speed, repetition), their profiles and clock
+
+@dataclass
+class _Runs:
+    """The runs of a twin, one per (speed, repetition): commanded velocity (rad/s), held seconds,
+    the profile's times (s from the run's start: end of the ramp up, of the hold, of the ramp
+    down, of the record), samples and the start on the experiment clock, the friction factor of
+    the repetition; and the clock's steps (control ``dt``, ``n_sub`` of them per sample ``dt_s``)."""
+
+    w_cmd: np.ndarray
+    rep: np.ndarray
+    holds: np.ndarray
+    acc: float
+    t_acc: np.ndarray
+    t_hold_end: np.ndarray
+    t_end: np.ndarray
+    t_stop: np.ndarray
+    rate: float
+    dt: float
+    n_sub: int
+    dt_s: float
+    n_samp: np.ndarray
+    t_start: np.ndarray
+    scale: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.w_cmd)
+
+
+def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Generator) -> _Runs:
+    """The runs (speed, repetition) in order, their acceleration-limited profiles and clock."""
     n_sp = len(speeds_rpm)
     w_cmd = np.repeat(np.asarray(speeds_rpm) * RPM, repetitions)
     rep = np.tile(np.arange(repetitions), n_sp)
@@ -494,7 +506,6 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         holds = np.repeat(d, repetitions)
     if np.any(holds <= 0):
         raise InputError("silo4_twin: durations must be positive")
-    R_ = len(w_cmd)
     acc = float(P["acceleration"])
     t_acc = np.abs(w_cmd) / acc
     t_hold_end = t_acc + holds
@@ -507,215 +518,233 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     dt_s = n_sub * dt
     n_samp = np.floor(t_stop / dt_s).astype(int) + 1
     t_start = np.concatenate(([0.0], np.cumsum(n_samp * dt_s + float(P["pause"]))[:-1]))
-    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(R_)
+    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(w_cmd))
+    return _Runs(w_cmd, rep, holds, acc, t_acc, t_hold_end, t_end, t_stop, rate, dt, n_sub, dt_s, n_samp, t_start,
+                 scale)
 
-    # ---- plant and controller
-    kM, Rw, Vmax = float(P["torque_constant"]), float(P["resistance"]), float(P["supply_voltage"])
-    J = float(P["inertia"]) + lf.extra_inertia
-    b_emf = kM * kM / Rw
-    wc = 2 * _PI * float(P["bandwidth_hz"])
-    Jd = float(P["inertia"])  # the controller is tuned for the nominal inertia
-    Kd = max(3 * Jd * wc - b_emf, 0.0)
-    Kp = 3 * Jd * wc ** 2
-    Ki = Jd * wc ** 3
-    volt = Rw / kM  # V per Nm of commanded torque
-    q = 2 * _PI / float(P["counts_per_rev"])
-    m_der = max(1, int(round(float(P["derivative_interval"]) * rate)))
-    Ad, Bd, Cd, Dd = _bessel_zoh(int(P["filter_order"]), float(P["filter_cutoff"]), dt)
 
-    # channels (load, temperature) per run: constant per run or functions of the clock
-    def channels_at(tl, idx):
-        clock = t_start[idx] + tl
-        ch, rec_names = effect_channels(effects, clock, idx)
-        if load is not None:
+class _Bench:
+    """The plant and the controller of :data:`PLANT` (see the module docstring): motor constants, the
+    PID gains tuned for a triple pole at the bandwidth with the nominal inertia, the encoder step
+    and the current filter discretised for the control period ``dt``."""
+
+    def __init__(self, P: dict, extra_inertia: float, dt: float):
+        self.kM, self.Rw, self.Vmax = float(P["torque_constant"]), float(P["resistance"]), float(P["supply_voltage"])
+        self.J = float(P["inertia"]) + extra_inertia
+        self.b_emf = self.kM * self.kM / self.Rw
+        wc = 2 * _PI * float(P["bandwidth_hz"])
+        Jd = float(P["inertia"])  # the controller is tuned for the nominal inertia
+        self.Kd = max(3 * Jd * wc - self.b_emf, 0.0)
+        self.Kp = 3 * Jd * wc ** 2
+        self.Ki = Jd * wc ** 3
+        self.volt = self.Rw / self.kM  # V per Nm of commanded torque
+        self.q = 2 * _PI / float(P["counts_per_rev"])
+        self.m_der = max(1, int(round(float(P["derivative_interval"]) * float(P["control_rate"]))))
+        self.Ad, self.Bd, self.Cd, self.Dd = _bessel_zoh(int(P["filter_order"]), float(P["filter_cutoff"]), dt)
+
+
+class _Channels:
+    """The channels (load, temperature) of the runs: constant per run or functions of the
+    experiment clock; ``dynamic`` when they change within a run."""
+
+    def __init__(self, effects, load, t_start: np.ndarray, rep: np.ndarray):
+        self.effects, self.load, self.t_start, self.rep = effects, load, t_start, rep
+        self.dynamic = False
+
+    def at(self, tl, idx):
+        """``(clock, channels, names recorded)`` at run times ``tl`` of the runs ``idx``."""
+        clock = self.t_start[idx] + tl
+        ch, rec_names = effect_channels(self.effects, clock, idx)
+        if self.load is not None:
             if "load" in ch:
                 raise InputError("silo4_twin: both the load argument and an effect supply the load")
-            ch["load"] = _channel_values(load, "load", clock, idx, rep[idx])
+            ch["load"] = _channel_values(self.load, "load", clock, idx, self.rep[idx])
             rec_names = rec_names | {"load"}
         return clock, ch, rec_names
 
-    _, ch0, recorded = channels_at(np.zeros(R_), np.arange(R_))
-    missing = {n for e in effects for n in e.needs} - set(ch0)
-    if missing:
-        raise InputError(f"silo4_twin: an effect needs the {', '.join(sorted(missing))} channel, which this twin "
-                         "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
-    if model.law_spec.needs_load and "load" not in ch0:
-        raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
-    dynamic_ch = callable(load) or any(e.name == "warming" for e in effects)
-    needs_t = any("t" in TERMS[t["kind"]].needs for t in model.terms)
-    needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in model.terms)
 
-    # ---- state, runs ordered by stop time (longest first) so that active runs are a prefix
-    order = np.argsort(-t_stop, kind="stable")
-    inv = np.empty(R_, int)
-    inv[order] = np.arange(R_)
-    W = w_cmd[order]
-    TA, TH, TE, TS = t_acc[order], t_hold_end[order], t_end[order], t_stop[order]
-    SC = scale[order]
-    NS = n_samp[order]
-    run_idx = order.copy()  # run id of each state slot
-    T0 = t_start[order]
-    sw, Wa = np.sign(W), np.abs(W)
-    half_a = 0.5 * acc
-    if isinstance(theta0, str):
-        if theta0 != "auto":
-            raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
-        starts = _auto_starts(base, w_cmd, holds, acc)
-    else:
-        starts = np.full(R_, float(theta0))
-    TH0 = starts[order]
-    theta = TH0.copy()
-    vel = np.zeros(R_)
-    integ = np.zeros(R_)
-    ebuf = np.zeros((m_der, R_))
-    X = np.zeros((R_, len(Bd)))
-    AdT = np.ascontiguousarray(Ad.T)
-    turn_theta = np.full(R_, np.nan)
-    last_sign = np.zeros(R_)
-    f_acc = np.zeros(R_)  # friction summed over the current sample interval
-    ns_max = int(n_samp.max())
-    out_th = np.full((ns_max, R_), np.nan)
-    out_i = np.full((ns_max, R_), np.nan)
-    out_f = np.full((ns_max, R_), np.nan)
-    out_v = np.full((ns_max, R_), np.nan)
-    out_ch = {k: np.full((ns_max, R_), np.nan) for k in ch0}
-    const_ch = {k: v[order] for k, v in ch0.items()}
-    n_steps = int(round(TS.max() * rate)) + 1
-    kp_v, ki_v, kd_v = volt * Kp, volt * Ki, volt * Kd / (m_der * dt)
-    dt_J = dt / J
-    n_act = R_
-    chunk = 1024
-    for k0 in range(0, n_steps, chunk):
-        # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
-        while n_act > 0 and k0 * dt > TS[n_act - 1] + 1e-9:
-            n_act -= 1
-        if n_act == 0:
-            break
-        tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
-        a = slice(0, n_act)
-        t1 = np.minimum(tl_c, TA[a])
-        t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
-        t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
-        ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
-        for kk_ in range(len(tl_c)):
-            k = k0 + kk_
-            tl = k * dt
-            if tl > TS[n_act - 1] + 1e-9:
-                while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
-                    n_act -= 1
-                if n_act == 0:
-                    break
-                a = slice(0, n_act)
-            th = theta[a]
-            v = vel[a]
-            # PID on the encoder count (voltage out, anti-windup: no integration while the
-            # voltage saturates in the direction of the error)
-            e = ref_c[kk_, :n_act] - np.floor(th / q) * q
-            j = k % m_der
-            u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
-            ebuf[j, a] = e
-            U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
-            integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
-            current = (U - kM * v) * (1.0 / Rw)
-            # channels, external torques, friction (at rest: the static friction, the model at
-            # 0+ in the direction the drive pushes)
-            kw = {}
-            if const_ch or dynamic_ch:
-                ch = channels_at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
-                    {kk: vv[a] for kk, vv in const_ch.items()}
-                kw = {kk: ch.get(kk) for kk in ("load", "temperature")}
-            else:
-                ch = {}
-            if needs_t:
-                kw["t"] = T0[a] + tl
-            if needs_run:
-                kw["run"] = run_idx[a]
-            drive = kM * current
-            if kw.get("load") is not None:
-                drive = drive - kw["load"] / RATIO
-            if lf.signed:
-                drive = drive - lf.external(th, v, **kw)
-            moving = v != 0
-            v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
-            F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
-            # record the state at the start of the step (filter output up to the previous step)
-            if k % n_sub == 0:
-                i = k // n_sub
-                cols_ = np.flatnonzero(i < NS[a])
-                out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
-                out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
-                out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
-                out_v[i, cols_] = v[cols_]
-                for kk, vv in ch.items():
-                    out_ch[kk][i, cols_] = vv[cols_]
-                f_acc[a] = 0.0
-            # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
-            # that would change sign within the step stops instead
-            v_new = v + (drive - F) * dt_J
-            v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
-            f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
-            if lf.history:
-                s_new = np.sign(v_new)
-                ls = last_sign[a]
-                rev = (s_new != 0) & (ls != 0) & (s_new != ls)
-                turn_theta[a] = np.where(rev, th, turn_theta[a])
-                last_sign[a] = np.where(s_new != 0, s_new, ls)
-            theta[a] = th + v_new * dt
-            vel[a] = v_new
-            X[a] = X[a] @ AdT + current[:, None] * Bd
+class _ClosedLoop:
+    """Every run of a twin integrated together: one numpy step per control period over the vector of
+    runs, ordered by stop time (longest first) so that the runs still active are a prefix; what is
+    recorded at each sample kept per run slot (``inv`` maps a run to its slot)."""
 
-    # ---- assemble the recording (runs in their own order)
+    _CHUNK = 1024  # control steps whose reference trajectory is computed at once
+
+    def __init__(self, runs: _Runs, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
+                 starts: np.ndarray):
+        self.runs, self.bench, self.lf, self.channels = runs, bench, lf, channels
+        R_ = runs.n
+        order = np.argsort(-runs.t_stop, kind="stable")
+        self.inv = np.empty(R_, int)
+        self.inv[order] = np.arange(R_)
+        self.W = runs.w_cmd[order]
+        self.TA, self.TH, self.TE, self.TS = (runs.t_acc[order], runs.t_hold_end[order], runs.t_end[order],
+                                              runs.t_stop[order])
+        self.SC = runs.scale[order]
+        self.NS = runs.n_samp[order]
+        self.run_idx = order.copy()  # run id of each state slot
+        self.T0 = runs.t_start[order]
+        self.TH0 = starts[order]
+        self.const_ch = {k: v[order] for k, v in ch0.items()}
+        ns_max = int(runs.n_samp.max())
+        self.out_th = np.full((ns_max, R_), np.nan)
+        self.out_i = np.full((ns_max, R_), np.nan)
+        self.out_f = np.full((ns_max, R_), np.nan)
+        self.out_v = np.full((ns_max, R_), np.nan)
+        self.out_ch = {k: np.full((ns_max, R_), np.nan) for k in ch0}
+        terms = lf.model.terms
+        self.needs_t = any("t" in TERMS[t["kind"]].needs for t in terms)
+        self.needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in terms)
+
+    def run(self) -> "_ClosedLoop":
+        """Integrate every run to its stop; the recorded samples are in ``out_*``."""
+        runs, bench, lf, channels = self.runs, self.bench, self.lf, self.channels
+        R_, dt, n_sub, rate = runs.n, runs.dt, runs.n_sub, runs.rate
+        kM, Rw, Vmax, q, m_der = bench.kM, bench.Rw, bench.Vmax, bench.q, bench.m_der
+        Bd, Cd, Dd = bench.Bd, bench.Cd, bench.Dd
+        TA, TH, TE, TS, SC, NS, T0, TH0 = self.TA, self.TH, self.TE, self.TS, self.SC, self.NS, self.T0, self.TH0
+        run_idx, const_ch, dynamic_ch = self.run_idx, self.const_ch, channels.dynamic
+        out_th, out_i, out_f, out_v, out_ch = self.out_th, self.out_i, self.out_f, self.out_v, self.out_ch
+        sw, Wa = np.sign(self.W), np.abs(self.W)
+        half_a = 0.5 * runs.acc
+        theta = TH0.copy()
+        vel = np.zeros(R_)
+        integ = np.zeros(R_)
+        ebuf = np.zeros((m_der, R_))
+        X = np.zeros((R_, len(Bd)))
+        AdT = np.ascontiguousarray(bench.Ad.T)
+        turn_theta = np.full(R_, np.nan)
+        last_sign = np.zeros(R_)
+        f_acc = np.zeros(R_)  # friction summed over the current sample interval
+        n_steps = int(round(TS.max() * rate)) + 1
+        kp_v, ki_v, kd_v = bench.volt * bench.Kp, bench.volt * bench.Ki, bench.volt * bench.Kd / (m_der * dt)
+        dt_J = dt / bench.J
+        n_act = R_
+        chunk = self._CHUNK
+        for k0 in range(0, n_steps, chunk):
+            # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
+            while n_act > 0 and k0 * dt > TS[n_act - 1] + 1e-9:
+                n_act -= 1
+            if n_act == 0:
+                break
+            tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
+            a = slice(0, n_act)
+            t1 = np.minimum(tl_c, TA[a])
+            t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
+            t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
+            ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+            for kk_ in range(len(tl_c)):
+                k = k0 + kk_
+                tl = k * dt
+                if tl > TS[n_act - 1] + 1e-9:
+                    while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
+                        n_act -= 1
+                    if n_act == 0:
+                        break
+                    a = slice(0, n_act)
+                th = theta[a]
+                v = vel[a]
+                # PID on the encoder count (voltage out, anti-windup: no integration while the
+                # voltage saturates in the direction of the error)
+                e = ref_c[kk_, :n_act] - np.floor(th / q) * q
+                j = k % m_der
+                u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
+                ebuf[j, a] = e
+                U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
+                integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
+                current = (U - kM * v) * (1.0 / Rw)
+                # channels, external torques, friction (at rest: the static friction, the model at
+                # 0+ in the direction the drive pushes)
+                kw = {}
+                if const_ch or dynamic_ch:
+                    ch = channels.at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
+                        {kk: vv[a] for kk, vv in const_ch.items()}
+                    kw = {kk: ch.get(kk) for kk in ("load", "temperature")}
+                else:
+                    ch = {}
+                if self.needs_t:
+                    kw["t"] = T0[a] + tl
+                if self.needs_run:
+                    kw["run"] = run_idx[a]
+                drive = kM * current
+                if kw.get("load") is not None:
+                    drive = drive - kw["load"] / RATIO
+                if lf.signed:
+                    drive = drive - lf.external(th, v, **kw)
+                moving = v != 0
+                v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
+                F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
+                # record the state at the start of the step (filter output up to the previous step)
+                if k % n_sub == 0:
+                    i = k // n_sub
+                    cols_ = np.flatnonzero(i < NS[a])
+                    out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
+                    out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
+                    out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
+                    out_v[i, cols_] = v[cols_]
+                    for kk, vv in ch.items():
+                        out_ch[kk][i, cols_] = vv[cols_]
+                    f_acc[a] = 0.0
+                # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
+                # that would change sign within the step stops instead
+                v_new = v + (drive - F) * dt_J
+                v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
+                f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
+                if lf.history:
+                    s_new = np.sign(v_new)
+                    ls = last_sign[a]
+                    rev = (s_new != 0) & (ls != 0) & (s_new != ls)
+                    turn_theta[a] = np.where(rev, th, turn_theta[a])
+                    last_sign[a] = np.where(s_new != 0, s_new, ls)
+                theta[a] = th + v_new * dt
+                vel[a] = v_new
+                X[a] = X[a] @ AdT + current[:, None] * Bd
+        return self
+
+
+def _twin_columns(runs: _Runs, out: _ClosedLoop, model: FrictionModel, P: dict, rng: np.random.Generator,
+                  speeds_rpm, repetitions: int, starts: np.ndarray) -> tuple[dict, list[dict]]:
+    """The columns of the recording (runs in their own order, the current with its measurement
+    noise) and one row of truth per run (the held part, its true friction and velocity)."""
     noise = float(P["current_noise"])
+    out_ch, dt_s = out.out_ch, runs.dt_s
     cols = {k: [] for k in ("t", "theta", "current", "run", "velocity", *out_ch)}
     rows = []
-    for r in range(R_):
-        s = inv[r]
-        n = int(n_samp[r])
+    for r in range(runs.n):
+        s = out.inv[r]
+        n = int(runs.n_samp[r])
         tl = np.arange(n) * dt_s
-        cur = out_i[:n, s] + (noise * rng.standard_normal(n) if noise else 0.0)
-        cols["t"].append(t_start[r] + tl)
-        cols["theta"].append(out_th[:n, s])
+        cur = out.out_i[:n, s] + (noise * rng.standard_normal(n) if noise else 0.0)
+        cols["t"].append(runs.t_start[r] + tl)
+        cols["theta"].append(out.out_th[:n, s])
         cols["current"].append(cur)
         cols["run"].append(np.full(n, r, np.int64))
-        cols["velocity"].append(out_v[:n, s])
+        cols["velocity"].append(out.out_v[:n, s])
         for kk in out_ch:
             cols[kk].append(out_ch[kk][:n, s])
-        held = (tl >= t_acc[r] + 0.25 * min(1.0, holds[r])) & (tl <= t_hold_end[r])
+        held = (tl >= runs.t_acc[r] + 0.25 * min(1.0, runs.holds[r])) & (tl <= runs.t_hold_end[r])
         if not held.any():
-            held = (tl >= t_acc[r]) & (tl <= t_hold_end[r])
-        d = 1 if w_cmd[r] > 0 else -1
-        f_mag = d * out_f[:n, s][held]
-        v_held = out_v[:n, s][held]
+            held = (tl >= runs.t_acc[r]) & (tl <= runs.t_hold_end[r])
+        d = 1 if runs.w_cmd[r] > 0 else -1
+        f_mag = d * out.out_f[:n, s][held]
+        v_held = out.out_v[:n, s][held]
         stuck = v_held == 0
         kw_lvl = {}
         if "load" in out_ch:
             kw_lvl["load"] = np.array([np.nanmean(out_ch["load"][:n, s][held])])
         try:
-            lvl = float(model.mean_level(abs(w_cmd[r]), d, **kw_lvl)[0]) * scale[r]
+            lvl = float(model.mean_level(abs(runs.w_cmd[r]), d, **kw_lvl)[0]) * runs.scale[r]
         except InputError:
             lvl = float("nan")
-        rows.append({"run": r, "speed_rpm": speeds_rpm[r // repetitions], "velocity": w_cmd[r], "direction": d,
-                     "repetition": int(rep[r]), "theta_start": starts[r], "t_start": t_start[r], "t_stop": t_start[r] + (n - 1) * dt_s,
-                     "t0": t_start[r] + tl[held][0], "t1": t_start[r] + tl[held][-1], "hold": holds[r],
-                     "scale": scale[r], "level": lvl,
+        t0 = runs.t_start[r]
+        rows.append({"run": r, "speed_rpm": speeds_rpm[r // repetitions], "velocity": runs.w_cmd[r], "direction": d,
+                     "repetition": int(runs.rep[r]), "theta_start": starts[r], "t_start": t0,
+                     "t_stop": t0 + (n - 1) * dt_s, "t0": t0 + tl[held][0], "t1": t0 + tl[held][-1],
+                     "hold": runs.holds[r], "scale": runs.scale[r], "level": lvl,
                      "friction_mean": float(np.mean(f_mag)),
                      "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(stuck)),
                      "n_held": int(held.sum())})
-    data = {"t": np.concatenate(cols["t"]), "theta": np.concatenate(cols["theta"]),
-            "current": np.concatenate(cols["current"]), "run": np.concatenate(cols["run"])}
-    for kk in out_ch:
-        if kk in recorded:
-            data[kk] = np.concatenate(cols[kk])
-    if record_velocity:
-        data["velocity"] = np.concatenate(cols["velocity"])
-    gear = twin_gear(kM, float(P["inertia"]))
-    rec = Recording.from_arrays(gear=gear, source="silo4 twin", **data)
-    settings = {**P, "Kp": Kp, "Ki": Ki, "Kd": Kd, "electrical_damping": b_emf, "inertia_total": J,
-                "seed": seed, "repetitions": repetitions, "speeds_rpm": speeds_rpm,
-                "theta0": theta0 if not isinstance(theta0, str) else "auto",
-                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist())}
-    truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
-    return rec, truth_info
+    return {k: np.concatenate(v) for k, v in cols.items()}, rows
 
 
 def stick_slip_run(joint_speed: float = FIG3_JOINT_SPEED, duration: float = 30.0, *, seed: int | None = 0,

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import laws
+from ..model import FrictionModel
 from ..recording import Recording
 
 __all__ = ["Ripple", "plateau_recording", "model_recording", "quasi_static_recording", "excitation_recording"]
@@ -104,8 +106,8 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
         y = np.broadcast_to(np.asarray(lvl(spd, d), dtype=float), spd.shape).copy()
         rip = []
         for r in ripples:
-            a = r.value("amplitude", d) * np.exp(-r.value("decay", d) * spd)
-            y = y + a * np.sin(2 * np.pi * r.frequency * theta[sel] + r.value("phase", d))
+            y = y + laws.meshing_ripple(theta[sel], spd, r.value("amplitude", d), r.value("decay", d), r.frequency,
+                                        r.value("phase", d))
             rip.append({"frequency": r.frequency, "amplitude": r.amplitude_at(abs(v), d), "phase": r.value("phase", d)})
         torque[sel] = np.where(direction[sel] != 0, direction[sel], d) * y
         held = sel & hold
@@ -299,7 +301,7 @@ def quasi_static_recording(*, step=0.002, revolutions=1.0, levels=(0.05, 0.04), 
         rip = []
         for r in ripples:
             a, ph = r.value("amplitude", d), r.value("phase", d)
-            y[sel] += a * np.sin(2 * np.pi * r.frequency * pos[sel] + ph)
+            y[sel] += laws.position_ripple(pos[sel], a, r.frequency, ph)
             rip.append({"frequency": r.frequency, "amplitude": a, "phase": ph})
         truth["directions"][d] = {"level": lvl[d], "ripples": rip}
     torque = dirs * y + (rng.normal(0.0, noise, n) if noise else 0.0)
@@ -383,7 +385,8 @@ def excitation_recording(*, fs=250.0, move=10.0, amplitude=2.0, cruise_speed=1.5
     t = np.arange(n) * dt
     theta = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1])) * dt))
     acc = np.gradient(v, dt)
-    torque = np.sign(v) * (level + viscous * np.abs(v)) + inertia * acc + rng.normal(0.0, noise, n)
+    friction = FrictionModel("coulomb_viscous", {"tau_c": level, "viscous": viscous}).evaluate(theta, v)
+    torque = friction + inertia * acc + rng.normal(0.0, noise, n)
     meas = theta + rng.normal(0.0, position_noise, n)
     rec = Recording.from_arrays(t=t, theta=meas, torque=torque, gear=gear, unit=unit, source="synthetic-excitation")
     return rec, {"velocity": v, "acceleration": acc, "cruise": cruise, "tails": tails}

@@ -1,0 +1,318 @@
+"""Loading recordings: :func:`load_recording` reads files (or folders of them), maps and scales
+their columns to the canonical ones, numbers the runs, then cleans (:mod:`.cleaning`) and checks
+(:mod:`.checks`) the rows into a :class:`~gearspec.recording.Recording`."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..errors import InputError, warn
+from ..gears import GearTrain, load_gear
+from .checks import _check_motion, _check_signal, _check_time_unit, _check_units
+from .cleaning import _clean_rows
+from .readers import _SUFFIXES, _names, _read_file
+from .record import GAP_FACTOR, GAP_QUANTILE, Recording, _logged_gap_limits
+
+__all__ = ["load_recording", "CANONICAL", "parse_assignments"]
+
+CANONICAL = ("t", "theta", "torque", "current", "velocity", "load", "temperature", "run")
+
+
+def parse_assignments(text: str | None, option: str, numeric: bool = False) -> dict:
+    """Parse ``a=b,c=d`` (as given to ``--map`` and ``--scale``) into a dict."""
+    out: dict = {}
+    if not text:
+        return out
+    for part in str(text).split(","):
+        part = part.strip()
+        if not part:
+            continue
+        if "=" not in part:
+            raise InputError(f"{option}: '{part}' is not of the form name=value")
+        k, v = (s.strip() for s in part.split("=", 1))
+        if not k or not v:
+            raise InputError(f"{option}: '{part}' is not of the form name=value")
+        if k in out:
+            raise InputError(f"{option}: '{k}' is given twice ({k}={out[k]} and {k}={v}); give it once")
+        if numeric:
+            try:
+                v = float(v)
+            except ValueError:
+                pass  # may name a scalar stored in the file (e.g. gtau in a .mat file)
+        out[k] = v
+    return out
+
+
+# ---------------------------------------------------------------------- main entry point
+def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
+                   map: Mapping[str, str] | str | None = None, scale: Mapping[str, float | str] | str | None = None,
+                   fs: float | None = None, sep: str | None = None, header: bool = True,
+                   names: Sequence[str] | str | None = None, signal: str | None = None,
+                   max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
+    """Load one or more recording files (or folders of them) into a validated :class:`Recording`.
+
+    Parameters
+    ----------
+    paths : path or list of paths
+        ``.csv`` (``.txt``, ``.dat``, ``.tsv``), ``.parquet``, ``.mat`` (v5/v7) or ``.npz`` files, or
+        folders holding them.  Each file is one experiment: it gets its own ``run`` unless it has a
+        ``run`` column.
+    gear : GearTrain, preset name or TOML path, optional
+        Gives the unit of ``theta`` and the torque constant for ``current``.
+    map : dict or "canonical=source,..."
+        Source column names for canonical columns, e.g. ``{"theta": "qm", "torque": "vir"}``.
+    scale : dict or "column=factor,..."
+        Factors applied after mapping, e.g. ``{"torque": 35.15}``; a factor may name a scalar stored
+        in the file (``torque=gtau`` for the EMPS .mat files).
+    fs : float, optional
+        Sample rate in Hz, for files without a time column.
+    sep, header, names
+        For csv: separator (sniffed when None; "whitespace" for runs of blanks), whether the first
+        row is a header, and the column names when it is not.
+    signal : {"torque", "current"}, optional
+        The channel to analyse when both are present (default torque).
+    max_bad_fraction : float
+        Rows with NaN/inf, duplicate or backward times are excluded and counted; if more than this
+        fraction of a file's rows are bad, the file is refused instead.
+    max_gap : float, optional
+        A time step longer than this (s) is a gap that splits a run.  Default: chosen per run from
+        its own step distribution (:func:`auto_max_gap`: 5 x its 99th-percentile step) and reported
+        in ``notes``.
+    """
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    files: list[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in _SUFFIXES)
+            if not found:
+                raise InputError(f"{p}: the folder holds no recording files (.csv, .parquet, .mat, .npz)")
+            files += found
+        else:
+            files.append(p)
+    if not files:
+        raise InputError("no recording files given")
+    gear = load_gear(gear)
+    mapping = parse_assignments(map, "--map") if isinstance(map, str) or map is None else dict(map)
+    scaling = parse_assignments(scale, "--scale", numeric=True) if isinstance(scale, str) or scale is None else dict(scale)
+    if isinstance(names, str):
+        names = [n.strip() for n in names.split(",")]
+    bad_canon = [k for k in mapping if k not in CANONICAL]
+    if bad_canon:
+        raise InputError(f"--map: '{bad_canon[0]}' is not a canonical column ({', '.join(CANONICAL)})")
+    by_source: dict = {}
+    for canon, src in mapping.items():
+        if src in by_source:
+            raise InputError(f"--map: column '{src}' is given for both {by_source[src]} and {canon}; "
+                             "each source column can be mapped to one canonical column only")
+        by_source[src] = canon
+    parts = []
+    for path in files:
+        frame, meta = _read_file(path, sep, header, names)
+        frame = _map_and_scale(path, frame, meta, mapping, scaling)
+        parts.append((str(path), frame, meta))
+    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction,
+                     max_gap=max_gap)
+
+
+def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, scaling: dict) -> pd.DataFrame:
+    cols = list(frame.columns)
+    rename = {}
+    for canon, src in mapping.items():
+        if src not in frame.columns:
+            raise InputError(f"{path}: no column '{src}' (given in --map {canon}={src}); columns are: {_names(cols)}")
+        rename[src] = canon
+    clash = [c for c in rename.values() if c in frame.columns and c not in rename]
+    if clash:
+        # the file already has a column with the canonical name: keep it as an extra channel
+        frame = frame.rename(columns={c: f"{c}_original" for c in clash})
+    frame = frame.rename(columns=rename)
+    for col, factor in scaling.items():
+        if col not in frame.columns:
+            hint = "".join(f"; --scale applies after --map: use --scale {canon}=..." for canon, src in mapping.items()
+                           if src == col)
+            raise InputError(f"{path}: --scale names column '{col}', which is not there "
+                             f"(columns: {_names(frame.columns)}){hint}")
+        given = factor
+        if isinstance(factor, str):
+            try:
+                factor = float(factor)
+            except ValueError:
+                if factor not in meta:
+                    raise InputError(f"{path}: --scale {col}={factor}: '{factor}' is neither a number nor a scalar "
+                                     "stored in the file") from None
+                if np.size(meta[factor]) != 1:
+                    raise InputError(f"{path}: --scale {col}={factor}: '{factor}' holds {np.size(meta[factor])} values, "
+                                     "not a single number") from None
+                factor = float(np.asarray(meta[factor]).reshape(()))
+        try:
+            factor = float(factor)
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: --scale {col}={given!r}: the factor is not a number") from None
+        if not math.isfinite(factor) or factor == 0:
+            raise InputError(f"{path}: --scale {col}={given}: the factor must be a finite, non-zero number, got {factor:g}")
+        frame[col] = _numeric_column(path, frame, col) * factor
+    return frame
+
+
+def _first_bad_cell(series: pd.Series) -> tuple[int, str] | None:
+    coerced = pd.to_numeric(series, errors="coerce")
+    bad = coerced.isna() & series.notna() & (series.astype(str).str.strip() != "")
+    if not bad.any():
+        return None
+    i = int(np.flatnonzero(bad.to_numpy())[0])
+    return i + 1, str(series.iloc[i])
+
+
+def _numeric_column(path, frame: pd.DataFrame, col: str) -> pd.Series:
+    s = frame[col]
+    if s.dtype.kind in "biuf":
+        return s.astype(float)
+    bad = _first_bad_cell(s)
+    if bad is not None:
+        line, value = bad
+        raise InputError(f"{path}: column '{col}', data row {line}: '{value}' is not a number")
+    return pd.to_numeric(s, errors="coerce").astype(float)
+
+
+def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
+              max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
+    """The :class:`Recording` of the tables ``parts`` (``(source, frame, meta)``, columns mapped and
+    scaled): each validated, given its runs, cleaned with every excluded row counted in the ledger,
+    then joined and checked for plausibility."""
+    unit, max_gap = _check_options(gear, unit, signal, fs, max_gap)
+    excluded: Counter = Counter()
+    notes: list[str] = []
+    frames = []
+    meta_all: dict = {}
+    n_read = 0
+    sig_used = None
+    run_offset = 0
+    auto_gaps: dict = {}
+    for path, frame, meta in parts:
+        frame = frame.reset_index(drop=True)  # index = data row - 1, kept through exclusions for messages
+        n_read += len(frame)
+        meta_all.update(meta)
+        sig_used = _analysed_signal(path, frame, signal, sig_used, gear, fs)
+        frame = _numeric_frame(path, frame, fs, notes)
+        frame, run_offset = _number_runs(path, frame, run_offset, len(parts) > 1, notes)
+        auto_gaps.update(_logged_gap_limits(frame))
+        frame = _clean_rows(path, frame, sig_used, unit, excluded, notes, max_bad_fraction)
+        frames.append(frame)
+    data = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0].reset_index(drop=True)
+    rec = Recording(data=data, unit=unit, signal=sig_used, excluded=excluded, n_read=n_read, notes=notes,
+                    meta=meta_all, gear=gear, sources=[p for p, _, _ in parts], max_gap=max_gap,
+                    _auto_gaps=auto_gaps)
+    _check_time_unit(rec)
+    _check_motion(rec)
+    _check_signal(rec)
+    _check_units(rec)
+    if sig_used == "current":
+        factor = float(gear.torque_from_current(1.0))   # the conversion tau uses, said once
+        rec.notes.append(f"torque = {factor:g} Nm/A x current (torque constant {gear.torque_constant:g} Nm/A"
+                         + (f" x ratio {gear.total_ratio:g}, ideal gear" if gear.reference == "output" else "") + ")")
+    n_gaps = len(rec.pieces()) - len(rec.gap_limits())
+    if n_gaps:
+        rec.notes.append(_gap_note(rec, n_gaps))
+    return rec
+
+
+def _check_options(gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
+                   max_gap) -> tuple[str, float | None]:
+    """The unit of theta (given, the gear's, or rad) and ``max_gap`` (s) as a number, once the
+    loader's options are checked."""
+    unit = unit or (gear.unit if gear is not None else "rad")
+    if max_gap is not None:
+        try:
+            max_gap = float(max_gap)
+        except (TypeError, ValueError):
+            raise InputError(f"--max-gap must be a time in seconds, got {max_gap!r}") from None
+        if not (math.isfinite(max_gap) and max_gap > 0):
+            raise InputError(f"--max-gap must be a positive time in seconds, got {max_gap:g}")
+    if unit not in ("rad", "m"):
+        raise InputError(f"unit must be 'rad' or 'm', got '{unit}'")
+    if fs is not None and not (math.isfinite(fs) and fs > 0):
+        raise InputError(f"--fs must be a positive sample rate in Hz, got {fs}")
+    if signal not in (None, "torque", "current"):
+        raise InputError(f"--signal must be 'torque' or 'current', got '{signal}'")
+    return unit, max_gap
+
+
+def _analysed_signal(path, frame: pd.DataFrame, signal: str | None, sig_used: str | None,
+                     gear: GearTrain | None, fs: float | None) -> str:
+    """The channel analysed in this file ('torque' or 'current'), once the columns the analysis
+    needs are found there; the same in every file."""
+    cols = list(frame.columns)
+    if "theta" not in frame:
+        raise InputError(f"{path}: no column 'theta' (position); columns are: {_names(cols)}; "
+                         "name the position column with --map theta=NAME")
+    has_t = "t" in frame
+    if not has_t and fs is None:
+        raise InputError(f"{path}: no time column 't' and no --fs; columns are: {_names(cols)}; "
+                         "map the time column with --map t=NAME or give the sample rate with --fs HZ")
+    if has_t and fs is not None:
+        warn(f"{path}: has a time column 't'; --fs {fs:g} is ignored")
+    if "torque" not in frame and "current" not in frame:
+        raise InputError(f"{path}: neither 'torque' nor 'current' is there; columns are: {_names(cols)}; "
+                         "map one with --map torque=NAME or --map current=NAME")
+    this_sig = signal or ("torque" if "torque" in frame else "current")
+    if this_sig not in frame:
+        raise InputError(f"{path}: --signal {this_sig} but the file has no '{this_sig}' column")
+    if sig_used is not None and this_sig != sig_used:
+        raise InputError(f"{path}: analyses '{this_sig}' but earlier files analyse '{sig_used}'; "
+                         "give --signal to choose one for all files")
+    if this_sig == "current":
+        if gear is None or gear.torque_constant is None:
+            raise InputError(f"{path}: the analysed signal is motor current, which needs the gear spec's "
+                             "torque_constant (Nm/A); give --gear with torque_constant, or record torque")
+    return this_sig
+
+
+def _numeric_frame(path, frame: pd.DataFrame, fs: float | None, notes: list[str]) -> pd.DataFrame:
+    """The canonical columns as numbers (a cell that is not one is refused), and ``t`` from ``fs``
+    when the file has no time column."""
+    for col in CANONICAL:
+        if col in frame:
+            frame[col] = _numeric_column(path, frame, col)
+    if "t" not in frame:
+        frame.insert(0, "t", np.arange(len(frame)) / fs)
+        notes.append(f"{path}: no time column; t = sample index / {fs:g} Hz")
+    return frame
+
+
+def _number_runs(path, frame: pd.DataFrame, run_offset: int, several: bool, notes: list[str]):
+    """Run ids numbered on from ``run_offset`` (a file without a ``run`` column is one run);
+    returns the frame and the next free id."""
+    if "run" in frame:
+        r = frame["run"].to_numpy()
+        ok = np.isfinite(r)
+        if not ok.all():
+            raise InputError(f"{path}: column 'run', data row {int(np.flatnonzero(~ok)[0]) + 1}: run ids must be integers, not NaN")
+        if np.any(r != np.round(r)):
+            raise InputError(f"{path}: column 'run' holds non-integer values; run ids must be integers")
+        uniq, inv = np.unique(r.astype(np.int64), return_inverse=True)
+        frame["run"] = inv + run_offset
+        if several:
+            notes.append(f"{path}: runs {list(uniq)} renumbered {run_offset}..{run_offset + len(uniq) - 1}")
+        run_offset += len(uniq)
+    else:
+        frame["run"] = run_offset
+        run_offset += 1
+    frame["run"] = frame["run"].astype(np.int64)
+    return frame, run_offset
+
+
+def _gap_note(rec: Recording, n_gaps: int) -> str:
+    limits = [v for v in rec.gap_limits().values() if math.isfinite(v)]
+    lo, hi = min(limits), max(limits)
+    span = f"{lo:.3g} s" if math.isclose(lo, hi, rel_tol=1e-3) else f"{lo:.3g} to {hi:.3g} s (per run)"
+    how = ("--max-gap" if rec.max_gap is not None else
+           f"{GAP_FACTOR:g} x the run's {GAP_QUANTILE:.0%} step; set it with --max-gap")
+    return f"gaps longer than {span} ({how}) split runs: {n_gaps} gap(s); nothing is analysed across them"

@@ -1,0 +1,139 @@
+"""Kinematics of a recording: velocity and acceleration by a Savitzky-Golay filter, piece by piece,
+and the friction torque ``tau - J thetadd`` (SILO4 eq. 2), whole or one segment at a time
+(:class:`FrictionTorque`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from ..recording import Recording
+
+__all__ = ["derivatives", "friction_torque", "FrictionTorque"]
+
+
+def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration of ``theta`` by a Savitzky-Golay filter, piece by piece.
+
+    Parameters
+    ----------
+    rec : Recording
+    deriv_window : int, optional
+        Filter length in samples (odd, >= 5).  Default: about 20 ms, at least 7 samples.
+
+    Returns
+    -------
+    velocity, acceleration : ndarray
+        In unit/s and unit/s^2, one value per row; pieces shorter than the window (in samples,
+        or on the uniform grid a jittered piece is resampled to) get NaN: no derivative.
+    """
+    t, theta = rec.t, rec.theta
+    vel = np.full(len(t), np.nan)
+    acc = np.full(len(t), np.nan)
+    for _, a, b in rec.pieces():
+        tt, th = t[a:b], theta[a:b]
+        params = _filter_params(tt, deriv_window)
+        if params is None:
+            continue
+        dt, w, uniform = params
+        if uniform:
+            vel[a:b] = savgol_filter(th, w, 2, deriv=1, delta=dt)
+            acc[a:b] = savgol_filter(th, w, 2, deriv=2, delta=dt)
+        else:
+            grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
+            thg = np.interp(grid, tt, th)
+            vel[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=1, delta=dt))
+            acc[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
+    return vel, acc
+
+
+def _filter_params(tt: np.ndarray, deriv_window: int | None):
+    """``(dt, window, uniform)`` of the Savitzky-Golay filter on one piece with sample times
+    ``tt``, or None when the piece is too short for it: fewer samples than the window, or (for a
+    jittered piece, resampled to a uniform grid of the median step first) fewer grid points."""
+    n = len(tt)
+    if n < 5:
+        return None
+    d = np.diff(tt)
+    dt = float(np.median(d))
+    if not dt > 0:
+        return None
+    w = deriv_window or max(7, int(round(0.02 / dt)) | 1)
+    w = int(w) | 1
+    if w > n:
+        return None
+    np.subtract(d, dt, out=d)
+    uniform = bool(np.max(np.abs(d)) <= 0.01 * dt)
+    if not uniform and math.ceil((tt[-1] + dt / 2 - tt[0]) / dt) < w:  # len(np.arange(...)) of the grid
+        return None
+    return dt, w, uniform
+
+
+def friction_torque(rec: Recording, inertia: float | None = None, deriv_window: int | None = None) -> np.ndarray:
+    """Drive torque minus inertia torque, ``tau - J * thetadd`` (SILO4 eq. 2).
+
+    ``inertia`` defaults to the gear spec's; without one the drive torque is returned unchanged.
+    """
+    J = inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
+    if not J:
+        return rec.tau
+    _, acc = derivatives(rec, deriv_window)
+    out = rec.tau - J * np.nan_to_num(acc)
+    return out
+
+
+class FrictionTorque:
+    """``friction_torque(rec, inertia, deriv_window)[rows]`` on demand, for one stretch of rows at
+    a time (a segment), without the whole-recording arrays.
+
+    The Savitzky-Golay acceleration is computed only over the rows asked for plus one filter
+    length on each side (or up to the piece's edge, where the filter's own edge treatment then
+    applies exactly as on the whole piece): the values are the same as :func:`friction_torque`'s,
+    bit for bit, while the memory is that of the rows asked for, not three copies of the
+    recording.  Pieces whose sampling jitters (resampled to a uniform grid first) are computed
+    whole, once.  Without an inertia the rows of the drive torque are returned (a view).
+    """
+
+    def __init__(self, rec: Recording, inertia: float | None = None, deriv_window: int | None = None):
+        self.rec = rec
+        self.J = inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
+        self.deriv_window = deriv_window
+        self.tau = rec.tau
+        self._pieces = None
+        self._whole = {}
+
+    def _piece_params(self):
+        if self._pieces is None:
+            t = self.rec.t
+            out = []
+            for _, a, b in self.rec.pieces():
+                params = _filter_params(t[a:b], self.deriv_window)
+                out.append((a, b, None, None, None) if params is None else (a, b, *params))
+            self._pieces = out
+        return self._pieces
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        start, stop, _ = rows.indices(len(self.tau))
+        tau = self.tau[start:stop]
+        if not self.J:
+            return tau
+        piece = next((p for p in self._piece_params() if p[0] <= start and stop <= p[1]), None)
+        if piece is None:  # rows across pieces: the whole-recording computation
+            return friction_torque(self.rec, self.J, self.deriv_window)[start:stop]
+        a, b, dt, w, uniform = piece
+        if dt is None:  # too short for the filter: no acceleration (as friction_torque)
+            return tau.copy()
+        if not uniform:
+            if a not in self._whole:
+                rec = self.rec
+                tt, th = rec.t[a:b], rec.theta[a:b]
+                grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
+                thg = np.interp(grid, tt, th)
+                self._whole[a] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
+            acc = self._whole[a][start - a:stop - a]
+        else:
+            lo, hi = max(a, start - w), min(b, stop + w)
+            acc = savgol_filter(self.rec.theta[lo:hi], w, 2, deriv=2, delta=dt)[start - lo:stop - lo]
+        return tau - self.J * np.nan_to_num(acc)

@@ -1,0 +1,305 @@
+"""Constant-speed plateaus: block speeds over a window, the steady-block test, and the choice of the
+window per piece (steps 1-6 of the module docstring of :mod:`gearspec.segment`); quasi-static sweeps
+first (:mod:`.quasistatic`)."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import Counter
+
+import numpy as np
+
+from ..errors import InputError
+from ..recording import Recording
+from .quasistatic import _quasi_static_segments
+from .ramps import _K, _merge_fragments, _split_drift, _split_smooth, _trim_speed, _trim_to_line
+from .segmentation import Segment, Segmentation
+
+__all__ = ["find_segments", "PARALLEL_MIN_SAMPLES"]
+
+_WINDOW_LADDER = (0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0)
+_COVER_FRACTION = 0.8
+#: pieces at least this long try the windows of the "auto" ladder in two threads (by default)
+PARALLEL_MIN_SAMPLES = 1_000_000
+
+
+# ---------------------------------------------------------------------- segmentation
+def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: float = 0.15,
+                  min_speed: float | None = None, min_duration: float | None = None,
+                  min_samples: int = 32, workers: int | str = "auto",
+                  quasi_static: bool | None = None) -> Segmentation:
+    """Find constant-speed segments per direction, and quasi-static sweeps (see the module docstring).
+
+    Parameters
+    ----------
+    rec : Recording
+    window : float or "auto"
+        Speed-averaging window in seconds (four blocks); "auto" picks it per piece.
+    rel_tol : float
+        Allowed relative change of the window speed across a block, and half the allowed drift
+        of speed within a segment.
+    min_speed : float, optional
+        Speeds below this (unit/s) count as standstill.  Default: ten times the speed noise that
+        the position noise of the piece produces over one window.
+    min_duration : float, optional
+        Shortest segment kept, seconds.  Default: two windows, and at least 0.1 s.
+    min_samples : int
+        Shortest segment kept, samples.
+    workers : int or "auto"
+        Windows of the ``"auto"`` ladder tried at once, in threads (numpy releases the GIL for
+        the bulk of the work; the result is the same whatever the number).  ``"auto"``: two on a
+        machine with two or more CPUs for pieces of at least ``PARALLEL_MIN_SAMPLES`` samples.
+    quasi_static : bool or None
+        ``None`` (default): recognise quasi-static sweeps (rows stored at rest, position rather
+        than time setting the motion; see :func:`quasi_static_sweeps`) and look for plateaus in
+        the rest.  ``True`` (``--quasi-static``): every monotonic sweep of each run is a
+        quasi-static segment.  ``False``: plateaus only.
+
+    Returns
+    -------
+    Segmentation
+    """
+    if not 0 < rel_tol < 1:
+        raise InputError(f"rel_tol must be between 0 and 1, got {rel_tol}")
+    if window != "auto":
+        window = float(window)
+        if not window > 0:
+            raise InputError(f"the segment window must be a positive time in s, got {window}")
+    if workers != "auto" and (not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}")
+    if quasi_static not in (None, True, False):
+        raise InputError(f"quasi_static must be None (recognise), True or False, got {quasi_static!r}")
+    t, theta = rec.t, rec.theta
+    segments: list[Segment] = []
+    excluded: Counter = Counter()
+    chosen = {}
+    qs_segments, qs_excluded, taken = ([], Counter(), []) if quasi_static is False else \
+        _quasi_static_segments(rec, force=bool(quasi_static), min_samples=min_samples)
+    segments += qs_segments
+    excluded += qs_excluded
+    for run, a, b in _outside(rec.pieces(), taken):
+        ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
+        noise = _position_noise(theta[a:b]) if b - a >= 3 else None
+        dt = float(np.median(np.diff(t[a:min(b, a + 100_000)]))) if b - a >= 2 else None  # once per piece
+
+        def one(w, a=a, b=b, noise=noise, dt=dt):
+            return _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise, dt)
+
+        n_workers = ((2 if (os.cpu_count() or 1) >= 2 and b - a >= PARALLEL_MIN_SAMPLES else 1)
+                     if workers == "auto" else int(workers))
+        if n_workers > 1 and len(ladder) > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            # the shortest windows (most blocks) are the most work: they go first
+            with ThreadPoolExecutor(max_workers=min(n_workers, len(ladder)),
+                                    thread_name_prefix="gearspec-window") as pool:
+                results = list(pool.map(one, ladder))
+        else:
+            results = [one(w) for w in ladder]
+        tried = [(sum(e - s for s, e, *_ in res[0]), w, res) for w, res in zip(ladder, results) if res is not None]
+        if not tried:  # piece too short for any window
+            excluded["transient"] += b - a
+            continue
+        # the shortest window that finds nearly as much plateau as any: long windows would
+        # also swallow short transients at the edges of plateaus
+        top = max(c for c, _, _ in tried)
+        _, w, (segs, labels) = next(x for x in tried if x[0] >= _COVER_FRACTION * top)
+        chosen[(run, a)] = w
+        for s, e, direction, speed, ripple in segs:
+            segments.append(Segment(int(run), int(a + s), int(a + e), int(direction), float(speed), ripple, float(w)))
+        for reason, count in labels.items():
+            excluded[reason] += count
+    segments.sort(key=lambda x: x.start)
+    seg = Segmentation(segments, excluded, len(rec), {"window": window, "rel_tol": rel_tol,
+                                                      "min_speed": min_speed, "min_duration": min_duration,
+                                                      "windows_chosen": sorted(set(chosen.values())),
+                                                      "quasi_static": ("auto" if quasi_static is None
+                                                                       else bool(quasi_static)),
+                                                      "quasi_static_segments": len(qs_segments)})
+    seg.check_ledger()
+    return seg
+
+
+def _outside(pieces, taken):
+    """The pieces ``(run, a, b)`` with the row ranges ``taken`` cut out."""
+    if not taken:
+        yield from pieces
+        return
+    for run, a, b in pieces:
+        pos = a
+        for s, e in taken:
+            if e <= pos or s >= b:
+                continue
+            if s > pos:
+                yield run, pos, s
+            pos = max(pos, e)
+        if pos < b:
+            yield run, pos, b
+
+
+def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
+    """Least-squares slope of thb against tb over every window of k consecutive blocks.
+
+    Written as k shifted slices (in-place operations on arrays of the number of windows) rather
+    than reductions over a sliding-window view, whose rows of k elements numpy reduces slowly."""
+    m = len(tb) - k + 1
+    if m <= 0:
+        return np.empty(0)
+    mt = tb[:m].copy()
+    my = thb[:m].copy()
+    for j in range(1, k):
+        mt += tb[j:j + m]
+        my += thb[j:j + m]
+    mt /= k
+    my /= k
+    num = np.zeros(m)
+    den = np.zeros(m)
+    tc = np.empty(m)
+    yc = np.empty(m)
+    for j in range(k):
+        np.subtract(tb[j:j + m], mt, out=tc)
+        np.subtract(thb[j:j + m], my, out=yc)
+        yc *= tc
+        num += yc
+        tc *= tc
+        den += tc
+    num /= den
+    return num
+
+
+def _block_means(x: np.ndarray, m: int, b: int) -> np.ndarray:
+    """Means of m consecutive blocks of b samples (einsum: several times faster than
+    ``reshape(m, b).mean(axis=1)`` for short blocks)."""
+    out = np.einsum("ij->i", x[: m * b].reshape(m, b))
+    out /= b
+    return out
+
+
+def _position_noise(theta: np.ndarray, chunks: int = 20, size: int = 5000) -> float:
+    """Noise of a position signal: robust sd of second differences / sqrt(6), floored by the
+    encoder quantum / sqrt(12); from up to ``chunks`` contiguous stretches of ``size`` samples."""
+    n = len(theta)
+    if n <= chunks * size:
+        parts = [theta]
+    else:
+        starts = np.linspace(0, n - size, chunks).astype(int)
+        parts = [theta[s:s + size] for s in starts]
+    d2 = np.concatenate([np.diff(p, 2) for p in parts])
+    d1 = np.abs(np.concatenate([np.diff(p) for p in parts]))
+    sigma = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6) if len(d2) else 0.0
+    q = d1[d1 > 0].min() if np.any(d1 > 0) else 0.0
+    return max(float(sigma), q / math.sqrt(12))
+
+
+def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise=None, dt=None):
+    n = len(t)
+    if n < 2:
+        return None
+    if dt is None:
+        dt = float(np.median(np.diff(t[: min(n, 100_000)])))
+    if dt <= 0:
+        return None
+    b = int(round(window / _K / dt))
+    if b < 2 or n < b * (2 * _K + 1):
+        return None
+    m = n // b
+    used = m * b
+    tb = _block_means(t, m, b)
+    thb = _block_means(theta, m, b)
+    # slope over K blocks: v_win[i] covers blocks i .. i+K-1
+    v_win = _block_slopes(tb - tb[0], thb - thb[0], _K)
+    # per block j: the window ending at j ("before") and the window starting at j ("after"); near
+    # the ends of a piece, where one of them does not exist, the first (last) two non-overlapping
+    # windows stand in, so a piece that ends on a plateau keeps it and one that starts with a
+    # ramp does not
+    before, after = _before_after(v_win, m)
+    across = 0.5 * (before + after)
+    # speed noise of a window from position noise (second differences), for the default min_speed
+    sigma = noise if noise is not None else _position_noise(theta)
+    if min_speed is None:
+        nw = _K * b
+        v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
+        v_floor = 10 * v_noise
+    else:
+        v_floor = float(min_speed)
+    valid = np.ones(m, bool)
+    moving = valid & (np.abs(across) > v_floor)
+    same_sign = moving & (np.sign(before) == np.sign(across)) & (np.sign(after) == np.sign(across))
+    steady = same_sign & (np.abs(after - before) <= rel_tol * np.abs(across))
+    min_dur = max(2 * window, 0.1) if min_duration is None else float(min_duration)
+    block_label = np.where(valid & ~moving, 1, 0)  # 1 standstill, 0 transient; steady handled below
+    # runs of steady blocks, split where the speed drifts, then fragments of one plateau (broken
+    # by a ripple excursion shorter than a window) merged again
+    edges = np.diff(np.concatenate(([0], steady.astype(np.int8), [0])))
+    # runs shorter than a window are too short to know their speed: treated as part of a hole
+    runs_ = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if e - s >= _K]
+    runs_ = _merge_fragments(runs_, t, theta, b, rel_tol)
+    runs_ = [r for s, e in runs_ for r in _split_drift(across, s, e, rel_tol)]
+    runs_ = [_trim_speed(across, s, e, rel_tol) for s, e in runs_]
+    # block-to-block speeds (the finest the blocks resolve): a ramp is smooth at this scale, ripple is not
+    tmid = 0.5 * (tb[1:] + tb[:-1])
+    vblock = np.diff(thb) / np.maximum(np.diff(tb), 1e-300)
+    vnoise2 = 2.0 * sigma * sigma / b / (b * dt) ** 2  # variance of a block speed from position noise
+    runs_ = [r for s, e in runs_ for r in _split_smooth(tmid, vblock, s, e, rel_tol, vnoise2)]
+    segs = []
+    short_blocks = []
+    for s2, e2 in runs_:
+        rows_s, rows_e = _trim_to_line(t, theta, s2 * b, e2 * b, b)
+        s2, e2 = rows_s // b, -(-rows_e // b)
+        dur = t[rows_e - 1] - t[rows_s]
+        if dur < min_dur or rows_e - rows_s < min_samples:
+            short_blocks.append((s2, e2))
+            continue
+        speed = abs(theta[rows_e - 1] - theta[rows_s]) / dur
+        direction = int(np.sign(theta[rows_e - 1] - theta[rows_s]))
+        vs = across[s2:e2]
+        ripple = float(np.std(vs) / abs(np.mean(vs))) if len(vs) > 1 else 0.0
+        segs.append((rows_s, rows_e, direction, float(speed), ripple))
+    labels = Counter()
+    in_seg = np.zeros(m, bool)
+    for rs, re_, *_ in segs:
+        in_seg[rs // b: re_ // b] = True
+    short = np.zeros(m, bool)
+    for s2, e2 in short_blocks:
+        short[s2:e2] = True
+    labels["short_plateau"] += int(short.sum()) * b
+    standstill = (block_label == 1) & ~in_seg & ~short
+    labels["standstill"] += int(standstill.sum()) * b
+    labels["transient"] += int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)
+    labels = Counter({k: v for k, v in labels.items() if v})
+    return segs, labels
+
+
+def _before_after(v_win: np.ndarray, m: int):
+    """For every block j of m: the window speed ending at j (``before``, window j-K+1) and the one
+    starting at j (``after``, window j), with the piece's first (last) two non-overlapping windows
+    standing in near its ends.  Slices in the interior, index arithmetic only at the ends."""
+    K = _K
+    top = m - K  # the last window
+
+    def idx(j):  # the rule for a few blocks j, as index arrays
+        j = np.asarray(j)
+        left = j - K + 1
+        right = j.copy()
+        at_start = left < 0
+        left[at_start] = 0
+        right[at_start] = np.maximum(right[at_start], K)
+        at_end = right > top
+        right[at_end] = top
+        left[at_end] = np.minimum(left[at_end], m - 2 * K)
+        return np.clip(left, 0, top), np.clip(right, 0, top)
+
+    before = np.empty(m)
+    after = np.empty(m)
+    # interior: K-1 <= j <= top, where left = j-K+1 and right = j
+    a, b = K - 1, top + 1
+    if b > a:
+        before[a:b] = v_win[0:b - K + 1]
+        after[a:b] = v_win[a:b]
+    ends = np.concatenate([np.arange(0, min(a, m)), np.arange(max(b, a, 0), m)])
+    if len(ends):
+        li, ri = idx(ends)
+        before[ends] = v_win[li]
+        after[ends] = v_win[ri]
+    return before, after

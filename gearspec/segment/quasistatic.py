@@ -1,0 +1,178 @@
+"""Quasi-static sweeps: monotonic sweeps whose rows were stored at rest after each step of a position
+loop (recognised from the spread of steps and of row-to-row speeds), one segment each."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import numpy as np
+
+from ..recording import Recording
+from .segmentation import Segment
+
+__all__ = ["quasi_static_sweeps", "QS_MIN_STEPS", "QS_MIN_SPEED_SPREAD", "QS_SPREAD_RATIO", "QS_MAX_REPEATS",
+           "QS_REVERSAL_STEPS"]
+
+#: a sweep is recognised as quasi-static when it has at least this many steps (moves between rows):
+#: enough distinct positions for the joint fit of a level and a few lines with dozens of degrees
+#: of freedom left, and for the spread statistics below to mean something
+QS_MIN_STEPS = 50
+#: ... when the speed between rows (step / time step) varies over at least a factor of 2 (10-90 %
+#: range) ...
+QS_MIN_SPEED_SPREAD = math.log(2.0)
+#: ... at least this many times more than the steps themselves do (in log, 10-90 % range): rows
+#: stored when the shaft came to rest after a step of the position loop have a steady step and
+#: an irregular time step, continuous motion sampled by a clock has steps that follow the time
+#: steps (or a regular clock)
+QS_SPREAD_RATIO = 2.0
+#: ... and at most this fraction of its rows repeats the previous position
+QS_MAX_REPEATS = 0.5
+#: a reversal is a return of more than this many median steps (smaller returns are jitter)
+QS_REVERSAL_STEPS = 3.0
+
+
+def _spread(x: np.ndarray) -> float:
+    """10-90 % range of log(x) (x > 0)."""
+    if len(x) < 2:
+        return 0.0
+    lo, hi = np.percentile(x, [10, 90])
+    return float(math.log(hi / lo)) if lo > 0 else float("inf")
+
+
+def _at_rest_statistics(t: np.ndarray, theta: np.ndarray) -> dict:
+    """Steps, repeats and the spread of steps and of row-to-row speeds of a stretch of rows."""
+    dth = np.abs(np.diff(theta))
+    dt = np.diff(t)
+    move = dth > 0
+    steps, speeds = dth[move], dth[move] / np.maximum(dt[move], 1e-300)
+    return {"steps": int(move.sum()), "repeats": float(1 - move.mean()) if len(move) else 1.0,
+            "step_spread": _spread(steps), "speed_spread": _spread(speeds)}
+
+
+def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000) -> dict:
+    """:func:`_at_rest_statistics` of a whole run, from up to ``chunks`` contiguous stretches of
+    ``size`` rows (row-to-row statistics: a stride would sum steps and average time steps)."""
+    n = len(t)
+    if n <= chunks * size:
+        return _at_rest_statistics(t, theta)
+    starts = np.linspace(0, n - size, chunks).astype(int)
+    dth = np.concatenate([np.diff(theta[s:s + size]) for s in starts])
+    dt = np.concatenate([np.diff(t[s:s + size]) for s in starts])
+    return _at_rest_statistics(np.concatenate(([0.0], np.cumsum(dt))), np.concatenate(([0.0], np.cumsum(dth))))
+
+
+def _looks_at_rest(st: dict) -> bool:
+    """The recognition rule (see the constants above)."""
+    return (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS
+            and st["speed_spread"] >= QS_MIN_SPEED_SPREAD
+            and st["speed_spread"] >= QS_SPREAD_RATIO * st["step_spread"])
+
+
+def _sweeps(theta: np.ndarray, tol: float) -> list[tuple[int, int, int]]:
+    """Monotonic sweeps ``(start, stop, direction)`` of one run, split at reversals of more than
+    ``tol`` (hysteresis: smaller returns are jitter and stay in the sweep).  The row at a turning
+    point ends the sweep before it; every row is in one sweep; direction 0: no travel of ``tol``."""
+    n = len(theta)
+    if n == 0:
+        return []
+    th = theta.tolist()
+    turns = []
+    d = 0
+    hi = lo = 0
+    first = 0
+    for i in range(1, n):
+        x = th[i]
+        if d == 0:
+            if x > th[hi]:
+                hi = i
+            if x < th[lo]:
+                lo = i
+            if th[hi] - th[lo] >= tol:
+                d = 1 if hi > lo else -1
+                first = d
+        elif d > 0:
+            if x > th[hi]:
+                hi = i
+            elif th[hi] - x >= tol:
+                turns.append(hi)
+                d, lo = -1, i
+        else:
+            if x < th[lo]:
+                lo = i
+            elif x - th[lo] >= tol:
+                turns.append(lo)
+                d, hi = 1, i
+    bounds = [0] + [k + 1 for k in turns] + [n]
+    out = []
+    direction = first
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b > a:
+            out.append((a, b, direction))
+        direction = -direction
+    return out
+
+
+def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
+    """The monotonic sweeps of each run, with the statistics of the recognition rule.
+
+    Works over position, per run: time gaps do not split a sweep (at rest, time is irrelevant).
+    A sweep ends at a reversal of more than ``QS_REVERSAL_STEPS`` median steps.  It is
+    *quasi-static* (``"at_rest"``) when it has at least ``QS_MIN_STEPS`` steps, at most
+    ``QS_MAX_REPEATS`` of its rows repeat a position, and the speed between rows varies over a
+    factor of two or more and ``QS_SPREAD_RATIO`` times more than the steps do (log 10-90 %
+    ranges): rows stored by position (at rest after each step of a position loop), not by a
+    clock.  On a plateau the speed between rows is steady (or, on a regular clock, varies exactly
+    as the steps do: stick-slip, encoder noise), so no plateau recording passes.  Without
+    ``force`` a run whose rows as a whole do not pass is not searched (the cheap common case).
+
+    Returns
+    -------
+    list of dict
+        ``run, start, stop, direction`` (rows of the recording, stop exclusive) and ``at_rest``,
+        plus the statistics.
+    """
+    t, theta, run = rec.t, rec.theta, rec.run
+    out = []
+    if len(t) == 0:
+        return out
+    cuts = np.flatnonzero(np.diff(run) != 0) + 1
+    bounds = np.concatenate(([0], cuts, [len(run)]))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        a, b = int(a), int(b)
+        if b - a < 2:
+            continue
+        if not force and not _looks_at_rest(_run_statistics(t[a:b], theta[a:b])):
+            continue
+        d = np.abs(np.diff(theta[a:b]))
+        nz = d[d > 0]
+        if not len(nz):
+            continue
+        tol = QS_REVERSAL_STEPS * float(np.median(nz))
+        for s, e, direction in _sweeps(theta[a:b], tol):
+            st = _at_rest_statistics(t[a + s:a + e], theta[a + s:a + e])
+            out.append({"run": int(run[a]), "start": a + s, "stop": a + e, "direction": int(direction),
+                        "at_rest": bool(direction != 0 and _looks_at_rest(st)), **st})
+    return out
+
+
+def _quasi_static_segments(rec: Recording, *, force: bool, min_samples: int):
+    """Quasi-static segments (recognised, or every sweep when ``force``), their ledger, and the
+    row ranges they take."""
+    segments, excluded, taken = [], Counter(), []
+    t, theta = rec.t, rec.theta
+    for sw in quasi_static_sweeps(rec, force=force):
+        a, b, d = sw["start"], sw["stop"], sw["direction"]
+        if not (sw["at_rest"] or force):
+            continue
+        taken.append((a, b))
+        if d == 0:
+            excluded["standstill"] += b - a
+            continue
+        if b - a < min_samples:
+            excluded["short_sweep"] += b - a
+            continue
+        dur = float(t[b - 1] - t[a])
+        speed = abs(float(theta[b - 1] - theta[a])) / dur if dur > 0 else float("nan")
+        segments.append(Segment(sw["run"], a, b, d, speed, 0.0, 0.0, "quasi_static"))
+    return segments, excluded, sorted(taken)

@@ -1,0 +1,178 @@
+"""Candidate plateaus refined: fragments of one plateau joined, slow drifts split (CUSUM), ramp tails
+trimmed by speed and by position, and runs whose speed follows a smooth curve (a ramp, a bell's top,
+a creeping tail) split until only parts shown flat remain (steps 4 and 5 of the module docstring of
+:mod:`gearspec.segment`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_K = 4  # blocks per speed window
+
+
+def _trim_speed(v, s, e, rel_tol):
+    """Drop edge blocks whose window speed is off the run's median by more than ``rel_tol``: the
+    tail of a ramp that was gentle enough to pass the before/after test."""
+    if e - s < 3:
+        return s, e
+    med = np.median(v[s:e])
+    lim = rel_tol * abs(med)
+    while s < e and abs(v[s] - med) > lim:
+        s += 1
+    while e > s and abs(v[e - 1] - med) > lim:
+        e -= 1
+    return s, e
+
+
+def _trim_to_line(t, theta, a, z, b):
+    """Trim rows a..z at both ends (by whole blocks) where position leaves the straight-line band.
+
+    Works on every ``max(1, b // 4)``-th sample: the band and the trim are at block resolution.
+    """
+    n = z - a
+    if n < 10 * b:
+        return a, z
+    stride = max(1, b // 4)
+    tt_all, th_all = t[a:z:stride], theta[a:z:stride]
+    m = len(tt_all)
+    mid = slice(m // 5, m - m // 5)
+    tt, th = tt_all[mid], th_all[mid]
+    t0 = tt.mean()
+    c = float(th.mean())
+    dtt = tt - t0
+    # sums rather than BLAS dot products: OpenBLAS splits long ones across threads, which costs
+    # more than it gains here, and a great deal on a busy machine
+    v = float(np.sum(dtt * (th - c)) / np.sum(dtt * dtt))
+    dev = th - c
+    dev -= v * dtt
+    band = 1.5 * float(np.max(np.abs(dev))) + 1e-12
+    del dtt, dev
+    edge = m // 5
+
+    def off_line(sl):  # only the two edges can be trimmed: the middle is never looked at again
+        d = th_all[sl] - (c + v * (tt_all[sl] - t0))
+        return np.abs(d) > band
+
+    head = np.flatnonzero(off_line(slice(0, edge)))
+    tail = np.flatnonzero(off_line(slice(m - edge, m)))
+    new_a = a + (head[-1] + 1) * stride if len(head) else a
+    new_z = a + (m - edge + tail[0]) * stride if len(tail) else z
+    # whole blocks, so that the ledger stays block-exact
+    new_a = a + -(-(new_a - a) // b) * b
+    new_z = a + ((new_z - a) // b) * b
+    return new_a, max(new_z, new_a)
+
+
+def _merge_fragments(runs_, t, theta, b, rel_tol):
+    """Join consecutive block runs of one plateau separated by a short excursion.
+
+    Two runs are joined when they move the same way at speeds within ``rel_tol``, the excursion
+    between them lasts no longer than two windows, and its mean speed (travel over time) is within
+    ``2 * rel_tol`` of theirs: the drive left the plateau briefly and came back.
+    """
+    def mean_speed(s, e):
+        a, z = s * b, e * b - 1
+        return (theta[z] - theta[a]) / (t[z] - t[a])
+
+    out = []
+    for s, e in runs_:
+        if out:
+            ps, pe = out[-1]
+            v1, v2 = mean_speed(ps, pe), mean_speed(s, e)
+            vg = (theta[s * b] - theta[pe * b - 1]) / (t[s * b] - t[pe * b - 1])
+            vm = 0.5 * (v1 + v2)
+            if (np.sign(v1) == np.sign(v2) and abs(v1 - v2) <= rel_tol * abs(vm)
+                    and (s - pe) <= 2 * _K and abs(vg - vm) <= 2 * rel_tol * abs(vm)):
+                out[-1] = (ps, e)
+                continue
+        out.append((s, e))
+    return out
+
+
+def _split_drift(v: np.ndarray, s: int, e: int, rel_tol: float, depth: int = 0):
+    """Split blocks s..e where the speed changes most (CUSUM), while the two sides differ by more
+    than ``rel_tol`` in mean speed: a slow ramp or a step, not ripple (which averages out)."""
+    seg = v[s:e]
+    if e - s < 2 * _K or depth > 20:
+        return [(s, e)]
+    c = np.cumsum(seg - seg.mean())
+    k = int(np.argmax(np.abs(c[:-1]))) + 1
+    v1, v2 = seg[:k].mean(), seg[k:].mean()
+    if abs(v1 - v2) <= rel_tol * abs(seg.mean()):
+        return [(s, e)]
+    return _split_drift(v, s, s + k, rel_tol, depth + 1) + _split_drift(v, s + k, e, rel_tol, depth + 1)
+
+
+#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` over
+#: its length is a ramp, not a plateau (the rest of the tolerance is left to ripple) ...
+_SMOOTH_SPREAD = 1.0 / 3.0
+#: ... when that curve stands out of the position noise (its sum of squares, 3 degrees of freedom
+#: beyond the mean, exceeds this many noise variances: chi-square tail below 1e-4) ...
+_SMOOTH_CHI2 = 20.0
+#: degree of the smooth curve (a cubic in time: a ramp, a bell's top, one swing of a sine)
+_SMOOTH_DEGREE = 3
+
+
+def _split_smooth(tb: np.ndarray, v: np.ndarray, s: int, e: int, rel_tol: float, vnoise2: float = 0.0,
+                  prove_flat: bool = False, depth: int = 0):
+    """Blocks s..e without a systematic speed change.
+
+    The before/after test bounds the speed change over one window only; along an acceleration
+    ramp, the top of a bell-shaped move, a creeping tail or a slow sine the speed changes little
+    per window but steadily, and a run of "steady" blocks results.  The smooth curve is a cubic in
+    time fitted to the block-to-block speeds ``v`` (variance ``vnoise2`` from position noise
+    alone).  A run is a ramp when that curve spans more than ``_SMOOTH_SPREAD * rel_tol`` of the
+    mean speed, stands out of the noise (``_SMOOTH_CHI2``) and explains more of the speed's
+    variation than what is left beside it beyond the noise.  Ripple (closed-loop, stick-slip,
+    position-locked) is not smooth in time over a plateau: the cubic explains little of it, and
+    the rule leaves such plateaus alone however large the ripple.
+
+    A ramp is split (CUSUM) recursively; a part of a ramp is kept only where it is shown flat
+    (``prove_flat``: its spread plus two standard errors within the limit), so that the plateau
+    beside a ramp stays and the ramp's own fragments go.  Runs never judged a ramp are kept, unless
+    the position noise alone is too large to show a change of the limit (a crawl near the noise
+    floor, such as the end of a creeping tail)."""
+    n = e - s
+    limit = _SMOOTH_SPREAD * rel_tol
+    if n < 2 + _SMOOTH_DEGREE:
+        return [] if prove_flat else [(s, e)]
+    seg = v[s:e - 1]  # block speeds between the blocks of the run
+    x = tb[s:e - 1]
+    if len(seg) > 4096:  # a long run: its shape is as clear from every k-th block speed
+        k = -(-len(seg) // 4096)
+        seg, x = seg[::k], x[::k]
+    x = (x - x[0]) / max(x[-1] - x[0], 1e-300) * 2.0 - 1.0
+    c = np.polynomial.legendre.legfit(x, seg, _SMOOTH_DEGREE)
+    f = np.polynomial.legendre.legval(x, c)
+    mean = float(np.mean(seg))
+    ss_res = float(np.sum((seg - f) ** 2))
+    ss_fit = float(np.sum((f - mean) ** 2))
+    dof = max(len(seg) - _SMOOTH_DEGREE - 1, 1)
+    # the noise variance predicted from position noise, never above the scatter actually seen (a
+    # quantised encoder in steady motion dithers: its block means are better than q / sqrt(12))
+    vnoise2 = min(vnoise2, ss_res / dof)
+    ss_rest = max(ss_res - dof * vnoise2, 0.0)  # ripple beyond noise
+    scale = max(abs(mean), 1e-300)
+    spread = float(f.max() - f.min()) / scale
+    k_se = 4.0 * math.sqrt((_SMOOTH_DEGREE + 1) / len(seg))  # two standard errors of a range of the curve
+    if k_se * math.sqrt(vnoise2) / scale > limit:
+        # position noise alone hides a change of the limit over this run: not shown constant
+        return []
+    if prove_flat:
+        s_res = math.sqrt(ss_res / dof)
+        upper = spread + k_se * s_res / scale
+        if upper <= limit:
+            return [(s, e)]
+    else:
+        smooth = ss_fit > _SMOOTH_CHI2 * vnoise2 and ss_fit > ss_rest
+        if spread <= limit or not smooth:
+            return [(s, e)]
+    if n < 2 * _K or depth > 30:
+        return []
+    cs = np.cumsum(seg - mean)
+    k = int(np.argmax(np.abs(cs[:-1]))) + 1
+    k = min(max(k, 1), n - 1)
+    return (_split_smooth(tb, v, s, s + k, rel_tol, vnoise2, True, depth + 1)
+            + _split_smooth(tb, v, s + k, e, rel_tol, vnoise2, True, depth + 1))

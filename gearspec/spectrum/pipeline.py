@@ -1,0 +1,157 @@
+"""The spectral analysis of a whole recording (``gearspec spectrum``): segment it, analyse every
+segment (:func:`~gearspec.spectrum.analysis.analyze_segment`, in threads when segments are long),
+and label the peaks of one segment that are aliases of lines measured in another."""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+from dataclasses import replace
+
+from ..errors import InputError
+from ..gears import GearTrain, alias_of, load_gear
+from ..recording import Recording
+from ..segment import FrictionTorque, Segment, Segmentation, find_segments
+from . import analysis as _one  # LS_MAX_SAMPLES read at call time (a test patches it there)
+from .analysis import _local, analyze_segment
+from .results import SegmentSpectrum, SpectrumResult
+
+__all__ = ["analyze", "relabel_aliases"]
+
+
+def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = None,
+            window: float | str = "auto", rel_tol: float = 0.15, min_speed: float | None = None,
+            min_duration: float | None = None, inertia: bool = True, progress: bool | None = None,
+            workers: int | str = "auto", **options) -> SpectrumResult:
+    """Segment a recording and analyse every segment (``gearspec spectrum``).
+
+    Parameters
+    ----------
+    rec : Recording
+    gear : GearTrain, preset name or path, optional
+        Defaults to the recording's own gear spec.
+    segmentation : Segmentation, optional
+        Precomputed segments; otherwise :func:`~gearspec.segment.find_segments` runs with
+        ``window``, ``rel_tol``, ``min_speed`` and ``min_duration``.
+    inertia : bool
+        Subtract ``J * thetadd`` when the gear spec gives an inertia.
+    progress : bool, optional
+        Show a progress bar (default: when stderr is a terminal and there are many segments).
+    workers : int or "auto"
+        Segments analysed at once, in threads (numpy, the BLAS and the FFT release the GIL for
+        the bulk of the work).  The results are the same whatever the number.  ``"auto"``: two
+        on a machine with two or more CPUs when at least two segments are long (more than
+        ``LS_MAX_SAMPLES`` samples), else one.  Each segment in flight holds its own
+        temporaries, so two workers need about twice the memory of one.
+    **options
+        Passed to :func:`analyze_segment` (``max_frequency``, ``min_cycles``, ``harmonics``,
+        ``degree``, ``fap_threshold``, ``max_peaks``, ``oversample``, ``noise``, ``method``,
+        ``keep_spectra``).
+    """
+    gear = load_gear(gear) if gear is not None else rec.gear
+    if gear is not None and gear.unit != rec.unit:
+        raise InputError(f"gear spec '{gear.name}' is for theta in {gear.unit}, the recording's theta is in {rec.unit}")
+    # `is None`, not `or`: an empty Segmentation is falsy, and the user's segmentation (with its
+    # options) must be honoured -- refused below when it holds no segment -- never replaced
+    seg = segmentation if segmentation is not None else find_segments(
+        rec, window=window, rel_tol=rel_tol, min_speed=min_speed, min_duration=min_duration)
+    if len(seg) == 0:
+        raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found "
+                         f"(rows: {dict(seg.excluded)}); try a larger --rel-tol or a fixed --window")
+    J = gear.inertia if (inertia and gear is not None) else None
+    # the friction torque segment by segment (tau - J thetadd), never the whole recording at once
+    tau = FrictionTorque(rec, inertia=J) if J else rec.tau
+    theta = rec.theta
+    notes = list(rec.notes)
+    if J:
+        notes.append(f"inertia removed: tau - {J:g} x thetadd (Savitzky-Golay derivative)")
+    if progress is None:
+        progress = sys.stderr.isatty() and len(seg) > 5
+    n_workers = _n_workers(workers, seg)
+
+    def one(s: Segment) -> SegmentSpectrum:
+        # a quasi-static sweep was taken at rest: its torque is analysed as measured (no J thetadd)
+        y = (rec.tau if s.kind == "quasi_static" else tau)[s.rows]
+        if s.direction < 0:  # the friction magnitude (a view of the torque when it is the torque)
+            y = -y
+        return analyze_segment(theta[s.rows], y, gear, segment=s, **options)
+
+    def one_in_pool(s: Segment) -> SegmentSpectrum:
+        _local.in_pool = True
+        try:
+            return one(s)
+        finally:
+            _local.in_pool = False
+
+    if n_workers > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=n_workers, thread_name_prefix="gearspec-segment") as pool:
+            it = pool.map(one_in_pool, seg.segments)
+            if progress:
+                from tqdm import tqdm
+
+                it = tqdm(it, total=len(seg), desc="segments", unit="seg", file=sys.stderr)
+            results = list(it)
+    else:
+        iterator = seg.segments
+        if progress:
+            from tqdm import tqdm
+
+            iterator = tqdm(iterator, desc="segments", unit="seg", file=sys.stderr)
+        results = [one(s) for s in iterator]
+    relabel_aliases(results, gear, unit=rec.unit)
+    excluded = Counter(rec.excluded) + Counter(seg.excluded)
+    return SpectrumResult(results, excluded, rec.n_read, rec.unit, gear, notes,
+                          settings={**seg.settings, **options, "inertia": inertia})
+
+
+def relabel_aliases(segments: list[SegmentSpectrum], gear: GearTrain | None = None, unit: str = "rad") -> int:
+    """Label ``alias of <line>`` the unexplained peaks of a segment that sit where a line found
+    in *another* segment (measured there, below its position Nyquist frequency) aliases in this
+    one -- the same ripple seen at a slow speed and, above the Nyquist frequency, at a fast one
+    (:func:`gearspec.gears.alias_of`, the rule the per-segment labels use).  Changes the peaks in
+    place; returns how many were relabelled."""
+    known: list[tuple[float, str]] = []
+    for s in segments:
+        for p in s.peaks:
+            if p.declared or p.aliased_from is not None or p.fap >= 0.01:
+                continue
+            name = (p.label.split(" = ")[0] if p.label else p.hint) or f"line at {p.frequency:.6g} cycles/{unit}"
+            if not any(abs(f - p.frequency) <= 1e-4 * p.frequency for f, _ in known):
+                known.append((p.frequency, name))
+    changed = 0
+    for s in segments:
+        n = s.segment.n
+        if not s.peaks or n < 2 or not (s.span > 0):
+            continue
+        spacing = s.span / (n - 1)
+        for i, p in enumerate(s.peaks):
+            if p.declared or p.label is not None:
+                continue
+            others = [(f, lab) for f, lab in known if f > s.nyquist]  # only lines this segment cannot measure
+            if not others:
+                continue
+            ln = alias_of(None, p.frequency, max(0.5 / s.span, 3 * p.frequency_se), spacing, nyquist=s.nyquist,
+                          known=others, max_harmonic=1)
+            if ln is not None:
+                s.peaks[i] = replace(p, label=ln.label, hint=None, frequency_exact=None, order_exact=None,
+                                     aliased_from={"label": ln.parents[0], "frequency": ln.frequency,
+                                                   "order": None if gear is None else gear.order(ln.frequency)})
+                changed += 1
+    return changed
+
+
+def _n_workers(workers, seg: Segmentation) -> int:
+    if workers == "auto":
+        import os
+
+        long_ = sum(s.n > _one.LS_MAX_SAMPLES for s in seg)
+        return 2 if (os.cpu_count() or 1) >= 2 and long_ >= 2 else 1
+    try:
+        n = int(workers)
+    except (TypeError, ValueError):
+        raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}") from None
+    if n < 1:
+        raise InputError(f"workers must be a positive integer or 'auto', got {workers!r}")
+    return min(n, max(1, len(seg)))

@@ -1,0 +1,156 @@
+"""What the spectral analysis returns: the peaks of a segment (:class:`Peak`), the analysis of one
+segment (:class:`SegmentSpectrum`) and of a recording (:class:`SpectrumResult`, with its JSON form,
+``CONTRACTS.md`` section 4, and its tables)."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..gears import GearTrain
+from ..jsonsafe import plain
+from ..segment import Segment
+from .harmonic import HarmonicFit
+
+__all__ = ["Peak", "SegmentSpectrum", "SpectrumResult"]
+
+
+@dataclass(frozen=True)
+class Peak:
+    """A sinusoidal component of one segment (``CONTRACTS.md`` section 4, ``peaks``)."""
+
+    frequency: float
+    amplitude: float
+    amplitude_se: float
+    phase: float
+    phase_se: float
+    fap: float
+    order: float | None
+    label: str | None
+    declared: bool
+    snr: float  # power over local noise power at the frequency
+    hint: str | None = None  # for an unlabelled peak: an integer multiple of a shaft it sits on
+    frequency_se: float = 0.0  # standard error of a found peak's frequency (0: declared, fixed)
+    frequency_exact: float | None = None  # with a hint: the exact frequency of that multiple
+    order_exact: float | None = None      # ... and its exact order
+    aliased_from: dict | None = None  # a peak labelled 'alias of X': X's label, frequency and order
+
+    def to_dict(self) -> dict:
+        return {"frequency": self.frequency, "amplitude": self.amplitude, "amplitude_se": self.amplitude_se,
+                "phase": self.phase, "phase_se": self.phase_se, "fap": self.fap, "order": self.order,
+                "label": self.label, "declared": self.declared, "snr": self.snr, "hint": self.hint,
+                "frequency_se": self.frequency_se, "frequency_exact": self.frequency_exact,
+                "order_exact": self.order_exact, "aliased_from": self.aliased_from}
+
+
+@dataclass
+class SegmentSpectrum:
+    """Spectral analysis of one segment."""
+
+    segment: Segment
+    peaks: list[Peak]
+    level: float            # mean friction magnitude over the segment (Nm or N)
+    sigma: float            # residual standard deviation after the fit
+    span: float             # travel, rad or m
+    nyquist: float          # highest frequency the sampling resolves, cycles per unit
+    degree: int             # nuisance polynomial degree
+    skipped: list[dict]     # declared lines not fitted, with the reason
+    fit: HarmonicFit | None
+    fft_frequency: np.ndarray | None = None
+    fft_amplitude: np.ndarray | None = None
+    ls_frequency: np.ndarray | None = None
+    ls_amplitude: np.ndarray | None = None
+    ls_residual_amplitude: np.ndarray | None = None
+    noise_amplitude: np.ndarray | None = None
+    note: str = ""
+
+    @property
+    def direction(self) -> int:
+        return self.segment.direction
+
+    @property
+    def speed(self) -> float:
+        return self.segment.speed
+
+    def peak(self, label: str) -> Peak | None:
+        """The peak labelled ``label`` (or with ``label`` among its ' = '-joined names), or None."""
+        for p in self.peaks:
+            if p.label is not None and (p.label == label or label in p.label.split(" = ")):
+                return p
+        return None
+
+    def to_dict(self) -> dict:
+        s = self.segment
+        return {"direction": s.direction, "speed": s.speed, "n": s.n, "run": s.run, "kind": s.kind,
+                "start": s.start, "stop": s.stop, "level": self.level, "sigma": self.sigma,
+                "span": self.span, "nyquist": self.nyquist, "nuisance_degree": self.degree,
+                "peaks": [p.to_dict() for p in self.peaks], "skipped_lines": self.skipped,
+                "above_nyquist": [d["label"] for d in self.skipped if d.get("kind") == "above_nyquist"],
+                **({"note": self.note} if self.note else {})}
+
+
+@dataclass
+class SpectrumResult:
+    """All segments of a recording with their spectra, and the ledger of excluded rows."""
+
+    segments: list[SegmentSpectrum]
+    excluded: Counter
+    n_rows: int
+    unit: str
+    gear: GearTrain | None
+    notes: list[str] = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"unit": self.unit, "torque_unit": "Nm" if self.unit == "rad" else "N",
+                "frequency_unit": f"cycles/{self.unit}", "n_rows": self.n_rows,
+                "gear": None if self.gear is None else self.gear.to_dict(),
+                "segments": [s.to_dict() for s in self.segments],
+                "excluded": dict(sorted(self.excluded.items())), "notes": self.notes,
+                "settings": {k: v for k, v in self.settings.items() if _jsonable(v)}}
+
+    def to_json(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(plain(self.to_dict()), indent=1))
+        return path
+
+    def peaks_table(self) -> pd.DataFrame:
+        """One row per (segment, peak)."""
+        rows = []
+        for i, s in enumerate(self.segments):
+            for p in s.peaks:
+                rows.append({"segment": i, "run": s.segment.run, "direction": s.direction, "speed": s.speed,
+                             "level": s.level, **p.to_dict()})
+        return pd.DataFrame(rows)
+
+    def amplitude_vs_speed(self, label: str) -> pd.DataFrame:
+        """Amplitude of the peak labelled ``label`` in every segment where it was fitted."""
+        rows = []
+        for i, s in enumerate(self.segments):
+            p = s.peak(label)
+            if p is not None:
+                rows.append({"segment": i, "direction": s.direction, "speed": s.speed, "level": s.level,
+                             "amplitude": p.amplitude, "amplitude_se": p.amplitude_se, "phase": p.phase,
+                             "frequency": p.frequency})
+        return pd.DataFrame(rows)
+
+    def unexplained(self, max_fap: float = 0.01) -> pd.DataFrame:
+        """Peaks found that no declared line, harmonic or sideband explains."""
+        t = self.peaks_table()
+        if t.empty:
+            return t
+        return t[(~t["declared"]) & t["label"].isna() & (t["fap"] <= max_fap)].reset_index(drop=True)
+
+
+def _jsonable(v) -> bool:
+    try:
+        json.dumps(plain(v))
+        return True
+    except TypeError:
+        return False

@@ -1,0 +1,299 @@
+"""The search for peaks no declared line explains, in the residual power spectrum of one segment:
+its uniform frequency grid (:class:`_Grid`), its local noise level (:class:`_LocalNoise`), the
+residual's Hann spectrum over position with fitted lines taken out in closed form
+(:func:`_fft_residual_power`, :class:`_FFTResidual`), the candidates (:func:`_search`) and the joint
+fit's significance test (:func:`_significant`).  Internal to :func:`~gearspec.spectrum.analyze_segment`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .fft import (
+    hann_fft_length,
+    hann_sinusoid_dft,
+    hann_spectrum32,
+    hann_spectrum32_buffer,
+    legendre_constant,
+)
+from .harmonic import HarmonicFit, NormalEquations
+from .periodogram import false_alarm_probability, noise_blocks
+from .resample import grid_size, resample_uniform
+
+
+def _search(power, grid: "_Grid", noise_model: "_LocalNoise", declared_f, taken, span, guard, f_found_min,
+            fap_threshold, m_eff, oversample, room) -> list[float]:
+    """Peaks of a residual power spectrum that nothing fitted explains, strongest first: local
+    maxima whose false-alarm probability (local noise, F-distributed for an estimated level,
+    ``m_eff`` independent frequencies searched) is below ``fap_threshold``; none within 1.5
+    resolution steps of a declared line (the two could not be told apart), within ``guard`` of a
+    line in ``taken`` (found or rejected before) or of a stronger new one, or below
+    ``f_found_min`` (where the nuisance polynomial could mimic it).  At most ``room``."""
+    nbin = len(power)
+    is_max = np.zeros(nbin, bool)
+    np.greater(power[1:-1], power[:-2], out=is_max[1:-1])
+    is_max[1:-1] &= power[1:-1] >= power[2:]
+    for f0 in declared_f:
+        is_max[grid.within(f0, 1.5 / span)] = False
+    for f0 in taken:
+        is_max[grid.within(f0, guard)] = False
+    is_max[:grid.first_at_least(f_found_min)] = False
+    cand = np.flatnonzero(is_max)
+    del is_max
+    # a candidate needs at least the power that a known noise level (the lightest tail) would
+    # call significant; only those get the exact (F-distributed) false-alarm probability.  The
+    # lowest noise level anywhere screens out most of them without evaluating the level.
+    z_floor = _z_floor(fap_threshold, m_eff)
+    floor = noise_model.lowest()
+    if floor > 0:
+        cand = cand[power[cand] > z_floor * floor * (1 - 1e-6)]
+    z_c = power[cand] / noise_model.level(cand)
+    keep_c = z_c > z_floor
+    cand, z_c = cand[keep_c], z_c[keep_c]
+    fap_c = false_alarm_probability(z_c, m_eff, noise_model.bins(cand), oversample)
+    sig = fap_c < fap_threshold
+    cand, z_c = cand[sig], z_c[sig]
+    new: list[float] = []
+    for i in cand[np.argsort(-z_c)]:
+        f_pk = _refine(grid, power, i)
+        if any(abs(f_pk - f0) < guard for f0 in new):
+            continue
+        new.append(f_pk)
+        if len(new) >= room:
+            break
+    return new
+
+
+def _significant(eq: NormalEquations, keep, noise_model: "_LocalNoise", grid: "_Grid", n, enbw, n_dec,
+                 fap_threshold, m_eff, oversample, f_found_min):
+    """The joint fit of the lines ``keep`` of ``eq``, found lines (index >= ``n_dec``) dropped while
+    one is not significant against ``noise_model`` or too slow.  Returns ``(keep, fit, z, fap)``;
+    a declared line's fap is for one frequency, a found one's counts the ``m_eff`` searched."""
+    keep = list(keep)
+    while True:
+        fit = eq.fit(keep)
+        s_at = grid.interp(fit.frequency, noise_model.level) if len(keep) else np.array([])
+        k_at = grid.interp(fit.frequency, noise_model.bins) if len(keep) else np.array([])
+        z_fit = n * fit.amplitude**2 / 4.0 / np.maximum(s_at / enbw, 1e-300)
+        is_dec = np.array([j < n_dec for j in keep], bool)
+        fap_fit = np.where(is_dec, false_alarm_probability(z_fit, 1.0, k_at, oversample),
+                           false_alarm_probability(z_fit, m_eff, k_at, oversample))
+        bad = [j for j, dec, fp, f in zip(keep, is_dec, fap_fit, fit.frequency)
+               if not dec and (fp >= fap_threshold or f < f_found_min)]
+        if not bad:
+            return keep, fit, z_fit, fap_fit
+        keep = [j for j in keep if j not in bad]
+
+
+def _z_floor(fap_threshold: float, m_eff: float) -> float:
+    """The least power ratio z whose false-alarm probability can be below ``fap_threshold``:
+    that of an exactly known noise level (``exp(-z)`` per frequency), whose tail is the lightest
+    of the F-family; a little below, for rounding."""
+    single = -math.expm1(math.log1p(-min(max(fap_threshold, 1e-300), 1.0)) / max(1.0, m_eff))
+    if single <= 0:
+        return math.inf
+    return -math.log(min(single, 1.0)) * (1 - 1e-9) - 1e-12
+
+
+class _Grid:
+    """The frequencies of a uniform periodogram grid, ``f(i) = base + df (k0 + i)``, computed
+    exactly as the array ``base + df * arange(k0, k0 + n)`` would hold them, but only where
+    needed."""
+
+    def __init__(self, base: float, df: float, k0: int, n: int):
+        self.base, self.df, self.k0, self.n = float(base), float(df), int(k0), int(n)
+
+    def at(self, i):
+        i = np.asarray(i)
+        if self.base == 0.0:
+            return self.df * (self.k0 + i)
+        return self.base + self.df * (self.k0 + i)
+
+    def frequencies(self) -> np.ndarray:
+        return self.at(np.arange(self.n))
+
+    def _index_near(self, f: float) -> int:
+        return int(np.floor((f - self.base) / self.df)) - self.k0
+
+    def within(self, f0: float, width: float) -> slice:
+        """Bins with ``|f - f0| < width`` (a contiguous range)."""
+        a = max(0, self._index_near(f0 - width) - 2)
+        b = min(self.n, self._index_near(f0 + width) + 3)
+        if b <= a:
+            return slice(0, 0)
+        idx = np.arange(a, b)
+        hit = idx[np.abs(self.at(idx) - f0) < width]
+        return slice(int(hit[0]), int(hit[-1]) + 1) if len(hit) else slice(0, 0)
+
+    def first_at_least(self, f: float) -> int:
+        """The first bin with frequency >= f."""
+        i = min(max(0, self._index_near(f) - 2), self.n)
+        while i < self.n and self.at(i) < f:
+            i += 1
+        return i
+
+    def interp(self, f, values_at) -> np.ndarray:
+        """``np.interp(f, frequencies, values)``, with ``values_at(indices)`` giving values only
+        at the bins around each f."""
+        f = np.atleast_1d(np.asarray(f, dtype=float))
+        out = np.empty(len(f))
+        for j, x in enumerate(f):
+            c = self._index_near(x)
+            idx = np.arange(max(0, min(c, self.n - 1) - 2), min(self.n, max(c, 0) + 4))
+            out[j] = np.interp(x, self.at(idx), values_at(idx))
+        return out
+
+
+class _LocalNoise:
+    """:func:`~gearspec.spectrum.periodogram.local_noise` of a power spectrum, evaluated only at
+    the bins asked for (the same values: linear interpolation between block levels, and the
+    median power wherever the level is missing or not positive); ``bins`` is the number of
+    bins averaged, over the window's equivalent noise bandwidth."""
+
+    def __init__(self, power, width, min_width, mask, enbw):
+        self.power = power
+        self.centres, self.levels, self.counts = noise_blocks(power, width=width, min_width=min_width, mask=mask)
+        self.enbw = enbw
+        self._fallback = None
+
+    def fallback(self) -> float:
+        if self._fallback is None:
+            p = self.power
+            self._fallback = float(np.nanmedian(p)) if np.any(np.isfinite(p)) else 1.0
+        return self._fallback
+
+    def level(self, idx) -> np.ndarray:
+        idx = np.asarray(idx)
+        if len(self.centres):
+            v = np.interp(idx, self.centres, self.levels)
+        else:
+            v = np.full(idx.shape, np.nan)
+        bad = ~(np.isfinite(v) & (v > 0))
+        if bad.any():
+            v[bad] = self.fallback()
+        return v
+
+    def lowest(self) -> float:
+        """A lower bound of the level at every bin (0 when there is none)."""
+        if not len(self.levels) or not np.all(np.isfinite(self.levels) & (self.levels > 0)):
+            return 0.0
+        return float(np.min(self.levels))
+
+    def bins(self, idx) -> np.ndarray:
+        idx = np.asarray(idx)
+        if len(self.centres):
+            return np.interp(idx, self.centres, self.counts) / self.enbw
+        return np.zeros(idx.shape) / self.enbw
+
+
+def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None,
+                        lo: float | None = None, hi: float | None = None, keep_residual: bool = False):
+    """Power of the residual of ``fit0`` from one Hann-windowed FFT of the signal resampled over
+    position: the nuisance polynomial is subtracted on the grid, the fitted lines in closed form
+    near their bins (:func:`~gearspec.spectrum.fft.hann_sinusoid_dft`; beyond +-40 bins the
+    window's leakage is below 1e-7).  Scaled so that a sinusoid of amplitude A has power
+    n A^2 / 4; white noise then has power ``enbw * sigma^2``.
+
+    The resampled signal, once the nuisance is off, is windowed and transformed in single
+    precision (:func:`~gearspec.spectrum.fft.hann_spectrum32`): its rounding (~1e-7 of the
+    signal) is far below any noise floor the search could use, and it halves the FFT's time and
+    memory.
+
+    With ``keep_into`` (a SegmentSpectrum) the calibrated amplitude spectrum of the signal (line
+    included, nuisance removed) is stored there for the figures.
+
+    Returns ``(k_lo, k_hi, df, power, enbw, residual)``: ``residual`` (with ``keep_residual``,
+    else None) is a :class:`_FFTResidual` that gives the power of the residual of another fit
+    (more lines) without another transform.
+    """
+    n = len(theta)
+    if lo is None:
+        lo, hi = float(np.min(theta)), float(np.max(theta))
+    h, m = grid_size(n, lo, hi)
+    g0 = lo
+    # x of the nuisance's Legendre series on the grid: x_k = a + b k
+    if fit0.hi > fit0.lo:
+        b = 2.0 * h / (fit0.hi - fit0.lo)
+        a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
+    else:
+        a = b = 0.0
+    if m < 4:  # degenerate: the general function
+        _, _, vals = resample_uniform(theta, y, lo=lo, hi=hi)
+        spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
+    else:
+        # resampled straight into the transform's float32 buffer, the nuisance's constant part
+        # taken off first in double precision: no double-precision copy of the grid
+        buf = np.empty(m, np.float32)  # the transform pads it (in its own work buffer)
+        resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
+        spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b,
+                                                      nfft=hann_fft_length(m, oversample))
+        del buf
+    nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
+    if keep_into is not None:
+        keep_into.fft_frequency = (df * np.arange(len(spec))).astype(np.float32)
+        keep_into.fft_amplitude = (np.abs(spec) * np.float32(2.0 / wsum)).astype(np.float32)
+    for f, ca, cb in zip(fit0.frequency, fit0.coef_cos, fit0.coef_sin):
+        k0 = int(round(f / df))
+        k = np.arange(max(0, k0 - 40), min(len(spec), k0 + 41))
+        spec[k] -= hann_sinusoid_dft(k, nfft, m, g0, h, f, ca, cb).astype(spec.dtype)
+    k_lo = max(1, int(np.ceil((1.0 / (hi - lo)) / df)))
+    k_hi = min(len(spec) - 1, int(np.floor(f_max / df)))
+    sel = spec[k_lo:k_hi + 1]
+    power = np.square(sel.real)      # single precision, as the spectrum: ~1e-7 of each bin's power
+    power += np.square(sel.imag)
+    power *= np.float32(n / wsum**2)
+    res = (_FFTResidual(sel, k_lo, df, nfft, m, g0, h, np.float32(n / wsum**2), fit0, power)
+           if keep_residual and len(sel) else None)
+    return k_lo, k_hi, df, power, enbw, res
+
+
+class _FFTResidual:
+    """The complex residual spectrum of :func:`_fft_residual_power` (a view of its bins k_lo..k_hi),
+    kept to give the power of the residual of a fit with more lines: the bins within +-40 of
+    every line of either fit are recomputed in closed form (the first fit's lines put back, the
+    new fit's taken out, as the first were), the rest copied.  The change of the nuisance
+    polynomial between the two fits is left in (it is slow: it touches the lowest bins only)."""
+
+    _HALF = 40  # bins either side of a line (the Hann window's leakage beyond is below 1e-7)
+
+    def __init__(self, sel, k_lo, df, nfft, m, g0, h, scale, fit0: HarmonicFit, power0):
+        self.sel, self.k_lo, self.df, self.nfft, self.m, self.g0, self.h = sel, int(k_lo), df, nfft, m, g0, h
+        self.scale, self.power0 = scale, power0
+        self.lines0 = list(zip(fit0.frequency, fit0.coef_cos, fit0.coef_sin))
+
+    def _window(self, f):
+        k0 = int(round(f / self.df))
+        a = max(self.k_lo, k0 - self._HALF)
+        b = min(self.k_lo + len(self.sel) - 1, k0 + self._HALF)
+        return a, b
+
+    def power(self, fit: HarmonicFit):
+        p = self.power0.copy()
+        lines1 = list(zip(fit.frequency, fit.coef_cos, fit.coef_sin))
+        spans = [self._window(f) for f, _, _ in self.lines0 + lines1]
+        idx = np.unique(np.concatenate([np.arange(a, b + 1) for a, b in spans if b >= a] or [np.zeros(0, int)]))
+        if not len(idx):
+            return p
+        val = self.sel[idx - self.k_lo].astype(np.complex128)
+        for sign, lines in ((1.0, self.lines0), (-1.0, lines1)):
+            for f, ca, cb in lines:
+                a, b = self._window(f)
+                w = (idx >= a) & (idx <= b)
+                if w.any():
+                    val[w] += sign * hann_sinusoid_dft(idx[w], self.nfft, self.m, self.g0, self.h, f, ca, cb)
+        p[idx - self.k_lo] = (np.square(val.real) + np.square(val.imag)) * float(self.scale)
+        return p
+
+    def release(self):
+        self.sel = self.power0 = None
+
+
+def _refine(grid: _Grid, power, i):
+    """Peak frequency by a parabola through the log power of the three bins around bin i."""
+    if i <= 0 or i >= len(power) - 1:
+        return float(grid.at(i))
+    a, b, c = np.log(np.maximum(power[i - 1:i + 2].astype(float), 1e-300))
+    den = a - 2 * b + c
+    shift = 0.5 * (a - c) / den if den < 0 else 0.0
+    return float(grid.at(i) + np.clip(shift, -0.5, 0.5) * (grid.at(1) - grid.at(0)))
