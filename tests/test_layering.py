@@ -29,7 +29,7 @@ def test_public_names_import():
     for name in gearspec.__all__:
         assert getattr(gearspec, name) is not None, name
     assert set(gearspec.__all__) <= set(dir(gearspec))
-    assert gearspec.fit is gearspec.identify.fit and gearspec.load_recording.__module__ == "gearspec.recording"
+    assert gearspec.fit is gearspec.identify.fit and _within(gearspec.load_recording.__module__, "gearspec.recording")
     with pytest.raises(AttributeError, match="no attribute 'nonexistent'"):
         gearspec.nonexistent  # noqa: B018
 
@@ -132,7 +132,9 @@ def test_commands_without_the_reproductions_say_so(argv, tmp_path, monkeypatch, 
 
 def test_leaves_are_not_imported_by_the_library():
     def rule(mod, name):
-        return (any(_within(name, leaf) for leaf in LEAVES) and not any(_within(mod, leaf) for leaf in LEAVES))
+        # gearspec/__main__.py (``python -m gearspec``) is an entry point, like the command itself
+        return (any(_within(name, leaf) for leaf in LEAVES) and not any(_within(mod, leaf) for leaf in LEAVES)
+                and mod != "gearspec.__main__")
 
     assert _violations(rule) == []
 
