@@ -65,6 +65,15 @@ def test_folds_sort_by_speed_then_id_and_keep_the_order_given():
     assert deal_folds(sign, speed, ids, 2).tolist() == [0, 0, 0, 1, 1]
 
 
+def test_speeds_equal_to_rounding_are_a_tie_broken_by_id():
+    # plateaus at one commanded speed: mean speeds 1e-14 apart (rounding), dealt by group id
+    speed = np.array([1.0, 1.0 + 1e-14, 1.0 - 1e-14, 2.0])
+    assert deal_folds(np.ones(4, int), speed, np.array([2, 0, 1, 3]), 4).tolist() == [2, 0, 1, 3]
+    # a real difference (1e-6 relative) still orders by speed
+    speed = np.array([1.0, 1.0 + 1e-6, 1.0 - 1e-6, 2.0])
+    assert deal_folds(np.ones(4, int), speed, np.array([2, 0, 1, 3]), 4).tolist() == [1, 2, 0, 3]
+
+
 def test_group_summary_is_the_rows_mean_speed_and_direction():
     g = np.array([3, 3, 1, 1, 1, 8, 8])
     d = np.array([1, 1, -1, -1, 1, -1, 1])          # group 8: a tie, its first row says -1

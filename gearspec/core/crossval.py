@@ -14,6 +14,10 @@ The fold rule
 ``k = max(2, min(folds, groups))`` folds (never more folds than groups, so no fold is empty; at
 least two, so that something is held out).  Within each direction the groups are sorted by speed
 (ties by group id) and dealt round robin, so every fold spans the speed range of both directions.
+Speeds within ``SPEED_RTOL`` (relative) of each other are ties: plateaus at one commanded speed
+(e.g. one per load) have mean speeds that differ only by rounding, and the order rounding gives
+them depends on how the mean was summed (over samples, over segment means), which would give each
+engine its own folds.
 The positive direction is dealt from fold 0 and the negative one continues where the positive
 one stopped (it starts at fold ``n_positive % k``): the two directions together are one round
 robin, so the folds' sizes differ by at most one group.  Without that rotation both directions
@@ -32,8 +36,12 @@ from scipy import stats
 
 from ..errors import InputError
 
-__all__ = ["group_summary", "deal_folds", "row_folds", "splits", "held_out", "HeldOut", "z_statistic",
+__all__ = ["SPEED_RTOL", "group_summary", "deal_folds", "row_folds", "splits", "held_out", "HeldOut", "z_statistic",
            "critical_z", "n_params"]
+
+
+#: mean speeds of two groups closer than this (relative) are a tie, broken by the group id
+SPEED_RTOL = 1e-9
 
 
 # ---------------------------------------------------------------------- folds
@@ -106,11 +114,19 @@ def deal_folds(sign, speed, ids, folds: int) -> np.ndarray:
     out = np.zeros(len(sign), int)
     start = 0
     for d in (1, -1):
-        idx = np.flatnonzero(sign == d)
-        idx = idx[np.lexsort((ids[idx], speed[idx]))]
+        idx = _by_speed(np.flatnonzero(sign == d), speed, ids)
         out[idx] = (start + np.arange(len(idx))) % k
         start = len(idx) % k
     return out
+
+
+def _by_speed(idx, speed, ids):
+    """``idx`` sorted by speed, speeds within :data:`SPEED_RTOL` of their neighbour a tie broken by id."""
+    idx = idx[np.lexsort((ids[idx], speed[idx]))]
+    s = speed[idx]
+    tied = np.abs(np.diff(s)) <= SPEED_RTOL * np.maximum(np.abs(s[1:]), np.abs(s[:-1]))
+    level = np.cumsum(np.concatenate(([True], ~tied)))[:len(idx)]
+    return idx[np.lexsort((ids[idx], level))]
 
 
 def row_folds(groups, direction, v, folds: int) -> np.ndarray:
