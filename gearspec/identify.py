@@ -172,6 +172,8 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
 
 def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cycles: float,
                        nyquist_fraction: float) -> dict:
+    from .core.reduction import harmonic_columns
+
     K = len(freqs)
     P = 1 + 2 * K
     y = data.direction[ii] * data.y[ii]
@@ -189,15 +191,7 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
         nyq = position_nyquist(th) if len(th) > 1 else 0.0
         out["sampled"] = freqs < nyquist_fraction * nyq
         out["active"] = (out["cycles"] >= min_cycles) & out["sampled"]
-        # phases from positions centred on the segment (exact in double precision), rotated back
-        # to theta = 0: sin(w(th-m) + wm) = sin(w(th-m)) cos(wm) + cos(w(th-m)) sin(wm)
-        m = th.mean()
-        ph = _TWO_PI * np.outer(th - m, freqs)
-        sn, cs = np.sin(ph), np.cos(ph)
-        rot = _TWO_PI * freqs * m
-        c, s_ = np.cos(rot), np.sin(rot)
-        X[:, 1::2] = sn * c + cs * s_
-        X[:, 2::2] = cs * c - sn * s_
+        X[:, 1::2], X[:, 2::2] = harmonic_columns(th, freqs)   # phases about the segment's mean position
         X[:, 1:][:, np.repeat(~out["sampled"], 2)] = 0.0
     G = X.T @ X
     g = X.T @ y
@@ -788,22 +782,10 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
 
 # ---------------------------------------------------------------------- held-out errors
 def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
-    """Fold of each group: groups sorted by direction and speed, dealt round-robin (so every fold
-    spans the speed range of both directions)."""
-    groups = data.groups(by)
-    ug = np.unique(groups)
-    key = []
-    for gid in ug:
-        m = groups == gid
-        key.append((int(np.sign(np.mean(data.direction[m]))), float(np.mean(np.abs(data.v[m]))), gid))
-    key.sort()
-    fold_of = {}
-    counters = {}
-    for dsign, _, gid in key:
-        c = counters.get(dsign, 0)
-        fold_of[gid] = c % folds
-        counters[dsign] = c + 1
-    return np.array([fold_of[g] for g in groups])
+    """Fold of every sample: its segment's (or run's) fold by THE rule of :mod:`gearspec.core.crossval`."""
+    from .core.crossval import row_folds
+
+    return row_folds(data.groups(by), data.direction, data.v, folds)
 
 
 def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
@@ -824,39 +806,28 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
     fold whose model can be fitted without it and predict it (each direction needs its own
     groups, and enough speeds left for the law) -- and ``reason`` says which, in one sentence;
     never the in-sample error in its place.  When some folds fail, ``rmse`` comes from the others
-    and ``reason`` says how many held-out samples it covers."""
-    groups = data.groups(by)
-    ng = len(np.unique(groups))
+    and ``reason`` says how many held-out samples it covers.  Folds: :mod:`gearspec.core.crossval`."""
+    from .core.crossval import held_out
+
+    ng = len(np.unique(data.groups(by)))
     if ng < 2:
         return None, (f"cross-validation needs two held-out {by}s or more; the data have {ng}")
-    k = min(folds, ng)
-    fold = _folds(data, by, k)
-    sse, n = 0.0, 0
-    failed: list[str] = []
-    ran = 0
-    for f in range(k):
-        test = fold == f
-        if not test.any() or test.all():
-            continue
-        ran += 1
-        try:
-            m = fit_fn(data.subset(~test))
-            t = data.subset(test)
-            r = m.residual(t) if residual is None else residual(m, t)
-        except InputError as exc:
-            failed.append(str(exc))
-            continue
-        r = r[np.isfinite(r)]
-        sse += float(r @ r)
-        n += len(r)
+
+    def score(m, test):
+        t = data.subset(test)
+        r = np.asarray(m.residual(t) if residual is None else residual(m, t), dtype=float)
+        return np.where(np.isfinite(r), r * r, np.nan)
+
+    h = held_out(_folds(data, by, folds), lambda train: fit_fn(data.subset(train)), score)
+    n, failed = h.covered, h.failed
     if not n:
         why = failed[0] if failed else f"every {by} falls into one fold"
         return None, (f"cross-validation over {ng} {by}s could not run: no fold could be fitted without its "
                       f"{by}s and predict them ({why})")
     if n < len(data):
-        return math.sqrt(sse / n), (f"from {n} of {len(data)} samples: {len(failed)} of {ran} folds could not be "
-                                    f"fitted without their {by}s ({failed[0] if failed else 'no test data'})")
-    return math.sqrt(sse / n), None
+        return h.rmse, (f"from {n} of {len(data)} samples: {len(failed)} of {h.ran} folds could not be "
+                        f"fitted without their {by}s ({failed[0] if failed else 'no test data'})")
+    return h.rmse, None
 
 
 def refit(model: FrictionModel, data: FitData, **overrides) -> FrictionModel:
@@ -905,12 +876,9 @@ def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *,
 
 
 def _n_params(m: FrictionModel) -> int:
-    n = 0
-    for p in m.directions.values():
-        n += sum(1 for k in m.law_spec.params if p.get(k) is not None)
-        n += sum(3 if h.get("law", "exp") != "const" else 2 for h in p["harmonics"])
-    return n + sum(len([k for k in t if k not in ("kind", "label", "direction", "law") and not k.endswith("_se")])
-                   for t in m.terms)
+    from .core.crossval import n_params
+
+    return n_params(m)
 
 
 # ---------------------------------------------------------------------- the published SILO4 procedure

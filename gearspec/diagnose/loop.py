@@ -46,6 +46,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from ..core.crossval import critical_z, deal_folds, group_summary, splits, z_statistic
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
@@ -67,27 +68,13 @@ KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "
 
 
 def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
-    """Fold of every held-out group: groups sorted by direction and speed, dealt round-robin per
-    direction (every fold spans the speed range of both directions)."""
-    gt = dd.group_table()
-    k = max(2, min(folds, len(gt)))
-    out = np.zeros(len(gt), int)
-    for d in (1, -1):
-        sel = gt[gt["direction"] == d].sort_values(["speed", "group"])
-        out[sel["group"].to_numpy()] = np.arange(len(sel)) % k
-    # directions with few groups: rotate so that both directions do not always start in fold 0
-    neg = gt[gt["direction"] == -1].sort_values(["speed", "group"])
-    if len(neg):
-        off = len(gt[gt["direction"] == 1]) % k
-        out[neg["group"].to_numpy()] = (np.arange(len(neg)) + off) % k
-    return out
-
-
-def critical_z(alpha: float, candidates: int, groups: int) -> float:
-    """The value the held-out Z must reach: the one-sided t quantile at ``alpha / candidates``
-    (Bonferroni over the round's candidates, at least one) with ``groups - 1`` degrees of freedom
-    (at least one)."""
-    return float(stats.t.isf(alpha / max(candidates, 1), max(groups - 1, 1)))
+    """Fold of every held-out group (``dd``'s group order) by THE rule of
+    :mod:`gearspec.core.crossval`: groups sorted by direction and speed (mean ``|v|`` over the
+    group's observations, ties by group id), dealt round-robin, the negative direction continuing
+    where the positive one stopped."""
+    gid = dd.fit.groups(dd.by)[dd.index]
+    ids, sign, speed = group_summary(gid, dd.at("direction"), dd.at("v"))
+    return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, gid[dd.starts])]
 
 
 def relative_error(y, prediction) -> float:
@@ -157,8 +144,8 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
     p1 = np.zeros(len(dd))
     props = []
     n_par = 0
-    for f in range(rnd.K):
-        train = rnd.fold != f
+    for _, test in splits(rnd.fold):
+        train = ~test
         rows = np.flatnonzero(~rnd.rows(train))
         beta0 = rnd.beta(train)
         p0 = rnd.X[rows] @ beta0
@@ -189,22 +176,14 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
     ng = dd.n_groups
     sse0 = np.zeros(ng)
     sse1 = np.zeros(ng)
-    num = 0.0
-    var = 0.0
     fold_d = np.zeros(rnd.K)
-    fold_of_group = rnd.fold
     for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-        a0, a1, dl, an = r0[a:z], r1[a:z], delta[a:z], rn[a:z]
-        sse0[g] = float(a0 @ a0)
-        sse1[g] = float(a1 @ a1)
-        num += float(a0 @ dl)
-        whole = float(an @ dl) ** 2
-        blocks = sum(float(b1 @ b2) ** 2 for b1, b2 in zip(np.array_split(an, 8), np.array_split(dl, 8)))
-        var += max(whole, blocks)
-        fold_d[fold_of_group[g]] += sse0[g] - sse1[g]
+        sse0[g] = float(r0[a:z] @ r0[a:z])
+        sse1[g] = float(r1[a:z] @ r1[a:z])
+        fold_d[rnd.fold[g]] += sse0[g] - sse1[g]
     N = len(dd)
     drop = float(sse0.sum() - sse1.sum())
-    z = num / math.sqrt(var) if var > 0 else (math.inf if num > 0 else 0.0)
+    z = z_statistic(r0, delta, rn, dd.starts, dd.stops)
     tot = float(np.abs(fold_d).sum())
     cons = float(np.clip(fold_d, 0, None).sum() / tot) if tot > 0 else 0.0
     hb = math.sqrt(sse0.sum() / N)
@@ -897,15 +876,7 @@ def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, mi
             _, p_wo = pred(st_wo)
             r0 = vd.y - p_wo
             r1 = vd.y - p_full
-            delta = p_full - p_wo
-            num, var = 0.0, 0.0
-            for a, z in zip(vd.starts, vd.stops):
-                num += float(r0[a:z] @ delta[a:z])
-                whole = float(r1[a:z] @ delta[a:z]) ** 2
-                blk = sum(float(b1 @ b2) ** 2 for b1, b2 in zip(np.array_split(r1[a:z], 8),
-                                                                 np.array_split(delta[a:z], 8)))
-                var += max(whole, blk)
-            zv = num / math.sqrt(var) if var > 0 else 0.0
+            zv = z_statistic(r0, p_full - p_wo, r1, vd.starts, vd.stops)
             rm0 = float(np.sqrt(np.mean(r0 ** 2)))
             rm1 = float(np.sqrt(np.mean(r1 ** 2)))
             gain = (rm0 - rm1) / rm0 if rm0 > 0 else 0.0

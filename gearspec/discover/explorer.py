@@ -16,6 +16,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from ..core.crossval import n_params as _n_params
 from ..errors import InputError
 from ..jsonsafe import plain
 from ..fitdata import FitData
@@ -890,15 +891,6 @@ def _inclusion_table(lib: Library, prob: np.ndarray, M, stage: str = "", thresho
 
 
 # ---------------------------------------------------------------------- references
-def _n_params(m: FrictionModel) -> int:
-    n = 0
-    for p in m.directions.values():
-        n += sum(1 for k in m.law_spec.params if p.get(k) is not None)
-        for h in p["harmonics"]:
-            n += 2 + (1 if h.get("law", "exp") != "const" and h.get("decay") else 0)
-    return n
-
-
 def _segment_sse(data: FitData, model: FrictionModel, M: Moments, mask=None) -> np.ndarray:
     sub = data if mask is None else data.subset(mask)
     r = model.residual(sub)
@@ -969,5 +961,5 @@ def _published(data: FitData, M: Moments, name: str, model: FrictionModel) -> Re
     except InputError as exc:
         return Reference(name, "published", None, None, None, None, model, note=f"cannot be evaluated: {exc}")
     rm = math.sqrt(float(np.sum(sse)) / M.N)
-    return Reference(name, "published", rm, rm, _n_params(model) + sum(1 for _ in model.terms), sse, model,
+    return Reference(name, "published", rm, rm, _n_params(model), sse, model,
                      note="parameters as published; not fitted here, so its held-out error is its error on all data")

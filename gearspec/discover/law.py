@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize
 
+from ..core.crossval import deal_folds, group_summary, held_out
 from ..model import FrictionModel
 from .library import FAMILIES, _g
 from .moments import Moments
@@ -84,20 +85,13 @@ def complexity(parts) -> int:
 
 
 def fold_ids(m: Moments, by: str = "segment", folds: int = 5) -> np.ndarray:
-    """Fold of every segment: groups (segments or runs) sorted by direction and speed and dealt
-    round robin within each direction, so that every fold spans the speed range of both
-    directions (the rule of :func:`gearspec.identify.holdout_rmse`)."""
+    """Fold of every segment of ``m``: its group's (segment's or run's) fold by THE rule of
+    :mod:`gearspec.core.crossval`, from the same group summaries as :func:`gearspec.identify.fit`
+    and the closed loop (direction, mean ``|v|`` over the group's samples, ties by group id)."""
     g = m.groups(by)
-    ug = np.unique(g)
-    k = max(2, min(folds, len(ug)))
-    key = sorted((int(np.sign(np.sum(m.direction[g == u] * m.n[g == u]))),
-                  float(np.average(m.speed[g == u], weights=m.n[g == u])), int(u)) for u in ug)
-    fold_of, count = {}, {}
-    for d, _, u in key:
-        c = count.get(d, 0)
-        fold_of[u] = c % k
-        count[d] = c + 1
-    return np.array([fold_of[int(u)] for u in g])
+    vabs = m.speed if m.vabs is None else m.vabs
+    ids, sign, speed = group_summary(g, m.direction, vabs, weight=m.n)
+    return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, g)]
 
 
 # ---------------------------------------------------------------------- design
@@ -395,21 +389,23 @@ def _covariance(fit: LawFit, m: Moments, X: np.ndarray) -> None:
 def cross_validate(m: Moments, parts, fold: np.ndarray, *, z0=None, refine: bool = True):
     """Held-out residual sum of squares of every segment, each fold predicted by the structure
     refitted (all parameters) on the other folds; and the held-out predictions (S, K) on the
-    segments' pseudo rows (for comparing two laws' predictions)."""
+    segments' pseudo rows (for comparing two laws' predictions).  The loop:
+    :func:`gearspec.core.crossval.held_out`."""
     full = m
     lay = _layout(tuple(parts), m)
     m = m.restrict({b for _, _, b in lay.cols})      # once, not per fold
     kfull = np.array([full.index(b) for b in m.basis], dtype=int)
-    out = np.zeros(m.S)
     beta = np.zeros((m.S, full.K))
-    for f in np.unique(fold):
-        test = fold == f
-        tr = m.take(np.flatnonzero(~test))
-        fit = fit_law(tr, parts, z0=z0, refine=refine, max_nfev=40, scan=False)
+
+    def score(fit, test):
         mt = m.take(np.flatnonzero(test))
-        out[test] = fit.predict_sse(mt)
         beta[np.ix_(test, kfull)] = fit.basis_coefficients(mt)
-    return out, beta
+        return fit.predict_sse(mt)
+
+    def refit(train):
+        return fit_law(m.take(np.flatnonzero(train)), parts, z0=z0, refine=refine, max_nfev=40, scan=False)
+
+    return held_out(fold, refit, score, catch=()).sse, beta
 
 
 def cross_validate_linear(m: Moments, fit: LawFit, fold: np.ndarray) -> np.ndarray:
@@ -421,20 +417,21 @@ def cross_validate_linear(m: Moments, fit: LawFit, fold: np.ndarray) -> np.ndarr
     m = m.restrict({b for _, _, b in fit.layout.cols})
     A = _multipliers(fit.parts, fit.layout, m, fit.z)
     kidx = _basis_index(fit.layout, m)
-    X = (A[:, None, :] * m.P[:, :, kidx]).reshape(m.S * m.K, -1)
-    Xs = X.reshape(m.S, m.K, -1)
+    Xs = A[:, None, :] * m.P[:, :, kidx]                      # (S, K, p)
     kfull = np.array([full.index(b) for _, _, b in fit.layout.cols], dtype=int)
-    out = np.zeros(m.S)
     beta = np.zeros((m.S, full.K))
-    for f in np.unique(fold):
-        test = fold == f
-        w = _lstsq(Xs[~test].reshape(-1, X.shape[1]), m.q[~test].reshape(-1))
+
+    def score(w, test):
         r = m.q[test] - np.einsum("skp,p->sk", Xs[test], w)
-        out[test] = np.sum(r * r, axis=1) + m.rest[test]
         bt = np.zeros((int(test.sum()), full.K))
         np.add.at(bt.T, kfull, (A[test] * w).T)
         beta[test] = bt
-    return out, beta
+        return np.sum(r * r, axis=1) + m.rest[test]
+
+    def refit(train):
+        return _lstsq(Xs[train].reshape(-1, Xs.shape[2]), m.q[train].reshape(-1))
+
+    return held_out(fold, refit, score, catch=()).sse, beta
 
 
 # ---------------------------------------------------------------------- reading a fitted law

@@ -32,12 +32,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core.reduction import harmonic_columns
 from ..errors import InputError
 from ..fitdata import FitData
 
 __all__ = ["Moments", "moments"]
 
-_TWO_PI = 2.0 * np.pi
+_TWO_PI = 2.0 * np.pi     # used by .library
 
 
 @dataclass
@@ -55,6 +56,9 @@ class Moments:
         Their labels (None where unlabelled).
     segment, run, direction, speed, n : ndarray, (S,)
         Segment id, run id, direction (+1/-1), speed (|mean velocity|) and sample count.
+    vabs : ndarray, (S,) or None
+        Mean |velocity| over the segment's samples (the speed the held-out folds are dealt by,
+        :mod:`gearspec.core.crossval`); equal to ``speed`` where the velocity keeps its sign.
     B, c : ndarray, (S, K, K) and (S, K)
         Gram matrix of the bases and their products with the friction, per segment.
     yy : ndarray, (S,)
@@ -98,6 +102,7 @@ class Moments:
     cycles: np.ndarray | None = None
     noise: np.ndarray | None = None
     t_ref: float | None = None
+    vabs: np.ndarray | None = None
     unit: str = "rad"
     notes: list = field(default_factory=list)
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
@@ -136,7 +141,8 @@ class Moments:
                        speed=t(self.speed), n=t(self.n), B=t(self.B), c=t(self.c), P=t(self.P), q=t(self.q),
                        yy=t(self.yy),
                        rest=t(self.rest), load=t(self.load), temperature=t(self.temperature),
-                       cycles=t(self.cycles), noise=t(self.noise), notes=list(self.notes), _cache={})
+                       cycles=t(self.cycles), noise=t(self.noise), vabs=t(self.vabs), notes=list(self.notes),
+                       _cache={})
 
     def profile(self, keep, min_cycles: float | None = None) -> "Moments":
         """The moments of the bases ``keep`` with the others profiled out *per segment* (each
@@ -285,6 +291,7 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     c = np.zeros((S, K))
     yy = np.zeros(S)
     speed = np.zeros(S)
+    vabs = np.zeros(S)
     direction = np.zeros(S, np.int64)
     run = np.zeros(S, np.int64)
     n = np.zeros(S, np.int64)
@@ -302,6 +309,7 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
         dirs = data.direction[ii]
         d = int(np.sign(np.sum(dirs))) or int(dirs[0])
         speed[s] = abs(vm)
+        vabs[s] = float(np.mean(np.abs(v)))
         direction[s] = d
         run[s] = int(data.run[ii[0]])
         n[s] = len(ii)
@@ -321,15 +329,8 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
             col += 1
         if F:
             th = np.asarray(data.theta[ii], dtype=float)
-            m = float(np.mean(th))
             cycles[s] = freqs * (float(np.ptp(th)) if len(th) > 1 else 0.0)
-            # phases about the segment's mean position (exact in double precision), rotated back
-            ph = _TWO_PI * np.outer(th - m, freqs)
-            sn, cs = np.sin(ph), np.cos(ph)
-            rot = _TWO_PI * freqs * m
-            cr, sr = np.cos(rot), np.sin(rot)
-            Phi[:, col::2] = sn * cr + cs * sr
-            Phi[:, col + 1::2] = cs * cr - sn * sr
+            Phi[:, col::2], Phi[:, col + 1::2] = harmonic_columns(th, freqs)   # phases about the segment's mean
         y = data.y[ii]
         B[s] = Phi.T @ Phi
         c[s] = Phi.T @ y
@@ -340,7 +341,7 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
                      "segment's mean velocity")
     return Moments(basis=tuple(basis), frequencies=freqs, labels=labels, segment=sids, run=run, direction=direction,
                    speed=speed, n=n, B=B, c=c, yy=yy, load=seg_load, temperature=seg_temp, cycles=cycles,
-                   noise=_fill_noise(noise), t_ref=t_ref, unit=data.unit, notes=notes)
+                   noise=_fill_noise(noise), t_ref=t_ref, vabs=vabs, unit=data.unit, notes=notes)
 
 
 def _noise_variance(Phi, y, B, c, blocks: int = 10) -> float:
