@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from gearspec.gears import GearTrain, load_gear
-from gearspec.recording import Recording
 from gearspec.simulate import Ripple, plateau_recording
 from gearspec.spectrum import (LombScargle, analyze, analyze_segment, harmonic_fit, min_degree_for_cycles,
                                order_spectrum, resample_over_position)
