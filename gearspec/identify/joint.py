@@ -47,14 +47,14 @@ import numpy as np
 import pandas as pd
 from scipy import optimize
 
-from . import laws
-from .errors import InputError, warn
-from .fitdata import FitData
-from .gears import GearTrain, load_gear
-from .model import LAWS, RPM, FrictionModel
-from .spectrum import MEASURABLE_FRACTION, position_nyquist
-from .terms.registry import Basis as _Basis
-from .terms.registry import basis as _basis
+from .. import laws
+from ..errors import InputError, warn
+from ..fitdata import FitData
+from ..gears import GearTrain, load_gear
+from ..model import LAWS, RPM, FrictionModel
+from ..spectrum import MEASURABLE_FRACTION, position_nyquist
+from ..terms.registry import Basis as _Basis
+from ..terms.registry import basis as _basis
 
 __all__ = ["fit", "silo4_published", "holdout_rmse", "holdout", "compare", "refit", "harmonic_specs", "fit_efficiency",
            "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats", "ConvergenceError", "segment_errors", "identify_recording", "FitResult",
@@ -172,7 +172,7 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
 
 def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cycles: float,
                        nyquist_fraction: float) -> dict:
-    from .core.reduction import harmonic_columns
+    from ..core.reduction import harmonic_columns
 
     K = len(freqs)
     P = 1 + 2 * K
@@ -783,7 +783,7 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
 # ---------------------------------------------------------------------- held-out errors
 def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
     """Fold of every sample: its segment's (or run's) fold by THE rule of :mod:`gearspec.core.crossval`."""
-    from .core.crossval import row_folds
+    from ..core.crossval import row_folds
 
     return row_folds(data.groups(by), data.direction, data.v, folds)
 
@@ -807,7 +807,7 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
     groups, and enough speeds left for the law) -- and ``reason`` says which, in one sentence;
     never the in-sample error in its place.  When some folds fail, ``rmse`` comes from the others
     and ``reason`` says how many held-out samples it covers.  Folds: :mod:`gearspec.core.crossval`."""
-    from .core.crossval import held_out
+    from ..core.crossval import held_out
 
     ng = len(np.unique(data.groups(by)))
     if ng < 2:
@@ -876,7 +876,7 @@ def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *,
 
 
 def _n_params(m: FrictionModel) -> int:
-    from .core.crossval import n_params
+    from ..core.crossval import n_params
 
     return n_params(m)
 
@@ -1280,7 +1280,7 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     compare_with : sequence of str, optional
         Other laws fitted to the same data (default: the simpler ones).
     """
-    from .segment import find_segments
+    from ..segment import find_segments
 
     gear = load_gear(gear) if gear is not None else rec.gear
     seg = segmentation if segmentation is not None else find_segments(rec)
