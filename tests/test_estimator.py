@@ -2,7 +2,6 @@
 a trailing underscore, ``get_params`` / ``set_params`` / ``clone``, and ``refit`` rebuilding the
 estimator from the settings a model records in ``meta["fit"]`` (CONTRACTS.md)."""
 
-import numpy as np
 import pytest
 
 from gearspec import identify
@@ -23,8 +22,9 @@ def data():
     """A twin with known friction: 6 plateau speeds per direction (rad/s), 0.1 % torque noise."""
     speeds = [0.5, 1.0, 2.0, 5.0, 15.0, 60.0]
     sp = speeds + [-s for s in speeds]
-    rec, _ = model_recording(FrictionModel("silo4", TRUTH, TRUTH), sp, duration=[max(1.5, 3 / (0.8 * abs(v))) for v in sp],
-                             fs=500, ramp=0.1, noise=1e-4, seed=3)
+    dur = [max(1.5, 3 / (0.8 * abs(v))) for v in sp]        # s: three cycles of the line at least
+    rec, _ = model_recording(FrictionModel("silo4", TRUTH, TRUTH), sp, duration=dur, fs=500, ramp=0.1,
+                             noise=1e-4, seed=3)
     return FitData.from_recording(rec)
 
 

@@ -18,9 +18,9 @@ from .. import laws
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import LAWS, RPM, FrictionModel
+from . import validate
 from .joint import fit
 from .stats import ConvergenceError
-from .validate import holdout
 
 __all__ = ["efficiency_model", "fit_efficiency", "fit_catalog"]
 
@@ -112,13 +112,10 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
                       meta={"fit": {"law": law, "method": "efficiency", "ratio": ratio}})
     m.rmse = float(math.sqrt(np.mean(r * r)))
     if holdout:
-        m.rmse_holdout, m.rmse_holdout_reason = _eff_holdout(data, law, ratio, holdout, folds)
+        m.rmse_holdout, m.rmse_holdout_reason = validate.holdout(
+            lambda tr: fit_efficiency(tr, law, ratio=ratio), data, by=holdout, folds=folds,
+            residual=lambda mf, t: efficiency_model(mf, t.v, t.load, ratio) - t.y)
     return m
-
-
-def _eff_holdout(data, law, ratio, by, folds):
-    return holdout(lambda tr: fit_efficiency(tr, law, ratio=ratio), data, by=by, folds=folds,
-                       residual=lambda m, t: efficiency_model(m, t.v, t.load, ratio) - t.y)
 
 
 def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_extrapolated: bool = True

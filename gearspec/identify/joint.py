@@ -42,8 +42,9 @@ from ..model import LAWS, FrictionModel
 from ..terms.registry import Basis as _Basis
 from ..terms.registry import basis as _basis
 from ..terms.shapes import amplitude_law
+from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
+from .stats import speed_ranges
 from .validate import _safe_rmse, holdout
-from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, segment_stats, speed_ranges
 
 __all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous"]
 
@@ -67,8 +68,9 @@ class _Problem:
     def factors(self, decays):
         """(S, K) amplitude factor of each harmonic at each segment's speed, the speed held within
         the harmonic's ``speed_range`` (as :meth:`FrictionModel.evaluate` does)."""
-        return np.column_stack([amplitude_law(law, np.clip(self.stats.speed, *self.ranges[k]), decays[k])
-                                for k, law in enumerate(self.amp_law)]) if self.K else np.ones((len(self.stats.speed), 0))
+        sp = self.stats.speed
+        return np.column_stack([amplitude_law(law, np.clip(sp, *self.ranges[k]), decays[k])
+                                for k, law in enumerate(self.amp_law)]) if self.K else np.ones((len(sp), 0))
 
     def design(self, nonlin_base, decays):
         """M (S, P, L): local coefficients = M @ lin, lin = [base lin..., a_1, c_1, ...]."""
@@ -229,9 +231,8 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         ok = False
     se = np.sqrt(np.clip(np.diag(cov), 0, None)) if ok else np.full(p, np.nan)
     on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
-    out = {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2, "dof": dof,
-           "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
-    return out
+    return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2,
+            "dof": dof, "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
 
 
 def _jacobian(fun, z):
@@ -269,14 +270,8 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
         ia, ic = nb + 2 * k, nb + 2 * k + 1
         A = float(math.hypot(a, c))
         phi = float(math.atan2(c, a))
-        if A > 0 and np.all(np.isfinite(cov)):
-            ga = np.array([a / A, c / A])
-            gp = ga[::-1] * np.array([-1.0, 1.0]) / A     # (-c, a) / A^2 without A^2 (denormal A)
-            C2 = cov[np.ix_([ia, ic], [ia, ic])]
-            a_se = float(math.sqrt(max(ga @ C2 @ ga, 0)))
-            p_se = float(math.sqrt(max(gp @ C2 @ gp, 0)))
-        else:
-            a_se = p_se = float("nan")
+        nan2 = (float("nan"),) * 2
+        a_se, p_se = pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov)) else nan2
         entry = {"frequency": float(h["frequency"]), "amplitude": A, "amplitude_se": a_se,
                  "decay": float(sol["decays"][k]), "phase": phi, "phase_se": p_se,
                  "law": prob.amp_law[k]}
@@ -332,19 +327,9 @@ def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[
     return out
 
 
-def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, **kw):
-    """One direction's fit; a linear-algebra failure (an SVD or eigen-solver that does not
-    converge: lines far too many or too close for the data) is a :class:`ConvergenceError` with
-    one sentence, never a traceback."""
-    try:
-        return _fit_one_direction_(sub, law, specs, dname, **kw)
-    except np.linalg.LinAlgError as exc:
-        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
-                               f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
-
-
-def _fit_one_direction_(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
-                        bootstrap, seed):
+def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
+                       bootstrap, seed):
+    """One direction's fit: ``(parameters, not_identified, notes)``."""
     notes: list[str] = []
     ni: dict[str, str] = {}
     freqs = [h["frequency"] for h in specs]
@@ -595,9 +580,14 @@ class JointFit:
                 for k in list(LAWS[law].params) + [h.get("label") or h["frequency"] for h in specs]:
                     not_identified[f"{dname}.{k}"] = f"no segment in the {dname} direction"
                 continue
-            directions[dname], ni, nt = _fit_one_direction(
-                sub, law, specs, dname, weights=self.weights, min_cycles=self.min_cycles, se=self.se,
-                init=None if self.init is None else self.init.params(dname), bootstrap=self.bootstrap, seed=self.seed)
+            try:
+                directions[dname], ni, nt = _fit_one_direction(
+                    sub, law, specs, dname, weights=self.weights, min_cycles=self.min_cycles, se=self.se,
+                    init=None if self.init is None else self.init.params(dname), bootstrap=self.bootstrap,
+                    seed=self.seed)
+            except np.linalg.LinAlgError as exc:  # an SVD or eigen-solver that does not converge: one sentence
+                raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
+                                       f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
             not_identified.update(ni)
             notes += nt
         settings = {"law": law, "harmonics": specs, "weights": self.weights, "se": self.se,

@@ -7,7 +7,6 @@ Units: friction and errors Nm (N), speeds rad/s (m/s).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Mapping
 
@@ -17,6 +16,7 @@ from ..core.crossval import n_params as _n_params
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import load_gear
+from ..jsonsafe import plain
 from ..model import FrictionModel
 from ..segment import find_segments
 from .joint import fit, refit
@@ -77,8 +77,7 @@ class FitResult:
     def to_dict(self) -> dict:
         """The ``gearspec fit --json`` form (CONTRACTS.md section 4) plus the comparison."""
         d = self.model.to_dict()
-        d["comparison"] = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
-                           for r in self.comparison.to_dict("records")]
+        d["comparison"] = plain(self.comparison.to_dict("records"))
         d["models"] = {name: m.to_dict() for name, m in self.models.items() if m is not self.model}
         return d
 

@@ -22,8 +22,8 @@ import pandas as pd
 
 from ..fitdata import FitData
 from ..model import RPM, FrictionModel
-from .stats import harmonic_specs, segment_stats
 from . import validate
+from .stats import harmonic_specs, pair_se, segment_stats
 from .validate import _safe_rmse
 
 __all__ = ["silo4_published", "line_amplitudes", "amplitudes_from_spectrum"]
@@ -52,12 +52,10 @@ def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.
                     continue
                 ia, ic = 1 + 2 * k, 2 + 2 * k
                 a_, c_ = st.beta_hat[i, ia], st.beta_hat[i, ic]
-                A = math.hypot(a_, c_)
-                g = np.array([a_, c_]) / A if A > 0 else np.zeros(2)
-                se = math.sqrt(max(g @ cov[np.ix_([ia, ic], [ia, ic])] @ g, 0.0)) if A > 0 else float("nan")
                 rows.append({"segment": int(sid), "direction": d, "speed": float(st.speed[i]),
-                             "label": h.get("label"), "frequency": h["frequency"], "amplitude": A,
-                             "amplitude_se": se, "phase": math.atan2(c_, a_)})
+                             "label": h.get("label"), "frequency": h["frequency"], "amplitude": math.hypot(a_, c_),
+                             "amplitude_se": pair_se(a_, c_, cov[np.ix_([ia, ic], [ia, ic])])[0],
+                             "phase": math.atan2(c_, a_)})
     return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
                                        "amplitude_se", "phase"])
 

@@ -7,6 +7,7 @@ position, friction Nm (N).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -18,7 +19,8 @@ from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
 from ..spectrum import MEASURABLE_FRACTION, position_nyquist
 
-__all__ = ["MIN_CYCLES", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges"]
+__all__ = ["MIN_CYCLES", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges",
+           "pair_se"]
 
 #: a segment counts towards a line where it covers at least this fraction of a cycle (the default
 #: of :func:`fit`; the closed loop uses the same rule for the speed range of an amplitude law)
@@ -177,3 +179,15 @@ def speed_ranges(stats: SegmentStats) -> np.ndarray:
         if m.any():
             out[k] = float(np.min(stats.speed[m])), float(np.max(stats.speed[m]))
     return out
+
+
+def pair_se(a: float, c: float, cov) -> tuple[float, float]:
+    """Standard errors of the amplitude ``hypot(a, c)`` and the phase ``atan2(c, a)`` (rad) of a line
+    fitted as ``a sin + c cos`` with covariance ``cov`` (2 x 2) of ``(a, c)``, by the delta method;
+    NaN for a zero amplitude.  ``a``, ``c`` and the amplitude in Nm (N)."""
+    A = math.hypot(a, c)
+    if not A > 0:
+        return float("nan"), float("nan")
+    ga = np.array([a / A, c / A])
+    gp = ga[::-1] * np.array([-1.0, 1.0]) / A     # (-c, a) / A^2 without A^2 (denormal A)
+    return float(math.sqrt(max(ga @ cov @ ga, 0))), float(math.sqrt(max(gp @ cov @ gp, 0)))
