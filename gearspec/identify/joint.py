@@ -41,7 +41,7 @@ from ..fitdata import FitData
 from ..model import LAWS, FrictionModel
 from ..terms.registry import Basis as _Basis
 from ..terms.registry import basis as _basis
-from ..terms.shapes import amplitude_law
+from ..terms.shapes import amplitude_law, clamp_speed
 from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
 from .stats import speed_ranges
 from .validate import _safe_rmse, holdout
@@ -69,7 +69,7 @@ class _Problem:
         """(S, K) amplitude factor of each harmonic at each segment's speed, the speed held within
         the harmonic's ``speed_range`` (as :meth:`FrictionModel.evaluate` does)."""
         sp = self.stats.speed
-        return np.column_stack([amplitude_law(law, np.clip(sp, *self.ranges[k]), decays[k])
+        return np.column_stack([amplitude_law(law, clamp_speed(sp, tuple(self.ranges[k])), decays[k])
                                 for k, law in enumerate(self.amp_law)]) if self.K else np.ones((len(sp), 0))
 
     def design(self, nonlin_base, decays):
