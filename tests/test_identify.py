@@ -396,7 +396,7 @@ def test_linear_algebra_failure_is_a_one_sentence_convergence_error(monkeypatch)
     def boom(*a, **k):
         raise np.linalg.LinAlgError("SVD did not converge")
 
-    monkeypatch.setattr(identify, "_make_problem", boom)
+    monkeypatch.setattr(identify.joint, "_make_problem", boom)
     data = FitData.from_recording(twin(random_truth(np.random.default_rng(6)), 6, speeds=[0.5, 2, 8, 30]))
     with pytest.raises(identify.ConvergenceError, match="did not converge in the positive direction.*fewer lines"):
         identify.fit(data, "silo4", harmonics=SPECS, holdout=None)

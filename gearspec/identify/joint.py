@@ -1,0 +1,644 @@
+"""The joint fit: weighted nonlinear least squares of all parameters of a direction together, on
+the samples themselves (amplitudes fitted in the position domain, not through logs of noisy
+amplitudes), with standard errors from the covariance (or a bootstrap over segments); as an
+estimator in the scikit-learn manner (:class:`JointFit`) and as a function (:func:`fit`).
+
+How it works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
+coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the friction level, and
+``A_k g_k(|v_s|)`` times ``cos phi_k``, ``sin phi_k`` of every harmonic), so the residual sum of
+squares of the segment is exactly ``(beta_s - beta_hat_s)^T G_s (beta_s - beta_hat_s) + const``
+with ``G_s = X_s^T X_s`` and ``beta_hat_s`` the segment's own least-squares coefficients (X_s: the
+columns 1, sin, cos at the samples' positions; :class:`~.stats.SegmentStats`).  One pass over the
+samples gives every ``G_s`` and ``beta_hat_s``; the fit then works on a few numbers per segment --
+exact, and independent of the number of samples.  Each segment is weighted by the inverse of its
+own residual variance (pure error: the variance left after its unrestricted local fit).  The law's
+linear parameters are solved in closed form for given nonlinear ones (variable projection:
+Stribeck velocity, decay constants), the nonlinear ones by ``scipy.optimize.least_squares`` from
+the registry's grid start (:mod:`gearspec.terms.registry`), and a last joint Gauss-Newton pass over
+all parameters gives the covariance.  This needs the velocity constant within a segment: the laws
+are evaluated at each segment's mean velocity (``FitData`` with ``velocity="segment"``), and a
+load-dependent law at the segment's mean load.
+
+Lola/CROPS: :func:`fit` with ``law="lola8"``/``"lola11"`` fits friction points (from
+:meth:`FitData.from_points` or the load-holding segments of a recording).
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import math
+import sys
+import warnings
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from scipy import optimize
+
+from ..errors import GearspecWarning, InputError
+from ..fitdata import FitData
+from ..model import LAWS, FrictionModel
+from ..terms.registry import Basis as _Basis
+from ..terms.registry import basis as _basis
+from ..terms.shapes import amplitude_law, clamp_speed
+from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
+from .stats import speed_ranges
+from .validate import _safe_rmse, holdout
+
+__all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous"]
+
+
+# ---------------------------------------------------------------------- the joint fit of one direction
+@dataclass
+class _Problem:
+    stats: SegmentStats
+    basis: _Basis
+    harmonics: list[dict]
+    decay_free: np.ndarray     # (K,) bool: decay fitted (else fixed 0)
+    amp_law: list[str]
+    weights: np.ndarray        # (S,)
+    Lt: np.ndarray             # (S, P, P): sqrt(w) diag(sqrt(lambda)) U^T
+    ranges: np.ndarray         # (K, 2): speed range of each amplitude law (:func:`speed_ranges`)
+
+    @property
+    def K(self):
+        return len(self.harmonics)
+
+    def factors(self, decays):
+        """(S, K) amplitude factor of each harmonic at each segment's speed, the speed held within
+        the harmonic's ``speed_range`` (as :meth:`FrictionModel.evaluate` does)."""
+        sp = self.stats.speed
+        return np.column_stack([amplitude_law(law, clamp_speed(sp, tuple(self.ranges[k])), decays[k])
+                                for k, law in enumerate(self.amp_law)]) if self.K else np.ones((len(sp), 0))
+
+    def design(self, nonlin_base, decays):
+        """M (S, P, L): local coefficients = M @ lin, lin = [base lin..., a_1, c_1, ...]."""
+        st = self.stats
+        S, P = st.g.shape
+        nb = len(self.basis.lin)
+        L = nb + 2 * self.K
+        M = np.zeros((S, P, L))
+        if nb:
+            M[:, 0, :nb] = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
+        fac = self.factors(decays) * st.sampled
+        for k in range(self.K):
+            M[:, 1 + 2 * k, nb + 2 * k] = fac[:, k]
+            M[:, 2 + 2 * k, nb + 2 * k + 1] = fac[:, k]
+        return M
+
+    def solve_linear(self, nonlin_base, decays):
+        M = self.design(nonlin_base, decays)
+        A = np.einsum("spq,sql->spl", self.Lt, M).reshape(-1, M.shape[2])
+        rhs = np.einsum("spq,sq->sp", self.Lt, self.stats.beta_hat).ravel()
+        nonneg = [j for j, nm in enumerate(self.basis.lin) if nm in self.basis.nonneg]
+        if nonneg:
+            lo = np.full(A.shape[1], -np.inf)
+            lo[nonneg] = 0.0
+            sol = optimize.lsq_linear(A, rhs, bounds=(lo, np.inf), method="bvls").x
+        else:
+            sol = np.linalg.lstsq(A, rhs, rcond=None)[0]
+        return sol, A @ sol - rhs
+
+    def residual_full(self, lin, nonlin_base, decays):
+        M = self.design(nonlin_base, decays)
+        beta = np.einsum("spl,l->sp", M, lin)
+        return np.einsum("spq,sq->sp", self.Lt, beta - self.stats.beta_hat).ravel()
+
+    def rss_const(self):
+        return float(np.sum(self.weights * self.stats.rss_hat))
+
+
+def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
+    basis = _basis(law)
+    S, P = stats.g.shape
+    if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
+        w = 1.0 / stats.sigma2
+        w = w / np.median(w)
+    elif weights in ("segment", "uniform"):
+        w = np.ones(S)
+    else:
+        raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
+    Lt = np.zeros((S, P, P))
+    for i in range(S):
+        lam, U = np.linalg.eigh(stats.G[i])
+        lam = np.clip(lam, 0.0, None)
+        Lt[i] = math.sqrt(w[i]) * (np.sqrt(lam)[:, None] * U.T)
+    decay_free = np.array([h.get("decay", True) is not False and h.get("law", "exp") != "const" for h in harmonics],
+                          bool)
+    amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
+    return _Problem(stats, basis, harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
+
+
+def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
+    """Variable projection from a grid start, then one joint least-squares pass for the covariance."""
+    st = prob.stats
+    nb_nl = len(prob.basis.nonlin)
+    free = np.flatnonzero(prob.decay_free)
+    spd = st.speed[st.speed > 0]
+    # grids for the start: Stribeck velocity over the plateau speeds, decays from 0
+    lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
+    # the Stribeck velocity is searched within the bounds and from the grid the registry declares
+    # (:class:`gearspec.terms.Nonlinear`: outside [lo/10, 2 hi] it is not identifiable); a result
+    # on a bound is reported as not identified
+    nl_lo, nl_hi = prob.basis.search[0].bounds(lo, hi) if nb_nl else (1.0, 1.0)
+    vs_bounds = (math.log(nl_lo), math.log(nl_hi))
+    if nb_nl:
+        grid_vs = prob.basis.search[0].grid(lo, hi)
+        if init and init.get("v_s") and nl_lo < float(init["v_s"]) < nl_hi:
+            grid_vs = np.append(grid_vs, float(init["v_s"]))
+    else:
+        grid_vs = [None]
+    dec0 = np.zeros(prob.K)
+    if init:
+        for k, h in enumerate(init.get("harmonics", [])[:prob.K]):
+            if h.get("decay") is not None and prob.decay_free[k]:
+                dec0[k] = float(h["decay"])
+    costs = []
+    for vs in grid_vs:
+        nl = [] if vs is None else [vs]
+        _, r = prob.solve_linear(nl, dec0)
+        costs.append(float(r @ r))
+    # starts: every local minimum of the grid cost (the best three), not only the lowest grid
+    # point -- a sharp minimum (noiseless or precise points) can fall between two grid points and
+    # cost more there than a broad local minimum elsewhere does
+    costs = np.asarray(costs)
+    if nb_nl and len(costs) > 2:
+        order = np.argsort(np.asarray(grid_vs, dtype=float), kind="stable")
+        c_o = costs[order]
+        is_min = np.r_[c_o[0] <= c_o[1], (c_o[1:-1] <= c_o[:-2]) & (c_o[1:-1] <= c_o[2:]), c_o[-1] <= c_o[-2]]
+        mins = order[is_min]
+        starts = [[float(grid_vs[i])] for i in mins[np.argsort(costs[mins], kind="stable")][:3]]
+    else:
+        starts = [[] if grid_vs[int(np.argmin(costs))] is None else [float(grid_vs[int(np.argmin(costs))])]]
+    # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
+    sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
+    x0 = np.concatenate([np.log(starts[0]) if nb_nl else [], dec0[free] / sscale])
+
+    def unpack(x):
+        nl = list(np.exp(x[:nb_nl])) if nb_nl else []
+        dec = dec0.copy()
+        dec[free] = x[nb_nl:] * sscale
+        return nl, dec
+
+    def proj(x):
+        nl, dec = unpack(x)
+        return prob.solve_linear(nl, dec)[1]
+
+    if len(x0):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            lb = np.concatenate([[vs_bounds[0]] * nb_nl, np.full(len(free), -np.inf)])
+            ub = np.concatenate([[vs_bounds[1]] * nb_nl, np.full(len(free), np.inf)])
+            res = None
+            for st_ in starts:
+                x0 = np.clip(np.concatenate([np.log(st_) if nb_nl else [], dec0[free] / sscale]), lb + 1e-9, ub - 1e-9)
+                r_ = optimize.least_squares(proj, x0, bounds=(lb, ub), method="trf", x_scale="jac", max_nfev=400)
+                if res is None or (np.all(np.isfinite(r_.x)) and r_.cost < res.cost):
+                    res = r_
+        if not np.all(np.isfinite(res.x)):
+            raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
+        x_opt = res.x
+        status = res.status
+    else:
+        x_opt = x0
+        status = 1
+    nl, dec = unpack(x_opt)
+    lin, _ = prob.solve_linear(nl, dec)
+    # joint pass over all parameters: covariance from the Jacobian at the optimum
+    nb = len(prob.basis.lin)
+
+    def full(z):
+        lin_ = z[:len(lin)]
+        x = z[len(lin):]
+        nl_, dec_ = unpack(x)
+        return prob.residual_full(lin_, nl_, dec_)
+
+    z = np.concatenate([lin, x_opt])
+    r = full(z)
+    J = _jacobian(full, z)
+    rss = float(r @ r) + prob.rss_const()
+    N = int(np.sum(st.n))
+    p = len(z)
+    dof = max(N - p, 1)
+    s2 = rss / dof
+    JtJ = J.T @ J
+    try:
+        cov = np.linalg.inv(JtJ) * s2
+        ok = np.all(np.isfinite(cov))
+    except np.linalg.LinAlgError:
+        cov = np.full((p, p), np.nan)
+        ok = False
+    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if ok else np.full(p, np.nan)
+    on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
+    return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2,
+            "dof": dof, "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
+
+
+def _jacobian(fun, z):
+    f0 = fun(z)
+    J = np.empty((len(f0), len(z)))
+    for j in range(len(z)):
+        h = 1e-6 * max(abs(z[j]), 1e-8)
+        zp = z.copy()
+        zp[j] += h
+        zm = z.copy()
+        zm[j] -= h
+        J[:, j] = (fun(zp) - fun(zm)) / (2 * h)
+    return J
+
+
+def _direction_params(prob: _Problem, sol: dict) -> dict:
+    """Fitted values and standard errors of one direction, in the FrictionModel form."""
+    basis = prob.basis
+    lin, se, cov = sol["lin"], sol["se"], sol["cov"]
+    nb = sol["n_lin"]
+    L = len(lin)
+    P: dict = {}
+    for j, name in enumerate(basis.lin):
+        P[name] = float(lin[j])
+        P[name + "_se"] = float(se[j])
+    # nonlinear base parameters are fitted as logs: delta method
+    for j, name in enumerate(basis.nonlin):
+        val = float(sol["nonlin"][j])
+        P[name] = val
+        P[name + "_se"] = float(val * se[L + j])
+    harm = []
+    free = list(sol["free"])
+    for k, h in enumerate(prob.harmonics):
+        a, c = lin[nb + 2 * k], lin[nb + 2 * k + 1]
+        ia, ic = nb + 2 * k, nb + 2 * k + 1
+        A = float(math.hypot(a, c))
+        phi = float(math.atan2(c, a))
+        nan2 = (float("nan"),) * 2
+        a_se, p_se = pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov)) else nan2
+        entry = {"frequency": float(h["frequency"]), "amplitude": A, "amplitude_se": a_se,
+                 "decay": float(sol["decays"][k]), "phase": phi, "phase_se": p_se,
+                 "law": prob.amp_law[k]}
+        if k in free:
+            j = L + sol["nb_nl"] + free.index(k)
+            entry["decay_se"] = float(se[j] * sol["sscale"])
+        else:
+            entry["decay_se"] = 0.0 if prob.amp_law[k] == "const" else float("nan")
+        if h.get("label"):
+            entry["label"] = h["label"]
+        entry["segments"] = int(prob.stats.active[:, k].sum())
+        if np.all(np.isfinite(prob.ranges[k])):
+            entry["speed_range"] = [float(prob.ranges[k][0]), float(prob.ranges[k][1])]
+        harm.append(entry)
+    P["harmonics"] = harm
+    return P
+
+
+def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard
+    errors below 0) of each direction: friction
+    that falls with speed over the whole measured range is rarely physical, and more often an
+    inertia, a channel lag or aliasing the model does not hold, or plateau speeds too close
+    together to tell viscous from Stribeck friction.  Each flag is one sentence, added to
+    ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]`` (``"direction.parameter"
+    -> sentence``); returns the sentences."""
+    out = []
+    flags = model.meta.setdefault("flags", {})
+    su = "rad/s" if model.unit == "rad" else "m/s"
+    for dname, p in model.directions.items():
+        for k in ("viscous", "b"):
+            val = p.get(k)
+            if k not in model.law_spec.params or val is None or not val < 0:
+                continue
+            se = p.get(k + "_se")
+            # a value within two standard errors of 0 is no finding (and none without an error)
+            if se is None or not np.isfinite(se) or not val < -2 * se:
+                continue
+            sig = f" ({abs(val) / se:.1f} standard errors below 0)" if se > 0 else ""
+            rng = ""
+            if data is not None:
+                sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
+                if len(sp):
+                    rng = f" over {float(np.min(sp)):.3g}..{float(np.max(sp)):.3g} {su}"
+            msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
+                   f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
+                   f"tell viscous from Stribeck friction")
+            flags[f"{dname}.{k}"] = msg
+            note = "warning: " + msg
+            if note not in model.notes:
+                model.notes.append(note)
+            out.append(msg)
+    return out
+
+
+def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
+                       bootstrap, seed):
+    """One direction's fit: ``(parameters, not_identified, notes)``."""
+    notes: list[str] = []
+    ni: dict[str, str] = {}
+    freqs = [h["frequency"] for h in specs]
+    stats = segment_stats(sub, freqs, min_cycles=min_cycles)
+    # harmonics that the segments do not cover by one cycle together cannot be identified: left out
+    total = np.where(stats.active, stats.cycles, 0.0).sum(axis=0) if len(specs) else np.zeros(0)
+    keep = [k for k in range(len(specs)) if total[k] >= 1.0]
+    for k in range(len(specs)):
+        if k not in keep:
+            lab = specs[k].get("label") or f"{specs[k]['frequency']:.6g}"
+            ni[f"{dname}.{lab}"] = (f"the {dname} segments cover {total[k]:.3g} of its cycles together (segments "
+                                    f"with at least {min_cycles:g} cycle each); one cycle is "
+                                    f"{1 / specs[k]['frequency']:.4g} {sub.unit} of travel")
+    if len(keep) < len(specs):
+        specs = [specs[k] for k in keep]
+        stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
+    # a decay needs the line measured on its own (a whole cycle in a segment) at two speeds or
+    # more: a line seen only in partial cycles shifts segment levels, which the speed law could
+    # trade against a speed-dependent amplitude; it keeps a constant amplitude (SILO4 eq. 6)
+    specs = [dict(h) for h in specs]
+    if len(sub.segments) and "kind" in sub.segments and bool((sub.segments["kind"] == "quasi_static").all()):
+        return _quasi_static_direction(sub, stats, law, specs, dname, ni, notes, weights)
+    for k, h in enumerate(specs):
+        whole = stats.sampled[:, k] & (stats.cycles[:, k] >= 1.0)
+        speeds = np.unique(np.round(stats.speed[whole], 9))
+        if len(speeds) < 2 and h.get("decay", True) is not False and h.get("law", "exp") != "const":
+            h["decay"] = False
+            lab = h.get("label") or f"{h['frequency']:.6g}"
+            ni[f"{dname}.{lab}.decay"] = (f"the line completes a cycle within a segment at {len(speeds)} speed(s) "
+                                          f"only: its amplitude is held constant")
+    basis = _basis(law)
+    distinct = len(np.unique(np.round(stats.speed, 9)))
+    need = len(basis.lin) + len(basis.nonlin)
+    if LAWS[law].needs_load:
+        distinct_load = len(np.unique(np.round(stats.load, 9))) if stats.load is not None else 0
+        if distinct_load < 2:
+            raise ConvergenceError(f"law {law} needs points at two loads or more in the {dname} direction")
+    if distinct < need - (1 if LAWS[law].needs_load else 0):
+        raise ConvergenceError(f"law {law} has {need} parameters per direction but the {dname} direction has "
+                               f"plateaus at only {distinct} speed(s); fit a simpler law "
+                               f"(e.g. coulomb_viscous) or record more speeds")
+    prob = _make_problem(stats, law, specs, weights)
+    try:
+        sol = _fit_direction(prob, init=init)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}); the lines "
+                               f"asked for may be too close to each other or to the Nyquist frequency") from exc
+    if sol["status"] <= 0:
+        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction")
+    P = _direction_params(prob, sol)
+    for h in P["harmonics"]:
+        if np.isfinite(h["amplitude_se"]) and h["amplitude"] < 2 * h["amplitude_se"]:
+            notes.append(f"{dname}: amplitude of {h.get('label') or h['frequency']} not significant "
+                         f"({h['amplitude']:.3g} +- {h['amplitude_se']:.2g})")
+    if se == "bootstrap":
+        _bootstrap_se(P, stats, law, specs, weights, bootstrap, seed)
+    # parameters the data cannot pin down: a Stribeck velocity outside the plateau speeds.  Then
+    # the Stribeck part is left out (None) and the rest refitted without it: the law degrades to
+    # its Coulomb + viscous part over the measured speeds, and says so
+    if basis.nonlin:
+        lo, hi = float(np.min(stats.speed)), float(np.max(stats.speed))
+        rel = P["v_s_se"] / P["v_s"] if P["v_s"] > 0 else np.inf
+        # the height of the Stribeck term must be there too: static minus Coulomb larger than its
+        # error (either sign: Lola's Table IV has T_fS < T_f0, friction rising towards T_f0)
+        top, base = ("tau_s", "tau_c") if "tau_s" in P else ("t_fs", "t_f0")
+        hump = P[top] - P[base]
+        weak = not (np.isfinite(P[top + "_se"]) and P[top + "_se"] < abs(hump))
+        if sol["on_bound"] or not np.isfinite(rel) or rel > 1.0 or weak:
+            why = (f"not identified by plateaus at {lo:.3g}..{hi:.3g} {sub.unit}/s (the fit went to v_s = "
+                   f"{P['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
+                   f"{hump:.3g} +- {P[top + '_se']:.2g}); record slower plateaus")
+            reduced = LAWS[law].degraded_for("v_s")
+            prob2 = _make_problem(stats, reduced.name, specs, weights)
+            P2 = _direction_params(prob2, _fit_direction(prob2, init=init))
+            drop = reduced.dropped
+            P = {**P2, **{k: None for k in drop}, **{k + "_se": None for k in drop}}
+            for k in drop:
+                ni[f"{dname}.{k}"] = why
+            notes.append(f"{dname}: Stribeck part of law {law} not identified; Coulomb + viscous part fitted alone")
+    P["n_segments"] = int(len(stats.speed))
+    P["n_samples"] = int(np.sum(stats.n))
+    return P, ni, notes
+
+
+def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: list[dict], dname: str,
+                            ni: dict, notes: list, weights):
+    """One direction of a quasi-static map (every segment a sweep taken at rest): the level
+    (``tau_c``, the direction offset) and the lines with constant amplitudes.  The speeds of the
+    sweeps are nominal (travel over duration, at rest in between), so nothing that depends on
+    speed (Stribeck, viscous, decay laws) is identifiable: those are None, with the reason."""
+    quasi = LAWS[law].degraded_for("speed")
+    if LAWS[law].needs_load or quasi is None:
+        raise ConvergenceError(f"law {law} needs plateaus at several speeds and loads; the {dname} direction "
+                               f"has quasi-static sweeps only (fit silo4, stribeck or coulomb_viscous)")
+    why = (f"the {dname} direction has quasi-static sweeps only (rows taken at rest; their speed is nominal): "
+           f"no speed dependence can be identified")
+    for h in specs:
+        if h.get("decay", True) is not False and h.get("law", "exp") != "const":
+            ni[f"{dname}.{h.get('label') or format(h['frequency'], '.6g')}.decay"] = why + "; amplitude held constant"
+        h["decay"] = False
+    prob = _make_problem(stats, quasi.name, specs, weights)
+    P = _direction_params(prob, _fit_direction(prob))
+    for k in LAWS[law].params:
+        if k not in P:
+            P[k], P[k + "_se"] = None, None
+            ni[f"{dname}.{k}"] = why
+    notes.append(f"{dname}: quasi-static map: level and lines only")
+    P["n_segments"] = int(len(stats.speed))
+    P["n_samples"] = int(np.sum(stats.n))
+    return P, ni, notes
+
+
+def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
+    """Replace the standard errors by the spread of refits on segments resampled with replacement."""
+    rng = np.random.default_rng(seed)
+    S = len(stats.speed)
+    base_names = list(_basis(law).lin) + list(_basis(law).nonlin)
+    draws = {k: [] for k in base_names}
+    hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P["harmonics"]]
+    for _ in range(B):
+        bs = stats.take(rng.integers(0, S, S))
+        if len(np.unique(np.round(bs.speed, 9))) < len(base_names):
+            continue
+        try:
+            prob = _make_problem(bs, law, specs, weights)
+            Q = _direction_params(prob, _fit_direction(prob))
+        except (InputError, np.linalg.LinAlgError, ValueError):
+            continue
+        for k in base_names:
+            draws[k].append(Q[k])
+        for k, h in enumerate(Q["harmonics"]):
+            hdraws[k]["amplitude"].append(h["amplitude"])
+            hdraws[k]["decay"].append(h["decay"])
+            hdraws[k]["phase"].append(h["phase"])
+    for k in base_names:
+        if len(draws[k]) >= 10:
+            P[k + "_se"] = float(np.std(draws[k], ddof=1))
+    for h, dr in zip(P["harmonics"], hdraws):
+        if len(dr["amplitude"]) >= 10:
+            h["amplitude_se"] = float(np.std(dr["amplitude"], ddof=1))
+            h["decay_se"] = float(np.std(dr["decay"], ddof=1))
+            ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h["phase"])))
+            h["phase_se"] = float(np.sqrt(np.mean(ph ** 2)))
+    P["se_method"] = f"bootstrap over segments ({B} resamples)"
+
+
+
+
+# ---------------------------------------------------------------------- the estimator
+class JointFit:
+    """The joint fit of a friction law, per direction, as an estimator: settings in ``__init__``,
+    learned values (trailing underscore) after :meth:`fit`.
+
+    Parameters
+    ----------
+    law : str
+        ``silo4`` (eq. 11: eq. 3 + harmonics), ``stribeck`` (eq. 3 alone), ``coulomb_viscous``,
+        ``lola8``, ``lola11`` or ``none`` (harmonics only).  ``silo4`` fits the declared lines of
+        ``gear`` unless ``harmonics`` says otherwise; the others fit ``harmonics`` only if given.
+    harmonics, gear
+        See :func:`~.stats.harmonic_specs`.
+    weights : {"segment", "uniform"}
+        Weight each segment by the inverse of its own residual variance, or all samples alike.
+    se : {"covariance", "bootstrap"}
+        Standard errors from the covariance of the weighted fit, or from ``bootstrap`` refits on
+        segments resampled with replacement (per direction; ``seed`` seeds the resampling).
+    min_cycles : float
+        A segment counts towards a harmonic where it covers at least this fraction of a cycle;
+        the harmonic is identified when those segments cover at least one cycle together (a line
+        too slow for any one segment, e.g. one joint turn, is fitted from many).  Every segment's
+        level is modelled with the partial cycles of slow lines it contains.
+    holdout : {"segment", "run", None}
+        Also compute ``rmse_holdout`` by ``folds``-fold cross-validation over whole segments or
+        runs (None: skip), each fold refitted with :func:`refit`.
+    init : FrictionModel, optional
+        Starting values (e.g. from :func:`~.published.silo4_published`).
+    name : str, optional
+        The model's name (default: the law).
+    check : bool
+        Warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
+        (:func:`negative_viscous`); it is flagged in the model either way.
+
+    Attributes
+    ----------
+    model_ : FrictionModel
+        With ``rmse`` (in-sample, Nm), ``rmse_holdout``, ``not_identified`` and, in ``meta["fit"]``,
+        the settings :meth:`from_model` rebuilds the estimator from (CONTRACTS.md).
+    harmonics_ : list of dict
+        The lines fitted (``frequency`` in cycles per unit of theta, ``label``, ...).
+    """
+
+    def __init__(self, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",
+                 se: str = "covariance", bootstrap: int = 200, min_cycles: float = MIN_CYCLES,
+                 holdout: str | None = "segment", folds: int = 5, init: FrictionModel | None = None, seed: int = 0,
+                 name: str | None = None, check: bool = True):
+        self.law, self.harmonics, self.gear, self.weights, self.se = law, harmonics, gear, weights, se
+        self.bootstrap, self.min_cycles, self.holdout, self.folds = bootstrap, min_cycles, holdout, folds
+        self.init, self.seed, self.name, self.check = init, seed, name, check
+
+    def get_params(self, deep: bool = False) -> dict:
+        """The settings by name (``deep`` as in scikit-learn; no setting is itself an estimator)."""
+        return {k: getattr(self, k) for k in _SETTINGS}
+
+    def set_params(self, **params) -> "JointFit":
+        """Change settings by name; returns the estimator."""
+        for k in params:
+            if k not in _SETTINGS:
+                raise InputError(f"JointFit has no setting '{k}' (settings: {', '.join(_SETTINGS)})")
+        for k, v in params.items():
+            setattr(self, k, v)
+        return self
+
+    @classmethod
+    def from_model(cls, model: FrictionModel) -> "JointFit":
+        """An unfitted estimator with the settings ``model`` was fitted with (its ``meta["fit"]``, as
+        :meth:`fit` writes it) and its name; a file without ``min_cycles`` was fitted with 1 cycle."""
+        s = model.meta.get("fit") or {}
+        if not s or s.get("method"):
+            raise InputError("this model carries no fit settings (it was not made by gearspec.identify.fit)")
+        # the lines are recorded as fitted: none recorded means none (not the gear's declared lines)
+        lines = s.get("harmonics") or ([] if s["law"] == "silo4" else None)
+        return cls(s["law"], harmonics=lines, weights=s.get("weights", "segment"), se=s.get("se", "covariance"),
+                   bootstrap=s.get("bootstrap", 200), min_cycles=s.get("min_cycles", 1.0), name=model.name)
+
+    def fit(self, data: FitData) -> "JointFit":
+        """Fit the law to ``data`` (samples in constant-speed segments, ``velocity="segment"``, or
+        quasi-static points), each direction on its own; returns the estimator, fitted."""
+        law = self.law
+        if law not in LAWS:
+            raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
+        if self.se not in ("covariance", "bootstrap"):
+            raise InputError(f"se must be 'covariance' or 'bootstrap', got '{self.se}'")
+        if LAWS[law].needs_load and data.load is None:
+            raise InputError(f"law {law} needs the output load torque: the data has no 'load' channel")
+        if law == "silo4" and self.harmonics is None:
+            specs = harmonic_specs(None, self.gear)
+            if not specs:
+                _warn("law silo4 without a gear spec or harmonics: fitting eq. 3 only")
+        else:
+            specs = harmonic_specs(self.harmonics, self.gear) if self.harmonics is not None else []
+        directions: dict[str, dict] = {}
+        not_identified: dict[str, str] = {}
+        notes: list[str] = []
+        for d, dname in ((1, "positive"), (-1, "negative")):
+            sub = data.direction_subset(d)
+            if len(sub) == 0:
+                directions[dname] = {**{k: None for k in LAWS[law].params}, "harmonics": []}
+                for k in list(LAWS[law].params) + [h.get("label") or h["frequency"] for h in specs]:
+                    not_identified[f"{dname}.{k}"] = f"no segment in the {dname} direction"
+                continue
+            try:
+                directions[dname], ni, nt = _fit_one_direction(
+                    sub, law, specs, dname, weights=self.weights, min_cycles=self.min_cycles, se=self.se,
+                    init=None if self.init is None else self.init.params(dname), bootstrap=self.bootstrap,
+                    seed=self.seed)
+            except np.linalg.LinAlgError as exc:  # an SVD or eigen-solver that does not converge: one sentence
+                raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
+                                       f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
+            not_identified.update(ni)
+            notes += nt
+        settings = {"law": law, "harmonics": specs, "weights": self.weights, "se": self.se,
+                    "min_cycles": self.min_cycles, "bootstrap": self.bootstrap}
+        model = FrictionModel(law, directions["positive"], directions["negative"], unit=data.unit,
+                              not_identified=not_identified, notes=notes, name=self.name or law,
+                              meta={"fit": settings})
+        model.rmse = _safe_rmse(model, data)
+        flags = negative_viscous(model, data)
+        if self.check:
+            for msg in flags:
+                _warn(msg)
+        if self.holdout:
+            model.rmse_holdout, model.rmse_holdout_reason = holdout(
+                lambda tr: refit(model, tr, holdout=None), data, by=self.holdout, folds=self.folds)
+        self.harmonics_, self.model_ = specs, model
+        return self
+
+
+#: the settings of :class:`JointFit`, in the order of its ``__init__``
+_SETTINGS = tuple(inspect.signature(JointFit.__init__).parameters)[1:]
+
+
+def clone(estimator: JointFit) -> JointFit:
+    """A new, unfitted estimator with copies of the settings of ``estimator``."""
+    return type(estimator)(**copy.deepcopy(estimator.get_params()))
+
+
+def _warn(message: str) -> None:
+    """A :class:`GearspecWarning` attributed to the first caller outside this module (of :func:`fit`
+    or of :meth:`JointFit.fit`)."""
+    frame, level = sys._getframe(1), 2
+    while frame is not None and frame.f_globals.get("__name__") == __name__:
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, GearspecWarning, stacklevel=level)
+
+
+def fit(data: FitData, law: str = "silo4", **settings) -> FrictionModel:
+    """Fit a friction law to samples, jointly per direction: ``JointFit(law, **settings).fit(data).model_``
+    (the settings and the model: :class:`JointFit`)."""
+    return JointFit(law, **settings).fit(data).model_
+
+
+def refit(model: FrictionModel, data: FitData, **overrides) -> FrictionModel:
+    """Fit ``model``'s law and lines again, to other data, with the settings it was fitted with
+    (:meth:`JointFit.from_model`; covariance standard errors, no warnings) changed by ``overrides``
+    (settings of :class:`JointFit`).  A model of :func:`~.efficiency.fit_efficiency` is refitted
+    to efficiency, with ``holdout`` the only override it takes."""
+    s = model.meta.get("fit") or {}
+    if s.get("method") == "efficiency":
+        from .efficiency import fit_efficiency
+
+        return fit_efficiency(data, s["law"], ratio=s["ratio"], holdout=overrides.get("holdout"), name=model.name)
+    return JointFit.from_model(model).set_params(**{"se": "covariance", "check": False, **overrides}).fit(data).model_

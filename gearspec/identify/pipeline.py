@@ -1,0 +1,150 @@
+"""Models side by side on the same data (:func:`compare`), and a whole recording identified
+(:func:`identify_recording`, ``gearspec fit``): the joint fit beside the published procedure and
+simpler laws, with in-sample, held-out and per-segment errors.
+
+Units: friction and errors Nm (N), speeds rad/s (m/s).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import pandas as pd
+
+from ..core.crossval import n_params as _n_params
+from ..errors import InputError
+from ..fitdata import FitData
+from ..gears import load_gear
+from ..jsonsafe import plain
+from ..model import FrictionModel
+from ..segment import find_segments
+from .joint import fit, refit
+from .published import line_amplitudes, silo4_published
+from .stats import harmonic_specs
+from .validate import _safe_rmse, holdout, segment_errors
+
+__all__ = ["compare", "FitResult", "identify_recording"]
+
+
+def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *, by: str = "segment",
+            folds: int = 5) -> pd.DataFrame:
+    """Models side by side on the same data: rmse (in-sample) and held-out rmse.
+
+    ``candidates`` maps a name to a fitted model (refitted per fold with its own settings for the
+    held-out error; a model without fit settings cannot be refitted: ``rmse_holdout`` None, never
+    its in-sample rmse) or to keyword arguments of :func:`fit` (``{"law": "stribeck"}``).
+    ``rmse_holdout_reason`` says why a held-out rmse is missing or partial (:func:`holdout`).
+    """
+    rows = []
+    for name, c in candidates.items():
+        if isinstance(c, FrictionModel):
+            m = c
+            if m.meta.get("fit"):
+                ho, why = holdout(lambda tr, m=m: refit(m, tr, holdout=None), data, by=by, folds=folds)
+            else:
+                ho, why = None, "the model carries no fit settings to refit it without the held-out data"
+        else:
+            kw = dict(c)
+            kw.setdefault("holdout", None)
+            m = fit(data, **kw)
+            ho, why = holdout(lambda tr, kw=kw: fit(tr, **{**kw, "check": False}), data, by=by, folds=folds)
+        n_par = _n_params(m)
+        rows.append({"model": name, "law": m.law, "parameters": n_par, "rmse": _safe_rmse(m, data),
+                     "rmse_holdout": ho, "rmse_holdout_reason": why})
+    return pd.DataFrame(rows)
+
+
+@dataclass
+class FitResult:
+    """What :func:`identify_recording` (``gearspec fit``) produces.
+
+    ``model``: the requested law, fitted jointly; ``models``: it and the models it is compared
+    with (the published procedure for ``silo4``, simpler laws), by name; ``comparison``: rmse and
+    held-out rmse of each on the same data; ``errors``: per-segment errors of each (SILO4 eqs.
+    12-13); ``data``: what they were fitted to; ``amplitudes``: the lines' amplitude, phase and
+    standard error in every segment (:func:`line_amplitudes`).
+    """
+
+    model: FrictionModel
+    models: dict
+    comparison: pd.DataFrame
+    errors: dict
+    data: FitData
+    amplitudes: pd.DataFrame | None = None
+    notes: list = None
+
+    def to_dict(self) -> dict:
+        """The ``gearspec fit --json`` form (CONTRACTS.md section 4) plus the comparison."""
+        d = self.model.to_dict()
+        d["comparison"] = plain(self.comparison.to_dict("records"))
+        d["models"] = {name: m.to_dict() for name, m in self.models.items() if m is not self.model}
+        return d
+
+
+#: laws compared with each law by default, and whether they get the same lines
+_COMPARE_WITH = {"silo4": (("stribeck", False), ("coulomb_viscous", True)), "stribeck": (("coulomb_viscous", False),),
+                 "lola11": (("lola8", False),), "lola8": (("lola11", False),), "coulomb_viscous": (), "none": ()}
+
+
+def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None, harmonics=None,
+                       published: bool | None = None, holdout: str = "segment", folds: int = 5,
+                       se: str = "covariance", load_ratio: float | None = None,
+                       compare_with=None) -> FitResult:
+    """Identify ``law`` from a recording, beside the published procedure and simpler laws.
+
+    Parameters
+    ----------
+    rec : Recording
+    law : str
+        A key of :data:`gearspec.model.LAWS`.
+    segmentation, gear
+        Default: found segments, the recording's gear spec.
+    harmonics
+        Lines to fit (:func:`harmonic_specs`); default for ``silo4``: every declared line.
+    published : bool
+        Also run :func:`silo4_published` (default: for ``silo4`` and ``stribeck``).
+    holdout, folds, se
+        As in :func:`fit`.
+    load_ratio : float, optional
+        Subtract ``|load| / load_ratio`` (the load seen at the motor, eq. 12) from the torque;
+        default for the Lola laws: the gear's total ratio when the recording has a load.
+    compare_with : sequence of str, optional
+        Other laws fitted to the same data (default: the simpler ones).
+    """
+    gear = load_gear(gear) if gear is not None else rec.gear
+    seg = segmentation if segmentation is not None else find_segments(rec)
+    notes = []
+    if law in ("lola8", "lola11") and load_ratio is None and "load" in rec.data and gear is not None and gear.stages:
+        load_ratio = gear.total_ratio
+        notes.append(f"friction = drive torque - |load| / {load_ratio:g} (Lola eq. 12; the load opposes the motion)")
+    data = FitData.from_recording(rec, seg, load_ratio=load_ratio)
+    if published is None:
+        published = law in ("silo4", "stribeck")
+    lines = harmonic_specs(harmonics, gear) if law == "silo4" else (harmonic_specs(harmonics) if harmonics else [])
+    amplitudes = line_amplitudes(data, lines) if lines else None
+    model = fit(data, law, harmonics=harmonics, gear=gear, holdout=holdout, folds=folds, se=se,
+                name=f"{law} (joint fit)")
+    models = {model.name: model}
+    if published:
+        pm = silo4_published(data, amplitudes, harmonics=lines, holdout=holdout, folds=folds)
+        if law == "stribeck":
+            for p in pm.directions.values():
+                p["harmonics"] = []
+            pm.law = "stribeck"
+            pm.rmse = _safe_rmse(pm, data)
+        models[pm.name] = pm
+    others = _COMPARE_WITH.get(law, ()) if compare_with is None else [(o, True) for o in compare_with]
+    for other, with_lines in others:
+        h = lines if with_lines else []
+        try:
+            m = fit(data, other, harmonics=h, gear=gear, holdout=holdout, folds=folds,
+                    name=other + (" + lines" if h else ""))
+            models[m.name] = m
+        except InputError as exc:
+            notes.append(f"{other} not fitted: {exc}")
+    rows = [{"model": name, "law": m.law, "parameters": _n_params(m), "rmse": m.rmse,
+             "rmse_holdout": m.rmse_holdout, "rmse_holdout_reason": m.rmse_holdout_reason}
+            for name, m in models.items()]
+    errors = {name: segment_errors(m, data) for name, m in models.items()}
+    return FitResult(model, models, pd.DataFrame(rows), errors, data, amplitudes, notes)

@@ -1,0 +1,98 @@
+"""Errors of a fitted model: in-sample over the directions it can predict, per segment (SILO4
+eqs. 12-13), and held out -- ``folds``-fold cross-validation over whole segments or runs, never
+interleaved samples, by THE fold rule and held-out loop of :mod:`gearspec.core.crossval`."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from ..core.crossval import held_out, row_folds
+from ..errors import InputError
+from ..fitdata import FitData
+from ..model import FrictionModel
+
+__all__ = ["holdout", "holdout_rmse", "segment_errors"]
+
+
+def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
+    """Fold of every sample: its segment's (or run's) fold by THE rule of :mod:`gearspec.core.crossval`."""
+    return row_folds(data.groups(by), data.direction, data.v, folds)
+
+
+def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
+                 folds: int = 5, residual: Callable | None = None) -> float | None:
+    """Root-mean-square error on held-out data: ``folds``-fold cross-validation over whole
+    segments (or runs); each fold is predicted by a model fitted to the others.  Folds where the
+    fit fails (too few speeds left) are skipped; None when every fold fails.  ``residual(model,
+    test_data)`` gives the error of a fold (default: ``model.residual``, friction torque).
+    :func:`holdout` gives the reason too."""
+    return holdout(fit_fn, data, by=by, folds=folds, residual=residual)[0]
+
+
+def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
+            folds: int = 5, residual: Callable | None = None) -> tuple[float | None, str | None]:
+    """:func:`holdout_rmse` and why it is missing or partial: ``(rmse, reason)``.
+
+    ``rmse`` is None when cross-validation cannot run -- fewer than two held-out groups, or no
+    fold whose model can be fitted without it and predict it (each direction needs its own
+    groups, and enough speeds left for the law) -- and ``reason`` says which, in one sentence;
+    never the in-sample error in its place.  When some folds fail, ``rmse`` comes from the others
+    and ``reason`` says how many held-out samples it covers.  Folds: :mod:`gearspec.core.crossval`."""
+    ng = len(np.unique(data.groups(by)))
+    if ng < 2:
+        return None, (f"cross-validation needs two held-out {by}s or more; the data have {ng}")
+
+    def score(m, test):
+        t = data.subset(test)
+        r = np.asarray(m.residual(t) if residual is None else residual(m, t), dtype=float)
+        return np.where(np.isfinite(r), r * r, np.nan)
+
+    h = held_out(_folds(data, by, folds), lambda train: fit_fn(data.subset(train)), score)
+    n, failed = h.covered, h.failed
+    if not n:
+        why = failed[0] if failed else f"every {by} falls into one fold"
+        return None, (f"cross-validation over {ng} {by}s could not run: no fold could be fitted without its "
+                      f"{by}s and predict them ({why})")
+    if n < len(data):
+        return h.rmse, (f"from {n} of {len(data)} samples: {len(failed)} of {h.ran} folds could not be "
+                        f"fitted without their {by}s ({failed[0] if failed else 'no test data'})")
+    return h.rmse, None
+
+
+def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
+    """In-sample rmse (Nm) on the samples of the directions ``model`` has parameters for; None if none."""
+    ok = np.zeros(len(data), bool)
+    for d, dname in ((1, "positive"), (-1, "negative")):
+        p = model.params(dname)
+        if all(p.get(k) is not None for k in model.law_spec.params if k not in model.law_spec.optional):
+            ok |= data.direction == d
+    if not ok.any():
+        return None
+    return model.rmse_on(data.subset(ok))
+
+
+def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
+    """Model error per segment, as SILO4 validates its model (eqs. 12-13, Table 3): the mean
+    error ``e`` and its standard deviation ``s_e`` of ``model - data`` (friction magnitudes, so that
+    a model above the data is positive in both directions), the rmse, the mean friction and ``e``
+    in percent of it.  Segments of a direction the model cannot predict are left out."""
+    rows = []
+    for sid in np.unique(data.segment):
+        sub = data.subset(data.segment == sid)
+        d = int(sub.direction[0])
+        try:
+            pred = model.evaluate(**sub.inputs())
+        except InputError:
+            continue
+        err = d * (pred - sub.y)
+        level = float(np.mean(d * sub.y))
+        rows.append({"segment": int(sid), "run": int(sub.run[0]), "direction": d,
+                     "speed": float(np.mean(np.abs(sub.v))), "n": len(sub), "level": level,
+                     "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
+                     "rmse": float(np.sqrt(np.mean(err ** 2))),
+                     # in percent of the mean friction; undefined (NaN) where that mean is 0
+                     "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")})
+    return pd.DataFrame(rows)
