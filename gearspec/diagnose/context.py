@@ -17,7 +17,8 @@ import numpy as np
 
 from ..core.crossval import held_out
 from .data import DiagnoseData
-from .design import FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, solve_normal
+from .design import FittedState, Grams, HarmonicBlock, State, fit_state, solve_normal
+from .nonlinear import nonlinear_standard_errors
 
 __all__ = ["Round"]
 

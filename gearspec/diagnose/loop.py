@@ -53,7 +53,8 @@ from .baseline import _as_data, baseline_model, idim_model, relative_error, resi
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import FittedState, HarmonicBlock, State, polish, refine, solve_normal, state_from_model
+from .design import FittedState, HarmonicBlock, State, solve_normal, state_from_model
+from .nonlinear import polish, refine
 from .detectors import analyse, propose
 from .detectors import line_candidates as _periodic_candidates  # noqa: F401  (tests/test_detectors.py)
 from .results import Diagnosis, Effect
@@ -534,8 +535,8 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
 
 def _settle(state: State, dd: DiagnoseData) -> State:
     """Nonlinear parameters of a state where all data want them: coordinate searches
-    (:func:`~gearspec.diagnose.design.polish`), then Gauss-Newton steps to convergence
-    (:func:`~gearspec.diagnose.design.refine`), so that a candidate's held-out gain is its own and
+    (:func:`~gearspec.diagnose.nonlinear.polish`), then Gauss-Newton steps to convergence
+    (:func:`~gearspec.diagnose.nonlinear.refine`), so that a candidate's held-out gain is its own and
     not that of a better-tuned base law."""
     return refine(polish(state, dd), dd, steps=8)
 
