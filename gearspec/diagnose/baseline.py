@@ -12,7 +12,7 @@ from ..model import FrictionModel
 from ..recording import Recording
 from .data import DiagnoseData
 from .design import fit_state, predict_model, state_from_model
-from .residual import acceleration_analysis, channel_analysis, position_spectra, reversal_analysis, speed_analysis
+from .detectors.analyses import residual_analyses
 
 __all__ = ["baseline_model", "idim_model", "residual_analysis", "relative_error"]
 
@@ -70,19 +70,7 @@ def residual_analysis(model: FrictionModel, data, *, gear=None, fap: float = 0.0
     FitData or DiagnoseData."""
     dd = _as_data(data, None, gear)
     r = dd.y - predict_model(model, dd)
-    out = {"residual": r,
-           "spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment)
-           if dd.at("theta") is not None else {"pooled": [], "segments": []},
-           "speed": speed_analysis(dd, r)}
-    for ch, tr in (("load", np.abs), ("temperature", None), ("t", None)):
-        res = channel_analysis(dd, r, ch, transform=tr)
-        if res is not None:
-            out[ch] = res
-    for name, fn in (("acc", acceleration_analysis), ("reversal", reversal_analysis)):
-        res = fn(dd, r)
-        if res is not None:
-            out[name] = res
-    return out
+    return {"residual": r, **residual_analyses(dd, r, fap=fap, per_segment=per_segment)}
 
 
 def idim_model(dd: DiagnoseData, *, symmetric: bool = True, offset: bool = True,
