@@ -47,14 +47,6 @@ _DNAME = {1: "positive", -1: "negative"}
 LINEAR = LAW_LINEAR
 
 
-def _inputs(dd: DiagnoseData) -> dict:
-    return dd.fit.inputs()
-
-
-def _sign(dd: DiagnoseData) -> np.ndarray:
-    return np.sign(dd.fit.v)
-
-
 # ---------------------------------------------------------------------- blocks
 _UID = itertools.count(1)
 _CACHE_SIZE = 96
@@ -370,7 +362,7 @@ class TermBlock(Block):
                 col = np.where(f.direction == self.direction, col, 0.0)
             return col[:, None]
         lin = TERM_LINEAR[self.kind]
-        inputs = _inputs(dd)
+        inputs = dd.fit.inputs()
         if lin == "trig":
             outs = []
             for ph in (0.0, math.pi / 2):

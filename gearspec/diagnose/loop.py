@@ -391,24 +391,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             break
         new_state = _settle(rnd.state.replaced(prop.drop, prop.add), dd)
         rnd = Round(dd, new_state, fold)
-        e = effects[_effect_key(effects, c)]
-        e.accepted = True
-        e.decision = ev.reason
-        e.detail.setdefault("accepted_z", []).append(float(ev.z))
-        e.history.append(f"round {k}: accepted")
-        e.detail["blocks"] = [b.uid for b in prop.add]
-        e.detail["dropped"] = [b for b in prop.drop]
-        added = [new_state.block(u) for u in e.detail["blocks"]]
-        e.parameters = "; ".join(b.describe() for b in added if b is not None)
-        if isinstance(c, PeriodicCandidate):
-            f_fit = added[0].frequency
-            f_se = rnd.fitted.nonlinear_se.get(added[0].uid, {}).get(("frequency",))
-            c.relabel(f_fit, f_se)
-            e.detail["frequency_se"] = f_se
-            e.frequency, e.label, e.hint = f_fit, c.label, c.hint
-            e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
-            e.order = dd.gear.order(f_fit) if dd.gear is not None else None
-        e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
+        e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new_state, rnd, k)
         was_in = {x.name for x in effects.values() if x.accepted}
         removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
         if removed:
@@ -449,6 +432,32 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             e.detail["partial"] = True
     diag.final_analyses = analyse(Round(dd, diag.final.state, fold), fap=fap, per_segment=False)
     return diag
+
+
+def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: State, rnd: Round, k: int) -> Effect:
+    """Record on ``e`` that its candidate ``c`` was accepted in round ``k``: the decision, the blocks
+    the proposal ``prop`` added (as settled in ``new_state``) and dropped, a line's fitted
+    frequency with its standard error, and what it adds to the prediction of ``rnd`` (the round
+    with it)."""
+    dd = rnd.dd
+    e.accepted = True
+    e.decision = ev.reason
+    e.detail.setdefault("accepted_z", []).append(float(ev.z))
+    e.history.append(f"round {k}: accepted")
+    e.detail["blocks"] = [b.uid for b in prop.add]
+    e.detail["dropped"] = [b for b in prop.drop]
+    added = [new_state.block(u) for u in e.detail["blocks"]]
+    e.parameters = "; ".join(b.describe() for b in added if b is not None)
+    if isinstance(c, PeriodicCandidate):
+        f_fit = added[0].frequency
+        f_se = rnd.fitted.nonlinear_se.get(added[0].uid, {}).get(("frequency",))
+        c.relabel(f_fit, f_se)
+        e.detail["frequency_se"] = f_se
+        e.frequency, e.label, e.hint = f_fit, c.label, c.hint
+        e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
+        e.order = dd.gear.order(f_fit) if dd.gear is not None else None
+    e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
+    return e
 
 
 def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
