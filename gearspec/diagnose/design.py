@@ -535,10 +535,10 @@ class FittedState:
             else:
                 blk.write(m, self.coef[a:z], self.se[a:z])
             _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
-        m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
-        m.rmse = self.rmse
-        m.rmse_holdout = rmse_holdout
-        return m
+        # through the constructor: the parameters cleaned as every model's are
+        return FrictionModel(m.law, m.directions["positive"], m.directions["negative"], terms=m.terms, unit=m.unit,
+                             rmse=self.rmse, rmse_holdout=rmse_holdout, not_identified=m.not_identified,
+                             notes=m.notes, name=m.name, meta=m.meta)
 
 
 def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list) -> None:
