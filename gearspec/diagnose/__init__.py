@@ -11,12 +11,18 @@ Modules (data flows one way):
 ``data``        :class:`DiagnoseData` -- samples in segments (or a whole trajectory, prepared as
                 the inverse dynamic model is: :func:`trajectory_data`), the held-out groups, the
                 travel since the last reversal, an optional decimation of every column
+``coverage``    where the data measure a line (resolved segments, speeds)
 ``design``      a model as linear blocks of columns (base law, lines, terms), fitted jointly;
                 to and from :class:`~gearspec.model.FrictionModel`
+``nonlinear``   the nonlinear parameters: standard errors, polish and Gauss-Newton refinement
 ``residual``    the residual analyses
-``candidates``  the candidate terms and how each searches its own nonlinear parameters (a channel
-                lag and declared sidebands included)
-``loop``        :func:`diagnose`, the held-out acceptance test, :class:`Diagnosis`
+``context``     :class:`Round`, the read-only context of one round (fits per fold, held-out errors)
+``candidates``  the candidate terms and how each searches its own nonlinear parameters
+``detectors``   one detector per effect kind, turning the residual analyses into candidates
+``baseline``    the model to start from, IDIM-LS, the residual analyses of any fitted model
+``results``     :class:`Effect` and :class:`Diagnosis`
+``validate``    the final judge: every accepted term checked on an independent recording
+``loop``        :func:`diagnose` and the held-out acceptance test
 
 The package exports what a user calls; the engine's parts (blocks, candidates, folds) are imported
 from their modules.  ``gearspec.diagnose(data, model)`` is :func:`diagnose` (the package is callable).

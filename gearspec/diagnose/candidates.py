@@ -36,7 +36,8 @@ from ..gears import integer_hint
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .context import Round
-from .design import Grams, HarmonicBlock, TermBlock, measurable, solve_normal
+from .coverage import measurable
+from .design import Grams, HarmonicBlock, TermBlock, solve_normal
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
            "LagCandidate", "LaggedHarmonicBlock", "SidebandCandidate", "SidebandBlock", "choose_amplitude_law",

@@ -15,8 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.crossval import held_out
 from .data import DiagnoseData
-from .design import FittedState, Grams, HarmonicBlock, State, fit_state, nonlinear_standard_errors, solve_normal
+from .design import FittedState, Grams, HarmonicBlock, State, fit_state, solve_normal
+from .nonlinear import nonlinear_standard_errors
 
 __all__ = ["Round"]
 
@@ -132,17 +134,17 @@ class Round:
         return [b for b in self.state.blocks if isinstance(b, HarmonicBlock)]
 
     def baseline_holdout(self) -> dict:
-        """Held-out sums of squares of the model as it stands, per group (Nm^2), and its held-out
-        prediction at every observation (Nm)."""
+        """Held-out sums of squares of the model as it stands, per group (Nm^2), its held-out
+        prediction at every observation (Nm) and its held-out rmse (Nm), folds as
+        :func:`gearspec.core.crossval.held_out` runs them: ``{"sse", "prediction", "rmse"}``."""
         dd = self.dd
-        sse = np.zeros(dd.n_groups)
         pred = np.zeros(len(dd))
-        for f in range(self.K):
-            train = self.fold != f
-            beta = self.beta(train)
-            rows = ~self.rows(train)
+
+        def score(beta, test):
+            rows = self.rows(test)
             pred[rows] = self.X[rows] @ beta
-        r = dd.y - pred
-        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-            sse[g] = float(r[a:z] @ r[a:z])
-        return {"sse": sse, "prediction": pred}
+            r = dd.y - pred
+            return [float(r[a:z] @ r[a:z]) for a, z in zip(dd.starts[test], dd.stops[test])]
+
+        ho = held_out(self.fold, self.beta, score, weight=dd.stops - dd.starts, catch=())
+        return {"sse": ho.sse, "prediction": pred, "rmse": ho.rmse}

@@ -270,17 +270,6 @@ class DiagnoseData:
         d = self.at("direction")
         return [x for x in (1, -1) if np.any(d == x)]
 
-    def subset_groups(self, keep) -> "DiagnoseData":
-        """Only the observations of held-out groups ``keep`` (a boolean array over groups), for
-        plateau data (no reduction)."""
-        if self.reduce is not None:
-            raise InputError("subsets of reduced (decimated) data are not supported; hold groups out instead")
-        keep = np.asarray(keep, bool)
-        mask = keep[self.group]
-        travel = None if self.travel is None else self.travel[mask]
-        return DiagnoseData(self.fit.subset(mask), by=self.by, travel=travel, kind=self.kind, name=self.name,
-                            notes=list(self.notes), gear=self.gear)
-
 
 # ---------------------------------------------------------------------- whole trajectories
 def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, decimate_by: int = 10,

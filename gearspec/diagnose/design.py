@@ -32,12 +32,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel
-from ..spectrum import MEASURABLE_FRACTION, position_nyquist
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
+from .coverage import line_speed_range, resolved
 from .data import DiagnoseData
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "Grams", "FittedState", "fit_state",
-           "state_from_model", "LINEAR", "solve_normal", "predict_model", "polish", "nonlinear_parameters"]
+           "state_from_model", "LINEAR", "solve_normal", "predict_model", "nonlinear_parameters"]
 
 _TWO_PI = 2.0 * math.pi
 _DNAME = {1: "positive", -1: "negative"}
@@ -45,14 +45,6 @@ _DNAME = {1: "positive", -1: "negative"}
 #: linear and nonlinear parameters of every base law (the magnitude is linear in the first
 #: given the second): the term registry's (:mod:`gearspec.terms.registry`)
 LINEAR = LAW_LINEAR
-
-
-def _inputs(dd: DiagnoseData) -> dict:
-    return dd.fit.inputs()
-
-
-def _sign(dd: DiagnoseData) -> np.ndarray:
-    return np.sign(dd.fit.v)
 
 
 # ---------------------------------------------------------------------- blocks
@@ -370,7 +362,7 @@ class TermBlock(Block):
                 col = np.where(f.direction == self.direction, col, 0.0)
             return col[:, None]
         lin = TERM_LINEAR[self.kind]
-        inputs = _inputs(dd)
+        inputs = dd.fit.inputs()
         if lin == "trig":
             outs = []
             for ph in (0.0, math.pi / 2):
@@ -543,10 +535,10 @@ class FittedState:
             else:
                 blk.write(m, self.coef[a:z], self.se[a:z])
             _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
-        m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
-        m.rmse = self.rmse
-        m.rmse_holdout = rmse_holdout
-        return m
+        # through the constructor: the parameters cleaned as every model's are
+        return FrictionModel(m.law, m.directions["positive"], m.directions["negative"], terms=m.terms, unit=m.unit,
+                             rmse=self.rmse, rmse_holdout=rmse_holdout, not_identified=m.not_identified,
+                             notes=m.notes, name=m.name, meta=m.meta)
 
 
 def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list) -> None:
@@ -565,28 +557,6 @@ def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list
         elif key[0] == "fixed":
             for t in new_terms:
                 t[key[1] + "_se"] = se
-
-
-def nonlinear_standard_errors(state: State, dd: DiagnoseData, X: np.ndarray | None = None,
-                              G: np.ndarray | None = None) -> dict:
-    """Standard errors of the nonlinear parameters (Stribeck velocities, decays, frequencies,
-    exponents, lengths): those of the coefficients of their Taylor columns in the joint least-
-    squares fit of all data, ``{uid: {key: se}}`` (white-noise errors, like the linear ones)."""
-    X = state.design(dd, taylor=True) if X is None else X
-    G = X.T @ X if G is None else G
-    beta = solve_normal(G, X.T @ dd.y)
-    r = dd.y - X @ beta
-    s2 = float(r @ r) / max(len(r) - X.shape[1], 1)
-    cov = _cov(G, s2)
-    out = {}
-    for blk, (a, z) in zip(state.blocks, state.spans(dd, taylor=True)):
-        keys = [p[0] for p in nonlinear_parameters(blk, dd)] if blk.coef else []
-        if not keys:
-            continue
-        k0 = a + len(blk.names)
-        out[blk.uid] = {key: float(np.sqrt(max(cov[k0 + j, k0 + j], 0.0))) for j, key in enumerate(keys)
-                        if np.isfinite(cov[k0 + j, k0 + j])}
-    return out
 
 
 def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) -> FittedState:
@@ -725,70 +695,6 @@ def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
     return np.array([float(t[lin])])
 
 
-def _segment_bounds(f) -> list:
-    seg = f.segment
-    bounds = np.flatnonzero(np.diff(seg) != 0) + 1
-    return list(zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [len(seg)]))))
-
-
-def segment_nyquist(dd: DiagnoseData) -> np.ndarray:
-    """Position Nyquist frequency of the segment of every sample
-    (:func:`gearspec.spectrum.position_nyquist` of the segment's positions), cached on the data."""
-    hit = dd.cache.get("nyquist")
-    if hit is not None:
-        return hit
-    f = dd.fit
-    out = np.full(len(f), np.inf)
-    if f.theta is not None:
-        for a, z in _segment_bounds(f):
-            if z - a > 1:
-                nyq = position_nyquist(f.theta[a:z])
-                if nyq > 0:
-                    out[a:z] = nyq
-    dd.cache["nyquist"] = out
-    return out
-
-
-def resolved(dd: DiagnoseData, frequency: float, fraction: float = MEASURABLE_FRACTION) -> np.ndarray:
-    """Samples whose segment resolves a line at ``frequency`` (below ``fraction`` of its position
-    Nyquist frequency)."""
-    return frequency < fraction * segment_nyquist(dd)
-
-
-def measurable(dd: DiagnoseData, frequency: float) -> np.ndarray:
-    """Samples (of ``dd.fit``) whose segment measures a line at ``frequency``: resolved
-    (:func:`resolved`) and at least :data:`gearspec.identify.MIN_CYCLES` of its cycles within the
-    segment's travel (the rule of :func:`gearspec.identify.fit`).  An amplitude law is chosen and
-    fitted from these samples only, and held at the edges of their speeds elsewhere."""
-    from ..identify import MIN_CYCLES
-
-    f = dd.fit
-    if f.theta is None:
-        return np.zeros(len(f), bool)
-    span = dd.cache.get("segment_span")
-    if span is None:
-        span = np.zeros(len(f))
-        for a, z in _segment_bounds(f):
-            span[a:z] = float(np.ptp(f.theta[a:z])) if z > a else 0.0
-        dd.cache["segment_span"] = span
-    return resolved(dd, frequency) & (frequency * span >= MIN_CYCLES)
-
-
-def line_speed_range(dd: DiagnoseData, frequency: float, direction: int = 0) -> tuple | None:
-    """``(min, max)`` of |v| where ``dd`` measures a line at ``frequency`` (:func:`measurable`) in
-    ``direction`` (0: both); None where it measures it nowhere.  Whole trajectories (reduced
-    data, where the lines are fitted on every sample): the range of the moving samples."""
-    f = dd.fit
-    sel = (f.direction == direction) if direction else np.ones(len(f), bool)
-    sel = sel & (f.v != 0)
-    if dd.reduce is None:
-        sel = sel & measurable(dd, frequency)
-    if not sel.any():
-        return None
-    sp = np.abs(f.v[sel])
-    return float(np.min(sp)), float(np.max(sp))
-
-
 # ---------------------------------------------------------------------- nonlinear parameters
 def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
     """The nonlinear parameters of a block the polish refines: ``(key, value, lo, hi, log)``.
@@ -866,105 +772,3 @@ def with_parameter(blk: Block, key: tuple, value: float) -> Block:
         k = key[1]
         return replace(blk, fixed=tuple((kk, value if kk == k else v) for kk, v in blk.fixed))
     raise KeyError(key)
-
-
-def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> State:
-    """Refine the nonlinear parameters of the blocks (:func:`nonlinear_parameters`) by bounded
-    one-dimensional searches of the least-squares error, every linear parameter refitted at each
-    trial, block by block, ``sweeps`` times (``only``: uids of the blocks to refine).  The linear
-    refits of the loop hold nonlinear parameters fixed; this keeps them where the present model
-    wants them (the baseline's Stribeck velocity was fitted without the effects found since)."""
-    from scipy.optimize import minimize_scalar
-
-    blocks = list(state.blocks)
-    y = dd.y
-    yy = float(y @ y)
-    for _ in range(sweeps):
-        for i in range(len(blocks)):
-            blk = blocks[i]
-            if only is not None and blk.uid not in only:
-                continue
-            params = nonlinear_parameters(blk, dd)
-            if not params:
-                continue
-            others = [b.columns(dd) for j, b in enumerate(blocks) if j != i]
-            Xo = np.column_stack(others) if others else np.zeros((len(dd), 0))
-            Goo = Xo.T @ Xo
-            bo = Xo.T @ y
-            for key, val, lo, hi, log in params:
-                cur = blocks[i]
-
-                def rss(x, cur=cur, key=key, log=log):
-                    b = with_parameter(cur, key, math.exp(x) if log else x)
-                    C = b.columns(dd)
-                    G = np.block([[Goo, Xo.T @ C], [C.T @ Xo, C.T @ C]])
-                    rhs = np.concatenate([bo, C.T @ y])
-                    beta = solve_normal(G, rhs)
-                    return yy - float(beta @ rhs)
-
-                if not hi > lo:
-                    continue
-                val = min(max(val, lo), hi)
-                a, z, x0 = (math.log(lo), math.log(hi), math.log(val)) if log else (lo, hi, val)
-                r0 = rss(x0)
-                res = minimize_scalar(rss, bounds=(a, z), method="bounded",
-                                      options={"xatol": 2e-3 * (abs(z - a)), "maxiter": 25})
-                if res.fun < r0:
-                    blocks[i] = with_parameter(cur, key, math.exp(res.x) if log else float(res.x))
-    return State(blocks, state.template, state.symmetric)
-
-
-def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> State:
-    """A few Gauss-Newton steps on the nonlinear parameters of the blocks ``only`` (uids; all
-    by default): each step is one least-squares fit of the plain columns and the Taylor columns
-    (:meth:`Block.taylor_columns`), whose coefficients are the steps (clipped to a factor 2 for
-    scale parameters and to the bounds; halved while the error does not fall).  A cheap
-    :func:`polish` for the held-out test, where every candidate needs one."""
-    y = dd.y
-
-    def sse(st):
-        X = st.design(dd)
-        beta = solve_normal(X.T @ X, X.T @ y)
-        r = y - X @ beta
-        return float(r @ r), beta
-
-    cur, (best, beta) = state, sse(state)
-    for _ in range(steps):
-        cur = cur.refreshed(beta)
-        blocks = list(cur.blocks)
-        cols, moves = [], []
-        for i, b in enumerate(blocks):
-            cols.append(b.columns(dd))
-            if (only is None or b.uid in only) and b.coef:
-                T = b.taylor_columns(dd)
-                for j, par in enumerate(nonlinear_parameters(b, dd)):
-                    cols.append(T[:, j:j + 1])
-                    moves.append((i, par))
-        if not moves:
-            return cur
-        X = np.column_stack(cols)
-        sol = solve_normal(X.T @ X, X.T @ y)
-        # the Taylor coefficients sit right after each block's plain columns
-        k, taylor = 0, []
-        for i, b in enumerate(blocks):
-            k += len(b.names)
-            n_t = sum(1 for (ii, _) in moves if ii == i)
-            taylor += list(sol[k:k + n_t])
-            k += n_t
-        improved = False
-        for scale in (1.0, 0.5, 0.25):
-            trial = list(blocks)
-            for (i, (key, val, lo, hi, log)), dlt in zip(moves, taylor):
-                new = val + scale * dlt
-                if log:
-                    new = min(max(new, val / 2), val * 2)
-                new = min(max(new, lo), hi)
-                trial[i] = with_parameter(trial[i], key, new)
-            st = State(trial, cur.template, cur.symmetric)
-            e, b2 = sse(st)
-            if e < best:
-                cur, best, beta, improved = st, e, b2, True
-                break
-        if not improved:
-            break
-    return cur.refreshed(beta)

@@ -48,17 +48,17 @@ from scipy import stats
 
 from ..core.crossval import critical_z, deal_folds, group_summary, splits, z_statistic
 from ..errors import InputError
-from ..fitdata import FitData
 from ..model import FrictionModel
-from ..recording import Recording
+from .baseline import _as_data, baseline_model, idim_model, relative_error, residual_analysis
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import (FittedState, HarmonicBlock, State, fit_state, polish, predict_model, refine, solve_normal,
-                     state_from_model)
-from .detectors import analyse, term_candidates
-from .detectors import line_candidates as _periodic_candidates  # the loop's name for the spectrum's lines
-from .residual import acceleration_analysis, channel_analysis, position_spectra, reversal_analysis, speed_analysis
+from .design import FittedState, HarmonicBlock, State, solve_normal, state_from_model
+from .nonlinear import polish, refine
+from .detectors import analyse, propose
+from .detectors import line_candidates as _periodic_candidates  # noqa: F401  (tests/test_detectors.py)
+from .results import Diagnosis, Effect
+from .validate import validate
 
 __all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "folds_of", "baseline_model",
            "idim_model", "residual_analysis", "KINDS", "relative_error"]
@@ -75,12 +75,6 @@ def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
     gid = dd.fit.groups(dd.by)[dd.index]
     ids, sign, speed = group_summary(gid, dd.at("direction"), dd.at("v"))
     return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, gid[dd.starts])]
-
-
-def relative_error(y, prediction) -> float:
-    """``100 ||y - prediction|| / ||y||`` (percent), the EMPS benchmark's figure of merit."""
-    y = np.asarray(y, float)
-    return float(100 * np.linalg.norm(y - np.asarray(prediction, float)) / np.linalg.norm(y))
 
 
 # ---------------------------------------------------------------------- one round
@@ -262,222 +256,7 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
     return out
 
 
-# ---------------------------------------------------------------------- results
-@dataclass
-class Effect:
-    """One candidate of the loop with its evidence and held-out numbers (``CONTRACTS.md``
-    section 4 ``effects`` entry, plus details)."""
-
-    kind: str
-    name: str
-    accepted: bool
-    evidence: str
-    rmse_holdout_before: float
-    rmse_holdout_after: float
-    frequency: float | None = None
-    label: str | None = None
-    hint: str | None = None
-    order: float | None = None
-    z: float = float("nan")
-    z_crit: float = float("nan")
-    gain: float = float("nan")
-    consistency: float = float("nan")
-    n_params: int = 0
-    round: int = 0
-    decision: str = ""
-    parameters: str = ""
-    terms: list = field(default_factory=list)
-    detail: dict = field(default_factory=dict, repr=False)
-    validation: dict | None = None
-    history: list = field(default_factory=list)
-    value: float | None = None       # a scalar effect's estimate (lag: s)
-
-    def to_dict(self) -> dict:
-        f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
-        d = {"kind": self.kind, "accepted": bool(self.accepted), "frequency": f(self.frequency), "label": self.label,
-             "evidence": self.evidence, "rmse_holdout_before": f(self.rmse_holdout_before),
-             "rmse_holdout_after": f(self.rmse_holdout_after), "name": self.name, "hint": self.hint,
-             "order": f(self.order), "z": f(self.z), "z_crit": f(self.z_crit), "gain": f(self.gain),
-             "consistency": f(self.consistency), "parameters_added": self.n_params, "round": self.round,
-             "decision": self.decision, "fitted": self.parameters, "terms": self.terms, "history": self.history,
-             "value": f(self.value)}
-        if self.validation is not None:
-            d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
-        d["status"] = self.status
-        return d
-
-    @property
-    def status(self) -> str:
-        """``accepted`` (in the final model), ``removed`` (accepted once, then taken out again by
-        backward elimination or the validation data) or ``rejected`` (never accepted)."""
-        if self.accepted:
-            return "accepted"
-        return "removed" if self.detail.get("removed") else "rejected"
-
-
-@dataclass
-class Diagnosis:
-    """What :func:`diagnose` finds: the baseline and final models (fitted), every candidate
-    (``effects``, in the order they were last evaluated), the rounds, and per-group errors."""
-
-    data: DiagnoseData
-    baseline: FittedState
-    final: FittedState
-    baseline_model: FrictionModel
-    final_model: FrictionModel
-    effects: list
-    rounds: list
-    folds: np.ndarray
-    baseline_holdout: dict
-    final_holdout: dict
-    analyses: dict = field(repr=False, default_factory=dict)     # of the baseline residual
-    final_analyses: dict = field(repr=False, default_factory=dict)
-    settings: dict = field(default_factory=dict)
-    validation: dict | None = None
-    notes: list = field(default_factory=list)
-    trace: pd.DataFrame = field(repr=False, default=None)   # every evaluation of every round
-
-    @property
-    def accepted(self) -> list:
-        return [e for e in self.effects if e.accepted]
-
-    def summary_table(self) -> pd.DataFrame:
-        """Before/after: rmse (in-sample) and held-out rmse, and on validation data when given."""
-        rows = [{"model": "baseline", "name": self.baseline_model.name, "parameters": len(self.baseline.coef),
-                 "rmse": self.baseline.rmse, "rmse_holdout": self.baseline_model.rmse_holdout},
-                {"model": "final", "name": self.final_model.name, "parameters": len(self.final.coef),
-                 "rmse": self.final.rmse, "rmse_holdout": self.final_model.rmse_holdout}]
-        if self.validation:
-            rows[0]["rmse_validation"] = self.validation["baseline_rmse"]
-            rows[1]["rmse_validation"] = self.validation["final_rmse"]
-        return pd.DataFrame(rows)
-
-    def segment_table(self) -> pd.DataFrame:
-        """Per held-out group: in-sample and held-out rmse of the baseline and the final model."""
-        dd = self.data
-        gt = dd.group_table()
-        n = gt["n"].to_numpy()
-        rb, rf = self.baseline.residual, self.final.residual
-        gt["rmse_before"] = [float(np.sqrt(np.mean(rb[a:z] ** 2))) for a, z in zip(dd.starts, dd.stops)]
-        gt["rmse_after"] = [float(np.sqrt(np.mean(rf[a:z] ** 2))) for a, z in zip(dd.starts, dd.stops)]
-        gt["rmse_holdout_before"] = np.sqrt(self.baseline_holdout["sse"] / n)
-        gt["rmse_holdout_after"] = np.sqrt(self.final_holdout["sse"] / n)
-        gt["fold"] = self.folds
-        return gt
-
-    def to_dict(self) -> dict:
-        """The ``gearspec diagnose --json`` form (CONTRACTS.md section 4) plus details."""
-        f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)  # noqa: E731
-        out = {"baseline": {"model": self.baseline_model.name, "rmse": f(self.baseline.rmse),
-                            "rmse_holdout": f(self.baseline_model.rmse_holdout),
-                            "parameters": len(self.baseline.coef), "friction_model": self.baseline_model.to_dict()},
-               "effects": [e.to_dict() for e in self.effects],
-               "final": {"model": self.final_model.name, "rmse": f(self.final.rmse),
-                         "rmse_holdout": f(self.final_model.rmse_holdout), "parameters": len(self.final.coef),
-                         "friction_model": self.final_model.to_dict()},
-               "settings": self.settings, "rounds": self.rounds, "notes": self.notes,
-               "held_out": f"whole {'moves' if self.data.kind == 'trajectory' else self.data.by + 's'}, "
-                           f"{int(self.folds.max()) + 1} folds",
-               "unit": self.data.unit}
-        if self.validation:
-            out["validation"] = {k: (f(v) if isinstance(v, (float, np.floating)) else v)
-                                 for k, v in self.validation.items() if k != "data"}
-        return out
-
-
 # ---------------------------------------------------------------------- the loop
-def baseline_model(dd: DiagnoseData, law: str = "silo4", *, gear=None, harmonics=None, symmetric: bool = False,
-                   terms=()) -> FrictionModel:
-    """The model to start from when none is given: ``law`` fitted by :func:`gearspec.identify.fit`
-    (its nonlinear parameters -- Stribeck velocity, decays -- are then kept by the loop's linear
-    refits), with the declared lines of ``gear`` for ``silo4``; ``symmetric``: one parameter set
-    for both directions (fitted on the friction magnitudes of both directions together).
-    Whole-trajectory data take laws without nonlinear parameters (the loop fits them linearly)."""
-    from .. import identify
-
-    fd = dd.fit
-    if dd.kind == "trajectory":
-        if law not in ("coulomb_viscous", "none", "lola8"):
-            raise InputError(f"whole-trajectory data: start from a law without nonlinear parameters "
-                             f"(coulomb_viscous), not '{law}'; the loop adds a Stribeck term if the data want one")
-        from ..model import LAWS
-        P = {k: 0.0 for k in LAWS[law].params}
-        m = FrictionModel(law, P, P if symmetric else dict(P), unit=fd.unit, terms=list(terms),
-                          name=f"{law} ({'symmetric' if symmetric else 'per direction'})")
-        return m
-    if symmetric:
-        mag = fd.direction * fd.y
-        folded = FitData(theta=fd.theta, v=np.abs(fd.v), y=mag, acc=fd.acc, load=fd.load,
-                         temperature=fd.temperature, t=fd.t, run=fd.run, segment=fd.segment,
-                         direction=np.ones(len(fd), np.int8), unit=fd.unit, segments=fd.segments.assign(direction=1),
-                         notes=list(fd.notes))
-        m = identify.fit(folded, law, harmonics=harmonics, gear=gear, holdout=None)
-        p = m.directions["positive"]
-        ni = {k.replace("positive.", "both."): v for k, v in m.not_identified.items() if not k.startswith("negative.")}
-        m = FrictionModel(m.law, p, p, unit=m.unit, terms=list(terms), not_identified=ni,
-                          notes=m.notes + ["symmetric: one parameter set for both directions"],
-                          name=f"{law} (symmetric)", meta=m.meta)
-        return m
-    m = identify.fit(fd, law, harmonics=harmonics, gear=gear, holdout=None)
-    if terms:
-        m = m.with_terms(*terms)
-    m.name = f"{law} (joint fit)"
-    return m
-
-
-def residual_analysis(model: FrictionModel, data, *, gear=None, fap: float = 0.01, per_segment: bool = True) -> dict:
-    """Every residual analysis of :mod:`~gearspec.diagnose.residual` for a fitted model on any
-    recording, as it is (nothing refitted): ``{"residual", "spectra", "speed", "load",
-    "temperature", "t", "acc", "reversal"}`` (the channels the data have).  ``data``: a Recording,
-    FitData or DiagnoseData."""
-    dd = _as_data(data, None, gear)
-    r = dd.y - predict_model(model, dd)
-    out = {"residual": r,
-           "spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment)
-           if dd.at("theta") is not None else {"pooled": [], "segments": []},
-           "speed": speed_analysis(dd, r)}
-    for ch, tr in (("load", np.abs), ("temperature", None), ("t", None)):
-        res = channel_analysis(dd, r, ch, transform=tr)
-        if res is not None:
-            out[ch] = res
-    for name, fn in (("acc", acceleration_analysis), ("reversal", reversal_analysis)):
-        res = fn(dd, r)
-        if res is not None:
-            out[name] = res
-    return out
-
-
-def idim_model(dd: DiagnoseData, *, symmetric: bool = True, offset: bool = True,
-               name: str | None = None) -> FrictionModel:
-    """The inverse dynamic identification model fitted by least squares (IDIM-LS), as the EMPS
-    reference procedure does: ``tau = M qdd + Fv qd + Fc sign(qd) (+ offset)``, one Fv and Fc for
-    both directions (``symmetric``) or per direction, on the observations of ``dd`` (use
-    :func:`~gearspec.diagnose.trajectory_data`: filtered position, central differences, every
-    column decimated).  A :class:`~gearspec.model.FrictionModel` of law ``coulomb_viscous`` with an
-    ``inertia`` term (M) and an ``offset`` term; ``rmse`` and, in ``meta["relative_error"]``, the
-    relative error ``100 ||y - yhat|| / ||y||`` in percent."""
-    P = {"tau_c": 0.0, "viscous": 0.0}
-    terms = [{"kind": "inertia", "inertia": 0.0}] + ([{"kind": "offset", "offset": 0.0}] if offset else [])
-    tmpl = FrictionModel("coulomb_viscous", P, dict(P), unit=dd.unit, terms=terms,
-                         name=name or f"IDIM-LS {'symmetric' if symmetric else 'asymmetric'}")
-    st = state_from_model(tmpl, dd, symmetric=symmetric and len(dd.directions()) == 2)
-    fitted = fit_state(st, dd)
-    m = fitted.model(name=tmpl.name)
-    m.meta = {**m.meta, "relative_error": relative_error(dd.y, fitted.prediction),
-              "procedure": "IDIM-LS (ordinary least squares on the decimated observation matrix)"}
-    return m
-
-
-def _as_data(data, by: str | None, gear=None) -> DiagnoseData:
-    if isinstance(data, DiagnoseData):
-        return data
-    if isinstance(data, Recording):
-        return DiagnoseData.from_recording(data, by=by or "segment")
-    if isinstance(data, FitData):
-        return DiagnoseData.from_fitdata(data, by=by or "segment", gear=gear)
-    raise InputError("diagnose takes a Recording, a FitData or a DiagnoseData")
-
-
 def _contribution(rnd_dd: DiagnoseData, state: State, fitted: FittedState, uids) -> np.ndarray:
     """What the blocks ``uids`` add to the prediction (torque, at the observations)."""
     out = np.zeros(len(rnd_dd))
@@ -489,7 +268,7 @@ def _contribution(rnd_dd: DiagnoseData, state: State, fitted: FittedState, uids)
 
 def _holdout(rnd: Round) -> tuple[float, dict]:
     h = rnd.baseline_holdout()
-    return float(math.sqrt(h["sse"].sum() / len(rnd.dd))), h
+    return h["rmse"], h
 
 
 def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", gear=None, harmonics=None,
@@ -589,10 +368,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         analyses = analyse(rnd, fap=fap, per_segment=per_segment_spectra and k == 1)
         if first_analyses is None:
             first_analyses = analyses
-        cands = []
-        if "periodic" in kinds:
-            cands += _periodic_candidates(rnd, analyses)
-        cands += [c for c in term_candidates(rnd, analyses, gate=gate) if c.kind in kinds]
+        cands = propose(rnd, analyses, gate=gate, kinds=kinds)
         if not cands:
             rounds.append({"round": k, "candidates": 0, "accepted": None})
             break
@@ -615,24 +391,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             break
         new_state = _settle(rnd.state.replaced(prop.drop, prop.add), dd)
         rnd = Round(dd, new_state, fold)
-        e = effects[_effect_key(effects, c)]
-        e.accepted = True
-        e.decision = ev.reason
-        e.detail.setdefault("accepted_z", []).append(float(ev.z))
-        e.history.append(f"round {k}: accepted")
-        e.detail["blocks"] = [b.uid for b in prop.add]
-        e.detail["dropped"] = [b for b in prop.drop]
-        added = [new_state.block(u) for u in e.detail["blocks"]]
-        e.parameters = "; ".join(b.describe() for b in added if b is not None)
-        if isinstance(c, PeriodicCandidate):
-            f_fit = added[0].frequency
-            f_se = rnd.fitted.nonlinear_se.get(added[0].uid, {}).get(("frequency",))
-            c.relabel(f_fit, f_se)
-            e.detail["frequency_se"] = f_se
-            e.frequency, e.label, e.hint = f_fit, c.label, c.hint
-            e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
-            e.order = dd.gear.order(f_fit) if dd.gear is not None else None
-        e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
+        e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new_state, rnd, k)
         was_in = {x.name for x in effects.values() if x.accepted}
         removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
         if removed:
@@ -660,7 +419,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
                       "max_rounds": max_rounds, "kinds": sorted(kinds), "symmetric": bool(state.symmetric)})
     diag.trace = pd.DataFrame(trace)
     if validation is not None:
-        _validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain)
+        validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain)
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
     # what each accepted term explains in the final model: its contribution, and the partial
@@ -673,6 +432,32 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             e.detail["partial"] = True
     diag.final_analyses = analyse(Round(dd, diag.final.state, fold), fap=fap, per_segment=False)
     return diag
+
+
+def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: State, rnd: Round, k: int) -> Effect:
+    """Record on ``e`` that its candidate ``c`` was accepted in round ``k``: the decision, the blocks
+    the proposal ``prop`` added (as settled in ``new_state``) and dropped, a line's fitted
+    frequency with its standard error, and what it adds to the prediction of ``rnd`` (the round
+    with it)."""
+    dd = rnd.dd
+    e.accepted = True
+    e.decision = ev.reason
+    e.detail.setdefault("accepted_z", []).append(float(ev.z))
+    e.history.append(f"round {k}: accepted")
+    e.detail["blocks"] = [b.uid for b in prop.add]
+    e.detail["dropped"] = [b for b in prop.drop]
+    added = [new_state.block(u) for u in e.detail["blocks"]]
+    e.parameters = "; ".join(b.describe() for b in added if b is not None)
+    if isinstance(c, PeriodicCandidate):
+        f_fit = added[0].frequency
+        f_se = rnd.fitted.nonlinear_se.get(added[0].uid, {}).get(("frequency",))
+        c.relabel(f_fit, f_se)
+        e.detail["frequency_se"] = f_se
+        e.frequency, e.label, e.hint = f_fit, c.label, c.hint
+        e.name = f"line at {f_fit:.6g} cycles/{dd.unit}"
+        e.order = dd.gear.order(f_fit) if dd.gear is not None else None
+    e.detail["contribution"] = _contribution(dd, rnd.state, rnd.fitted, e.detail["blocks"])
+    return e
 
 
 def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
@@ -759,8 +544,8 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
 
 def _settle(state: State, dd: DiagnoseData) -> State:
     """Nonlinear parameters of a state where all data want them: coordinate searches
-    (:func:`~gearspec.diagnose.design.polish`), then Gauss-Newton steps to convergence
-    (:func:`~gearspec.diagnose.design.refine`), so that a candidate's held-out gain is its own and
+    (:func:`~gearspec.diagnose.nonlinear.polish`), then Gauss-Newton steps to convergence
+    (:func:`~gearspec.diagnose.nonlinear.refine`), so that a candidate's held-out gain is its own and
     not that of a better-tuned base law."""
     return refine(polish(state, dd), dd, steps=8)
 
@@ -852,72 +637,3 @@ def _written_terms(e: Effect, rnd: Round) -> list:
         else:
             out.append({"note": blk.describe()})
     return out
-
-
-def _validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, min_gain: float) -> None:
-    """Check every accepted term on independent data; remove those that do not help there."""
-    dd = diag.data
-    accepted = [e for e in diag.effects if e.accepted]
-    state = rnd.state
-    removed = []
-
-    def pred(st):
-        f = fit_state(st, dd)
-        return f, st.design(vd) @ f.coef
-
-    while True:
-        full_fit, p_full = pred(state)
-        worst = None
-        for e in accepted:
-            if e in removed:
-                continue
-            # without the effect: its blocks out, the blocks it replaced (an old amplitude law) back
-            st_wo = state.replaced(e.detail.get("blocks", []), e.detail.get("dropped", []))
-            _, p_wo = pred(st_wo)
-            r0 = vd.y - p_wo
-            r1 = vd.y - p_full
-            zv = z_statistic(r0, p_full - p_wo, r1, vd.starts, vd.stops)
-            rm0 = float(np.sqrt(np.mean(r0 ** 2)))
-            rm1 = float(np.sqrt(np.mean(r1 ** 2)))
-            gain = (rm0 - rm1) / rm0 if rm0 > 0 else 0.0
-            zc = critical_z(alpha, len(accepted), vd.n_groups)
-            ok = zv >= zc and gain >= min_gain
-            e.validation = {"z": zv, "z_crit": zc, "rmse_without": rm0, "rmse_with": rm1, "gain": gain,
-                            "relative_error_without": relative_error(vd.y, p_wo),
-                            "relative_error_with": relative_error(vd.y, p_full), "confirmed": bool(ok)}
-            if not ok and (worst is None or zv < worst[0]):
-                worst = (zv, e, st_wo)
-        if worst is None:
-            break
-        _, e, st_wo = worst
-        e.accepted = False
-        v = e.validation
-        e.decision = (f"rejected by the validation data: helps on the estimation data (held-out rmse "
-                      f"{e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g}) but not on the independent "
-                      f"recording (rmse {v['rmse_without']:.4g} -> {v['rmse_with']:.4g}, relative error "
-                      f"{v['relative_error_without']:.3f} % -> {v['relative_error_with']:.3f} %, Z {v['z']:.2f} "
-                      f"< {v['z_crit']:.2f} or gain below {100 * min_gain:.2g} %)")
-        e.history.append(e.decision)
-        e.detail.setdefault("removed", []).append("validation")
-        removed.append(e)
-        state = st_wo
-    if removed:
-        rnd2 = Round(dd, state, diag.folds)
-        ho, h = _holdout(rnd2)
-        name = "final: " + diag.baseline_model.name.replace("baseline: ", "") + "".join(
-            f" + {e.name}" for e in diag.effects if e.accepted)
-        diag.final = rnd2.fitted
-        diag.final_model = rnd2.fitted.model(name=name, rmse_holdout=ho)
-        diag.final_holdout = h
-        diag.notes.append(f"held-out rmse: {diag.baseline_model.rmse_holdout:.5g} (baseline) -> {ho:.5g} (final "
-                          f"model): the validation data removed {', '.join(e.name for e in removed)} after the "
-                          f"loop, and the final model is the one without "
-                          f"{'them' if len(removed) > 1 else 'it'} (same folds as every step)")
-    # numbers on the validation data, baseline and final (both fitted on the estimation data)
-    pb = diag.baseline.state.design(vd) @ diag.baseline.coef
-    pf = diag.final.state.design(vd) @ diag.final.coef
-    diag.validation = {"name": vd.name, "baseline_rmse": float(np.sqrt(np.mean((vd.y - pb) ** 2))),
-                       "final_rmse": float(np.sqrt(np.mean((vd.y - pf) ** 2))),
-                       "baseline_relative_error": relative_error(vd.y, pb),
-                       "final_relative_error": relative_error(vd.y, pf),
-                       "removed": [e.name for e in removed], "groups": vd.n_groups, "data": vd}

@@ -119,8 +119,7 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     unit = dd.unit
     diag.baseline_model.to_json(out / "baseline_model.json")
     diag.final_model.to_json(out / "final_model.json")
-    et = effect_table(diag)
-    et.to_csv(out / "effects.csv", index=False)
+    effect_table(diag).to_csv(out / "effects.csv", index=False)
     seg = diag.segment_table()
     seg.to_csv(out / "segments.csv", index=False)
     spectra = diag.analyses.get("spectra", {}).get("pooled", [])
@@ -130,7 +129,17 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
                                     unit=unit, torque_unit=tu, title="Residual spectra over position (final model)") \
         if final_spec else None
     fig_seg = dplots.plot_segment_errors(seg, out / "segment_errors.png", torque_unit=tu, unit=unit)
+    md = (_header_section(diag, title, command, recording_summary) + _summary_section(diag)
+          + _baseline_section(diag, fig_spec) + _accepted_section(diag, out) + _rejected_section(diag, out)
+          + _final_section(diag, seg, fig_final, fig_seg) + _method_section(diag))
+    path = out / "report.md"
+    path.write_text("\n".join(md))
+    return path
 
+
+def _header_section(diag: Diagnosis, title: str, command: str, recording_summary: str) -> list[str]:
+    """Title, command, recording and the held-out groups (Markdown lines)."""
+    dd = diag.data
     held = "moves" if dd.kind == "trajectory" else f"{dd.by}s"
     k = diag.settings.get("folds")
     md = [f"# {title}", ""]
@@ -140,9 +149,14 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
         md += ["## Recording", "", "```", recording_summary, "```", ""]
     md += [f"{len(dd)} observations in {dd.n_groups} held-out groups (whole {held}); {k}-fold cross-validation "
            "over whole groups, never interleaved samples. " + " ".join(dd.notes), ""]
-    # ---- summary
+    return md
+
+
+def _summary_section(diag: Diagnosis) -> list[str]:
+    """The accepted effects, before and after, the notes and the validation data (Markdown lines)."""
+    tu, unit = diag.data.torque_unit, diag.data.unit
     acc = [e for e in diag.effects if e.accepted]
-    md += ["## Summary", ""]
+    md = ["## Summary", ""]
     if acc:
         n_rem = sum(e.status == "removed" for e in diag.effects)
         md += [f"{len(acc)} effect(s) accepted, " + (f"{n_rem} accepted and removed again, " if n_rem else "")
@@ -165,11 +179,15 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
                f"{v['baseline_relative_error']:.3f} % -> {v['final_relative_error']:.3f} %.", ""]
         if v.get("removed"):
             md += ["Removed because they did not help there: " + ", ".join(v["removed"]) + ".", ""]
-    # ---- baseline
+    return md
+
+
+def _baseline_section(diag: Diagnosis, fig_spec: Path) -> list[str]:
+    """The baseline model, its residual spectra and analyses (Markdown lines)."""
     bm = diag.baseline_model
-    md += ["## Baseline model", "", f"`{bm.name}` -- law {bm.law} ({bm.law_spec.description}); nonlinear "
-           "parameters (Stribeck velocity, decays) refined by least squares, linear ones refitted jointly by "
-           "ordinary least squares, as every model of the loop is.", "", markdown_table(_param_table(bm)), ""]
+    md = ["## Baseline model", "", f"`{bm.name}` -- law {bm.law} ({bm.law_spec.description}); nonlinear "
+          "parameters (Stribeck velocity, decays) refined by least squares, linear ones refitted jointly by "
+          "ordinary least squares, as every model of the loop is.", "", markdown_table(_param_table(bm)), ""]
     if bm.terms:
         md += ["Terms: " + "; ".join(_term_text(t) for t in bm.terms), ""]
     md += ["## Residual spectra", "", "Residual of the baseline model over position, pooled over the segments of each "
@@ -191,9 +209,14 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
         md += ["Per segment: the strongest residual peak with false-alarm probability below 1 % (every "
                "independent frequency of the segment searched; empty: none).", "",
                markdown_table(pd.DataFrame(rows)), ""]
-    # ---- effects
-    md += ["## Effects accepted", ""]
-    if not acc:
+    return md
+
+
+def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
+    """Every accepted effect: evidence, test, fitted terms and its figure (Markdown lines)."""
+    tu = diag.data.torque_unit
+    md = ["## Effects accepted", ""]
+    if not any(e.accepted for e in diag.effects):
         md += ["_(none)_", ""]
     for i, e in enumerate(diag.effects):
         if not e.accepted:
@@ -215,14 +238,18 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
             md += [f"- {_term_text(t.get('term') or t.get('harmonic'), t.get('direction'))}" for t in e.terms] + [""]
         if fig is not None:
             md += [f"![{e.name}]({fig.name})", ""]
-    # ---- rejected
-    rej = [e for e in diag.effects if not e.accepted]
-    md += ["## Candidates not accepted", "", "Every candidate the detectors proposed, with its evidence and why it was "
-           "not accepted (Z: the held-out correlation of the residual with what the candidate predicts, in units of "
-           "its noise; needed: the one-sided t quantile at the round's Bonferroni level).", ""]
-    if not rej:
+    return md
+
+
+def _rejected_section(diag: Diagnosis, out: Path) -> list[str]:
+    """Every candidate not accepted, why, and the figures of the strongest (Markdown lines)."""
+    tu, unit = diag.data.torque_unit, diag.data.unit
+    md = ["## Candidates not accepted", "", "Every candidate the detectors proposed, with its evidence and why it was "
+          "not accepted (Z: the held-out correlation of the residual with what the candidate predicts, in units of "
+          "its noise; needed: the one-sided t quantile at the round's Bonferroni level).", ""]
+    if all(e.accepted for e in diag.effects):
         md += ["_(none)_", ""]
-    for i, e in enumerate(diag.effects):
+    for e in diag.effects:
         if e.accepted:
             continue
         f = f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else ""
@@ -239,9 +266,13 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
         fig = _figure_for(diag, e, out, i)
         if fig is not None:
             md += [f"Figure for the rejected candidate *{e.name}*:", "", f"![{e.name}]({fig.name})", ""]
-    # ---- final model
+    return md
+
+
+def _final_section(diag: Diagnosis, seg: pd.DataFrame, fig_final, fig_seg: Path) -> list[str]:
+    """The final model and the error per held-out group (Markdown lines)."""
     fm = diag.final_model
-    md += ["## Final model", "", f"`{fm.name}`", "", markdown_table(_param_table(fm)), ""]
+    md = ["## Final model", "", f"`{fm.name}`", "", markdown_table(_param_table(fm)), ""]
     if fm.terms:
         md += ["Terms: " + "; ".join(_term_text(t) for t in fm.terms), ""]
     md += ["`final_model.json` holds it in the `gearspec fit --json` form (terms included); "
@@ -251,25 +282,27 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     md += ["## Error per held-out group", "", f"![segments]({fig_seg.name})", "",
            markdown_table(seg[["group", "direction", "speed", "n", "rmse_before", "rmse_after", "rmse_holdout_before",
                                "rmse_holdout_after"]]), ""]
-    md += ["## Method", "",
-           "Residual analyses (gearspec.diagnose.residual): Lomb-Scargle periodograms of the residual over position "
-           "per segment and pooled over segments of one direction and similar speed, with local noise and "
-           "false-alarm probabilities; residual means against speed per direction (lack of fit), against load, "
-           "temperature and time per group; against acceleration; against the travel since the last reversal. "
-           "Each detector turns what it sees into candidate terms (a line at the found frequency with its "
-           "amplitude law chosen by the data, other speed laws, load terms and SILO4 eq. 14, temperature, drift, "
-           "direction asymmetry, inertia, presliding and backlash).", "",
-           "Acceptance (gearspec.diagnose.loop): in every fold the candidate searches its own frequency or shape on "
-           "the training groups only and is fitted jointly with the model; on the held-out groups the statistic "
-           "Z = sum <r0, Delta> / sqrt(sum V) (r0: held-out residual without the candidate, Delta: the change the "
-           "candidate predicts, V: cluster-robust variance per group) must exceed the one-sided t quantile at "
-           f"alpha = {diag.settings.get('alpha')} / (candidates of the round), the improving folds must carry 90 % of "
-           f"the change, and the held-out rmse must fall by {100 * diag.settings.get('min_gain', 0):.2g} % at least. "
-           "The best passing candidate is added, nonlinear parameters are refined, terms accepted earlier are "
-           "checked again (backward elimination), and the loop repeats until nothing passes.", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return md
+
+
+def _method_section(diag: Diagnosis) -> list[str]:
+    """How the residual was analysed and a term accepted (Markdown lines)."""
+    return ["## Method", "",
+            "Residual analyses (gearspec.diagnose.residual): Lomb-Scargle periodograms of the residual over position "
+            "per segment and pooled over segments of one direction and similar speed, with local noise and "
+            "false-alarm probabilities; residual means against speed per direction (lack of fit), against load, "
+            "temperature and time per group; against acceleration; against the travel since the last reversal. "
+            "Each detector turns what it sees into candidate terms (a line at the found frequency with its "
+            "amplitude law chosen by the data, other speed laws, load terms and SILO4 eq. 14, temperature, drift, "
+            "direction asymmetry, inertia, presliding and backlash).", "",
+            "Acceptance (gearspec.diagnose.loop): in every fold the candidate searches its own frequency or shape on "
+            "the training groups only and is fitted jointly with the model; on the held-out groups the statistic "
+            "Z = sum <r0, Delta> / sqrt(sum V) (r0: held-out residual without the candidate, Delta: the change the "
+            "candidate predicts, V: cluster-robust variance per group) must exceed the one-sided t quantile at "
+            f"alpha = {diag.settings.get('alpha')} / (candidates of the round), the improving folds must carry 90 % "
+            f"of the change, and the held-out rmse must fall by {100 * diag.settings.get('min_gain', 0):.2g} % at "
+            "least. The best passing candidate is added, nonlinear parameters are refined, terms accepted earlier "
+            "are checked again (backward elimination), and the loop repeats until nothing passes.", ""]
 
 
 def analysis_table(analyses: dict) -> pd.DataFrame:

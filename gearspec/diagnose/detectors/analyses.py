@@ -10,10 +10,11 @@ import numpy as np
 from scipy import stats
 
 from ..context import Round
+from ..data import DiagnoseData
 from ..residual import (acceleration_analysis, channel_analysis, magnitude_residual, position_spectra,
                         reversal_analysis, speed_analysis)
 
-__all__ = ["analyse", "load_line_analysis"]
+__all__ = ["analyse", "residual_analyses", "load_line_analysis"]
 
 
 def analyse(rnd: Round, *, fap: float = 0.01, per_segment: bool = True) -> dict:
@@ -23,28 +24,31 @@ def analyse(rnd: Round, *, fap: float = 0.01, per_segment: bool = True) -> dict:
     ``per_segment``: spectra of every segment as well as the pooled ones."""
     dd = rnd.dd
     r = rnd.fitted.residual
-    out = {"spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment) if dd.at("theta") is not None
-           else {"pooled": [], "segments": []}}
     base_params = max((len(b.names) // max(len(dd.directions()), 1) for b in rnd.state.blocks if b.key == "base"),
                       default=0)
-    out["speed"] = speed_analysis(dd, r, n_params=base_params)
-    ld = channel_analysis(dd, r, "load", transform=np.abs)
-    if ld is not None:
-        out["load"] = ld
-    tp = channel_analysis(dd, r, "temperature")
-    if tp is not None:
-        out["temperature"] = tp
-    tt = channel_analysis(dd, r, "t")
-    if tt is not None:
-        out["t"] = tt
-    ac = acceleration_analysis(dd, r)
-    if ac is not None:
-        out["acc"] = ac
-    rv = reversal_analysis(dd, r)
-    if rv is not None:
-        out["reversal"] = rv
+    out = residual_analyses(dd, r, fap=fap, per_segment=per_segment, n_params=base_params)
     if dd.at("load") is not None and np.ptp(dd.at("load")) > 0:
         out["load_lines"] = load_line_analysis(rnd, r)
+    return out
+
+
+def residual_analyses(dd: DiagnoseData, r: np.ndarray, *, fap: float = 0.01, per_segment: bool = True,
+                      n_params: int = 0) -> dict:
+    """Every residual analysis of :mod:`~gearspec.diagnose.residual` on a residual ``r`` (Nm) of
+    ``dd``: ``{"spectra", "speed", "load", "temperature", "t", "acc", "reversal"}`` (the channels
+    the data have); ``n_params``: parameters per direction of the base law (the speed analysis's
+    degrees of freedom)."""
+    out = {"spectra": position_spectra(dd, r, fap_threshold=fap, per_segment=per_segment) if dd.at("theta") is not None
+           else {"pooled": [], "segments": []},
+           "speed": speed_analysis(dd, r, n_params=n_params)}
+    for ch, tr in (("load", np.abs), ("temperature", None), ("t", None)):
+        res = channel_analysis(dd, r, ch, transform=tr)
+        if res is not None:
+            out[ch] = res
+    for name, fn in (("acc", acceleration_analysis), ("reversal", reversal_analysis)):
+        res = fn(dd, r)
+        if res is not None:
+            out[name] = res
     return out
 
 

@@ -9,7 +9,7 @@ from ...lag import lag_from_phases
 from ...spectrum.harmonic import harmonic_fit
 from ..candidates import Candidate, LagCandidate, LaggedHarmonicBlock
 from ..context import Round
-from ..design import resolved
+from ..coverage import resolved
 from .registry import register_detector
 
 __all__ = ["segment_phases", "lag_candidates"]
