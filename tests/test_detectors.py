@@ -223,13 +223,13 @@ def test_each_detector_proposes_what_the_old_chain_did(rounds, which):
     assert [(c.kind, c.name) for c in propose(rnd, analyses, gate=1.01)] == [w[:2] for w in KNOWN[which]]
 
 
-def test_the_loops_old_entry_points_ask_the_registry(rounds):
-    from gearspec.diagnose import candidates as C
+def test_the_spectrum_lines_then_the_term_detectors(rounds):
+    from gearspec.diagnose import detectors as C
     rnd, analyses = rounds["per_direction"]
-    cands = loop._periodic_candidates(rnd, analyses) + C.term_candidates(rnd, analyses, gate=1.01)
+    cands = C.line_candidates(rnd, analyses) + C.propose(rnd, analyses, gate=1.01, skip=("lines",))
     assert [(c.kind, c.name) for c in cands] == [w[:2] for w in KNOWN["per_direction"]]
     # at the loop's gate, fewer: the speed-law family needs evidence
-    names = [c.name for c in C.term_candidates(rnd, analyses, gate=1e-300)]
+    names = [c.name for c in C.propose(rnd, analyses, gate=1e-300, skip=("lines",))]
     assert "nonlinear viscous |v|^p" not in names and "drift" in names
 
 

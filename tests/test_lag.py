@@ -162,7 +162,7 @@ def test_held_out_test_rejects_a_lag_that_is_not_there(base):
     # and the held-out test rejects it
     from scipy import stats
 
-    from gearspec.diagnose import candidates as C
+    from gearspec.diagnose import detectors as C
     from gearspec.diagnose import loop
     from gearspec.diagnose.design import state_from_model
 

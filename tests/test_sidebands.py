@@ -20,7 +20,8 @@ import math
 import numpy as np
 import pytest
 
-from gearspec.diagnose import candidates as C
+from gearspec.diagnose import detectors as C
+from gearspec.diagnose.candidates import SidebandCandidate
 from gearspec.diagnose import loop
 from gearspec.gears import load_gear
 from gearspec.simulate.synthetic import Ripple, plateau_recording
@@ -66,8 +67,8 @@ def first_round(rec, gear):
 
     rnd = loop.Round(dd, loop._settle(state_from_model(model, dd), dd), loop.folds_of(dd, 5))
     analyses = loop.analyse(rnd, per_segment=False)
-    cands = C.term_candidates(rnd, analyses, gate=1.01)
-    sb = [c for c in cands if isinstance(c, C.SidebandCandidate)]
+    cands = C.propose(rnd, analyses, gate=1.01, skip=("lines",))
+    sb = [c for c in cands if isinstance(c, SidebandCandidate)]
     laws = [c for c in cands if c.kind == "speed_law" and c.name.startswith("amplitude law of spur tooth mesh")]
     return rnd, sb, laws
 

@@ -519,15 +519,3 @@ class SidebandCandidate(Candidate):
             xtc, ctc, cty = cross_grams(rnd, C)
             self._cache = {"round": rnd, "prop": Proposal(add, [], xtc, ctc, cty, self.name)}
         return self._cache["prop"]
-
-
-_MOVED = ("term_candidates", "lag_candidates", "sideband_candidates", "segment_phases", "SIDEBAND_CYCLES",
-          "AsymmetryBlock")
-
-
-def __getattr__(name):
-    """The builders of candidates moved to :mod:`.detectors`; their old names still resolve here."""
-    if name in _MOVED:
-        from . import detectors
-        return getattr(detectors, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

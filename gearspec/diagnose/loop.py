@@ -56,7 +56,6 @@ from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, solve_normal, state_from_model
 from .nonlinear import polish, refine
 from .detectors import analyse, propose
-from .detectors import line_candidates as _periodic_candidates  # noqa: F401  (tests/test_detectors.py)
 from .results import Diagnosis, Effect
 from .validate import validate
 

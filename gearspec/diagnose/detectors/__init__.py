@@ -43,12 +43,6 @@ from .lag import lag_candidates, segment_phases  # noqa: E402
 from .lines import line_candidates  # noqa: E402
 from .sidebands import SIDEBAND_CYCLES, sideband_candidates  # noqa: E402
 
-__all__ = ["register_detector", "unregister_detector", "detectors", "Detector", "propose", "term_candidates",
+__all__ = ["register_detector", "unregister_detector", "detectors", "Detector", "propose",
            "analyse", "load_line_analysis", "line_candidates", "lag_candidates", "segment_phases",
            "sideband_candidates", "SIDEBAND_CYCLES", "AsymmetryBlock"]
-
-
-def term_candidates(rnd, analyses: dict, *, gate: float) -> list:
-    """The candidates of every registered detector but the residual-spectrum lines (``lines``:
-    :func:`line_candidates`), in the detectors' order."""
-    return propose(rnd, analyses, gate=gate, skip=("lines",))
