@@ -385,7 +385,7 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     the mean friction of every segment (data, the selected law, each reference) for the plots."""
     t0 = time.perf_counter()
     M = run.M
-    refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold, run.by) for law in references or ()]
+    refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold) for law in references or ()]
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
     levels = {"data": M.c[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}

@@ -38,8 +38,6 @@ from ..fitdata import FitData
 
 __all__ = ["Moments", "moments"]
 
-_TWO_PI = 2.0 * np.pi     # used by .library
-
 
 @dataclass
 class Moments:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from .law import LawFit, Part, canonical, cross_validate, cross_validate_linear, fit_law
-from .library import FAMILIES, GROUPS, Library
+from .library import FAMILIES, Library
 from .moments import Moments
 from .results import Candidate, _paired
 
@@ -44,11 +44,8 @@ def _signature(parts) -> tuple:
 
 
 def _group_of(p: Part) -> tuple:
-    fam = p.family
-    for g, members in GROUPS.items():
-        if fam in members:
-            return (g, p.freq)
-    return (fam, p.freq)
+    """The slot of a part: its family's slot of equivalent shapes and its ripple line."""
+    return (p.fam.slot, p.freq)
 
 
 def _addable(lib: Library) -> list[Part]:

@@ -7,45 +7,54 @@ import math
 
 import numpy as np
 
-from ..core.crossval import n_params as _n_params
+from ..core.crossval import held_out, n_params as _n_params
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
+from ..terms import BASE_LAWS
 from .moments import Moments
 from .results import Reference
 
 __all__ = ["PAPER_LAWS"]
 
-#: the papers' laws the explorer compares with (names of :func:`gearspec.identify.fit`)
-PAPER_LAWS = ("coulomb_viscous", "stribeck", "silo4", "lola8", "lola11")
+#: the papers' laws the explorer compares with: every base law of :mod:`gearspec.terms` with
+#: parameters (names of :func:`gearspec.identify.fit`)
+PAPER_LAWS = tuple(name for name, law in BASE_LAWS.items() if law.params)
+
+#: how the comparison names them (a law not listed: by its name)
+_LABELS = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per direction)",
+           "stribeck": "SILO4 eq. 3 (per direction)", "silo4": "SILO4 eq. 11 (per direction, declared lines)",
+           "lola8": "Lola law (8)", "lola11": "Lola law (11)"}
+
+
+def _segment_index(data: FitData, M: Moments) -> np.ndarray:
+    """Position in ``M`` of every sample's segment."""
+    pos = {int(s): i for i, s in enumerate(M.segment)}
+    return np.array([pos[int(s)] for s in data.segment], dtype=int)
 
 
 def _segment_mean(data: FitData, model: FrictionModel, M: Moments) -> np.ndarray:
     pred = model.evaluate(**data.inputs())
-    pos = {int(s): i for i, s in enumerate(M.segment)}
-    idx = np.array([pos[int(s)] for s in data.segment], dtype=int)
-    return np.bincount(idx, weights=np.nan_to_num(pred), minlength=M.S) / M.n
-
+    return np.bincount(_segment_index(data, M), weights=np.nan_to_num(pred), minlength=M.S) / M.n
 
 
 def _segment_sse(data: FitData, model: FrictionModel, M: Moments, mask=None) -> np.ndarray:
+    """Residual sum of squares of ``model`` in every segment of ``M`` over the samples ``mask``."""
     sub = data if mask is None else data.subset(mask)
     r = model.residual(sub)
     out = np.zeros(M.S)
-    pos = {int(s): i for i, s in enumerate(M.segment)}
-    np.add.at(out, np.array([pos[int(s)] for s in sub.segment], dtype=int), np.nan_to_num(r * r, nan=0.0))
+    np.add.at(out, _segment_index(sub, M), np.nan_to_num(r * r, nan=0.0))
     return out
 
 
-def _paper_law(data: FitData, M: Moments, law: str, specs, fold, by) -> Reference:
+def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
     """A law of the papers, fitted by :func:`gearspec.identify.fit` (ordinary least squares,
-    ``weights="uniform"``, like the candidates) on the same folds."""
+    ``weights="uniform"``, like the candidates) on all data and on the same folds (``fold``: of
+    every segment of ``M``)."""
     from .. import identify
 
-    label = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per direction)",
-             "stribeck": "SILO4 eq. 3 (per direction)", "silo4": "SILO4 eq. 11 (per direction, declared lines)",
-             "lola8": "Lola law (8)", "lola11": "Lola law (11)"}.get(law, law)
-    if law in ("lola8", "lola11") and data.load is None:
+    label = _LABELS.get(law, law)
+    if law in BASE_LAWS and BASE_LAWS[law].needs_load and data.load is None:
         return Reference(label, "paper law", None, None, None, None, note="needs the load channel; not fitted")
     # SILO4 eq. 11 with the lines the user declared or gave (not those the spectrum found: the
     # paper's law is about the gear train's own lines)
@@ -61,26 +70,14 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold, by) -> Referenc
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a comparison is never worth a crash
         return Reference(label, "paper law", None, None, None, None,
                          note=f"identify.fit failed ({type(exc).__name__}: {exc})")
-    seg_fold = dict(zip(M.segment.tolist(), fold.tolist()))
-    sample_fold = np.array([seg_fold[int(s)] for s in data.segment])
-    cv = np.zeros(M.S)
-    failed = 0
-    for f in np.unique(fold):
-        test = sample_fold == f
-        try:
-            mf = identify.fit(data.subset(~test), law, **kw)
-            cv += _segment_sse(data, mf, M, test)
-        except (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError):
-            failed += 1
-            cv[fold == f] = np.nan
-    ok = np.isfinite(cv)
-    note = ""
-    if failed:
-        note = f"fit failed in {failed} fold(s): held-out error over the other folds"
-    n_ok = float(np.sum(M.n[ok]))
-    ho = math.sqrt(float(np.sum(cv[ok])) / n_ok) if n_ok else None
-    return Reference(label, "paper law", _rmse_all(data, model), ho, _n_params(model),
-                     np.where(ok, cv, np.nan) if not failed else None, model, note)
+    seg = _segment_index(data, M)
+    ho = held_out(fold, lambda train: identify.fit(data.subset(train[seg]), law, **kw),
+                  lambda mf, test: _segment_sse(data, mf, M, test[seg])[test], weight=M.n,
+                  catch=(InputError, np.linalg.LinAlgError, ValueError, FloatingPointError))
+    failed = len(ho.failed)
+    note = f"fit failed in {failed} fold(s): held-out error over the other folds" if failed else ""
+    return Reference(label, "paper law", _rmse_all(data, model), ho.rmse, _n_params(model),
+                     None if failed else ho.sse, model, note)
 
 
 def _rmse_all(data, model) -> float | None:
