@@ -21,7 +21,7 @@ from ..model import FrictionModel
 from .law import LawFit, _design, _multipliers, equation, fit_law, fold_ids, to_model
 from .library import Library, default_library
 from .moments import Moments, moments
-from .pool import _addable, _front, _path_structures, _Pool, _signature
+from .pool import _addable, _front, _path_structures, _Pool, _signature, climb, finalize
 from .references import PAPER_LAWS, _paper_law, _published, _segment_mean
 from .results import Candidate, DiscoveryResult, Reference
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
@@ -205,8 +205,8 @@ def _discover(data, *, references, published, **options) -> DiscoveryResult:
     run.timings["ripple path"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if run.local_search:
-        pool.climb()
-    sel = pool.finalize(run.local_search)
+        climb(pool)
+    sel = finalize(pool, run.local_search)
     run.timings["selection"] = time.perf_counter() - t0
     run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
     cand_list, front, selected = _finish(run, pool, sel)
@@ -273,7 +273,7 @@ def _level_stage(run: _Run, M1: Moments, lib1: Library) -> tuple:
     run.timings["level path"] = time.perf_counter() - t0
     level, z = (), None
     if pool1.fits:
-        best1 = pool1.climb() if run.local_search else (pool1.screen() or pool1.best())
+        best1 = climb(pool1) if run.local_search else (pool1.screen() or pool1.best())
         level, z = pool1.cands[best1].parts, pool1.cands[best1].fit.z
     run.timings["level selection"] = time.perf_counter() - t0 - run.timings["level path"]
     return pool1, path1, level, z

@@ -179,73 +179,92 @@ class _Pool:
                 c.rmse_holdout = math.sqrt(float(np.sum(c.cv_sse)) / self.M.N)
             self.full.add(sig)
 
-    def best(self, among=None):
-        keys = list(among if among is not None else self.cands)
-        return min(keys, key=lambda s: self.cands[s].rmse_holdout)
+    def best(self):
+        """The structure with the lowest held-out error so far."""
+        return min(self.cands, key=lambda s: self.cands[s].rmse_holdout)
 
-    def climb(self, rounds: int = 12, moves=None):
-        """Hill climbing on the screened held-out error from the best structure found: every
-        neighbour (a term added, dropped, made direction-dependent or symmetric, reshaped)
-        evaluated, the best taken, until nothing improves."""
-        self.screen()
-        cur = self.best()
+    def select(self):
+        """The selection rule (:func:`_select`) over the laws with full held-out refits."""
+        return _select({s: self.cands[s] for s in self.full}, self.M, self.groups, self.se_rule)
+
+
+def climb(pool: _Pool, rounds: int = 12):
+    """Hill climbing on the screened held-out error from the best structure of ``pool``: every
+    neighbour (a term added, dropped, made direction-dependent or symmetric, reshaped) evaluated,
+    the best taken, until nothing improves (at a local optimum of single moves, pairs of moves are
+    tried once).  Returns the signature it ends at."""
+    pool.screen()
+    cur = pool.best()
+    compound = False
+    for _ in range(rounds):
+        nxt = _climb_step(pool, cur, compound)
+        if nxt == cur and not compound:
+            compound = True          # a local optimum of single moves: try pairs once
+            continue
         compound = False
-        for _ in range(rounds):
-            base = self.cands[cur]
-            start = _inherit(base.fit)
-            moves_ = _compound(start, self.M, self.addable) if compound else _neighbours(start, self.M, self.addable)
-            new = []
-            for parts in moves_:
-                if moves is None or moves(parts):
-                    sig = self.consider(parts, f"neighbour of {_short(base, self.M)}", base.threshold, refine=False)
-                    if sig is not None:
-                        new.append(sig)
-            self.screen()
-            # neighbours start from the parent's refined values (new terms from the grid): refine
-            # the most promising few
-            new = sorted(set(new), key=lambda s_: self.cands[s_].rmse_holdout)[:self.refine_top]
-            self.refine(new)
-            nxt = self.best()
-            if nxt == cur and not compound:
-                compound = True          # a local optimum of single moves: try pairs once
-                continue
-            compound = False
-            if nxt == cur:
-                break
-            cur = nxt
-        return cur
+        if nxt == cur:
+            break
+        cur = nxt
+    return cur
 
-    def finalize(self, local_search: bool = True):
-        """Full held-out refits of the screened Pareto front and of every law within reach of the
-        best; the selection rule on those; the selected law's simplifications checked too."""
-        self.screen()
-        for _ in range(4):
-            near = sorted((s for s in self.cands if self._near(s, max(self.se_rule, 1.0))),
-                          key=lambda s: self.cands[s].rmse_holdout)[:10]
-            todo = set(_front(self.cands)) | set(near)
-            self.refit_holdout(todo)
-            sel = _select({s: self.cands[s] for s in self.full}, self.M, self.groups, self.se_rule)
-            if not local_search:
-                return sel
-            base = self.cands[sel]
-            nb = set()
-            for parts in _neighbours(_inherit(base.fit), self.M, self.addable, adds=False):
-                self.consider(parts, f"neighbour of {_short(base, self.M)}", base.threshold)
-                sig = _signature(parts)
-                if sig in self.fits:
-                    nb.add(sig)
-            self.screen()
-            self.refit_holdout(nb)
-            nsel = _select({s: self.cands[s] for s in self.full}, self.M, self.groups, self.se_rule)
-            if nsel == sel:
-                return sel
-        return nsel
 
-    def _near(self, sig, n_se):
-        b = self.best()
-        if sig == b:
-            return True
-        return _excess(self.cands[sig], self.cands[b], self.M, self.groups) <= n_se
+def _climb_step(pool: _Pool, cur, compound: bool):
+    """One round of moves (or pairs of moves) from the structure ``cur``; the best structure after it."""
+    base = pool.cands[cur]
+    start = _inherit(base.fit)
+    moves = _compound(start, pool.M, pool.addable) if compound else _neighbours(start, pool.M, pool.addable)
+    new = []
+    for parts in moves:
+        sig = pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold, refine=False)
+        if sig is not None:
+            new.append(sig)
+    pool.screen()
+    # neighbours start from the parent's refined values (new terms from the grid): refine the most
+    # promising few
+    pool.refine(sorted(set(new), key=lambda s_: pool.cands[s_].rmse_holdout)[:pool.refine_top])
+    return pool.best()
+
+
+def finalize(pool: _Pool, local_search: bool = True):
+    """Full held-out refits of the screened Pareto front and of every law within reach of the
+    best; the selection rule on those; the selected law's simplifications checked too, until the
+    selection stands (four rounds at most).  Returns the selected signature."""
+    pool.screen()
+    for _ in range(4):
+        pool.refit_holdout(_reachable(pool))
+        sel = pool.select()
+        if not local_search:
+            return sel
+        pool.refit_holdout(_simplifications(pool, sel))
+        nsel = pool.select()
+        if nsel == sel:
+            return sel
+    return nsel
+
+
+def _reachable(pool: _Pool) -> set:
+    """The screened Pareto front and the ten best laws within ``max(se_rule, 1)`` standard errors
+    of noise (:func:`_excess`) of the best."""
+    b = pool.best()
+    n_se = max(pool.se_rule, 1.0)
+    near = sorted((s for s in pool.cands
+                   if s == b or _excess(pool.cands[s], pool.cands[b], pool.M, pool.groups) <= n_se),
+                  key=lambda s: pool.cands[s].rmse_holdout)[:10]
+    return set(_front(pool.cands)) | set(near)
+
+
+def _simplifications(pool: _Pool, sel) -> set:
+    """The selected law's neighbours that add nothing (a term dropped, made symmetric or
+    direction-dependent, reshaped), fitted and screened."""
+    base = pool.cands[sel]
+    nb = set()
+    for parts in _neighbours(_inherit(base.fit), pool.M, pool.addable, adds=False):
+        pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold)
+        sig = _signature(parts)
+        if sig in pool.fits:
+            nb.add(sig)
+    pool.screen()
+    return nb
 
 
 def _front(cands: dict) -> list:
