@@ -151,7 +151,6 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
                          seed=seed)
 
 
-
 @dataclass
 class _Run:
     """One exploration's data and settings, read by each of its steps."""
@@ -189,6 +188,7 @@ class _Run:
 
 
 def _discover(data, *, references, published, **options) -> DiscoveryResult:
+    """:func:`discover`'s steps, in order."""
     t_start = time.perf_counter()
     run = _prepare(data, t_start, **options)
     M, lib = run.M, run.lib

@@ -474,7 +474,7 @@ def equation(fit: LawFit, frequencies, t_ref=None, unit: str = "rad") -> str:
         sv = _slot_values(fit, i)
         fam = p.fam
         par = {s: d["param"][0] for s, d in sv.items() if d["param"] is not None}
-        fac = fam.text(_pair(par, _g) if par else None)
+        fac = fam.factor.format(p=_pair(par, _g) if par else None)
         if t_ref is not None:
             fac = fac.replace("T_ref", _g(t_ref))
         if fam.basis == "ripple":

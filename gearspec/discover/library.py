@@ -80,10 +80,6 @@ class Family:
         """The slot of equivalent shapes (one of them is enough in a law)."""
         return self.group or self.name
 
-    def text(self, p: str | None = None) -> str:
-        """The readable factor with the parameter printed as ``p``."""
-        return self.factor.format(p=p)
-
 
 def _VS_BOUNDS(lo, hi):
     """Stribeck velocities the plateaus can identify: below lo/5 the term has vanished at every
@@ -170,7 +166,7 @@ class Term:
 
     def names(self, frequencies, t_ref=None) -> list[str]:
         """The columns' equations."""
-        fac = self.fam.text(None if self.param is None else _g(self.param, self.fam.digits))
+        fac = self.fam.factor.format(p=None if self.param is None else _g(self.param, self.fam.digits))
         if self.fam.basis == "ripple":
             s = f"sin(2pi*{_g(float(frequencies[self.freq]), 6)}*theta)"
             fac = f"{fac}*{s}" if fac else s

@@ -27,7 +27,6 @@ per-sample load, temperature and acceleration bases, hence this one.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -403,7 +402,3 @@ def _pseudo_rows(B, c, yy):
     rest = np.maximum(yy - np.sum(q * q, axis=1), 0.0)
     return P, q, rest
 
-
-def rms(m: Moments) -> float:
-    """RMS of the friction samples."""
-    return math.sqrt(float(np.sum(m.yy)) / max(m.N, 1))
