@@ -20,8 +20,8 @@ from . import (
     segments_from_args,
     stages,
 )
+from .fit import law_choices
 
-LAWS = ("silo4", "stribeck", "coulomb_viscous", "lola8", "lola11")
 KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "inertia", "hysteresis", "lag", "other")
 
 
@@ -34,7 +34,7 @@ def register(sub) -> None:
     add_recording_options(p)
     add_segment_options(p)
     g = p.add_argument_group("model")
-    g.add_argument("--law", default="silo4", choices=LAWS,
+    g.add_argument("--law", default="silo4", choices=law_choices("silo4", "stribeck"),
                    help="base law of the baseline model (default silo4: eq. 11 with the gear's declared lines)")
     g.add_argument("--model", metavar="MODEL.json",
                    help="start from this model instead (the `gearspec fit --json` form): its law, lines and terms")

@@ -17,6 +17,7 @@ from . import (
     segments_from_args,
     stages,
 )
+from .fit import law_choices
 
 
 def register(sub) -> None:
@@ -59,7 +60,7 @@ def register(sub) -> None:
     s.add_argument("--bootstrap", type=number(0, 10000, integer=True), default=50,
                    help="segment-bootstrap replicates for inclusion probabilities (default 50; 0: none)")
     s.add_argument("--no-local-search", action="store_true", help="only the sparse-regression path's laws")
-    s.add_argument("--compare", default="coulomb_viscous,stribeck,silo4,lola8,lola11",
+    s.add_argument("--compare", default=",".join(law_choices()),
                    help="papers' laws to fit on the same folds (comma-separated; 'none' for none)")
     s.add_argument("--no-published", action="store_true", help="leave out published models of the data set (EMPS)")
     s.add_argument("--seed", type=int, default=0, help="of the bootstrap")

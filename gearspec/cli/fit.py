@@ -19,7 +19,16 @@ from . import (
     stages,
 )
 
-LAWS = ("silo4", "stribeck", "lola8", "lola11", "coulomb_viscous")
+
+
+def law_choices(*first: str) -> tuple[str, ...]:
+    """The laws a fit can use: every base law of :data:`gearspec.terms.BASE_LAWS` with parameters
+    (so a law registered there is accepted), those named in ``first`` first (the order ``--help``
+    lists them in)."""
+    from ..terms import BASE_LAWS
+
+    laws = [name for name, law in BASE_LAWS.items() if law.params]
+    return tuple(dict.fromkeys([k for k in first if k in laws] + laws))
 
 
 def register(sub) -> None:
@@ -30,7 +39,7 @@ def register(sub) -> None:
     add_recording_options(p)
     add_segment_options(p)
     g = p.add_argument_group("fit")
-    g.add_argument("--law", default="silo4", choices=LAWS,
+    g.add_argument("--law", default="silo4", choices=law_choices("silo4", "stribeck", "lola8", "lola11"),
                    help="silo4: the full model (11) with direction-dependent parameters (default); stribeck: eq. 3; "
                         "lola8, lola11: the Lola/CROPS laws (need a load channel); coulomb_viscous")
     g.add_argument("--lines", metavar="F,F,...",

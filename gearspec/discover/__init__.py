@@ -31,7 +31,9 @@ Pipeline (one module each):
              standard errors of the noise in that difference -- a margin for the hundreds of laws
              the search scores -- with AIC/BIC beside), a bootstrap over segments for inclusion
              probabilities, and the papers' laws refitted by :func:`gearspec.identify.fit` on the
-             same folds (published models, e.g. EMPS's IDIM-LS, scored as they are).
+             same folds (published models, e.g. EMPS's IDIM-LS, scored as they are); its search
+             pool and moves in ``pool``, the papers' laws in ``references``, what it returns in
+             ``results``.
 ``published`` friction models published with the real data sets.
 
 Choices worth knowing: one term per slot of equivalent shapes (one Stribeck shape, one amplitude

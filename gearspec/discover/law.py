@@ -460,6 +460,13 @@ def _pair(vals: dict, fmt) -> str:
     return f"({fmt(vals[1])} | {fmt(vals[-1])})"
 
 
+def _times(c: str, fac: str) -> str:
+    """The coefficient ``c`` times the factor ``fac`` as printed (``c/(...)`` for ``1/(...)``)."""
+    if fac in ("", "1"):
+        return c
+    return c + fac[1:] if fac.startswith("1/") else f"{c}*{fac}"
+
+
 def equation(fit: LawFit, frequencies, t_ref=None, unit: str = "rad") -> str:
     """The fitted law as one readable line (SI units; ``(a | b)``: positive | negative direction)."""
     friction, signed = [], []
@@ -467,31 +474,17 @@ def equation(fit: LawFit, frequencies, t_ref=None, unit: str = "rad") -> str:
         sv = _slot_values(fit, i)
         fam = p.fam
         par = {s: d["param"][0] for s, d in sv.items() if d["param"] is not None}
+        fac = fam.factor.format(p=_pair(par, _g) if par else None)
+        if t_ref is not None:
+            fac = fac.replace("T_ref", _g(t_ref))
         if fam.basis == "ripple":
             amp = {s: math.hypot(d["lin"][0][0], d["lin"][1][0]) for s, d in sv.items()}
             ph = {s: math.atan2(d["lin"][1][0], d["lin"][0][0]) for s, d in sv.items()}
             f = _g(float(frequencies[p.freq]), 6)
-            a = _pair(amp, _g)
-            if fam.name == "ripple_exp":
-                a += f"*exp(-{_pair(par, _g)}*|v|)"
-            elif fam.name == "ripple_rational":
-                a += f"/(1+({_pair(par, _g)}*|v|)^2)"
-            friction.append(f"{a}*sin(2pi*{f}*theta + {_pair(ph, lambda x: _g(x, 3))})")
+            friction.append(f"{_times(_pair(amp, _g), fac)}*sin(2pi*{f}*theta + {_pair(ph, lambda x: _g(x, 3))})")
             continue
-        c = _pair({s: d["lin"][0][0] for s, d in sv.items()}, _g)
-        if fam.basis == "acc":
-            signed.append(f"{c}*a")
-            continue
-        if fam.param:
-            pp = _pair(par, _g)
-            fac = {"power": f"|v|^{pp}", "stribeck_exp": f"exp(-|v|/{pp})", "stribeck_gauss": f"exp(-(|v|/{pp})^2)",
-                   "stribeck_rational": f"/(1+(|v|/{pp})^2)"}[fam.name]
-            friction.append(c + fac if fam.name == "stribeck_rational" else f"{c}*{fac}")
-        else:
-            fac = fam.factor(None, None)
-            if t_ref is not None:
-                fac = fac.replace("T_ref", _g(t_ref))
-            friction.append(c if fac == "1" else f"{c}*{fac}")
+        term = _times(_pair({s: d["lin"][0][0] for s, d in sv.items()}, _g), fac)
+        (signed if fam.basis == "acc" else friction).append(term)
     body = " + ".join(friction) if friction else "0"
     s = f"tau = sign(v)*[{body}]"
     if signed:
@@ -502,7 +495,8 @@ def equation(fit: LawFit, frequencies, t_ref=None, unit: str = "rad") -> str:
 def to_model(fit: LawFit, frequencies, labels=None, t_ref=None, unit: str = "rad", name: str = "discovered",
              rmse=None, rmse_holdout=None) -> FrictionModel:
     """The fitted law as a :class:`FrictionModel` (base law coulomb_viscous per direction, ripple as
-    harmonics per direction, other parts as :mod:`gearspec.terms`), which evaluates identically."""
+    harmonics per direction, other parts as :mod:`gearspec.terms`: what each family becomes is
+    :attr:`.library.Family.term`), which evaluates identically."""
     dirs = {1: {"tau_c": 0.0, "viscous": 0.0, "harmonics": []}, -1: {"tau_c": 0.0, "viscous": 0.0, "harmonics": []}}
     terms = []
     for i, p in enumerate(fit.parts):
@@ -512,45 +506,33 @@ def to_model(fit: LawFit, frequencies, labels=None, t_ref=None, unit: str = "rad
             targets = (1, -1) if sl == 0 else (sl,)
             lin = d["lin"]
             par, par_se = d["param"] if d["param"] is not None else (None, None)
-            if fam.basis == "ripple":
+            if fam.term == "harmonic":
                 (cs, cs_se), (cc, cc_se) = lin
                 A = math.hypot(cs, cc)
                 ph = math.atan2(cc, cs)
                 A_se = math.sqrt((cs * cs_se) ** 2 + (cc * cc_se) ** 2) / A if A > 0 else float("nan")
                 ph_se = math.sqrt((cc * cs_se) ** 2 + (cs * cc_se) ** 2) / (A * A) if A > 0 else float("nan")
-                law = {"ripple_const": "const", "ripple_exp": "exp", "ripple_rational": "rational"}[fam.name]
                 h = {"frequency": float(frequencies[p.freq]), "amplitude": A, "amplitude_se": A_se, "phase": ph,
                      "phase_se": ph_se, "decay": par if par is not None else 0.0,
-                     "decay_se": par_se if par is not None else None, "law": law,
+                     "decay_se": par_se if par is not None else None, "law": fam.shape,
                      "label": (labels[p.freq] if labels is not None else None)}
                 for t in targets:
                     dirs[t]["harmonics"].append(dict(h))
                 continue
             c, c_se = lin[0]
-            direction = {} if sl == 0 else {"direction": sl}
-            if fam.name == "coulomb":
+            if fam.term == "base":
                 for t in targets:
-                    dirs[t]["tau_c"] += c
-                    dirs[t]["tau_c_se"] = c_se
-            elif fam.name == "viscous":
-                for t in targets:
-                    dirs[t]["viscous"] += c
-                    dirs[t]["viscous_se"] = c_se
-            elif fam.name == "power":
-                terms.append({"kind": "viscous_power", "coefficient": c, "coefficient_se": c_se, "exponent": par,
-                              "exponent_se": par_se, **direction})
-            elif fam.name.startswith("stribeck_"):
-                terms.append({"kind": "stribeck_extra", "amplitude": c, "amplitude_se": c_se, "v_s": par,
-                              "v_s_se": par_se, "shape": fam.name.split("_")[1], **direction})
-            elif fam.name == "load_coulomb":
-                terms.append({"kind": "load_coulomb", "mu": c, "mu_se": c_se, **direction})
-            elif fam.name == "load_viscous":
-                terms.append({"kind": "load_viscous", "gamma": c, "gamma_se": c_se, **direction})
-            elif fam.name == "temperature":
-                terms.append({"kind": "temperature", "coefficient": c, "coefficient_se": c_se,
-                              "reference": float(t_ref), **direction})
-            elif fam.name == "inertia":
-                terms.append({"kind": "inertia", "inertia": c, "inertia_se": c_se})
+                    dirs[t][fam.coef] += c
+                    dirs[t][f"{fam.coef}_se"] = c_se
+                continue
+            term = {"kind": fam.term, fam.coef: c, f"{fam.coef}_se": c_se}
+            if fam.param:
+                term.update({fam.param: par, f"{fam.param}_se": par_se})
+            if fam.shape:
+                term["shape"] = fam.shape
+            if fam.basis == "temperature":
+                term["reference"] = float(t_ref)
+            terms.append(term if sl == 0 else {**term, "direction": sl})
     return FrictionModel("coulomb_viscous", dirs[1], dirs[-1], terms=terms, unit=unit, name=name, rmse=rmse,
                          rmse_holdout=rmse_holdout,
                          notes=[f"found by gearspec discover; standard errors: {fit.se_method or 'not computed'}"])

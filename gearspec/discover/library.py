@@ -34,11 +34,12 @@ from typing import Callable
 
 import numpy as np
 
+from ..core.reduction import harmonic_columns
 from ..errors import InputError
 from ..terms.shapes import amplitude_law, stribeck_shape
 from .moments import Moments
 
-__all__ = ["Family", "FAMILIES", "Term", "Library", "default_library", "GROUPS"]
+__all__ = ["Family", "FAMILIES", "Term", "Library", "default_library"]
 
 
 def _g(x: float, digits: int = 4) -> str:
@@ -47,28 +48,37 @@ def _g(x: float, digits: int = 4) -> str:
 
 @dataclass(frozen=True)
 class Family:
-    """A family of terms: magnitude ``m(speed, p)``, the sample basis it multiplies and how it prints.
+    """A family of terms: magnitude ``m(speed, p)``, the sample basis it multiplies, how it prints
+    and what it becomes in a :class:`~gearspec.model.FrictionModel`.
 
-    ``param``: name of the nonlinear parameter (None: none), with ``bounds(lo_speed, hi_speed)``
-    for its refinement; ``factor(p, f)``: the readable factor (``f`` the ripple frequency).
+    ``factor``: the readable factor, ``{p}`` standing for the nonlinear parameter (a ripple
+    family's: the amplitude law's, the sinusoid follows), printed with ``digits`` significant
+    digits in column names; ``param``: name of the nonlinear parameter (None: none), with
+    ``bounds(lo_speed, hi_speed)`` for its refinement; ``group``: the slot of mutually exclusive
+    shapes it belongs to (default: its own).  ``term``: what a fitted term becomes in a model --
+    ``"base"`` (the parameter ``coef`` of the base law coulomb_viscous), ``"harmonic"`` (a harmonic
+    with amplitude law ``shape``) or a term kind of :mod:`gearspec.terms` (its coefficient ``coef``,
+    its parameter under the name ``param``, its Stribeck ``shape`` if it has one).
     """
 
     name: str
     basis: str                         # "1", "load", "temperature", "acc" or "ripple"
     magnitude: Callable
-    factor: Callable
+    factor: str
     param: str | None = None
     bounds: Callable | None = None
-    group: str = ""                    # slot of mutually exclusive shapes (see GROUPS)
+    group: str = ""
     description: str = ""
     refine: bool = True                # the parameter is refined by nonlinear least squares
+    term: str = ""
+    coef: str = ""
+    shape: str | None = None
+    digits: int = 4
 
-
-def _ripple_factor(amp: str) -> Callable:
-    def f(p, freq):
-        s = f"sin(2pi*{_g(freq, 6)}*theta)"
-        return s if not amp else amp.format(p=_g(p)) + "*" + s
-    return f
+    @property
+    def slot(self) -> str:
+        """The slot of equivalent shapes (one of them is enough in a law)."""
+        return self.group or self.name
 
 
 def _VS_BOUNDS(lo, hi):
@@ -83,42 +93,48 @@ def _DECAY_BOUNDS(lo, hi):
     return (0.05 / hi, 20.0 / hi)
 
 
+def _ones(u, p):
+    return np.ones_like(u)
+
+
+def _linear(u, p):
+    return u
+
+
+def _stribeck(shape: str, factor: str, description: str) -> Family:
+    return Family(f"stribeck_{shape}", "1", partial(stribeck_shape, shape), factor, "v_s", _VS_BOUNDS, "stribeck",
+                  description, term="stribeck_extra", coef="amplitude", shape=shape)
+
+
+def _ripple(law: str, factor: str, description: str) -> Family:
+    decays = law != "const"
+    return Family(f"ripple_{law}", "ripple", partial(amplitude_law, law), factor, "decay" if decays else None,
+                  _DECAY_BOUNDS if decays else None, "ripple", description, term="harmonic", shape=law)
+
+
 FAMILIES: dict[str, Family] = {f.name: f for f in [
-    Family("coulomb", "1", lambda u, p: np.ones_like(u), lambda p, f: "1", group="coulomb",
-           description="Coulomb friction"),
-    Family("viscous", "1", lambda u, p: u, lambda p, f: "|v|", group="viscous", description="viscous friction"),
+    Family("coulomb", "1", _ones, "1", description="Coulomb friction", term="base", coef="tau_c"),
+    Family("viscous", "1", _linear, "|v|", description="viscous friction", term="base", coef="viscous"),
     # exponents stay at their grid values: a free exponent mimics Coulomb (p -> 0) or viscous (p -> 1)
     # friction and turns every law into a power law
-    Family("power", "1", lambda u, p: u ** p, lambda p, f: f"|v|^{_g(p, 3)}", "exponent",
-           lambda lo, hi: (0.05, 4.0), group="power", description="power law |v|^p (sqrt: p = 0.5, |v|v: p = 2)",
-           refine=False),
-    Family("stribeck_exp", "1", partial(stribeck_shape, "exp"), lambda p, f: f"exp(-|v|/{_g(p)})", "v_s",
-           _VS_BOUNDS, group="stribeck", description="Stribeck, exponential (SILO4 eq. 3)"),
-    Family("stribeck_gauss", "1", partial(stribeck_shape, "gauss"), lambda p, f: f"exp(-(|v|/{_g(p)})^2)", "v_s",
-           _VS_BOUNDS, group="stribeck", description="Stribeck, Gaussian"),
-    Family("stribeck_rational", "1", partial(stribeck_shape, "rational"), lambda p, f: f"1/(1+(|v|/{_g(p)})^2)",
-           "v_s", _VS_BOUNDS, group="stribeck",
-           description="Stribeck, rational (Lola law (11))"),
-    Family("load_coulomb", "load", lambda u, p: np.ones_like(u), lambda p, f: "|T_l|", group="load_coulomb",
-           description="load-dependent Coulomb (Lola law (8))"),
-    Family("load_viscous", "load", lambda u, p: u, lambda p, f: "|T_l|*|v|", group="load_viscous",
-           description="load-speed coupling (Lola law (8))"),
-    Family("temperature", "temperature", lambda u, p: np.ones_like(u), lambda p, f: "(T-T_ref)", group="temperature",
-           description="friction level changing with temperature"),
-    Family("inertia", "acc", lambda u, p: np.ones_like(u), lambda p, f: "a", group="inertia",
-           description="residual inertia (acceleration; not friction)"),
-    Family("ripple_const", "ripple", partial(amplitude_law, "const"), _ripple_factor(""), group="ripple",
-           description="position ripple of constant amplitude (SILO4 eq. 6)"),
-    Family("ripple_exp", "ripple", partial(amplitude_law, "exp"), _ripple_factor("exp(-{p}*|v|)"), "decay",
-           _DECAY_BOUNDS, group="ripple", description="meshing ripple decaying exponentially with speed (SILO4 eq. 8)"),
-    Family("ripple_rational", "ripple", partial(amplitude_law, "rational"), _ripple_factor("1/(1+({p}*|v|)^2)"),
-           "decay", _DECAY_BOUNDS, group="ripple",
-           description="ripple decaying as a Lorentzian of speed"),
+    Family("power", "1", lambda u, p: u ** p, "|v|^{p}", "exponent", lambda lo, hi: (0.05, 4.0),
+           description="power law |v|^p (sqrt: p = 0.5, |v|v: p = 2)", refine=False, term="viscous_power",
+           coef="coefficient", digits=3),
+    _stribeck("exp", "exp(-|v|/{p})", "Stribeck, exponential (SILO4 eq. 3)"),
+    _stribeck("gauss", "exp(-(|v|/{p})^2)", "Stribeck, Gaussian"),
+    _stribeck("rational", "1/(1+(|v|/{p})^2)", "Stribeck, rational (Lola law (11))"),
+    Family("load_coulomb", "load", _ones, "|T_l|", description="load-dependent Coulomb (Lola law (8))",
+           term="load_coulomb", coef="mu"),
+    Family("load_viscous", "load", _linear, "|T_l|*|v|", description="load-speed coupling (Lola law (8))",
+           term="load_viscous", coef="gamma"),
+    Family("temperature", "temperature", _ones, "(T-T_ref)", description="friction level changing with temperature",
+           term="temperature", coef="coefficient"),
+    Family("inertia", "acc", _ones, "a", description="residual inertia (acceleration; not friction)", term="inertia",
+           coef="inertia"),
+    _ripple("const", "", "position ripple of constant amplitude (SILO4 eq. 6)"),
+    _ripple("exp", "exp(-{p}*|v|)", "meshing ripple decaying exponentially with speed (SILO4 eq. 8)"),
+    _ripple("rational", "1/(1+({p}*|v|)^2)", "ripple decaying as a Lorentzian of speed"),
 ]}
-
-#: slots of families that describe the same effect in different shapes (one is enough in a law)
-GROUPS = {"stribeck": ("stribeck_exp", "stribeck_gauss", "stribeck_rational"),
-          "ripple": ("ripple_const", "ripple_exp", "ripple_rational"), "power": ("power",)}
 
 
 @dataclass(frozen=True)
@@ -150,8 +166,10 @@ class Term:
 
     def names(self, frequencies, t_ref=None) -> list[str]:
         """The columns' equations."""
-        f = None if self.freq is None else float(frequencies[self.freq])
-        fac = self.fam.factor(self.param, f)
+        fac = self.fam.factor.format(p=None if self.param is None else _g(self.param, self.fam.digits))
+        if self.fam.basis == "ripple":
+            s = f"sin(2pi*{_g(float(frequencies[self.freq]), 6)}*theta)"
+            fac = f"{fac}*{s}" if fac else s
         if t_ref is not None:
             fac = fac.replace("T_ref", _g(t_ref))
         out = []
@@ -241,8 +259,6 @@ class Library:
     def evaluate(self, data, m: Moments) -> np.ndarray:
         """(N, p): the columns at every sample of ``data`` (dense; for checks and baselines -- the
         search itself never builds this).  Rows in the order of ``data``."""
-        from .moments import _TWO_PI
-
         sid_of = {int(s): i for i, s in enumerate(m.segment)}
         seg_idx = np.array([sid_of[int(s)] for s in data.segment])
         A = self.multipliers(m)[seg_idx]
@@ -254,9 +270,10 @@ class Library:
             bases["temperature"] = np.asarray(data.temperature, dtype=float) - m.t_ref
         if "acc" in m.basis:
             bases["acc"] = np.asarray(data.acc, dtype=float)
-        for i, f in enumerate(m.frequencies):
-            ph = _TWO_PI * f * np.asarray(data.theta, dtype=float)
-            bases[f"sin{i}"], bases[f"cos{i}"] = np.sin(ph), np.cos(ph)
+        if len(m.frequencies):
+            sn, cs = harmonic_columns(data.theta, m.frequencies)
+            for i in range(len(m.frequencies)):
+                bases[f"sin{i}"], bases[f"cos{i}"] = sn[:, i], cs[:, i]
         for j, (_, _, b) in enumerate(self.columns):
             X[:, j] = A[:, j] * bases[b]
         return X

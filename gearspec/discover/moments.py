@@ -27,7 +27,6 @@ per-sample load, temperature and acceleration bases, hence this one.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -37,8 +36,6 @@ from ..errors import InputError
 from ..fitdata import FitData
 
 __all__ = ["Moments", "moments"]
-
-_TWO_PI = 2.0 * np.pi     # used by .library
 
 
 @dataclass
@@ -241,43 +238,10 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
         raise InputError("fit data: no samples")
     notes: list[str] = []
     if min_cycles is not None and len(freqs):
-        order = np.argsort(data.segment, kind="stable")
-        _, starts = np.unique(data.segment[order], return_index=True)
-        th = np.asarray(data.theta, dtype=float)[order]
-        span = np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts)
-        ok = freqs * float(np.max(span)) >= min_cycles
-        for f, lab in zip(freqs[~ok], np.asarray(labels, dtype=object)[~ok]):
-            notes.append(f"ripple line {f:.6g} cycles/{data.unit}" + (f" ({lab})" if lab else "")
-                         + f" completes fewer than {min_cycles:g} cycle(s) in every segment: left out")
-        freqs = freqs[ok]
-        labels = [lab for lab, k in zip(labels, ok) if k]
+        freqs, labels = _lines_with_cycles(data, freqs, labels, min_cycles, notes)
     if not np.all(np.isfinite(data.y)) or not np.all(np.isfinite(data.v)):
         raise InputError("fit data: friction or velocity has NaN or infinite values")
-    basis = ["1"]
-    load = None
-    if data.load is not None:
-        load = np.abs(np.asarray(data.load, dtype=float))
-        if np.ptp(load) > 0 or np.any(load > 0):
-            basis.append("load")
-        else:
-            load = None
-    temp = None
-    t_ref = None
-    if data.temperature is not None:
-        temp = np.asarray(data.temperature, dtype=float)
-        if np.ptp(temp) > 0:
-            t_ref = float(np.round(np.mean(temp), 1))
-            basis.append("temperature")
-        else:
-            notes.append(f"temperature constant ({temp[0]:.3g} degC): no temperature term")
-            temp = None
-    acc = None
-    if inertia and data.acc is not None:
-        a = np.asarray(data.acc, dtype=float)
-        scale = np.max(np.abs(data.v)) if len(data.v) else 0.0
-        if inertia is True or (np.sqrt(np.mean(a * a)) > 1e-9 * max(scale, 1e-300)):
-            acc = a
-            basis.append("acc")
+    basis, load, temp, t_ref, acc = _sample_bases(data, inertia, notes)
     for i in range(len(freqs)):
         basis += [f"sin{i}", f"cos{i}"]
     K = len(basis)
@@ -344,6 +308,51 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
                    noise=_fill_noise(noise), t_ref=t_ref, vabs=vabs, unit=data.unit, notes=notes)
 
 
+
+def _lines_with_cycles(data: FitData, freqs, labels, min_cycles: float, notes: list) -> tuple:
+    """The frequencies (and their labels) that complete at least ``min_cycles`` cycles in some
+    segment; a note for each left out."""
+    order = np.argsort(data.segment, kind="stable")
+    _, starts = np.unique(data.segment[order], return_index=True)
+    th = np.asarray(data.theta, dtype=float)[order]
+    span = np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts)
+    ok = freqs * float(np.max(span)) >= min_cycles
+    for f, lab in zip(freqs[~ok], np.asarray(labels, dtype=object)[~ok]):
+        notes.append(f"ripple line {f:.6g} cycles/{data.unit}" + (f" ({lab})" if lab else "")
+                     + f" completes fewer than {min_cycles:g} cycle(s) in every segment: left out")
+    return freqs[ok], [lab for lab, k in zip(labels, ok) if k]
+
+
+def _sample_bases(data: FitData, inertia, notes: list) -> tuple:
+    """The sample bases besides the ripple's (``1`` and those of the channels that vary), and the
+    channels they are built from: ``(basis, |load| or None, temperature or None, t_ref, acc or None)``."""
+    basis = ["1"]
+    load = None
+    if data.load is not None:
+        load = np.abs(np.asarray(data.load, dtype=float))
+        if np.ptp(load) > 0 or np.any(load > 0):
+            basis.append("load")
+        else:
+            load = None
+    temp = None
+    t_ref = None
+    if data.temperature is not None:
+        temp = np.asarray(data.temperature, dtype=float)
+        if np.ptp(temp) > 0:
+            t_ref = float(np.round(np.mean(temp), 1))
+            basis.append("temperature")
+        else:
+            notes.append(f"temperature constant ({temp[0]:.3g} degC): no temperature term")
+            temp = None
+    acc = None
+    if inertia and data.acc is not None:
+        a = np.asarray(data.acc, dtype=float)
+        scale = np.max(np.abs(data.v)) if len(data.v) else 0.0
+        if inertia is True or (np.sqrt(np.mean(a * a)) > 1e-9 * max(scale, 1e-300)):
+            acc = a
+            basis.append("acc")
+    return basis, load, temp, t_ref, acc
+
 def _noise_variance(Phi, y, B, c, blocks: int = 10) -> float:
     """Noise variance of one segment (see :attr:`Moments.noise`); NaN for segments too short."""
     n, K = Phi.shape
@@ -393,7 +402,3 @@ def _pseudo_rows(B, c, yy):
     rest = np.maximum(yy - np.sum(q * q, axis=1), 0.0)
     return P, q, rest
 
-
-def rms(m: Moments) -> float:
-    """RMS of the friction samples."""
-    return math.sqrt(float(np.sum(m.yy)) / max(m.N, 1))

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["make_optimizer", "OPTIMIZERS", "Scaled", "scale", "path", "bootstrap_inclusion"]
+__all__ = ["make_optimizer", "OPTIMIZERS", "Scaled", "path", "bootstrap_inclusion"]
 
 OPTIMIZERS = ("stlsq", "sr3")
 
@@ -63,13 +63,6 @@ class Scaled:
         self.X = X / cr
         self.X[:, ~self.live] = 0.0
         self.q = q / self.y_rms
-
-    def unscale(self, w: np.ndarray) -> np.ndarray:
-        return np.where(self.live, w * self.y_rms / np.where(self.live, self.col_rms, 1.0), 0.0)
-
-
-def scale(X, q, N, yy) -> Scaled:
-    return Scaled(X, q, N, yy)
 
 
 def _fit(method, threshold, alpha, sc: Scaled, free=None) -> np.ndarray:

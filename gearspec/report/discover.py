@@ -8,8 +8,6 @@ from pathlib import Path
 import pandas as pd
 
 from ..plots.discover import plot_inclusion, plot_levels, plot_pareto
-
-
 from . import markdown_table
 
 __all__ = ["write_discover_report"]

@@ -1,0 +1,337 @@
+"""The search pool of the explorer: structures refined and scored on one set of moments, the moves
+of its hill climb (a term added, dropped, made direction-dependent or symmetric, reshaped) and the
+selection rule (the simplest law within ``se_rule`` standard errors of noise of the best)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .law import LawFit, Part, canonical, cross_validate, cross_validate_linear, fit_law
+from .library import FAMILIES, Library
+from .moments import Moments
+from .results import Candidate, _paired
+
+
+def _structure(lib: Library, w: np.ndarray) -> tuple:
+    """Library columns selected (nonzero standardised coefficients ``w``) -> a structure: one part
+    per slot of equivalent shapes (Stribeck of any shape and velocity, one power law, one
+    amplitude law per ripple line; the member with the largest coefficient), direction-dependent
+    where an asym column of the slot is selected.  Keeping one Stribeck term and one amplitude law
+    per line keeps the laws readable and the refinement well posed: a second Stribeck term at a
+    neighbouring velocity is how plain least squares spends collinearity, not physics."""
+    ct = lib.column_terms()
+    weight: dict = {}
+    split: dict = {}
+    for j in np.flatnonzero(w):
+        t = lib.terms[ct[j]]
+        slot = _group_of(Part(t.family, t.freq))
+        weight.setdefault(slot, {}).setdefault(t.key, 0.0)
+        weight[slot][t.key] += abs(float(w[j]))
+        split[slot] = split.get(slot, False) or t.variant == "asym"
+    parts = []
+    for slot, members in weight.items():
+        fam, param, freq = max(members, key=members.get)
+        parts.append(Part(fam, freq, split[slot], param))
+    return canonical(parts)
+
+
+def _signature(parts) -> tuple:
+    """What distinguishes structures after refinement (refined parameters' start values do not)."""
+    return tuple(sorted((p.family, -1 if p.freq is None else p.freq, p.split, 0.0 if p.free else (p.param0 or 0.0))
+                        for p in parts))
+
+
+def _group_of(p: Part) -> tuple:
+    """The slot of a part: its family's slot of equivalent shapes and its ripple line."""
+    return (p.fam.slot, p.freq)
+
+
+def _addable(lib: Library) -> list[Part]:
+    """One symmetric part per family (and ripple line, and fixed exponent) of the library, its
+    parameter started at the middle of the library's grid: what the search may add."""
+    grid: dict = {}
+    for t in lib.terms:
+        key = (t.family, t.freq, t.param if (t.fam.param and not t.fam.refine) else None)
+        grid.setdefault(key, []).append(t.param)
+    out = []
+    for (fam, freq, fixed), params in grid.items():
+        if fixed is not None:
+            p0 = fixed
+        elif FAMILIES[fam].param:
+            vals = sorted(set(params))
+            p0 = vals[len(vals) // 2]
+        else:
+            p0 = None
+        out.append(Part(fam, freq, False, p0))
+    return out
+
+
+def _inherit(fit: LawFit) -> tuple:
+    """The law's parts with their start values set to the refined ones (geometric mean over the
+    directions), so that its neighbours start their refinement where it ended."""
+    vals: dict = {}
+    for (i, _), zv in zip(fit.layout.nl, fit.z):
+        vals.setdefault(i, []).append(zv)
+    return tuple(Part(p.family, p.freq, p.split, math.exp(float(np.mean(vals[i]))) if i in vals else p.param0)
+                 for i, p in enumerate(fit.parts))
+
+
+def _compound(parts, M: Moments, addable) -> list[tuple]:
+    """Two moves at once: a term dropped and another made direction-dependent -- to leave a local
+    optimum where one term stands in for the direction dependence of another."""
+    out = []
+    both = len(M.directions) == 2
+    for i in range(len(parts)):
+        rest = list(parts[:i]) + list(parts[i + 1:])
+        if not rest:
+            continue
+        for j, p in enumerate(rest):
+            if both and not p.split and p.fam.basis != "acc":
+                out.append(canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)]))
+    return out
+
+
+def _neighbours(parts, M: Moments, addable=(), adds: bool = True) -> list[tuple]:
+    """Structures around one: each part dropped, made symmetric or direction-dependent, or given
+    the other shapes of its slot; each of ``addable`` added (if its family and line are absent)."""
+    out = []
+    both = len(M.directions) == 2
+    if both:   # direction dependence wholesale: every term split, or none
+        out.append(canonical([Part(p.family, p.freq, p.fam.basis != "acc", p.param0) for p in parts]))
+        out.append(canonical([Part(p.family, p.freq, False, p.param0) for p in parts]))
+    have = {_group_of(p) for p in parts}
+    for a in (addable if adds else ()):
+        if _group_of(a) not in have:
+            out.append(canonical(list(parts) + [a]))
+    for i, p in enumerate(parts):
+        rest = list(parts[:i]) + list(parts[i + 1:])
+        if rest:
+            out.append(canonical(rest))
+        if p.split:
+            out.append(canonical(rest + [Part(p.family, p.freq, False, p.param0)]))
+        elif both and p.fam.basis != "acc":
+            out.append(canonical(rest + [Part(p.family, p.freq, True, p.param0)]))
+        slot = _group_of(p)
+        for a in addable:
+            if _group_of(a) == slot and (a.family != p.family or (not a.free and a.param0 != p.param0)):
+                p0 = a.param0 if not a.free else (p.param0 if (p.param0 is not None and p.free
+                                                               and a.fam.param == p.fam.param) else a.param0)
+                out.append(canonical(rest + [Part(a.family, p.freq, p.split, p0)]))
+    return out
+
+
+class _Pool:
+    """Structures refined and scored on one set of moments: one per signature (the best in-sample
+    fit among those that share it).  Held-out errors: a fast screen while searching (nonlinear
+    parameters held, :func:`~.law.cross_validate_linear`), then full refits per fold for the laws
+    that can end up on the front or be selected (:func:`~.law.cross_validate`)."""
+
+    def __init__(self, M: Moments, fold, by, max_parts, se_rule, addable=()):
+        self.M, self.fold, self.max_parts, self.se_rule = M, fold, max_parts, se_rule
+        self.groups = M.groups(by)
+        self.fits: dict = {}          # signature -> (fit, origin, threshold)
+        self.tried: set = set()
+        self.cands: dict = {}         # signature -> Candidate (screened)
+        self.full: set = set()        # signatures with full held-out refits
+        self.addable = list(addable)
+        self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
+        self.refine_top = 4
+
+    def consider(self, parts, origin, thr, refine: bool = True):
+        parts = canonical(parts)
+        if not parts or parts in self.tried or len(parts) > self.max_parts:
+            return None
+        self.tried.add(parts)
+        fit = fit_law(self.M, parts, max_nfev=self.screen_nfev, refine=refine)
+        sig = _signature(parts)
+        old = self.fits.get(sig)
+        if old is None or np.sum(fit.sse) < np.sum(old[0].sse) * (1 - 1e-9):
+            self.fits[sig] = (fit, origin if old is None else old[1], thr if old is None else old[2])
+            self.cands.pop(sig, None)
+            self.full.discard(sig)
+        return sig
+
+    def screen(self):
+        for sig, (fit, origin, thr) in self.fits.items():
+            if sig not in self.cands:
+                cv, pred = cross_validate_linear(self.M, fit, self.fold)
+                self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / self.M.N), origin, thr, pred)
+
+    def refine(self, sigs):
+        """A few refinement steps for structures screened with their start values."""
+        for sig in sigs:
+            fit, origin, thr = self.fits[sig]
+            if any(p.free for p in fit.parts):
+                self.fits[sig] = (fit_law(self.M, fit.parts, z0=fit.z, max_nfev=self.screen_nfev), origin, thr)
+                self.cands.pop(sig, None)
+        self.screen()
+
+    def refit_holdout(self, sigs):
+        for sig in sigs:
+            if sig in self.full:
+                continue
+            c = self.cands[sig]
+            if any(p.free for p in c.parts):
+                c.fit = fit_law(self.M, c.parts, z0=c.fit.z)
+                c.cv_sse, c.cv_pred = cross_validate(self.M, c.parts, self.fold, z0=c.fit.z)
+                c.rmse_holdout = math.sqrt(float(np.sum(c.cv_sse)) / self.M.N)
+            self.full.add(sig)
+
+    def best(self):
+        """The structure with the lowest held-out error so far."""
+        return min(self.cands, key=lambda s: self.cands[s].rmse_holdout)
+
+    def select(self):
+        """The selection rule (:func:`_select`) over the laws with full held-out refits."""
+        return _select({s: self.cands[s] for s in self.full}, self.M, self.groups, self.se_rule)
+
+
+def climb(pool: _Pool, rounds: int = 12):
+    """Hill climbing on the screened held-out error from the best structure of ``pool``: every
+    neighbour (a term added, dropped, made direction-dependent or symmetric, reshaped) evaluated,
+    the best taken, until nothing improves (at a local optimum of single moves, pairs of moves are
+    tried once).  Returns the signature it ends at."""
+    pool.screen()
+    cur = pool.best()
+    compound = False
+    for _ in range(rounds):
+        nxt = _climb_step(pool, cur, compound)
+        if nxt == cur and not compound:
+            compound = True          # a local optimum of single moves: try pairs once
+            continue
+        compound = False
+        if nxt == cur:
+            break
+        cur = nxt
+    return cur
+
+
+def _climb_step(pool: _Pool, cur, compound: bool):
+    """One round of moves (or pairs of moves) from the structure ``cur``; the best structure after it."""
+    base = pool.cands[cur]
+    start = _inherit(base.fit)
+    moves = _compound(start, pool.M, pool.addable) if compound else _neighbours(start, pool.M, pool.addable)
+    new = []
+    for parts in moves:
+        sig = pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold, refine=False)
+        if sig is not None:
+            new.append(sig)
+    pool.screen()
+    # neighbours start from the parent's refined values (new terms from the grid): refine the most
+    # promising few
+    pool.refine(sorted(set(new), key=lambda s_: pool.cands[s_].rmse_holdout)[:pool.refine_top])
+    return pool.best()
+
+
+def finalize(pool: _Pool, local_search: bool = True):
+    """Full held-out refits of the screened Pareto front and of every law within reach of the
+    best; the selection rule on those; the selected law's simplifications checked too, until the
+    selection stands (four rounds at most).  Returns the selected signature."""
+    pool.screen()
+    for _ in range(4):
+        pool.refit_holdout(_reachable(pool))
+        sel = pool.select()
+        if not local_search:
+            return sel
+        pool.refit_holdout(_simplifications(pool, sel))
+        nsel = pool.select()
+        if nsel == sel:
+            return sel
+    return nsel
+
+
+def _reachable(pool: _Pool) -> set:
+    """The screened Pareto front and the ten best laws within ``max(se_rule, 1)`` standard errors
+    of noise (:func:`_excess`) of the best."""
+    b = pool.best()
+    n_se = max(pool.se_rule, 1.0)
+    near = sorted((s for s in pool.cands
+                   if s == b or _excess(pool.cands[s], pool.cands[b], pool.M, pool.groups) <= n_se),
+                  key=lambda s: pool.cands[s].rmse_holdout)[:10]
+    return set(_front(pool.cands)) | set(near)
+
+
+def _simplifications(pool: _Pool, sel) -> set:
+    """The selected law's neighbours that add nothing (a term dropped, made symmetric or
+    direction-dependent, reshaped), fitted and screened."""
+    base = pool.cands[sel]
+    nb = set()
+    for parts in _neighbours(_inherit(base.fit), pool.M, pool.addable, adds=False):
+        pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold)
+        sig = _signature(parts)
+        if sig in pool.fits:
+            nb.add(sig)
+    pool.screen()
+    return nb
+
+
+def _front(cands: dict) -> list:
+    """Signatures on the Pareto front (complexity vs held-out error)."""
+    out, best = [], math.inf
+    for s in sorted(cands, key=lambda s: (cands[s].complexity, cands[s].rmse_holdout)):
+        if cands[s].rmse_holdout < best * (1 - 1e-12):
+            out.append(s)
+            best = cands[s].rmse_holdout
+    return out
+
+
+def _path_structures(lib: Library, coefs, ths, offset: int = 0):
+    """(threshold, structure) along a path, ``offset`` leading fixed columns skipped."""
+    out = []
+    for t, w in zip(ths, coefs):
+        w = w[offset:]
+        if np.any(w):
+            out.append((float(t), _structure(lib, w)))
+    return out
+
+
+def _short(c: Candidate, M) -> str:
+    return "+".join(c.terms(M.frequencies))
+
+
+def _excess(c: Candidate, best: Candidate, M: Moments, groups) -> float:
+    """How much worse ``c`` predicts held-out data than ``best``, in standard errors of that
+    difference when it is noise: for held-out predictions p_c, p_b and data y,
+    ``D = |y - p_c|^2 - |y - p_b|^2 = |d|^2 - 2 d.(y - p_b)`` with ``d = p_c - p_b``, whose noise
+    part has variance ``4 sum_s sigma_s^2 |d_s|^2`` (sigma_s^2: the segment's noise variance,
+    :attr:`Moments.noise`).  Where no noise variance is known (one point per segment), the
+    spread of the per-group differences is used instead."""
+    D = float(np.sum(c.cv_sse) - np.sum(best.cv_sse))
+    if D <= 0:
+        return D
+    if M.noise is not None and np.all(np.isfinite(M.noise)) and c.cv_pred is not None and best.cv_pred is not None:
+        d = c.cv_pred - best.cv_pred               # held-out prediction difference, as basis coefficients
+        d2 = np.einsum("sk,skl,sl->s", d, M.B, d)
+        se = 2.0 * math.sqrt(float(np.sum(M.noise * d2)))
+    else:
+        p = _paired(c.cv_sse, best.cv_sse, groups, M.N)
+        se = (p["delta_mse_se"] or float("nan")) * M.N
+    if not (se > 0 and math.isfinite(se)):
+        return math.inf
+    return D / se
+
+
+#: when two laws of equal complexity predict held-out data equally well (within one standard
+#: error), the more conventional shape is preferred: SILO4's exponential Stribeck and decay
+#: laws, then Lola's rational form, then the Gaussian
+_PREFERENCE = {"stribeck_exp": 0, "stribeck_rational": 1, "stribeck_gauss": 2,
+               "ripple_const": 0, "ripple_exp": 0, "ripple_rational": 1}
+
+
+def _select(cands: dict, M: Moments, groups, se_rule) -> tuple:
+    """The simplest candidate whose held-out error exceeds the best one's by at most ``se_rule``
+    standard errors of noise (:func:`_excess`).  Among the laws of that complexity, those within
+    one standard error of the best of them are ties, broken by :data:`_PREFERENCE` and then by
+    held-out error."""
+    best = min(cands, key=lambda s: cands[s].rmse_holdout)
+    ok = [s for s in cands if s == best or _excess(cands[s], cands[best], M, groups) <= se_rule]
+    k = min(cands[s].complexity for s in ok)
+    same = [s for s in ok if cands[s].complexity == k]
+    top = min(same, key=lambda s: cands[s].rmse_holdout)
+    ties = [s for s in same if s == top or _excess(cands[s], cands[top], M, groups) <= 1.0]
+    return min(ties, key=lambda s: (sum(_PREFERENCE.get(p.family, 0) for p in cands[s].parts),
+                                    cands[s].rmse_holdout))
+
+

@@ -1,0 +1,99 @@
+"""The papers' laws (refitted by :func:`gearspec.identify.fit` on the explorer's folds) and
+published models (scored as they are), beside the discovered laws."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..core.crossval import held_out, n_params as _n_params
+from ..errors import InputError
+from ..fitdata import FitData
+from ..model import FrictionModel
+from ..terms import BASE_LAWS
+from .moments import Moments
+from .results import Reference
+
+__all__ = ["PAPER_LAWS"]
+
+#: the papers' laws the explorer compares with: every base law of :mod:`gearspec.terms` with
+#: parameters (names of :func:`gearspec.identify.fit`)
+PAPER_LAWS = tuple(name for name, law in BASE_LAWS.items() if law.params)
+
+#: how the comparison names them (a law not listed: by its name)
+_LABELS = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per direction)",
+           "stribeck": "SILO4 eq. 3 (per direction)", "silo4": "SILO4 eq. 11 (per direction, declared lines)",
+           "lola8": "Lola law (8)", "lola11": "Lola law (11)"}
+
+
+def _segment_index(data: FitData, M: Moments) -> np.ndarray:
+    """Position in ``M`` of every sample's segment."""
+    pos = {int(s): i for i, s in enumerate(M.segment)}
+    return np.array([pos[int(s)] for s in data.segment], dtype=int)
+
+
+def _segment_mean(data: FitData, model: FrictionModel, M: Moments) -> np.ndarray:
+    pred = model.evaluate(**data.inputs())
+    return np.bincount(_segment_index(data, M), weights=np.nan_to_num(pred), minlength=M.S) / M.n
+
+
+def _segment_sse(data: FitData, model: FrictionModel, M: Moments, mask=None) -> np.ndarray:
+    """Residual sum of squares of ``model`` in every segment of ``M`` over the samples ``mask``."""
+    sub = data if mask is None else data.subset(mask)
+    r = model.residual(sub)
+    out = np.zeros(M.S)
+    np.add.at(out, _segment_index(sub, M), np.nan_to_num(r * r, nan=0.0))
+    return out
+
+
+def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
+    """A law of the papers, fitted by :func:`gearspec.identify.fit` (ordinary least squares,
+    ``weights="uniform"``, like the candidates) on all data and on the same folds (``fold``: of
+    every segment of ``M``)."""
+    from .. import identify
+
+    label = _LABELS.get(law, law)
+    if law in BASE_LAWS and BASE_LAWS[law].needs_load and data.load is None:
+        return Reference(label, "paper law", None, None, None, None, note="needs the load channel; not fitted")
+    # SILO4 eq. 11 with the lines the user declared or gave (not those the spectrum found: the
+    # paper's law is about the gear train's own lines)
+    harmonics = ([{"frequency": s["frequency"], "label": s.get("label")} for s in specs
+                  if s.get("source") != "found"] if law == "silo4" else None)
+    if law == "silo4" and not harmonics:
+        return Reference(label, "paper law", None, None, None, None, note="no ripple line declared; same as eq. 3")
+    kw = {"harmonics": harmonics, "weights": "uniform", "holdout": None}
+    try:
+        model = identify.fit(data, law, **kw)
+    except InputError as exc:
+        return Reference(label, "paper law", None, None, None, None, note=f"not fitted: {exc}")
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a comparison is never worth a crash
+        return Reference(label, "paper law", None, None, None, None,
+                         note=f"identify.fit failed ({type(exc).__name__}: {exc})")
+    seg = _segment_index(data, M)
+    ho = held_out(fold, lambda train: identify.fit(data.subset(train[seg]), law, **kw),
+                  lambda mf, test: _segment_sse(data, mf, M, test[seg])[test], weight=M.n,
+                  catch=(InputError, np.linalg.LinAlgError, ValueError, FloatingPointError))
+    failed = len(ho.failed)
+    note = f"fit failed in {failed} fold(s): held-out error over the other folds" if failed else ""
+    return Reference(label, "paper law", _rmse_all(data, model), ho.rmse, _n_params(model),
+                     None if failed else ho.sse, model, note)
+
+
+def _rmse_all(data, model) -> float | None:
+    try:
+        r = model.residual(data)
+    except InputError:
+        return None
+    r = r[np.isfinite(r)]
+    return float(np.sqrt(np.mean(r * r))) if len(r) else None
+
+
+def _published(data: FitData, M: Moments, name: str, model: FrictionModel) -> Reference:
+    try:
+        sse = _segment_sse(data, model, M)
+    except InputError as exc:
+        return Reference(name, "published", None, None, None, None, model, note=f"cannot be evaluated: {exc}")
+    rm = math.sqrt(float(np.sum(sse)) / M.N)
+    return Reference(name, "published", rm, rm, _n_params(model), sse, model,
+                     note="parameters as published; not fitted here, so its held-out error is its error on all data")
