@@ -25,9 +25,9 @@ def law_choices(*first: str) -> tuple[str, ...]:
     """The laws a fit can use: every base law of :data:`gearspec.terms.BASE_LAWS` with parameters
     (so a law registered there is accepted), those named in ``first`` first (the order ``--help``
     lists them in)."""
-    from ..terms import BASE_LAWS
+    from ..terms import fittable_laws
 
-    laws = [name for name, law in BASE_LAWS.items() if law.params]
+    laws = list(fittable_laws())
     return tuple(dict.fromkeys([k for k in first if k in laws] + laws))
 
 

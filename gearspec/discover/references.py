@@ -11,7 +11,7 @@ from ..core.crossval import held_out, n_params as _n_params
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
-from ..terms import BASE_LAWS
+from ..terms import BASE_LAWS, fittable_laws
 from .moments import Moments
 from .results import Reference
 
@@ -19,7 +19,7 @@ __all__ = ["PAPER_LAWS"]
 
 #: the papers' laws the explorer compares with: every base law of :mod:`gearspec.terms` with
 #: parameters (names of :func:`gearspec.identify.fit`)
-PAPER_LAWS = tuple(name for name, law in BASE_LAWS.items() if law.params)
+PAPER_LAWS = fittable_laws()
 
 #: how the comparison names them (a law not listed: by its name)
 _LABELS = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per direction)",

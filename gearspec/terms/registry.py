@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import InputError
 from .shapes import stribeck_shape, stribeck_term
 
-__all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "LAW_LINEAR", "LiveView", "basis",
+__all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "fittable_laws", "LAW_LINEAR", "LiveView", "basis",
            "register_law"]
 
 
@@ -235,6 +235,12 @@ for _law in (
             degraded=(Degraded("lola8_nogamma", ("t_f0", "mu", "b"), _lola8_nogamma_cols, ("t_fs", "v_s"), "v_s"),)),
 ):
     register_law(_law)
+
+
+def fittable_laws() -> tuple[str, ...]:
+    """The laws a fit can identify: every registered base law with parameters (not ``none``), in
+    the order they were registered."""
+    return tuple(name for name, law in BASE_LAWS.items() if law.params)
 
 
 def basis(name: str) -> Basis:
