@@ -25,7 +25,8 @@ from gearspec.model import RPM, FrictionModel  # noqa: E402
 from gearspec.recording import load_recording  # noqa: E402
 from gearspec.simulate import effects as fx  # noqa: E402
 from gearspec.simulate import lola, model_recording, silo4  # noqa: E402
-from gearspec.simulate.silo4 import PLANT, _LoopFriction, silo4_twin, stick_slip_run, table2_model  # noqa: E402
+from gearspec.simulate.friction import _LoopFriction  # noqa: E402
+from gearspec.simulate.silo4 import PLANT, silo4_twin, stick_slip_run, table2_model  # noqa: E402
 from gearspec.spectrum import analyze  # noqa: E402
 
 KM = PLANT["torque_constant"]

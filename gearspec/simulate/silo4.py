@@ -81,12 +81,12 @@ from scipy import signal
 
 from ..errors import InputError
 from ..jsonsafe import plain
-from .. import laws
 from ..gears import GearTrain, load_gear
 from ..model import RPM, FrictionModel
 from ..recording import Recording
-from ..terms import TERMS, evaluate_term
+from ..terms import TERMS
 from .effects import Effect, apply_effects, effect_channels, effects_truth
+from .friction import _LoopFriction
 
 __all__ = ["PAPER_TABLE2", "table2_model", "twin_gear", "silo4_twin", "stick_slip_run", "TwinTruth",
            "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold"]
@@ -234,113 +234,6 @@ class TwinTruth:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
-
-
-# ---------------------------------------------------------------------- the friction inside the loop
-_HISTORY = ("hysteresis", "backlash")
-
-
-class _Pointwise:
-    """Evaluation of a model without signed or history terms, fast for small vectors.
-
-    Same numbers as ``model.evaluate`` (a test checks it), with less overhead per call: the
-    base law of both directions on every sample then a select (instead of boolean indexing),
-    and the exponential-decay harmonics of each direction in one broadcast call of
-    :func:`gearspec.laws.meshing_ripple`.  Harmonics of other amplitude laws or with a load
-    coefficient go through the ``periodic`` term as in the model.
-    """
-
-    def __init__(self, model: FrictionModel):
-        self.model = model
-        self.law = model.law_spec
-        params, fast, self.slow = [], [], []
-        for name in ("positive", "negative"):
-            p = model.directions[name]
-            missing = [k for k in self.law.params if p.get(k) is None]
-            if missing:
-                raise InputError(f"the truth model has no {name}-direction value for {', '.join(missing)}")
-            params.append([float(p[k]) for k in self.law.params])
-            hs = [h for h in p["harmonics"] if h.get("amplitude") is not None]
-            fast.append([h for h in hs if h.get("law", "exp") == "exp" and not h.get("load_coefficient")])
-            self.slow.append([h for h in hs if not (h.get("law", "exp") == "exp" and not h.get("load_coefficient"))])
-        # parameters of both directions stacked along a first axis of length 2
-        self.params = [np.array(col)[:, None] for col in zip(*params)] if params[0] else []
-        n_h = max(len(f) for f in fast)
-        self.harm = None
-        if n_h:
-            def stack(key, default):
-                return np.array([[[h.get(key, default)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast], dtype=float)
-            # padding harmonics have zero amplitude
-            self.harm = (stack("amplitude", 0.0), stack("decay", 0.0), stack("frequency", 0.0), stack("phase", 0.0))
-        self.terms = list(model.terms)
-
-    def __call__(self, theta, v, *, load=None, temperature=None, t=None, run=None):
-        speed = np.abs(v)
-        sign = np.sign(v)
-        ld = None if load is None else load[None, :]
-        m = np.asarray(self.law.magnitude(speed[None, :], ld, *self.params), dtype=float)
-        if self.harm is not None:
-            m = m + laws.meshing_ripple(theta[None, None, :], v[None, None, :], *self.harm).sum(axis=1)
-        mag = np.where(sign > 0, m[0], m[-1]) if m.ndim == 2 else np.broadcast_to(m, speed.shape)
-        for d, hs in ((1.0, self.slow[0]), (-1.0, self.slow[1])):
-            for h in hs:
-                mag = mag + (sign == d) * evaluate_term({"kind": "periodic", **h}, theta=theta, v=v, load=load)[0]
-        for term in self.terms:
-            mag = mag + evaluate_term(term, theta=theta, v=v, load=load, temperature=temperature, t=t, acc=None,
-                                      run=run)[0]
-        return sign * mag
-
-
-class _LoopFriction:
-    """A truth model split for step-by-step use in a closed loop.
-
-    * pointwise friction (base law, harmonics, magnitude terms): :class:`_Pointwise` per step;
-    * signed terms (cogging, offset): external torques, ``evaluate_term`` per step;
-    * inertia terms: added to the rotor inertia;
-    * history terms (hysteresis, backlash: they depend on the last reversal): evaluated with the
-      term's own function on two-sample sequences ``[turning point, now]`` per run, the turning
-      point kept as state -- the same numbers as evaluating the whole trajectory at once.
-    """
-
-    def __init__(self, model: FrictionModel):
-        self.model = model
-        pointwise = model.copy()
-        pointwise.terms = [t for t in model.terms if not TERMS[t["kind"]].signed and t["kind"] not in _HISTORY]
-        self.pointwise = _Pointwise(pointwise)
-        self.signed = [t for t in model.terms if TERMS[t["kind"]].signed and t["kind"] != "inertia"]
-        self.history = [t for t in model.terms if t["kind"] in _HISTORY]
-        self.extra_inertia = float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
-
-    def external(self, theta, v, **kw):
-        out = 0.0
-        for term in self.signed:
-            out = out + evaluate_term(term, theta=theta, v=v, **kw)[0]
-        return out
-
-    def friction(self, theta, v, turn_theta, last_sign, prev_theta=None, **kw):
-        """Signed friction at (theta, v); ``turn_theta``/``last_sign`` per run: the turning point of
-        the last reversal (NaN: none yet) and the last nonzero direction of motion; ``prev_theta``:
-        the position one step before (the turning point if the motion reverses now; default
-        theta, as in the twin, where a reversing motor always stops for a step first)."""
-        f = self.pointwise(theta, v, **kw)
-        if self.history:
-            s = np.sign(v)
-            now_rev = (s != 0) & (last_sign != 0) & (s != last_sign)
-            have = now_rev | np.isfinite(turn_theta)
-            if have.any():
-                idx = np.flatnonzero(have)
-                tt = np.where(now_rev, theta if prev_theta is None else prev_theta, turn_theta)[idx]
-                # sample 0: the turning point, moving the old way; sample 1: now
-                old = np.where(now_rev, last_sign, -s)[idx]
-                th2 = np.column_stack((tt, theta[idx])).ravel()
-                v2 = np.column_stack((old, s[idx])).ravel()
-                run2 = np.repeat(np.arange(len(idx)), 2)
-                extra = np.zeros(len(idx))
-                for term in self.history:
-                    extra += evaluate_term(term, theta=th2, v=v2, run=run2)[0][1::2]
-                f = f.copy()
-                f[idx] += s[idx] * extra
-        return f
 
 
 def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
