@@ -79,3 +79,29 @@ def test_amplitude_laws_at_hand_computed_speeds():
         assert g.tolist() == pytest.approx(values, rel=1e-12), law
     with pytest.raises(InputError, match="unknown amplitude law 'cubic'"):
         amplitude_law("cubic", speed, 0.5)
+
+
+def test_presliding_and_backlash_profiles_on_a_given_travel():
+    # the closed loop passes the travel since reversal of the whole recording (travel=); the kind
+    # then uses it as given: here the samples themselves never reverse (their own travel is inf)
+    from gearspec.terms import evaluate_term
+    travel = np.array([np.inf, 0.0, 0.25, 1.0, 3.0, np.inf])
+    theta, v = np.zeros(6), np.ones(6)
+    hys = {"kind": "hysteresis", "scale": 2.0, "length": 0.5}
+    bkl = {"kind": "backlash", "scale": 2.0, "gap": 1.0}
+    # -scale exp(-travel / length), nothing before the first reversal (rel 1e-15: numpy's exp vs math's)
+    got, _ = evaluate_term(hys, theta=theta, v=v, travel=travel)
+    assert got.tolist() == pytest.approx([0.0, -2.0, -2 * np.e ** -0.5, -2 * np.e ** -2, -2 * np.e ** -6, 0.0],
+                                         rel=1e-15, abs=0.0)
+    # -scale while travel < gap (a travel of exactly gap is past it), nothing before the first reversal
+    got, _ = evaluate_term(bkl, theta=theta, v=v, travel=travel)
+    assert got.tolist() == [0.0, -2.0, -2.0, 0.0, 0.0, 0.0]
+    # the travel the kind computes itself (one motion reversing at theta = 2, then at 0) given
+    # explicitly: the same profile to the bit
+    theta = np.array([0.0, 1.0, 2.0, 1.0, 0.0, 0.5, 1.0, 2.5])
+    v = np.array([1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
+    own = np.array([np.inf, np.inf, np.inf, 1.0, 2.0, 0.5, 1.0, 2.5])
+    for term in (hys, {**bkl, "gap": 1.5}):
+        recomputed, _ = evaluate_term(term, theta=theta, v=v)
+        given, _ = evaluate_term(term, theta=theta, v=v, travel=own)
+        assert np.array_equal(given, recomputed) and np.count_nonzero(given) >= 3, term

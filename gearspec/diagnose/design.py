@@ -348,20 +348,16 @@ class TermBlock(Block):
         f = dd.fit
         sgn = np.sign(f.v)
         signed = TERMS[self.kind].signed
+        lin = TERM_LINEAR[self.kind]
         if self.kind in ("hysteresis", "backlash"):
             if dd.travel is None:
                 raise InputError(f"a {self.kind} term needs the travel since the last reversal")
-            tr = dd.travel
-            fx = dict(self.fixed)
-            if self.kind == "hysteresis":
-                prof = -np.exp(-tr / fx["length"])
-            else:
-                prof = -(tr < fx["gap"]).astype(float)
-            col = sgn * np.where(np.isfinite(tr), prof, 0.0)
+            # the kind's own profile on the travel of the whole recording; the direction is the segments'
+            prof = TERMS[self.kind].func(self.term(**{lin: 1.0}), theta=f.theta, v=f.v, run=f.run, travel=dd.travel)
+            col = sgn * prof
             if self.direction:
                 col = np.where(f.direction == self.direction, col, 0.0)
             return col[:, None]
-        lin = TERM_LINEAR[self.kind]
         inputs = dd.fit.inputs()
         if lin == "trig":
             outs = []

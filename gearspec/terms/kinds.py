@@ -183,16 +183,18 @@ def _offset(term, *, v, **_):
 # ---------------------------------------------------------------------- hysteresis
 @register_term("hysteresis", needs=("theta",), params=("scale", "length"), linear="scale",
                describe=lambda t: f"presliding over {t['length']:.4g} after a reversal (depth {t['scale']:.3g})")
-def _hysteresis(term, *, theta, v, run=None, **_):
+def _hysteresis(term, *, theta, v, run=None, travel=None, **_):
     """Presliding near reversals: just after the motion reverses, friction builds up over a
     distance ``length`` instead of jumping (a Dahl-like exponential approach).
 
     Contribution to the magnitude: ``-scale * exp(-|theta - theta_rev| / length)``, where
     ``theta_rev`` is the position of the last reversal in the same run (none before the first one
     in a run).  ``scale`` is in torque units (the friction level it removes at the reversal).
-    Evaluated on ordered samples, with the reversal rule of :func:`_travel_since_reversal`.
+    Evaluated on ordered samples, with the reversal rule of :func:`_travel_since_reversal`;
+    ``travel`` (unit of theta, ``inf`` before the first reversal), when given, is the travel
+    since the last reversal measured elsewhere (e.g. on the whole recording), used instead.
     """
-    d = _travel_since_reversal(theta, v, run)
+    d = _travel(theta, v, run, travel)
     out = np.zeros(len(d))
     has = np.isfinite(d)
     out[has] = -term["scale"] * np.exp(-d[has] / term["length"])
@@ -249,14 +251,20 @@ def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
     return out
 
 
+def _travel(theta, v, run=None, travel=None) -> np.ndarray:
+    """``travel`` as given (float array), or :func:`_travel_since_reversal` of the samples."""
+    return _travel_since_reversal(theta, v, run) if travel is None else np.asarray(travel, dtype=float)
+
+
 @register_term("backlash", needs=("theta",), params=("scale", "gap"), linear="scale",
                describe=lambda t: f"backlash: {t['scale']:.4g} less friction over {t['gap']:.4g} after a reversal")
-def _backlash(term, *, theta, v, run=None, **_):
+def _backlash(term, *, theta, v, run=None, travel=None, **_):
     """Backlash seen from the motor: for a travel ``gap`` after every reversal of the motion the
     teeth are not in contact, so the friction of everything behind the gap (``scale``, torque
     units) is missing; then it is back at once.  Contribution to the magnitude: ``-scale`` while
     ``|theta - theta_turn| < gap``, 0 otherwise (nothing before the first reversal of a run).
-    Evaluated on ordered samples, with the reversal rule of ``hysteresis``.
+    Evaluated on ordered samples, with the reversal rule of ``hysteresis`` (or on ``travel``,
+    when given, as ``hysteresis``).
     """
-    d = _travel_since_reversal(theta, v, run)
+    d = _travel(theta, v, run, travel)
     return np.where(d < term["gap"], -float(term["scale"]), 0.0)
