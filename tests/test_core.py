@@ -242,3 +242,22 @@ def test_fit_and_discover_report_the_same_holdout_rmse_for_stribeck():
     parts = (Part("coulomb", split=True), Part("viscous", split=True), Part("stribeck_exp", split=True, param0=1.0))
     sse, _ = cross_validate(M, parts, fold_ids(M, "segment", 5))
     assert fit == pytest.approx(math.sqrt(float(np.sum(sse)) / M.N), rel=1e-6)
+
+
+def test_normal_equations_per_group_are_the_groups_own_least_squares():
+    # known answer: y = 2 + 3 x exactly in group 0, y = -1 x in group 1; the normal equations of
+    # each group solve to its own coefficients and leave a residual of 0 (to rounding)
+    from gearspec.core.reduction import group_normal_equations, normal_equations
+
+    x = np.array([0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0])
+    X = np.column_stack([np.ones_like(x), x])
+    y = np.where(np.arange(7) < 4, 2 + 3 * x, -x)
+    G, b, yy = group_normal_equations(X, y, [0, 4], [4, 7])
+    assert np.allclose(np.linalg.solve(G[0], b[0]), [2, 3], atol=1e-12)
+    assert np.allclose(np.linalg.solve(G[1], b[1]), [0, -1], atol=1e-12)
+    for g, (a, z) in enumerate([(0, 4), (4, 7)]):
+        beta = np.linalg.solve(G[g], b[g])
+        assert yy[g] - beta @ b[g] == pytest.approx(0.0, abs=1e-9)
+        G1, b1, yy1 = normal_equations(X[a:z], y[a:z])
+        assert np.array_equal(G1, G[g]) and np.array_equal(b1, b[g]) and yy1 == yy[g]
+    assert G[0][0, 0] == 4 and G[1][0, 0] == 3          # the group sizes, not the whole

@@ -1,14 +1,37 @@
-"""Shared pieces of the exact per-group reductions of :mod:`gearspec.identify` (``SegmentStats``)
-and :mod:`gearspec.discover.moments` (``Moments``).
+"""The exact per-group reduction the three engines share: a group's (segment's, run's, move's)
+samples become the normal equations of its columns, so that a fit's cost does not grow with the
+samples (:mod:`gearspec.identify` ``SegmentStats``, :mod:`gearspec.diagnose.design` ``Grams``,
+:mod:`gearspec.discover.moments` ``Moments``), with the lines' columns phased about the group's
+mean position.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["harmonic_columns"]
+__all__ = ["harmonic_columns", "normal_equations", "group_normal_equations"]
 
 _TWO_PI = 2.0 * np.pi
+
+
+def normal_equations(X, y) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(X^T X, X^T y, y^T y)`` of one group's columns ``X`` (n, p) and observations ``y`` (n,):
+    everything a least-squares fit of the group needs (the residual sum of squares of any
+    coefficients ``b`` is ``y^T y - 2 b^T X^T y + b^T X^T X b``)."""
+    X = np.asarray(X, dtype=float)
+    y = np.asarray(y, dtype=float)
+    return X.T @ X, X.T @ y, float(y @ y)
+
+
+def group_normal_equations(X, y, starts, stops) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`normal_equations` of every contiguous group ``[starts[g], stops[g])`` of the rows:
+    ``G`` (groups, p, p), ``b`` (groups, p), ``yy`` (groups,)."""
+    X = np.asarray(X, dtype=float)
+    ng, p = len(starts), X.shape[1]
+    G, b, yy = np.empty((ng, p, p)), np.empty((ng, p)), np.empty(ng)
+    for g, (a, z) in enumerate(zip(starts, stops)):
+        G[g], b[g], yy[g] = normal_equations(X[a:z], y[a:z])
+    return G, b, yy
 
 
 def harmonic_columns(theta, frequencies) -> tuple[np.ndarray, np.ndarray]:

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core.reduction import group_normal_equations
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
@@ -439,15 +440,7 @@ class Grams:
 
     @classmethod
     def of(cls, X: np.ndarray, y: np.ndarray, dd: DiagnoseData) -> "Grams":
-        ng, p = dd.n_groups, X.shape[1]
-        G = np.empty((ng, p, p))
-        b = np.empty((ng, p))
-        yy = np.empty(ng)
-        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-            Xg = X[a:z]
-            G[g] = Xg.T @ Xg
-            b[g] = Xg.T @ y[a:z]
-            yy[g] = float(y[a:z] @ y[a:z])
+        G, b, yy = group_normal_equations(X, y, dd.starts, dd.stops)
         return cls(G, b, yy, (dd.stops - dd.starts).astype(float))
 
     @staticmethod

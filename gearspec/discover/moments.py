@@ -31,7 +31,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.reduction import harmonic_columns
+from ..core.reduction import harmonic_columns, normal_equations
 from ..errors import InputError
 from ..fitdata import FitData
 
@@ -296,9 +296,7 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
             cycles[s] = freqs * (float(np.ptp(th)) if len(th) > 1 else 0.0)
             Phi[:, col::2], Phi[:, col + 1::2] = harmonic_columns(th, freqs)   # phases about the segment's mean
         y = data.y[ii]
-        B[s] = Phi.T @ Phi
-        c[s] = Phi.T @ y
-        yy[s] = float(y @ y)
+        B[s], c[s], yy[s] = normal_equations(Phi, y)
         noise[s] = _noise_variance(Phi, y, B[s], c[s])
     if varying:
         notes.append(f"velocity varies within {varying} of {S} segments: speed laws are evaluated at each "

@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core.reduction import harmonic_columns
+from ..core.reduction import harmonic_columns, normal_equations
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
@@ -152,9 +152,7 @@ def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cyc
         out["active"] = (out["cycles"] >= min_cycles) & out["sampled"]
         X[:, 1::2], X[:, 2::2] = harmonic_columns(th, freqs)   # phases about the segment's mean position
         X[:, 1:][:, np.repeat(~out["sampled"], 2)] = 0.0
-    G = X.T @ X
-    g = X.T @ y
-    yy = float(y @ y)
+    G, g, yy = normal_equations(X, y)
     try:
         beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
     except np.linalg.LinAlgError as exc:
