@@ -149,7 +149,6 @@ def test_n_params_counts_free_values():
         {"kind": "stribeck_extra", "amplitude": 0.2, "v_s": 0.5, "shape": "exp", "direction": 1}])
     # per direction 2 + (3 + 2); terms: coefficient; amplitude and v_s
     assert n_params(m) == 2 * (2 + 3 + 2) + 1 + 2
-    assert identify._n_params(m) == n_params(m)
 
 
 # ====================================================================== phases about the group mean
@@ -198,7 +197,7 @@ def test_fit_diagnose_and_discover_deal_identical_folds_on_uneven_data():
     fd = _uneven()
     dd = DiagnoseData.from_fitdata(fd)
     M = moments(fd)
-    by_fit = _fold_of_segment(fd.segment, identify._folds(fd, "segment", 5))
+    by_fit = _fold_of_segment(fd.segment, identify.validate._folds(fd, "segment", 5))
     by_loop = _fold_of_segment(dd.fit.segment, folds_of(dd, 5)[dd.group])
     by_discover = _fold_of_segment(M.segment, fold_ids(M, "segment", 5))
     assert by_fit == by_loop == by_discover
@@ -229,6 +228,12 @@ def test_fit_diagnose_and_discover_report_the_same_holdout_rmse():
     assert sym == pytest.approx(math.sqrt(float(np.sum(sse)) / M.N), rel=1e-9)
     sym_cand = [c for c in res.candidates if c.terms() == ["coulomb", "viscous"]]
     assert sym_cand and sym_cand[0].rmse_holdout == pytest.approx(sym, rel=1e-9)
+
+
+def test_compare_counts_parameters_by_the_core_rule():
+    # Coulomb + viscous per direction: 2 values in each of 2 directions, and nothing else
+    table = identify.compare(_uneven(), {"cv": {"law": "coulomb_viscous"}})
+    assert int(table["parameters"].iloc[0]) == 4
 
 
 def test_fit_and_discover_report_the_same_holdout_rmse_for_stribeck():

@@ -11,8 +11,8 @@ from gearspec.cli import main
 from gearspec.errors import InputError
 from gearspec.fitdata import FitData
 from gearspec.recording import Recording
-from gearspec.segment import (FrictionTorque, _sweeps, derivatives, find_segments, friction_torque,
-                              quasi_static_sweeps)
+from gearspec.segment import FrictionTorque, derivatives, find_segments, friction_torque, quasi_static_sweeps
+from gearspec.segment.quasistatic import _sweeps
 from gearspec.simulate import Ripple, plateau_recording
 from gearspec.simulate.synthetic import quasi_static_recording
 from gearspec.spectrum import analyze

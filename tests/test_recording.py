@@ -1086,7 +1086,7 @@ def test_motor_current_at_an_output_reference_is_torque_constant_times_ratio():
 def test_fast_motion_is_not_taken_for_a_wrap():
     # 0.4 rad per sample (more than 5 % of a turn) seen modulo 2 pi: fast motion, not a wrapped
     # encoder; theta is left as logged and nothing is said
-    from gearspec.recording import _unwrap_theta
+    from gearspec.recording.cleaning import _unwrap_theta
     th = np.mod(0.4 * np.arange(200), 2 * np.pi)
     frame = pd.DataFrame({"theta": th, "run": np.zeros(200, int)})
     notes = []

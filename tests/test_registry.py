@@ -53,14 +53,14 @@ def test_columns_times_linear_equal_magnitude_laws_and_model(name, p, speed, loa
 
 
 def test_every_law_declared_once_and_shared_by_model_identify_and_design():
-    assert model.LAWS is BASE_LAWS and model.Law is BaseLaw and identify._basis is basis
+    assert model.LAWS is BASE_LAWS and model.Law is BaseLaw and identify.joint._basis is basis
     for name, law in BASE_LAWS.items():
         assert design.LINEAR[name] == (law.linear, law.nonlinear_names) == LAW_LINEAR[name]
-        b = identify._basis(name)
+        b = identify.joint._basis(name)
         assert b.columns is law.columns and b.lin == law.linear and b.nonlin == law.nonlinear_names
         assert set(law.linear) | set(law.nonlinear_names) <= set(law.params)
         for d in law.degraded:
-            assert identify._basis(d.name).columns(np.array([1.0]), np.array([1.0])).shape == (1, len(d.linear))
+            assert identify.joint._basis(d.name).columns(np.array([1.0]), np.array([1.0])).shape == (1, len(d.linear))
     # term kinds: the closed loop's linear parameters are the kinds' declarations
     assert dict(design.TERM_LINEAR) == {k: tk.linear for k, tk in TERMS.items() if tk.linear is not None}
     assert design.TERM_LINEAR is TERM_LINEAR
@@ -119,7 +119,7 @@ def test_a_law_registered_once_is_known_to_model_identify_and_design():
         assert FrictionModel("test_quadratic", {"tau_c": 1.0, "c": 0.5}).evaluate(None, np.array([-2.0])) \
             == pytest.approx([-3.0], **TIGHT)
         assert design.LINEAR["test_quadratic"] == (("tau_c", "c"), ())
-        assert identify._basis("test_quadratic").lin == ("tau_c", "c")
+        assert identify.joint._basis("test_quadratic").lin == ("tau_c", "c")
     finally:
         BASE_LAWS.pop("test_quadratic")
     assert "test_quadratic" not in design.LINEAR

@@ -201,14 +201,14 @@ def test_identify_folds_deal_whole_segments_by_direction(n_pos, n_neg, k):
     G = n_pos + n_neg
     sizes = 30 + 7 * np.arange(G)  # unequal segments: dealing rows would split them
     fd = _segments_data(n_pos, n_neg, sizes)
-    fold = identify._folds(fd, "segment", k)
+    fold = identify.validate._folds(fd, "segment", k)
     assert fold.shape == (len(fd),)
     _check_fold_rules(fold, fd, k)
 
 
 def test_identify_folds_the_issue_case_nine_positive_ten_negative():
     fd = _segments_data(9, 10, 40 + 3 * np.arange(19))
-    fold_of_seg = _check_fold_rules(identify._folds(fd, "segment", 5), fd, 5)
+    fold_of_seg = _check_fold_rules(identify.validate._folds(fd, "segment", 5), fd, 5)
     d = {g: int(fd.direction[fd.segment == g][0]) for g in fold_of_seg}
     pos = np.bincount([f for g, f in fold_of_seg.items() if d[g] > 0], minlength=5)
     neg = np.bincount([f for g, f in fold_of_seg.items() if d[g] < 0], minlength=5)
@@ -523,7 +523,7 @@ def test_holdout_with_a_fold_that_cannot_be_fitted_says_how_much_it_covers():
     # they cover and the folds that failed out of those that ran
     from gearspec.errors import InputError
     fd = _memoriser_levels()
-    fold = identify._folds(fd, "segment", 5)
+    fold = identify.validate._folds(fd, "segment", 5)
     left_out = int(np.count_nonzero(fold == fold[fd.segment == 0][0]))
     assert left_out in (150, 200)        # 19 segments of 50 rows in 5 folds: 4 or 3 per fold
 

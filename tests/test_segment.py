@@ -199,7 +199,7 @@ def test_sweeps_see_a_reversal_at_the_second_row():
     # hand-traced: a log that starts one step before a turning point.  Rows 0-1 go one way by more
     # than the hysteresis tol, then the motion reverses; the turning row (1) ends the first sweep
     # (exact integer positions: no tolerance involved)
-    from gearspec.segment import _sweeps
+    from gearspec.segment.quasistatic import _sweeps
     assert _sweeps(np.array([0.0, 5.0, 4.0, 3.0, 2.0, 1.0]), 0.5) == [(0, 2, 1), (2, 6, -1)]
     assert _sweeps(np.array([0.0, -1.0, 0.0, 1.0, 2.0]), 0.5) == [(0, 2, -1), (2, 5, 1)]
     # a return smaller than tol right after the first row is jitter: one sweep
@@ -231,7 +231,7 @@ def test_rest_is_counted_as_standstill_and_the_ramps_as_transient():
 
 def test_position_noise_of_a_long_log_from_chunks():
     # 200 000 rows (more than 20 chunks of 5000: the estimate reads chunks spread over the log)
-    from gearspec.segment import _position_noise
+    from gearspec.segment.plateaus import _position_noise
     n = 200_000
     rng = np.random.default_rng(1)
     # at rest with white noise 1e-4 rad: second differences have sd 1e-4 sqrt(6); the MAD estimate

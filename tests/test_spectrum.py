@@ -394,7 +394,7 @@ def test_search_excludes_slow_declared_and_taken_peaks_and_keeps_the_strongest_f
     (the spikes are above 10 x the median / ln 2 and left out of every block), so z is the spike's
     power and every spike of 1000 or more is significant (fap ~ 0); a spike between equal
     neighbours is refined to its own bin.  Which spikes come back is decided by the rules alone."""
-    from gearspec.spectrum.analysis import _Grid, _LocalNoise, _search
+    from gearspec.spectrum.search import _Grid, _LocalNoise, _search
     span, oversample = 10.0, 2.0
     df, base, nbin = 1 / (span * oversample), 1 / span, 400          # f(i) = 0.1 + 0.05 i, up to 20.05
     grid = _Grid(base, df, 0, nbin)
@@ -427,7 +427,7 @@ def test_search_excludes_slow_declared_and_taken_peaks_and_keeps_the_strongest_f
 def test_z_floor_is_the_known_level_bound_of_the_false_alarm_probability():
     # a known noise level: P(one frequency > z) = exp(-z), over m: 1 - (1 - exp(-z))^m; the floor is
     # the z where this equals the threshold: -ln(1 - (1 - fap)^(1/m)), lowered by 1e-9 for rounding
-    from gearspec.spectrum.analysis import _z_floor
+    from gearspec.spectrum.search import _z_floor
     from gearspec.spectrum.periodogram import false_alarm_probability
     for fap, m, z in ((0.01, 1.0, 4.60517), (0.01, 1000.0, 11.50791), (0.001, 200.0, 12.20557)):
         zf = _z_floor(fap, m)
@@ -440,7 +440,7 @@ def test_z_floor_is_the_known_level_bound_of_the_false_alarm_probability():
 def test_local_noise_falls_back_to_the_median_where_no_block_has_a_level():
     # every bin masked (all of them near fitted lines): no block has a level; the level is the
     # median power everywhere (the documented fallback), and no bins are counted
-    from gearspec.spectrum.analysis import _LocalNoise
+    from gearspec.spectrum.search import _LocalNoise
     power = np.arange(1.0, 101.0)
     nm = _LocalNoise(power, width=200, min_width=40, mask=np.ones(100, bool), enbw=1.0)
     np.testing.assert_array_equal(nm.level(np.array([0, 50, 99])), [50.5, 50.5, 50.5])

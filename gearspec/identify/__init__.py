@@ -14,13 +14,12 @@
   (:func:`identify_recording`, ``gearspec fit``).
 """
 
-from ..terms.registry import basis as _basis  # noqa: F401  (the joint fit's bases: the registry's)
 from .efficiency import efficiency_model, fit_catalog, fit_efficiency
 from .joint import JointFit, clone, fit, negative_viscous, refit
-from .pipeline import FitResult, _n_params, compare, identify_recording  # noqa: F401
+from .pipeline import FitResult, compare, identify_recording
 from .published import amplitudes_from_spectrum, line_amplitudes, silo4_published
 from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, segment_stats
-from .validate import _folds, holdout, holdout_rmse, segment_errors  # noqa: F401
+from .validate import holdout, holdout_rmse, segment_errors
 
 __all__ = ["fit", "JointFit", "clone", "refit", "silo4_published", "holdout_rmse", "holdout", "compare",
            "harmonic_specs", "fit_efficiency", "fit_catalog", "efficiency_model", "SegmentStats", "segment_stats",

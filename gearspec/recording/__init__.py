@@ -18,7 +18,7 @@ One module per job:
 """
 
 from .checks import MAX_PLAUSIBLE_M_S, MAX_PLAUSIBLE_RAD_S, MIN_POSITION_RANGE, MIN_SIGNAL_CHANGE, MIN_TIME_STEP
-from .cleaning import CLOCK_BURST_FRACTION, _unwrap_theta  # noqa: F401  (_unwrap_theta: tests)
+from .cleaning import CLOCK_BURST_FRACTION
 from .load import CANONICAL, load_recording, parse_assignments
 from .record import GAP_FACTOR, GAP_QUANTILE, Recording, auto_max_gap
 

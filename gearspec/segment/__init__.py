@@ -46,8 +46,8 @@ never an error.  Quasi-static segments use no derivative at all.
 """
 
 from .kinematics import FrictionTorque, derivatives, friction_torque
-from .plateaus import PARALLEL_MIN_SAMPLES, _position_noise, find_segments  # noqa: F401  (_position_noise: tests)
-from .quasistatic import _sweeps, quasi_static_sweeps  # noqa: F401  (_sweeps: tests)
+from .plateaus import PARALLEL_MIN_SAMPLES, find_segments
+from .quasistatic import quasi_static_sweeps
 from .segmentation import Segment, Segmentation
 
 __all__ = ["Segment", "Segmentation", "find_segments", "quasi_static_sweeps", "derivatives", "friction_torque",

@@ -54,16 +54,7 @@ from ..segment import Segment
 from .harmonic import HarmonicFit, NormalEquations, min_degree_for_cycles, refine_frequencies
 from .periodogram import LombScargle
 from .results import Peak, SegmentSpectrum, SpectrumResult
-from .search import (  # noqa: F401  (_FFTResidual, _refine, _search, _z_floor: tests and benchmarks)
-    _FFTResidual,
-    _fft_residual_power,
-    _Grid,
-    _LocalNoise,
-    _refine,
-    _search,
-    _significant,
-    _z_floor,
-)
+from .search import _fft_residual_power, _Grid, _LocalNoise, _search, _significant
 
 __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "analyze", "position_nyquist",
            "MEASURABLE_FRACTION", "LS_MAX_SAMPLES", "relabel_aliases"]
