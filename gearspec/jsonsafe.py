@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -28,7 +29,7 @@ def plain(obj):
     """``obj`` with every container and number converted to what :func:`json.dumps` writes as
     strict JSON (see the module docstring). Strings and ``None`` pass through; an object of any
     other type is returned unchanged (``json.dumps`` then says which)."""
-    if isinstance(obj, dict):
+    if isinstance(obj, Mapping):      # dicts and the model's typed records (gearspec.model)
         return {str(k): plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [plain(v) for v in obj]

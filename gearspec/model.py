@@ -34,8 +34,10 @@ from __future__ import annotations
 import copy
 import json
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping
+from typing import Iterable
 
 import numpy as np
 import pandas as pd
@@ -44,7 +46,7 @@ from .errors import InputError
 from .jsonsafe import finite_or_none, plain
 from .terms import BASE_LAWS, TERMS, BaseLaw, evaluate_term
 
-__all__ = ["FrictionModel", "LAWS", "Law", "RPM", "DIRECTIONS"]
+__all__ = ["FrictionModel", "Direction", "Harmonic", "LAWS", "Law", "RPM", "DIRECTIONS"]
 
 #: rad/s per rpm
 RPM = 2.0 * math.pi / 60.0
@@ -58,6 +60,173 @@ Law = BaseLaw
 LAWS: dict[str, Law] = BASE_LAWS
 
 HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
+
+
+_ABSENT = object()
+
+
+class _JsonView(Mapping):
+    """Read access by JSON key (``p["tau_c"]``, ``p.get("tau_c_se")``, ``h["amplitude"]``) to a typed
+    record; the record itself is changed through its attributes, never through the view."""
+
+    def __iter__(self):
+        return iter(self.to_dict())
+
+    def __len__(self):
+        return len(self.to_dict())
+
+
+@dataclass(eq=True)
+class Harmonic(_JsonView):
+    """A position-locked line of one direction (SILO4 eqs. 6, 8 and 14).
+
+    ``frequency`` in cycles per unit of theta, ``amplitude`` in torque units (None: not measured),
+    ``decay`` in s/rad (the amplitude law's parameter), ``phase`` in rad; ``law`` the amplitude law
+    (None: exp, the default, not written to JSON), ``load_coefficient`` (eq. 14), ``speed_range``
+    ``[min, max]`` of |v| the law was fitted on, ``segments`` the number of segments that measured
+    the line; ``se`` the standard error of each parameter that has one; ``extra`` any other key a
+    model file carries, kept as read.  An optional field that is None is absent from the JSON.
+    """
+
+    frequency: float
+    amplitude: float | None
+    decay: float = 0.0
+    phase: float = 0.0
+    label: str | None = None
+    law: str | None = None
+    load_coefficient: float | None = None
+    speed_range: list | None = None
+    segments: int | None = None
+    se: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+
+    _OPTIONAL = ("label", "law", "load_coefficient", "speed_range", "segments")
+
+    @classmethod
+    def of(cls, h: Mapping) -> "Harmonic":
+        """A harmonic from its JSON form (or a copy of another harmonic); InputError when it lacks
+        ``frequency`` or ``amplitude`` or its ``speed_range`` is not ``[min, max]``."""
+        if isinstance(h, Harmonic):
+            return copy.deepcopy(h)
+        missing = [k for k in ("frequency", "amplitude") if k not in h]
+        if missing:
+            raise InputError(f"a harmonic of the model lacks {', '.join(missing)}")
+        out = cls(h["frequency"], h["amplitude"], h.get("decay", 0.0), h.get("phase", 0.0))
+        for k, val in h.items():
+            if k in ("frequency", "amplitude", "decay", "phase"):
+                continue
+            if k.endswith("_se"):
+                out.se[k[:-3]] = val
+            elif k in cls._OPTIONAL and val is not None:
+                setattr(out, k, _speed_range(val) if k == "speed_range" else copy.deepcopy(val))
+            else:
+                out.extra[k] = copy.deepcopy(val)
+        return out
+
+    @property
+    def amplitude_law(self) -> str:
+        return self.law or "exp"
+
+    def term(self) -> dict:
+        """The harmonic as a ``periodic`` term of :mod:`gearspec.terms` (how it is evaluated)."""
+        return {"kind": "periodic", **self.to_dict()}
+
+    def __getitem__(self, key):
+        if key in ("frequency", "amplitude", "decay", "phase"):
+            return getattr(self, key)
+        if key in self._OPTIONAL and getattr(self, key) is not None:
+            return getattr(self, key)
+        if key.endswith("_se") and key[:-3] in self.se:
+            return self.se[key[:-3]]
+        return self.extra[key]
+
+    def to_dict(self) -> dict:
+        out = {}
+        for k in ("frequency", "amplitude", "decay", "phase"):
+            out[k] = getattr(self, k)
+            if k in self.se:
+                out[k + "_se"] = self.se[k]
+        for k in self._OPTIONAL:
+            if getattr(self, k) is not None:
+                out[k] = list(self.speed_range) if k == "speed_range" else getattr(self, k)
+            if k in self.se:
+                out[k + "_se"] = self.se[k]
+        out.update(self.extra)
+        return out
+
+
+@dataclass(eq=True)
+class Direction(_JsonView):
+    """The parameters of one direction of motion.
+
+    ``values``: every parameter of the base law by name (SI units; None where the data could not
+    identify it), ``se``: their standard errors where known, ``harmonics``: the position-locked
+    lines (:class:`Harmonic`), ``n_segments`` / ``n_samples``: the data behind the fit and
+    ``se_method`` how the errors were computed when not by the covariance (None: not recorded),
+    ``extra``: any other key a model file carries, kept as read.
+    """
+
+    values: dict
+    se: dict = field(default_factory=dict)
+    harmonics: list = field(default_factory=list)
+    n_segments: int | None = None
+    n_samples: int | None = None
+    se_method: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    _COUNTS = ("n_segments", "n_samples", "se_method")
+
+    @classmethod
+    def of(cls, law: "BaseLaw", p: Mapping) -> "Direction":
+        """A direction from its JSON form (or a copy of another direction) for ``law``: every
+        parameter of the law present (None where absent)."""
+        if isinstance(p, Direction):
+            out = copy.deepcopy(p)
+        else:
+            out = cls({})
+            for k, val in p.items():
+                if k == "harmonics":
+                    out.harmonics = [Harmonic.of(h) for h in val]
+                elif k.endswith("_se"):
+                    out.se[k[:-3]] = val
+                elif k in law.params:
+                    out.values[k] = val
+                elif k in cls._COUNTS and val is not None:
+                    setattr(out, k, val)
+                else:
+                    out.extra[k] = copy.deepcopy(val)
+        for k in law.params:
+            out.values.setdefault(k, None)
+        return out
+
+    def set(self, name: str, value, se=_ABSENT) -> None:
+        """Set a parameter (and its standard error, when given)."""
+        self.values[name] = value
+        if se is not _ABSENT:
+            self.se[name] = se
+
+    def __getitem__(self, key):
+        if key in self.values:
+            return self.values[key]
+        if key == "harmonics":
+            return self.harmonics
+        if key in self._COUNTS and getattr(self, key) is not None:
+            return getattr(self, key)
+        if key.endswith("_se") and key[:-3] in self.se:
+            return self.se[key[:-3]]
+        return self.extra[key]
+
+    def to_dict(self) -> dict:
+        out = {}
+        for k, val in self.values.items():
+            out[k] = val
+            if k in self.se:
+                out[k + "_se"] = self.se[k]
+        out.update({k + "_se": s for k, s in self.se.items() if k not in self.values})
+        out.update({k: getattr(self, k) for k in self._COUNTS if getattr(self, k) is not None})
+        out.update(self.extra)
+        out["harmonics"] = [h.to_dict() for h in self.harmonics]
+        return out
 
 
 class FrictionModel:
@@ -100,8 +269,8 @@ class FrictionModel:
         if unit not in ("rad", "m"):
             raise InputError(f"unit must be 'rad' or 'm', got '{unit}'")
         self.law = law
-        self.directions = {"positive": self._clean_params(positive),
-                           "negative": self._clean_params(negative if negative is not None else positive)}
+        self.directions = {"positive": Direction.of(LAWS[law], positive),
+                           "negative": Direction.of(LAWS[law], negative if negative is not None else positive)}
         self.terms = [dict(t) for t in terms]
         for t in self.terms:
             if t.get("kind") not in TERMS:
@@ -116,31 +285,16 @@ class FrictionModel:
         self.meta = dict(meta or {})
 
     # ------------------------------------------------------------------ parameters
-    def _clean_params(self, p: Mapping) -> dict:
-        p = dict(copy.deepcopy(dict(p)))
-        p["harmonics"] = [dict(h) for h in p.get("harmonics", [])]
-        for h in p["harmonics"]:
-            missing = [k for k in ("frequency", "amplitude") if k not in h]
-            if missing:
-                raise InputError(f"a harmonic of the model lacks {', '.join(missing)}")
-            h.setdefault("decay", 0.0)
-            h.setdefault("phase", 0.0)
-            if h.get("speed_range") is not None:
-                h["speed_range"] = _speed_range(h["speed_range"])
-        for k in LAWS[self.law].params:
-            p.setdefault(k, None)
-        return p
-
     @property
     def law_spec(self) -> Law:
         return LAWS[self.law]
 
-    def params(self, direction) -> dict:
+    def params(self, direction) -> Direction:
         """Parameters of one direction (``"positive"``/``"negative"`` or +1/-1)."""
         return self.directions[_dir_name(direction)]
 
-    def harmonics(self, direction) -> list[dict]:
-        return self.params(direction)["harmonics"]
+    def harmonics(self, direction) -> list[Harmonic]:
+        return self.params(direction).harmonics
 
     @property
     def symmetric(self) -> bool:
@@ -162,8 +316,7 @@ class FrictionModel:
         """A copy with a harmonic added in one direction (or in both)."""
         m = self.copy()
         for d in ((_dir_name(direction),) if direction is not None else DIRECTIONS):
-            m.directions[d]["harmonics"].append(dict(harmonic))
-        m.directions = {k: m._clean_params(v) for k, v in m.directions.items()}
+            m.directions[d].harmonics.append(Harmonic.of(harmonic))
         m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
         return m
 
@@ -199,20 +352,20 @@ class FrictionModel:
             if not sel.any():
                 continue
             p = self.directions[name]
-            missing = [k for k in law.params if p.get(k) is None and k not in law.optional]
+            missing = [k for k in law.params if p.values[k] is None and k not in law.optional]
             if missing:
                 raise InputError(f"the model has no {name}-direction value for {', '.join(missing)} "
                                  f"(not identified: {self.not_identified.get(name + '.' + missing[0], 'no data')}); "
                                  f"it cannot predict motion in that direction")
             ld = None if load is None else load[sel]
-            mag = np.asarray(law.magnitude(speed[sel], ld, *[p[k] for k in law.params]), dtype=float)
+            mag = np.asarray(law.magnitude(speed[sel], ld, *[p.values[k] for k in law.params]), dtype=float)
             mag = np.broadcast_to(mag, (int(sel.sum()),)).copy()
-            for h in p["harmonics"]:
-                if h.get("amplitude") is None:
+            for h in p.harmonics:
+                if h.amplitude is None:
                     continue
                 if theta is None:
                     raise InputError("the model has position-locked harmonics and needs theta")
-                contrib, _ = evaluate_term({"kind": "periodic", **h}, theta=theta[sel], v=v[sel], load=ld)
+                contrib, _ = evaluate_term(h.term(), theta=theta[sel], v=v[sel], load=ld)
                 mag += contrib
             out[sel] = d * mag
         inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
@@ -237,7 +390,7 @@ class FrictionModel:
         s = np.atleast_1d(np.asarray(speed, dtype=float))
         m = self.copy()
         for p in m.directions.values():
-            p["harmonics"] = []
+            p.harmonics = []
         m.terms = [t for t in m.terms if t["kind"] not in ("periodic", "hysteresis") and not TERMS[t["kind"]].signed
                    and not set(TERMS[t["kind"]].needs) - {"load"}]
         return np.abs(m.evaluate(None, d * s, load=load))
@@ -256,7 +409,7 @@ class FrictionModel:
         """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready."""
 
         return plain({"law": self.law, "name": self.name, "unit": self.unit,
-                      "directions": self.directions, "terms": self.terms,
+                      "directions": {d: p.to_dict() for d, p in self.directions.items()}, "terms": self.terms,
                       "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
                       "rmse_holdout_reason": self.rmse_holdout_reason,
                       "not_identified": self.not_identified, "notes": self.notes, "meta": self.meta})
@@ -294,9 +447,9 @@ class FrictionModel:
         law = self.law_spec
         for k, u in zip(law.params, law.units):
             rows.append(_row(k, u, self.directions, lambda p, k=k: (p.get(k), p.get(k + "_se")), self.unit))
-        nh = max(len(p["harmonics"]) for p in self.directions.values())
+        nh = max(len(p.harmonics) for p in self.directions.values())
         for i in range(nh):
-            hs = {d: (p["harmonics"][i] if i < len(p["harmonics"]) else {}) for d, p in self.directions.items()}
+            hs = {d: (p.harmonics[i] if i < len(p.harmonics) else {}) for d, p in self.directions.items()}
             lab = next((h.get("label") for h in hs.values() if h.get("label")), None) or f"harmonic {i + 1}"
             f = next((h.get("frequency") for h in hs.values() if h.get("frequency") is not None), float("nan"))
             for key, u in (("amplitude", "Nm"), ("decay", "s/rad"), ("phase", "rad")):
@@ -339,7 +492,7 @@ class FrictionModel:
         lines += [n for n in self.notes if n.startswith("warning:")]
         su = "rad/s" if self.unit == "rad" else "m/s"
         for dname, p in self.directions.items():
-            for h in p["harmonics"]:
+            for h in p.harmonics:
                 r = h.get("speed_range")
                 lab = h.get("label") or f"line at {h['frequency']:.6g} cycles/{self.unit}"
                 if r is not None:

@@ -77,7 +77,7 @@ def test_joint_fit_recovers_direction_dependent_parameters(seed):
     held = truth.copy()
     for d in ("positive", "negative"):
         for ht, he in zip(held.harmonics(d), m.harmonics(d)):
-            ht["speed_range"] = he["speed_range"]
+            ht.speed_range = he.speed_range
     assert m.harmonics("positive")[1]["speed_range"][1] == pytest.approx(60.0, rel=1e-3)
     assert m.rmse <= 1.01 * held.rmse_on(data)
 

@@ -285,8 +285,8 @@ def n_params(model) -> int:
     """
     n = 0
     for p in model.directions.values():
-        n += sum(1 for k in model.law_spec.params if p.get(k) is not None)
-        n += sum(2 if h.get("law", "exp") == "const" else 3 for h in p["harmonics"])
+        n += sum(1 for k in model.law_spec.params if p.values.get(k) is not None)
+        n += sum(2 if h.amplitude_law == "const" else 3 for h in p.harmonics)
     for t in model.terms:
         n += sum(1 for k, v in t.items() if k not in _TERM_SETTINGS and not k.endswith("_se")
                  and isinstance(v, (int, float)) and not isinstance(v, bool))

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..core.reduction import group_normal_equations
 from ..errors import InputError
-from ..model import DIRECTIONS, LAWS, FrictionModel
+from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
 from .data import DiagnoseData
@@ -169,21 +169,20 @@ class BaseBlock(Block):
         for d, names in targets:
             for p in self._lin(d):
                 for nm in names:
-                    model.directions[nm][p] = float(coef[i])
-                    model.directions[nm][p + "_se"] = float(se[i])
+                    model.directions[nm].set(p, float(coef[i]), float(se[i]))
                 i += 1
             for nm in names:
+                P = model.directions[nm]
                 for k, val in self._nonlin(d).items():
-                    model.directions[nm][k] = val
+                    P.set(k, val)
                 law = LAWS[self.law]
                 for k in law.linear:
                     if k not in self._lin(d):
-                        model.directions[nm][k] = None
-                        model.directions[nm][k + "_se"] = None
+                        P.set(k, None, None)
                 degraded = law.degraded_for("v_s")
                 if degraded is not None and tuple(self._lin(d)) == degraded.linear:
                     for k in law.nonlinear_names:
-                        model.directions[nm][k] = None
+                        P.set(k, None)
 
     def describe(self):
         return f"{self.law} ({'symmetric' if self.symmetric else 'per direction'})"
@@ -303,9 +302,9 @@ class HarmonicBlock(Block):
                 i += 1
             h.update(ex.get(d, ex.get(0, {})))
             for nm in names:
-                hs = model.directions[nm]["harmonics"]
-                hs[:] = [x for x in hs if not math.isclose(x["frequency"], self.frequency, rel_tol=1e-12)]
-                hs.append(dict(h))
+                hs = model.directions[nm].harmonics
+                hs[:] = [x for x in hs if not math.isclose(x.frequency, self.frequency, rel_tol=1e-12)]
+                hs.append(Harmonic.of(h))
 
     def with_(self, **kw) -> "HarmonicBlock":
         return replace(self, **kw)
@@ -515,7 +514,7 @@ class FittedState:
                           name=name or tmpl.name, notes=list(tmpl.notes), meta=dict(tmpl.meta),
                           not_identified=dict(tmpl.not_identified))
         for p in m.directions.values():
-            p["harmonics"] = []
+            p.harmonics = []
         m.terms = []
         for blk, (a, z) in zip(self.state.blocks, self.state.spans()):
             n_terms = len(m.terms)
@@ -536,13 +535,13 @@ def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list
         if key[0] == "base":
             _, d, k = key
             for nm in (DIRECTIONS if d == 0 else (_DNAME[d],)):
-                m.directions[nm][k + "_se"] = se
+                m.directions[nm].se[k] = se
         elif key[0] in ("decay", "frequency"):
             names = DIRECTIONS if (key[0] == "frequency" or key[1] == 0) else (_DNAME[key[1]],)
             for nm in names:
-                for h in m.directions[nm]["harmonics"]:
-                    if math.isclose(h["frequency"], blk.frequency, rel_tol=1e-12):
-                        h[key[0] + "_se"] = se
+                for h in m.directions[nm].harmonics:
+                    if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
+                        h.se[key[0]] = se
         elif key[0] == "fixed":
             for t in new_terms:
                 t[key[1] + "_se"] = se
@@ -584,7 +583,7 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
     degraded = LAWS[law].degraded_for("v_s")
 
     def lin_of(p):
-        if any(p.get(k) is None for k in nonlin_names) and degraded is not None:
+        if any(p.values.get(k) is None for k in nonlin_names) and degraded is not None:
             return degraded.linear
         return lin_names
 
@@ -592,44 +591,45 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
         if symmetric:
             p = model.directions["positive"]
             blocks.append(BaseBlock(key="base", law=law, dirs=tuple(present), symmetric=True,
-                                    lin=((0, lin_of(p)),), nonlin=((0, {k: p.get(k) for k in nonlin_names}),)))
+                                    lin=((0, lin_of(p)),), nonlin=((0, {k: p.values.get(k) for k in nonlin_names}),)))
         else:
-            dirs = tuple(d for d in present if all(model.params(d).get(k) is not None
-                                                   for k in LINEAR[law][0] if k in lin_of(model.params(d))))
+            P = {d: model.params(d) for d in present}
+            dirs = tuple(d for d in present if all(P[d].values.get(k) is not None
+                                                   for k in LINEAR[law][0] if k in lin_of(P[d])))
             blocks.append(BaseBlock(key="base", law=law, dirs=dirs, symmetric=False,
-                                    lin=tuple((d, lin_of(model.params(d))) for d in dirs),
-                                    nonlin=tuple((d, {k: model.params(d).get(k) for k in nonlin_names})
+                                    lin=tuple((d, lin_of(P[d])) for d in dirs),
+                                    nonlin=tuple((d, {k: P[d].values.get(k) for k in nonlin_names})
                                                  for d in dirs)))
     # harmonics, paired by frequency
     freqs = []
     for d in present:
         for h in model.harmonics(d):
-            if h.get("amplitude") is None:
+            if h.amplitude is None:
                 continue
-            if not any(math.isclose(h["frequency"], f, rel_tol=1e-9) for f in freqs):
-                freqs.append(float(h["frequency"]))
+            if not any(math.isclose(h.frequency, f, rel_tol=1e-9) for f in freqs):
+                freqs.append(float(h.frequency))
     for f in freqs:
         per = {}
         for d in present:
             for h in model.harmonics(d):
-                if h.get("amplitude") is not None and math.isclose(h["frequency"], f, rel_tol=1e-9):
+                if h.amplitude is not None and math.isclose(h.frequency, f, rel_tol=1e-9):
                     per[d] = h
         dirs = tuple(sorted(per, reverse=True))
         any_h = next(iter(per.values()))
-        load_phase = tuple((d, float(per[d].get("phase", 0.0))) for d in dirs if per[d].get("load_coefficient"))
+        load_phase = tuple((d, float(per[d].phase or 0.0)) for d in dirs if per[d].load_coefficient)
         if symmetric:
-            rng = ((0, tuple(any_h["speed_range"])),) if keep_ranges and any_h.get("speed_range") else ()
-            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.get("label"), dirs=dirs,
-                                        symmetric=True, law=((0, any_h.get("law", "exp")),),
-                                        decay=((0, float(any_h.get("decay", 0.0) or 0.0)),),
+            rng = ((0, tuple(any_h.speed_range)),) if keep_ranges and any_h.speed_range else ()
+            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.label, dirs=dirs,
+                                        symmetric=True, law=((0, any_h.amplitude_law),),
+                                        decay=((0, float(any_h.decay or 0.0)),),
                                         load_phase=((0, load_phase[0][1]),) if load_phase else (),
                                         speed_range=rng))
         else:
-            rng = tuple((d, tuple(per[d]["speed_range"])) for d in dirs
-                        if keep_ranges and per[d].get("speed_range")) if keep_ranges else ()
-            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.get("label"), dirs=dirs,
-                                        law=tuple((d, per[d].get("law", "exp")) for d in dirs),
-                                        decay=tuple((d, float(per[d].get("decay", 0.0) or 0.0)) for d in dirs),
+            rng = tuple((d, tuple(per[d].speed_range)) for d in dirs
+                        if keep_ranges and per[d].speed_range) if keep_ranges else ()
+            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.label, dirs=dirs,
+                                        law=tuple((d, per[d].amplitude_law) for d in dirs),
+                                        decay=tuple((d, float(per[d].decay or 0.0)) for d in dirs),
                                         load_phase=load_phase, speed_range=rng))
     for t in model.terms:
         kind = t["kind"]
@@ -664,16 +664,16 @@ def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
         out = []
         for d in blk.dirs:
             p = model.params(d)
-            out += [float(p[k]) for k in blk._lin(d)]
+            out += [float(p.values[k]) for k in blk._lin(d)]
         return np.array(out)
     if isinstance(blk, HarmonicBlock):
         out = []
         for d in blk.dirs:
-            h = next(h for h in model.harmonics(d) if math.isclose(h["frequency"], blk.frequency, rel_tol=1e-9))
-            A, ph = float(h["amplitude"]), float(h.get("phase", 0.0))
+            h = next(h for h in model.harmonics(d) if math.isclose(h.frequency, blk.frequency, rel_tol=1e-9))
+            A, ph = float(h.amplitude), float(h.phase)
             out += [A * math.cos(ph), A * math.sin(ph)]
             if d in dict(blk.load_phase):
-                out.append(float(h.get("load_coefficient", 0.0)))
+                out.append(float(h.load_coefficient or 0.0))
         return np.array(out)
     t = next(t for t in model.terms if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == blk.direction
              and all(t.get(k) == v for k, v in blk.fixed))

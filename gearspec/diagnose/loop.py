@@ -625,9 +625,9 @@ def _written_terms(e: Effect, rnd: Round) -> list:
     for blk in [b for b in blocks if b is not None]:
         if isinstance(blk, HarmonicBlock):
             for dname, p in m.directions.items():
-                for h in p["harmonics"]:
-                    if math.isclose(h["frequency"], blk.frequency, rel_tol=1e-12):
-                        out.append({"direction": dname, "harmonic": h})
+                for h in p.harmonics:
+                    if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
+                        out.append({"direction": dname, "harmonic": h.to_dict()})
         elif hasattr(blk, "kind"):
             for t in m.terms:
                 if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == getattr(blk, "direction", 0) and all(

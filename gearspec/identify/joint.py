@@ -38,7 +38,7 @@ from scipy import optimize
 
 from ..errors import GearspecWarning, InputError
 from ..fitdata import FitData
-from ..model import LAWS, FrictionModel
+from ..model import LAWS, Direction, FrictionModel, Harmonic
 from ..terms.registry import Basis as _Basis
 from ..terms.registry import basis as _basis
 from ..terms.shapes import amplitude_law, clamp_speed
@@ -248,22 +248,19 @@ def _jacobian(fun, z):
     return J
 
 
-def _direction_params(prob: _Problem, sol: dict) -> dict:
-    """Fitted values and standard errors of one direction, in the FrictionModel form."""
+def _direction_params(prob: _Problem, sol: dict) -> Direction:
+    """Fitted values and standard errors of one direction."""
     basis = prob.basis
     lin, se, cov = sol["lin"], sol["se"], sol["cov"]
     nb = sol["n_lin"]
     L = len(lin)
-    P: dict = {}
+    P = Direction({})
     for j, name in enumerate(basis.lin):
-        P[name] = float(lin[j])
-        P[name + "_se"] = float(se[j])
+        P.set(name, float(lin[j]), float(se[j]))
     # nonlinear base parameters are fitted as logs: delta method
     for j, name in enumerate(basis.nonlin):
         val = float(sol["nonlin"][j])
-        P[name] = val
-        P[name + "_se"] = float(val * se[L + j])
-    harm = []
+        P.set(name, val, float(val * se[L + j]))
     free = list(sol["free"])
     for k, h in enumerate(prob.harmonics):
         a, c = lin[nb + 2 * k], lin[nb + 2 * k + 1]
@@ -272,21 +269,15 @@ def _direction_params(prob: _Problem, sol: dict) -> dict:
         phi = float(math.atan2(c, a))
         nan2 = (float("nan"),) * 2
         a_se, p_se = pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov)) else nan2
-        entry = {"frequency": float(h["frequency"]), "amplitude": A, "amplitude_se": a_se,
-                 "decay": float(sol["decays"][k]), "phase": phi, "phase_se": p_se,
-                 "law": prob.amp_law[k]}
         if k in free:
-            j = L + sol["nb_nl"] + free.index(k)
-            entry["decay_se"] = float(se[j] * sol["sscale"])
+            decay_se = float(se[L + sol["nb_nl"] + free.index(k)] * sol["sscale"])
         else:
-            entry["decay_se"] = 0.0 if prob.amp_law[k] == "const" else float("nan")
-        if h.get("label"):
-            entry["label"] = h["label"]
-        entry["segments"] = int(prob.stats.active[:, k].sum())
-        if np.all(np.isfinite(prob.ranges[k])):
-            entry["speed_range"] = [float(prob.ranges[k][0]), float(prob.ranges[k][1])]
-        harm.append(entry)
-    P["harmonics"] = harm
+            decay_se = 0.0 if prob.amp_law[k] == "const" else float("nan")
+        rng = [float(x) for x in prob.ranges[k]] if np.all(np.isfinite(prob.ranges[k])) else None
+        P.harmonics.append(Harmonic(float(h["frequency"]), A, float(sol["decays"][k]), phi,
+                                    label=h.get("label") or None, law=prob.amp_law[k], speed_range=rng,
+                                    segments=int(prob.stats.active[:, k].sum()),
+                                    se={"amplitude": a_se, "phase": p_se, "decay": decay_se}))
     return P
 
 
@@ -380,10 +371,10 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     if sol["status"] <= 0:
         raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction")
     P = _direction_params(prob, sol)
-    for h in P["harmonics"]:
-        if np.isfinite(h["amplitude_se"]) and h["amplitude"] < 2 * h["amplitude_se"]:
-            notes.append(f"{dname}: amplitude of {h.get('label') or h['frequency']} not significant "
-                         f"({h['amplitude']:.3g} +- {h['amplitude_se']:.2g})")
+    for h in P.harmonics:
+        if np.isfinite(h.se["amplitude"]) and h.amplitude < 2 * h.se["amplitude"]:
+            notes.append(f"{dname}: amplitude of {h.label or h.frequency} not significant "
+                         f"({h.amplitude:.3g} +- {h.se['amplitude']:.2g})")
     if se == "bootstrap":
         _bootstrap_se(P, stats, law, specs, weights, bootstrap, seed)
     # parameters the data cannot pin down: a Stribeck velocity outside the plateau speeds.  Then
@@ -391,26 +382,25 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     # its Coulomb + viscous part over the measured speeds, and says so
     if basis.nonlin:
         lo, hi = float(np.min(stats.speed)), float(np.max(stats.speed))
-        rel = P["v_s_se"] / P["v_s"] if P["v_s"] > 0 else np.inf
+        V = P.values
+        rel = P.se["v_s"] / V["v_s"] if V["v_s"] > 0 else np.inf
         # the height of the Stribeck term must be there too: static minus Coulomb larger than its
         # error (either sign: Lola's Table IV has T_fS < T_f0, friction rising towards T_f0)
-        top, base = ("tau_s", "tau_c") if "tau_s" in P else ("t_fs", "t_f0")
-        hump = P[top] - P[base]
-        weak = not (np.isfinite(P[top + "_se"]) and P[top + "_se"] < abs(hump))
+        top, base = ("tau_s", "tau_c") if "tau_s" in V else ("t_fs", "t_f0")
+        hump = V[top] - V[base]
+        weak = not (np.isfinite(P.se[top]) and P.se[top] < abs(hump))
         if sol["on_bound"] or not np.isfinite(rel) or rel > 1.0 or weak:
             why = (f"not identified by plateaus at {lo:.3g}..{hi:.3g} {sub.unit}/s (the fit went to v_s = "
-                   f"{P['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
-                   f"{hump:.3g} +- {P[top + '_se']:.2g}); record slower plateaus")
+                   f"{V['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
+                   f"{hump:.3g} +- {P.se[top]:.2g}); record slower plateaus")
             reduced = LAWS[law].degraded_for("v_s")
             prob2 = _make_problem(stats, reduced.name, specs, weights)
-            P2 = _direction_params(prob2, _fit_direction(prob2, init=init))
-            drop = reduced.dropped
-            P = {**P2, **{k: None for k in drop}, **{k + "_se": None for k in drop}}
-            for k in drop:
+            P = _direction_params(prob2, _fit_direction(prob2, init=init))
+            for k in reduced.dropped:
+                P.set(k, None, None)
                 ni[f"{dname}.{k}"] = why
             notes.append(f"{dname}: Stribeck part of law {law} not identified; Coulomb + viscous part fitted alone")
-    P["n_segments"] = int(len(stats.speed))
-    P["n_samples"] = int(np.sum(stats.n))
+    P.n_segments, P.n_samples = int(len(stats.speed)), int(np.sum(stats.n))
     return P, ni, notes
 
 
@@ -433,12 +423,11 @@ def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: 
     prob = _make_problem(stats, quasi.name, specs, weights)
     P = _direction_params(prob, _fit_direction(prob))
     for k in LAWS[law].params:
-        if k not in P:
-            P[k], P[k + "_se"] = None, None
+        if k not in P.values:
+            P.set(k, None, None)
             ni[f"{dname}.{k}"] = why
     notes.append(f"{dname}: quasi-static map: level and lines only")
-    P["n_segments"] = int(len(stats.speed))
-    P["n_samples"] = int(np.sum(stats.n))
+    P.n_segments, P.n_samples = int(len(stats.speed)), int(np.sum(stats.n))
     return P, ni, notes
 
 
@@ -448,7 +437,7 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
     S = len(stats.speed)
     base_names = list(_basis(law).lin) + list(_basis(law).nonlin)
     draws = {k: [] for k in base_names}
-    hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P["harmonics"]]
+    hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P.harmonics]
     for _ in range(B):
         bs = stats.take(rng.integers(0, S, S))
         if len(np.unique(np.round(bs.speed, 9))) < len(base_names):
@@ -459,21 +448,20 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
         except (InputError, np.linalg.LinAlgError, ValueError):
             continue
         for k in base_names:
-            draws[k].append(Q[k])
-        for k, h in enumerate(Q["harmonics"]):
-            hdraws[k]["amplitude"].append(h["amplitude"])
-            hdraws[k]["decay"].append(h["decay"])
-            hdraws[k]["phase"].append(h["phase"])
+            draws[k].append(Q.values[k])
+        for k, h in enumerate(Q.harmonics):
+            for key in ("amplitude", "decay", "phase"):
+                hdraws[k][key].append(getattr(h, key))
     for k in base_names:
         if len(draws[k]) >= 10:
-            P[k + "_se"] = float(np.std(draws[k], ddof=1))
-    for h, dr in zip(P["harmonics"], hdraws):
+            P.se[k] = float(np.std(draws[k], ddof=1))
+    for h, dr in zip(P.harmonics, hdraws):
         if len(dr["amplitude"]) >= 10:
-            h["amplitude_se"] = float(np.std(dr["amplitude"], ddof=1))
-            h["decay_se"] = float(np.std(dr["decay"], ddof=1))
-            ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h["phase"])))
-            h["phase_se"] = float(np.sqrt(np.mean(ph ** 2)))
-    P["se_method"] = f"bootstrap over segments ({B} resamples)"
+            h.se["amplitude"] = float(np.std(dr["amplitude"], ddof=1))
+            h.se["decay"] = float(np.std(dr["decay"], ddof=1))
+            ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h.phase)))
+            h.se["phase"] = float(np.sqrt(np.mean(ph ** 2)))
+    P.se_method = f"bootstrap over segments ({B} resamples)"
 
 
 
@@ -570,13 +558,13 @@ class JointFit:
                 _warn("law silo4 without a gear spec or harmonics: fitting eq. 3 only")
         else:
             specs = harmonic_specs(self.harmonics, self.gear) if self.harmonics is not None else []
-        directions: dict[str, dict] = {}
+        directions: dict[str, Direction] = {}
         not_identified: dict[str, str] = {}
         notes: list[str] = []
         for d, dname in ((1, "positive"), (-1, "negative")):
             sub = data.direction_subset(d)
             if len(sub) == 0:
-                directions[dname] = {**{k: None for k in LAWS[law].params}, "harmonics": []}
+                directions[dname] = Direction.of(LAWS[law], {})
                 for k in list(LAWS[law].params) + [h.get("label") or h["frequency"] for h in specs]:
                     not_identified[f"{dname}.{k}"] = f"no segment in the {dname} direction"
                 continue

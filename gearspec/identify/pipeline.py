@@ -130,7 +130,7 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
         pm = silo4_published(data, amplitudes, harmonics=lines, holdout=holdout, folds=folds)
         if law == "stribeck":
             for p in pm.directions.values():
-                p["harmonics"] = []
+                p.harmonics = []
             pm.law = "stribeck"
             pm.rmse = _safe_rmse(pm, data)
         models[pm.name] = pm

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..fitdata import FitData
-from ..model import RPM, FrictionModel
+from ..model import LAWS, RPM, Direction, FrictionModel, Harmonic
 from . import validate
 from .stats import harmonic_specs, pair_se, segment_stats
 from .validate import _safe_rmse
@@ -122,7 +122,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
     directions, ni, notes = {}, {}, []
     for d, dname in ((1, "positive"), (-1, "negative")):
         pl = plate[plate["direction"] == d]
-        P = {"tau_c": None, "tau_s": None, "v_s": None, "viscous": None, "harmonics": []}
+        P = Direction.of(LAWS["silo4"], {})
         if pl.empty:
             for k in ("tau_c", "tau_s", "v_s", "viscous"):
                 ni[f"{dname}.{k}"] = f"no segment in the {dname} direction"
@@ -133,23 +133,21 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
         if len(hi) >= 2:
             X = np.column_stack([np.ones(len(hi)), hi["speed"]])
             coef, se = _ols(X, hi["level"].to_numpy())
-            P["tau_c"], P["viscous"] = float(coef[0]), float(coef[1])
-            P["tau_c_se"], P["viscous_se"] = float(se[0]), float(se[1])
+            P.set("tau_c", float(coef[0]), float(se[0]))
+            P.set("viscous", float(coef[1]), float(se[1]))
         else:
             ni[f"{dname}.tau_c"] = ni[f"{dname}.viscous"] = (f"needs two plateaus above {high_speed:.4g} "
                                                                f"{data.unit}/s in the {dname} direction, has {len(hi)}")
-        if P["tau_c"] is not None:
-            excess = lo["level"].to_numpy() - P["tau_c"]
+        if P.values["tau_c"] is not None:
+            excess = lo["level"].to_numpy() - P.values["tau_c"]
             ok = excess > 0
             if ok.sum() >= 2:
                 X = np.column_stack([np.ones(ok.sum()), lo["speed"].to_numpy()[ok]])
                 coef, se = _ols(X, np.log(excess[ok]))
                 m_, n_ = coef[1], coef[0]
                 if m_ < 0:
-                    P["v_s"] = float(-1.0 / m_)
-                    P["v_s_se"] = float(se[1] / m_ ** 2)
-                    P["tau_s"] = float(P["tau_c"] + math.exp(n_))
-                    P["tau_s_se"] = float(math.exp(n_) * se[0])
+                    P.set("v_s", float(-1.0 / m_), float(se[1] / m_ ** 2))
+                    P.set("tau_s", float(P.values["tau_c"] + math.exp(n_)), float(math.exp(n_) * se[0]))
                     if ok.sum() < len(lo):
                         notes.append(f"{dname}: {len(lo) - ok.sum()} low-speed plateau(s) below the Coulomb level "
                                      f"left out of the log-linear fit (eq. 4 cannot take their log)")
@@ -184,7 +182,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
                 coef, se = _ols(np.column_stack([np.ones(len(sp)), sp]), np.log(amp))
                 entry.update(amplitude=float(math.exp(coef[0])), amplitude_se=float(math.exp(coef[0]) * se[0]),
                              decay=float(-coef[1]), decay_se=float(se[1]))
-            P["harmonics"].append(entry)
+            P.harmonics.append(Harmonic.of(entry))
         directions[dname] = P
     model = FrictionModel("silo4", directions["positive"], directions["negative"], unit=data.unit,
                           not_identified=ni, notes=notes, name="SILO4 published procedure",

@@ -297,9 +297,9 @@ class LoadMeshing(Effect):
         m = model.copy()
         hit = False
         for p in m.directions.values():
-            for h in p["harmonics"]:
+            for h in p.harmonics:
                 if _matches(h, self.target):
-                    h["load_coefficient"] = float(h.get("load_coefficient", 0.0) or 0.0) + float(self.coefficient)
+                    h.load_coefficient = float(h.load_coefficient or 0.0) + float(self.coefficient)
                     hit = True
         if hit:
             m.rmse = m.rmse_holdout = None
@@ -421,10 +421,10 @@ class DecayShape(Effect):
         m = model.copy()
         hit = False
         for d in _dirs(self.direction):
-            for h in m.directions[d]["harmonics"]:
+            for h in m.directions[d].harmonics:
                 if _matches(h, self.target):
-                    h["law"] = self.law
-                    h["decay"] = float(self.decay)
+                    h.law = self.law
+                    h.decay = float(self.decay)
                     hit = True
         if not hit:
             raise InputError(f"decay_shape: the model has no harmonic matching {self.target!r} in the "
@@ -482,7 +482,7 @@ class Asymmetry(Effect):
             raise InputError(f"asymmetry: law {m.law} has no parameter '{self.parameter}' "
                              f"(it has {', '.join(m.law_spec.params)})")
         p = m.directions[_dirs(self.direction)[0]]
-        p[self.parameter] = float(p[self.parameter]) * float(self.factor)
+        p.set(self.parameter, float(p.values[self.parameter]) * float(self.factor))
         m.rmse = m.rmse_holdout = None
         return m
 

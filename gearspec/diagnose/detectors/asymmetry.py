@@ -46,9 +46,8 @@ class AsymmetryBlock(Block):
 
     def write(self, model, coef, se):
         p = model.directions["negative"]
-        if p.get(self.param) is not None:
-            p[self.param] = float(p[self.param]) + float(coef[0])
-            p[self.param + "_se"] = float(se[0])
+        if p.values.get(self.param) is not None:
+            p.set(self.param, float(p.values[self.param]) + float(coef[0]), float(se[0]))
         model.notes.append(f"asymmetry: {self.param} differs in the negative direction by {coef[0]:.4g} "
                            f"(+- {se[0]:.2g})")
 
