@@ -30,10 +30,7 @@ def _check_time_unit(rec: Recording) -> None:
     t = rec.t
     if len(t) < 2:
         raise InputError(f"{', '.join(rec.sources)}: fewer than two usable rows")
-    dts = []
-    for _, s, e in rec.pieces():
-        if e - s > 1:
-            dts.append(np.median(np.diff(t[s:e])))
+    dts = [np.median(np.diff(t[s:e])) for _, s, e in rec.pieces() if e - s > 1]
     med = float(np.median(dts)) if dts else 0.0
     if dts and med < MIN_TIME_STEP:
         raise InputError(f"{', '.join(rec.sources)}: column 't' steps by {med:.3g} s (median), faster than any logger "
@@ -41,8 +38,6 @@ def _check_time_unit(rec: Recording) -> None:
     if med >= 1.0:
         warn(f"{', '.join(rec.sources)}: the median time step is {med:g} s; if 't' is in ms or sample numbers, "
              "use --scale t=0.001 or --fs HZ")
-
-
 
 
 def _check_signal(rec: Recording) -> None:
