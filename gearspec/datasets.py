@@ -436,7 +436,8 @@ def catalog_efficiency(download: bool = False) -> pd.DataFrame:
     torque, Nm), ``eta_rated``, ``compensation`` and ``efficiency`` (see the data set's SOURCE.md;
     the 0 rpm row is the source's own extrapolation)."""
     tables = load("harmonic_drive_catalog", download=download)
-    grid = tables["efficiency_vs_input_speed"].merge(tables["compensation_vs_load_torque"], how="cross").rename(columns={"efficiency_at_rated_torque": "eta_rated", "output_load_torque_Nm": "load",
+    grid = tables["efficiency_vs_input_speed"].merge(tables["compensation_vs_load_torque"], how="cross")
+    grid = grid.rename(columns={"efficiency_at_rated_torque": "eta_rated", "output_load_torque_Nm": "load",
                                 "compensation_coefficient": "compensation"})
     grid["efficiency"] = grid["eta_rated"] * grid["compensation"]
     return grid[["input_speed_rpm", "load", "eta_rated", "compensation", "efficiency"]]

@@ -87,11 +87,9 @@ class FitData:
         # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
         # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
         qs = np.concatenate([np.full(s.n, s.kind == "quasi_static") for s in seg.segments])
-        if velocity == "segment" or qs.all():
-            v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
-        else:
-            v = rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx]
-            v = np.where(qs, np.concatenate([np.full(s.n, s.velocity) for s in seg.segments]), v)
+        v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
+        if velocity == "measured" and not qs.all():
+            v = np.where(qs, v, rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx])
         a = acc[idx]
         no_deriv = int(np.count_nonzero(np.isnan(a) & ~qs))
         a = np.where(qs, 0.0, np.nan_to_num(a))
@@ -161,10 +159,8 @@ class FitData:
 
     def groups(self, by: str = "segment") -> np.ndarray:
         """Group id per sample for held-out folds: ``"segment"`` or ``"run"``."""
-        if by == "segment":
-            return self.segment
-        if by == "run":
-            return self.run
+        if by in ("segment", "run"):
+            return getattr(self, by)
         raise InputError(f"held-out groups must be 'segment' or 'run', got '{by}'")
 
     def plateaus(self, blocks: int = 8) -> pd.DataFrame:

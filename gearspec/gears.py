@@ -265,7 +265,8 @@ class GearTrain:
         if self.unit == "m":  # shaft j is the input of stage j+1; the last one is the screw (or pulley) shaft
             if not n:
                 return []
-            return (["motor shaft"] + inner)[:n - 1] + [f"{self.stages[-1].name} shaft" + (" (= motor shaft)" * (n == 1))]
+            screw = f"{self.stages[-1].name} shaft" + (" (= motor shaft)" if n == 1 else "")
+            return (["motor shaft"] + inner)[:n - 1] + [screw]
         return ["motor shaft" if n else "shaft"] + inner + ["output shaft"] * (n > 0)
 
     @property
