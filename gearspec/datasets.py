@@ -247,12 +247,8 @@ def data_dir() -> Path:
 
 def search_path() -> list[tuple[Path, str]]:
     """The folders searched for data sets, in order, each with what it is."""
-    out = []
     env = _env_dir()
-    if env is not None:
-        out.append((env, ENV_VAR))
-    out.append((cache_dir(), "user cache"))
-    return out
+    return ([] if env is None else [(env, ENV_VAR)]) + [(cache_dir(), "user cache")]
 
 
 def _locate(ds: DataSet) -> tuple[Path | None, list[tuple[Path, str, list[str]]]]:
@@ -300,11 +296,7 @@ def _verify(ds: DataSet, fname: str, path: Path) -> Path:
 
 
 def _is_in(path: Path, folder: Path) -> bool:
-    try:
-        path.resolve().relative_to(folder.resolve())
-        return True
-    except ValueError:
-        return False
+    return path.resolve().is_relative_to(folder.resolve())
 
 
 # ---------------------------------------------------------------------- public API
