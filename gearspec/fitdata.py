@@ -40,8 +40,7 @@ class FitData:
     unit: str = "rad"
     segments: pd.DataFrame = field(default_factory=pd.DataFrame)
     notes: list = field(default_factory=list)
-    #: per-segment results computed once (e.g. the sufficient statistics of identify.fit), keyed
-    #: by what was computed; shared with subsets, whose segments keep their ids
+    #: per-segment results computed once (keyed by what), shared with subsets (segments keep their ids)
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):

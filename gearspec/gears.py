@@ -455,20 +455,14 @@ class IntegerOrder:
 
 def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_multiple: int | None = None,
                   coincidence: float = HINT_COINCIDENCE) -> IntegerOrder | None:
-    """The integer multiple (>= 2) of a shaft of ``gear`` within ``tol`` of ``frequency``, or None.
+    """The integer multiple (>= 2, at most ``max_multiple``) of a shaft of ``gear`` within ``tol`` of
+    ``frequency``, or None.
 
-    Every multiple is tried (72x, 96x, 144x of a motor shaft as well as 7x) that the frequency's
-    uncertainty ``tol`` can tell from its neighbours.  The bound: the multiples of a shaft at
-    ``f_s`` are ``f_s`` apart, so a frequency that has nothing to do with the shaft lands within
-    ``tol`` of one of them with probability ``2 tol / f_s`` (uniform between two multiples).
-    Shafts are tried fastest first (the smallest multiple wins), each only while the summed
-    chance over the shafts tried so far is at most ``coincidence`` (10 %): so the chance that an
-    unrelated frequency gets any hint at all stays below it (a union bound), and neighbouring
-    multiples are always far apart compared with ``tol`` (``tol <= coincidence * f_s / 2``,
-    against the ``f_s / 2`` at which they stop being distinguishable).  A slow shaft (a
-    planetary or output shaft) thus needs a frequency sharper by the ratio of the shafts, which
-    is what keeps hints such as "53x planetary output shaft" out.  ``max_multiple`` optionally
-    caps the multiple.
+    Any multiple that ``tol`` tells from its neighbours is tried: an unrelated frequency lands
+    within ``tol`` of a multiple of a shaft at ``f_s`` with probability ``2 tol / f_s``.  Shafts
+    are tried fastest first while the summed chance stays at most ``coincidence`` (a union bound
+    on a false hint); a slow shaft thus needs a sharper frequency, which keeps hints such as "53x
+    planetary output shaft" out.
     """
     if gear is None or not (frequency > 0) or not (tol >= 0):
         return None

@@ -198,8 +198,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
 
 def _check_options(gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
                    max_gap) -> tuple[str, float | None]:
-    """The unit of theta (given, the gear's, or rad) and ``max_gap`` (s) as a number, once the
-    loader's options are checked."""
+    """The unit of theta (given, the gear's, or rad) and ``max_gap`` (s), the options checked."""
     unit = unit or (gear.unit if gear is not None else "rad")
     if max_gap is not None:
         try:
@@ -219,8 +218,7 @@ def _check_options(gear: GearTrain | None, unit: str | None, signal: str | None,
 
 def _analysed_signal(path, frame: pd.DataFrame, signal: str | None, sig_used: str | None,
                      gear: GearTrain | None, fs: float | None) -> str:
-    """The channel analysed in this file ('torque' or 'current'), once the columns the analysis
-    needs are found there; the same in every file."""
+    """The channel analysed ('torque' or 'current'; the same in every file), the needed columns found."""
     cols = list(frame.columns)
     if "theta" not in frame:
         raise InputError(f"{path}: no column 'theta' (position); columns are: {_names(cols)}; "
@@ -248,8 +246,7 @@ def _analysed_signal(path, frame: pd.DataFrame, signal: str | None, sig_used: st
 
 
 def _numeric_frame(path, frame: pd.DataFrame, fs: float | None, notes: list[str]) -> pd.DataFrame:
-    """The canonical columns as numbers (a cell that is not one is refused), and ``t`` from ``fs``
-    when the file has no time column."""
+    """The canonical columns as numbers (refusing a cell that is not), ``t`` from ``fs`` if missing."""
     for col in CANONICAL:
         if col in frame:
             frame[col] = _numeric_column(path, frame, col)
@@ -260,8 +257,7 @@ def _numeric_frame(path, frame: pd.DataFrame, fs: float | None, notes: list[str]
 
 
 def _number_runs(path, frame: pd.DataFrame, run_offset: int, several: bool, notes: list[str]):
-    """Run ids numbered on from ``run_offset`` (a file without a ``run`` column is one run);
-    returns the frame and the next free id."""
+    """The frame with run ids from ``run_offset`` on (no ``run`` column: one run), and the next id."""
     if "run" in frame:
         r = frame["run"].to_numpy()
         ok = np.isfinite(r)
