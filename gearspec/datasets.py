@@ -95,16 +95,16 @@ def _as_speeds(ds: DataSet, part, available: dict[float, Path]) -> list[float]:
     if not items:
         raise InputError(f"data set '{ds.name}': part is an empty list; give commanded speeds, e.g. '0.3'")
     chosen = []
+    listed = ", ".join(f"{s:g}" for s in sorted(available))
     for item in items:
         try:
             v = float(item)
         except (TypeError, ValueError):
             raise InputError(f"data set '{ds.name}': part {item!r} is not a commanded speed in rad/s "
-                             f"(available: {', '.join(f'{s:g}' for s in sorted(available))})") from None
+                             f"(available: {listed})") from None
         match = [s for s in available if abs(s - v) <= 1e-9 + 1e-6 * abs(v)]
         if not match:
-            raise InputError(f"data set '{ds.name}': no run at commanded speed {v:g} rad/s "
-                             f"(available: {', '.join(f'{s:g}' for s in sorted(available))})")
+            raise InputError(f"data set '{ds.name}': no run at commanded speed {v:g} rad/s (available: {listed})")
         chosen.append(match[0])
     return sorted(set(chosen))
 

@@ -61,10 +61,8 @@ class Recording:
     def tau(self) -> np.ndarray:
         """The analysed signal as drive torque at the reference shaft (Nm, or N on a linear axis)."""
         if self._tau is None:
-            if self.signal == "torque":
-                self._tau = self.data["torque"].to_numpy(dtype=float)
-            else:
-                self._tau = np.asarray(self.gear.torque_from_current(self.data["current"].to_numpy(dtype=float)))
+            raw = self.data[self.signal].to_numpy(dtype=float)
+            self._tau = raw if self.signal == "torque" else np.asarray(self.gear.torque_from_current(raw))
         return self._tau
 
     def channel(self, name: str) -> np.ndarray:
