@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
+from itertools import accumulate
 from pathlib import Path
 from typing import Iterable
 
@@ -234,29 +236,14 @@ class GearTrain:
     def _shaft_turns_per_unit(self) -> list[float]:
         """Turns of each shaft (motor, after stage 1, ..., output) per unit of theta."""
         ratios = [s.ratio for s in self.stages]
-        n = len(self.stages)
         if self.unit == "m":
             if not self.stages:
                 return []
-            # last stage converts rotation to travel: screw turns per metre = 1/lead
-            turns = [0.0] * (n + 1)
-            turns[n - 1] = 1.0 / self.stages[-1].lead  # screw shaft = input of the last stage
-            for j in range(n - 2, -1, -1):
-                turns[j] = turns[j + 1] * ratios[j]
-            return turns[:n]  # there is no rotating shaft after the screw
+            # the screw shaft (input of the last stage) turns 1/lead times per metre; none turns after it
+            return list(accumulate(ratios[:-1][::-1], operator.mul, initial=1.0 / self.stages[-1].lead))[::-1]
         if self.reference == "motor":
-            turns, acc = [], 1.0
-            for j in range(n + 1):
-                turns.append(acc / (2 * math.pi))
-                if j < n:
-                    acc /= ratios[j]
-            return turns
-        turns, acc = [], 1.0
-        for j in range(n, -1, -1):
-            turns.append(acc / (2 * math.pi))
-            if j > 0:
-                acc *= ratios[j - 1]
-        return turns[::-1]
+            return [a / (2 * math.pi) for a in accumulate(ratios, operator.truediv, initial=1.0)]
+        return [a / (2 * math.pi) for a in accumulate(ratios[::-1], operator.mul, initial=1.0)][::-1]
 
     def shaft_names(self) -> list[str]:
         """Names of the shafts, in the order of :meth:`_shaft_turns_per_unit`."""
