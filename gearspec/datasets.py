@@ -1,29 +1,11 @@
-"""The registry of real, measured data sets: where each comes from, its licence, its checksums, and
-how to load it.
+"""The registry of real, measured data sets (:data:`REGISTRY`): files with their SHA-256 checksums,
+source, licence, download URL where one exists, and how to load each.  The files are never part of
+the package.  A set lives in a folder of its name under ``$GEARSPEC_DATA`` (if set), then the user
+cache ``pooch.os_cache("gearspec")`` (where :func:`fetch` downloads); the first holding all its
+files is used, and every file is checked against its checksum before it is read.
 
-The registry is a small table (:data:`REGISTRY`) of :class:`DataSet` entries: the files of each set
-with their SHA-256 checksums, the source, the licence and, where one exists, the URL the files can be
-downloaded from.  The data files themselves are never part of the package or of the repository.
-
-Where the files are looked for
-------------------------------
-Each data set lives in a folder named after it (``emps/``, ``kinova_gen3_joint7/``, ...), under
-
-1. the folder named by the environment variable ``GEARSPEC_DATA``, if it is set (a folder holding
-   one subfolder per data set), then
-2. the user cache, ``pooch.os_cache("gearspec")`` (on Linux ``~/.cache/gearspec``), which is also
-   where :func:`fetch` ``(name, download=True)`` and ``gearspec data fetch NAME`` download to.
-
-The first of these that holds all the files of a set is used, and every file is checked against
-its checksum before it is read: a damaged or different file is refused, never analysed.
-
-Example
--------
->>> from gearspec import datasets
->>> datasets.list_datasets()                       # doctest: +SKIP
->>> rec = datasets.load("emps")                    # a Recording: theta in m, torque in N
->>> rec = datasets.load("kinova_gen3_joint7", part=["0.3", "0.5"])
->>> datasets.commanded_velocity(rec)               # {0: 0.3, 1: 0.5}
+>>> rec = datasets.load("kinova_gen3_joint7", part=["0.3", "0.5"])   # doctest: +SKIP
+>>> datasets.commanded_velocity(rec)               # {0: 0.3, 1: 0.5}  # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -56,29 +38,9 @@ _KINOVA_RUN = re.compile(r"velocity_([0-9]+(?:\.[0-9]*)?)readings\.csv$")
 
 @dataclass(frozen=True)
 class DataSet:
-    """One entry of the registry.
-
-    Attributes
-    ----------
-    name : str
-        Registry name, also the name of the data set's folder.
-    title : str
-    files : mapping of str to str
-        File name (relative to the data set's folder) to its SHA-256 checksum (hex).
-    source : str
-        Where the files were taken from.
-    licence : str
-    url_base : str or None
-        Download URL of the folder (file names are appended); None where no download exists.
-    citation : str
-        Whom to cite.
-    notes : str
-        Anything a user should know (assumptions, how the files were made, what loading does).
-    kind : {"recording", "tables"}
-        What :func:`load` returns: a :class:`~gearspec.recording.Recording`, or a dict of tables.
-    parts : tuple of str
-        What :func:`load`'s ``part`` may select.
-    """
+    """One entry of the registry: ``name`` (also its folder's), ``files`` (name -> SHA-256 hex),
+    ``url_base`` (download URL of the folder, None without one), ``kind`` ("recording" or "tables":
+    what :func:`load` returns), ``parts`` (what its ``part`` may select), and the ``loader``."""
 
     name: str
     title: str
@@ -133,16 +95,16 @@ def _as_speeds(ds: DataSet, part, available: dict[float, Path]) -> list[float]:
     if not items:
         raise InputError(f"data set '{ds.name}': part is an empty list; give commanded speeds, e.g. '0.3'")
     chosen = []
+    listed = ", ".join(f"{s:g}" for s in sorted(available))
     for item in items:
         try:
             v = float(item)
         except (TypeError, ValueError):
             raise InputError(f"data set '{ds.name}': part {item!r} is not a commanded speed in rad/s "
-                             f"(available: {', '.join(f'{s:g}' for s in sorted(available))})") from None
+                             f"(available: {listed})") from None
         match = [s for s in available if abs(s - v) <= 1e-9 + 1e-6 * abs(v)]
         if not match:
-            raise InputError(f"data set '{ds.name}': no run at commanded speed {v:g} rad/s "
-                             f"(available: {', '.join(f'{s:g}' for s in sorted(available))})")
+            raise InputError(f"data set '{ds.name}': no run at commanded speed {v:g} rad/s (available: {listed})")
         chosen.append(match[0])
     return sorted(set(chosen))
 
@@ -285,12 +247,8 @@ def data_dir() -> Path:
 
 def search_path() -> list[tuple[Path, str]]:
     """The folders searched for data sets, in order, each with what it is."""
-    out = []
     env = _env_dir()
-    if env is not None:
-        out.append((env, ENV_VAR))
-    out.append((cache_dir(), "user cache"))
-    return out
+    return ([] if env is None else [(env, ENV_VAR)]) + [(cache_dir(), "user cache")]
 
 
 def _locate(ds: DataSet) -> tuple[Path | None, list[tuple[Path, str, list[str]]]]:
@@ -338,36 +296,16 @@ def _verify(ds: DataSet, fname: str, path: Path) -> Path:
 
 
 def _is_in(path: Path, folder: Path) -> bool:
-    try:
-        path.resolve().relative_to(folder.resolve())
-        return True
-    except ValueError:
-        return False
+    return path.resolve().is_relative_to(folder.resolve())
 
 
 # ---------------------------------------------------------------------- public API
 def fetch(name: str, download: bool = False) -> dict[str, Path]:
-    """Paths of a data set's files, each checked against its checksum.
+    """Paths of a data set's files (file name -> path, in the registry's order), each checked against
+    its checksum (InputError naming both hashes, or where the files were looked for).
 
-    Parameters
-    ----------
-    name : str
-        A registered data set (:func:`names`).
-    download : bool
-        When the files are in none of the searched folders (:func:`search_path`), download them into
-        the user cache (``pooch.retrieve`` with the registered checksum and a progress bar).  Only for
-        data sets with a download URL.
-
-    Returns
-    -------
-    dict
-        File name to path, in the registry's order.
-
-    Raises
-    ------
-    InputError
-        A file differs from its checksum (naming the file, the expected and the actual hash); the
-        files are missing (saying where they were looked for and how to get them); a download failed.
+    ``download``: when the files are in no searched folder (:func:`search_path`), download them into
+    the user cache (``pooch.retrieve`` with the checksum and a progress bar), if the set has a URL.
     """
     ds = get(name)
     folder, tried = _locate(ds)
@@ -417,16 +355,12 @@ def _missing_message(ds: DataSet, tried) -> str:
     return msg + "."
 
 
-def _present(ds: DataSet) -> Path | None:
-    return _locate(ds)[0]
-
-
 def list_datasets() -> pd.DataFrame:
     """The registry as a table: name, title, number of files, source, licence, whether a download
     exists, whether the files are present locally (not checksummed here), and where."""
     rows = []
     for ds in REGISTRY:
-        folder = _present(ds)
+        folder = _locate(ds)[0]
         rows.append({"name": ds.name, "title": ds.title, "files": len(ds.files), "source": ds.source,
                      "licence": ds.licence, "download": ds.download, "present": folder is not None,
                      "location": "" if folder is None else str(folder)})
@@ -456,26 +390,13 @@ def describe(name: str) -> str:
 
 
 def load(name: str, part=None, download: bool = False):
-    """A data set, verified and loaded.
+    """A data set, verified (``download`` as :func:`fetch`) and loaded: a
+    :class:`~gearspec.recording.Recording`, or for ``harmonic_drive_catalog`` a dict of its two
+    tables (one DataFrame when ``part`` names it).
 
-    Parameters
-    ----------
-    name : str
-        ``"emps"``, ``"kinova_gen3_joint7"`` or ``"harmonic_drive_catalog"``.
-    part : optional
-        ``emps``: ``"DATA_EMPS"`` (default, the estimation set) or ``"DATA_EMPS_PULSES"`` (the
-        cross-test set).  ``kinova_gen3_joint7``: a commanded speed (``"0.3"`` or ``0.3``) or a list of
-        them; default all ten runs, sorted by commanded speed.  ``harmonic_drive_catalog``: one table's
-        name; default both.
-    download : bool
-        Passed to :func:`fetch`.
-
-    Returns
-    -------
-    Recording or dict of pandas.DataFrame or pandas.DataFrame
-        A :class:`~gearspec.recording.Recording` for measured recordings; the catalog is a table, so
-        it comes as ``{"compensation_vs_load_torque": df, "efficiency_vs_input_speed": df}`` (or one
-        of them when ``part`` names it).
+    ``part``: ``emps``: ``"DATA_EMPS"`` (default, estimation set) or ``"DATA_EMPS_PULSES"``
+    (cross-test set); ``kinova_gen3_joint7``: a commanded speed (``"0.3"`` or ``0.3``) or a list of
+    them, default all ten runs sorted by speed.
     """
     ds = get(name)
     return ds.loader(ds, fetch(ds.name, download=download), part)
@@ -497,9 +418,8 @@ def kinova_breakaway(download: bool = False) -> pd.DataFrame:
     """The Kinova static breakaway tests: ``breakaway_torque`` (Nm) at each ``ramp_rate`` (Nm/s) of the
     torque ramp, 10 repeats at each of 5 rates."""
     paths = fetch("kinova_gen3_joint7", download=download)
-    path = paths["static_torque_breakaway_point.csv"]
-    return pd.read_csv(path, sep=r"\s+", header=None, names=["breakaway_torque", "ramp_rate"])
-
+    return pd.read_csv(paths["static_torque_breakaway_point.csv"], sep=r"\s+", header=None,
+                       names=["breakaway_torque", "ramp_rate"])
 
 
 def catalog_efficiency(download: bool = False) -> pd.DataFrame:
@@ -508,9 +428,7 @@ def catalog_efficiency(download: bool = False) -> pd.DataFrame:
     torque, Nm), ``eta_rated``, ``compensation`` and ``efficiency`` (see the data set's SOURCE.md;
     the 0 rpm row is the source's own extrapolation)."""
     tables = load("harmonic_drive_catalog", download=download)
-    speed = tables["efficiency_vs_input_speed"]
-    comp = tables["compensation_vs_load_torque"]
-    grid = speed.merge(comp, how="cross")
+    grid = tables["efficiency_vs_input_speed"].merge(tables["compensation_vs_load_torque"], how="cross")
     grid = grid.rename(columns={"efficiency_at_rated_torque": "eta_rated", "output_load_torque_Nm": "load",
                                 "compensation_coefficient": "compensation"})
     grid["efficiency"] = grid["eta_rated"] * grid["compensation"]

@@ -1,9 +1,5 @@
-"""Errors and warnings a user of gearspec sees.
-
-Every refusal of bad input raises :class:`InputError` with one sentence that names the file, the
-column and the reason; the command line turns it into exit status 2.  Doubtful but usable input
-(a position that looks like degrees, a few NaN rows) gives a :class:`GearspecWarning` and goes on.
-"""
+"""Errors and warnings a user sees: :class:`InputError` refuses bad input (exit status 2 on the
+command line); :class:`GearspecWarning` flags doubtful but usable input."""
 
 from __future__ import annotations
 
@@ -13,11 +9,8 @@ __all__ = ["InputError", "GearspecWarning", "warn"]
 
 
 class InputError(ValueError):
-    """Input that gearspec cannot use: a file, a column, a value or an option.
-
-    The message is meant for a robotics engineer, not a programmer: it says what is wrong with
-    which file or column, and what to do about it.
-    """
+    """Input gearspec cannot use; one sentence for a robotics engineer naming the file, column or
+    option, what is wrong, and what to do."""
 
 
 class GearspecWarning(UserWarning):

@@ -1,14 +1,6 @@
-"""The data a friction model is fitted to and scored on: samples inside constant-speed segments,
-and plateau averages.
-
-:class:`FitData` holds, for every sample inside a segment of a recording, the position, the
-velocity, the friction torque (drive torque minus ``J thetadd`` when the gear spec gives ``J``;
-sign of the velocity) and whatever else the recording has (load, temperature, time, run), plus
-the segment each sample belongs to -- so that held-out errors can leave out *whole segments or
-runs*, never interleaved samples.  :meth:`FitData.plateaus` averages each segment (the Stribeck
-curve of SILO4 Fig. 4).  Quasi-static operating points (the Lola/CROPS testbed) are FitData too,
-one "segment" per point (:meth:`FitData.from_points`).
-"""
+"""The data a friction model is fitted to and scored on: the samples inside constant-speed segments,
+each with its segment (so that held-out errors leave out whole segments or runs, never interleaved
+samples), and their plateau averages (the Stribeck curve of SILO4 Fig. 4)."""
 
 from __future__ import annotations
 
@@ -28,32 +20,12 @@ _ARRAYS = ("theta", "v", "y", "acc", "load", "temperature", "t", "run", "segment
 
 @dataclass
 class FitData:
-    """Samples for identification (all arrays of one length; optional channels may be None).
-
-    Attributes
-    ----------
-    theta : ndarray or None
-        Position, rad (or m).
-    v : ndarray
-        Velocity used by the laws, rad/s: the segment's mean velocity (``velocity="segment"``) or
-        the measured/differentiated one (``velocity="measured"``).
-    y : ndarray
-        Friction torque, Nm (N), with the sign of the motion.
-    acc : ndarray or None
-        Acceleration, rad/s^2 (Savitzky-Golay), when known.
-    load, temperature, t : ndarray or None
-        Output load (Nm), temperature (degC), time (s).
-    run, segment : ndarray of int
-        Run id and segment id of each sample.
-    direction : ndarray of int
-        +1 / -1.
-    unit : str
-        "rad" or "m".
-    segments : DataFrame
-        One row per segment id: ``segment, run, direction, speed, velocity, n`` (and ``t0, t1``,
-        ``kind``: "plateau" or "quasi_static").
-    notes : list of str
-    """
+    """Samples for identification, arrays of one length (optional channels None): ``theta`` rad (m);
+    ``v`` the laws' velocity, rad/s (segment mean or measured); ``y`` friction torque, Nm (N), with
+    the sign of the motion (``J thetadd`` removed when the gear gives ``J``); ``acc`` rad/s^2;
+    ``load`` Nm, ``temperature`` degC, ``t`` s; ``run``, ``segment`` ids; ``direction`` +1 / -1.
+    ``segments``: one row per segment (``segment, run, direction, speed, velocity, n``, and ``t0, t1,
+    kind``: "plateau" or "quasi_static")."""
 
     theta: np.ndarray | None
     v: np.ndarray
@@ -68,8 +40,7 @@ class FitData:
     unit: str = "rad"
     segments: pd.DataFrame = field(default_factory=pd.DataFrame)
     notes: list = field(default_factory=list)
-    #: per-segment results computed once (e.g. the sufficient statistics of identify.fit), keyed
-    #: by what was computed; shared with subsets, whose segments keep their ids
+    #: per-segment results computed once (keyed by what), shared with subsets (segments keep their ids)
     cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -92,23 +63,14 @@ class FitData:
     @classmethod
     def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, velocity: str = "segment",
                        inertia: bool = True, load_ratio: float | None = None, **segment_options) -> "FitData":
-        """Samples inside the constant-speed segments of ``rec``.
+        """Samples inside the constant-speed segments of ``rec`` (``segmentation`` default:
+        :func:`~gearspec.segment.find_segments` with ``segment_options``).
 
-        Parameters
-        ----------
-        rec : Recording
-        segmentation : Segmentation, optional
-            Default: :func:`~gearspec.segment.find_segments` with ``segment_options``.
-        velocity : {"segment", "measured"}
-            The velocity the laws are evaluated at: each segment's mean velocity (robust to
-            closed-loop speed ripple and encoder noise; what the papers do), or the per-sample one
-            (the recording's ``velocity`` channel if it has one, else a Savitzky-Golay derivative).
-        inertia : bool
-            Subtract ``J thetadd`` when the gear spec gives ``J``.
-        load_ratio : float, optional
-            Subtract the load torque carried to the reference shaft, ``|load| / load_ratio`` in the
-            direction of motion (Lola/CROPS eq. 12: a brake that always opposes the motion, and a
-            torque measured at the motor of a gear of that ratio).  Default: nothing subtracted.
+        ``velocity``: ``"segment"`` (each segment's mean: robust to speed ripple and encoder noise,
+        as the papers do) or ``"measured"`` (the ``velocity`` channel, else a Savitzky-Golay
+        derivative).  ``inertia``: subtract ``J thetadd`` when the gear gives ``J``.  ``load_ratio``:
+        subtract ``|load| / load_ratio`` against the motion (Lola/CROPS eq. 12: a brake opposing the
+        motion, torque measured at the motor of a gear of that ratio).
         """
         if velocity not in ("segment", "measured"):
             raise InputError(f"velocity must be 'segment' or 'measured', got '{velocity}'")
@@ -124,11 +86,9 @@ class FitData:
         # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
         # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
         qs = np.concatenate([np.full(s.n, s.kind == "quasi_static") for s in seg.segments])
-        if velocity == "segment" or qs.all():
-            v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
-        else:
-            v = rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx]
-            v = np.where(qs, np.concatenate([np.full(s.n, s.velocity) for s in seg.segments]), v)
+        v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
+        if velocity == "measured" and not qs.all():
+            v = np.where(qs, v, rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx])
         a = acc[idx]
         no_deriv = int(np.count_nonzero(np.isnan(a) & ~qs))
         a = np.where(qs, 0.0, np.nan_to_num(a))
@@ -159,8 +119,7 @@ class FitData:
 
     @classmethod
     def from_points(cls, v, y, *, load=None, temperature=None, theta=None, unit: str = "rad") -> "FitData":
-        """Quasi-static operating points (one value each, e.g. the Lola/CROPS testbed's means):
-        each point is its own segment."""
+        """Quasi-static operating points (e.g. the Lola/CROPS testbed's means), one segment each."""
         v = np.asarray(v, dtype=float)
         n = len(v)
         if n == 0:
@@ -199,10 +158,8 @@ class FitData:
 
     def groups(self, by: str = "segment") -> np.ndarray:
         """Group id per sample for held-out folds: ``"segment"`` or ``"run"``."""
-        if by == "segment":
-            return self.segment
-        if by == "run":
-            return self.run
+        if by in ("segment", "run"):
+            return getattr(self, by)
         raise InputError(f"held-out groups must be 'segment' or 'run', got '{by}'")
 
     def plateaus(self, blocks: int = 8) -> pd.DataFrame:

@@ -1,20 +1,9 @@
-"""Gear trains: specs, presets, and the frequencies every shaft, mesh and stage puts into friction.
+"""Gear trains (TOML specs, ``CONTRACTS.md`` section 2, or presets) and their *lines*: the
+frequencies, in cycles per unit of ``theta``, at which the drive can ripple.  Declared lines (fitted
+in every segment): ``shaft`` (each shaft's revolution), ``mesh`` (tooth mesh of a stage with
+``teeth``), ``wave`` (2x / 4x wave generator of a strain-wave stage); lines that only label a found
+peak: ``harmonic`` (integer multiples) and ``sideband`` (sums and differences).
 
-A :class:`GearTrain` is read from a TOML spec (``CONTRACTS.md`` section 2) or taken from a built-in
-preset.  From it come the *lines*: the frequencies, in cycles per unit of ``theta`` (cycles/rad or
-cycles/m), at which the drive can ripple:
-
-* ``shaft``     once per revolution of every shaft (motor, each intermediate shaft, output);
-* ``mesh``      tooth-mesh frequency of a stage whose ``teeth`` are given;
-* ``wave``      the 1x / 2x / 4x wave-generator family of strain-wave (``harmonic``) stages;
-* ``harmonic``  integer multiples of the above;
-* ``sideband``  sum and difference of two of the above.
-
-Shafts, meshes and wave lines are *declared*: the spectrum fits them in every segment where they
-fit.  Harmonics and sidebands only serve to *label* a peak that was found.
-
-Conventions
------------
 ``ratio`` is input turns per output turn of a stage.  Frequencies of a rotary train are per radian
 of the reference shaft: with ``reference = "motor"`` the motor shaft is at 1/(2 pi) cycles/rad and
 the output at 1/(2 pi N); with ``reference = "output"`` the output is at 1/(2 pi) and the motor at
@@ -29,9 +18,11 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
+from itertools import accumulate
 from pathlib import Path
 from typing import Iterable
 
@@ -96,22 +87,9 @@ class Line:
 
 @dataclass(frozen=True)
 class GearTrain:
-    """A drive: reference shaft, units, optional torque constant and inertia, and its stages.
-
-    Parameters
-    ----------
-    name : str
-    reference : {"motor", "output"}
-        The shaft whose position the recording's ``theta`` measures.
-    unit : {"rad", "m"}
-        Unit of ``theta``: rotary (rad) or linear (m).
-    torque_constant : float, optional
-        Motor torque constant in Nm/A (needed when the recording has ``current`` but no torque).
-    inertia : float, optional
-        Inertia at the reference shaft, kg m^2 (kg on a linear axis); enables inertia removal.
-    stages : tuple of Stage
-        From the motor towards the output; may be empty (direct drive, unknown mechanics).
-    """
+    """A drive.  ``reference`` {"motor", "output"}: the shaft ``theta`` measures; ``unit`` {"rad",
+    "m"}: rotary or linear; ``torque_constant`` Nm/A (to use ``current``); ``inertia`` at the reference
+    shaft, kg m^2 (kg), for inertia removal; ``stages`` from the motor on, may be empty."""
 
     name: str
     reference: str = "motor"
@@ -258,46 +236,25 @@ class GearTrain:
     def _shaft_turns_per_unit(self) -> list[float]:
         """Turns of each shaft (motor, after stage 1, ..., output) per unit of theta."""
         ratios = [s.ratio for s in self.stages]
-        n = len(self.stages)
         if self.unit == "m":
             if not self.stages:
                 return []
-            # last stage converts rotation to travel: screw turns per metre = 1/lead
-            turns = [0.0] * (n + 1)
-            turns[n - 1] = 1.0 / self.stages[-1].lead  # screw shaft = input of the last stage
-            for j in range(n - 2, -1, -1):
-                turns[j] = turns[j + 1] * ratios[j]
-            return turns[:n]  # there is no rotating shaft after the screw
+            # the screw shaft (input of the last stage) turns 1/lead times per metre; none turns after it
+            return list(accumulate(ratios[:-1][::-1], operator.mul, initial=1.0 / self.stages[-1].lead))[::-1]
         if self.reference == "motor":
-            turns, acc = [], 1.0
-            for j in range(n + 1):
-                turns.append(acc / (2 * math.pi))
-                if j < n:
-                    acc /= ratios[j]
-            return turns
-        turns, acc = [], 1.0
-        for j in range(n, -1, -1):
-            turns.append(acc / (2 * math.pi))
-            if j > 0:
-                acc *= ratios[j - 1]
-        return turns[::-1]
+            return [a / (2 * math.pi) for a in accumulate(ratios, operator.truediv, initial=1.0)]
+        return [a / (2 * math.pi) for a in accumulate(ratios[::-1], operator.mul, initial=1.0)][::-1]
 
     def shaft_names(self) -> list[str]:
         """Names of the shafts, in the order of :meth:`_shaft_turns_per_unit`."""
         n = len(self.stages)
-        if self.unit == "m":
-            # shaft j is the input of stage j+1; the last one is the screw (or pulley) shaft
-            names = []
-            for j in range(n):
-                if j == n - 1:
-                    names.append(f"{self.stages[-1].name} shaft" + (" (= motor shaft)" if j == 0 else ""))
-                else:
-                    names.append("motor shaft" if j == 0 else f"{self.stages[j - 1].name} output shaft")
-            return names
-        names = ["motor shaft" if n else "shaft"]
-        for j, s in enumerate(self.stages):
-            names.append("output shaft" if j == n - 1 else f"{s.name} output shaft")
-        return names
+        inner = [f"{s.name} output shaft" for s in self.stages[:-1]]
+        if self.unit == "m":  # shaft j is the input of stage j+1; the last one is the screw (or pulley) shaft
+            if not n:
+                return []
+            screw = f"{self.stages[-1].name} shaft" + (" (= motor shaft)" if n == 1 else "")
+            return (["motor shaft"] + inner)[:n - 1] + [screw]
+        return ["motor shaft" if n else "shaft"] + inner + ["output shaft"] * (n > 0)
 
     @property
     def output_frequency(self) -> float | None:
@@ -311,25 +268,18 @@ class GearTrain:
         return None if fo is None else frequency / fo
 
     def declared_lines(self, max_harmonic: int = 1) -> list[Line]:
-        """Shaft, mesh and wave-generator lines (plus their harmonics up to ``max_harmonic``).
-
-        Lines at the same frequency (to 1e-9 relative) are merged and their labels joined with
-        ' = ', so that a regression never gets two identical columns.
-        """
+        """Shaft, mesh and wave-generator lines and their harmonics up to ``max_harmonic``; lines at
+        one frequency (1e-9 relative) are merged, labels joined by ' = ' (no two identical columns)."""
         turns = self._shaft_turns_per_unit()
         names = self.shaft_names()
-        base: list[Line] = []
-        for f, nm in zip(turns, names):
-            base.append(Line(f, nm, "shaft"))
+        base = [Line(f, nm, "shaft") for f, nm in zip(turns, names)]
         for j, s in enumerate(self.stages):
             if j >= len(turns):
                 break
             f_in = turns[j]
             f_out = turns[j + 1] if j + 1 < len(turns) else 0.0
             if s.kind == "harmonic":
-                for m in _WAVE_MULTIPLES:
-                    if m == 1:
-                        continue  # 1x is the input shaft itself, already declared (label added below)
+                for m in _WAVE_MULTIPLES[1:]:  # 1x is the input shaft itself (its label says so below)
                     base.append(Line(m * f_in, f"{s.name} {m}x wave generator", "wave"))
             if s.teeth:
                 rel = (f_in - f_out) if s.kind in _CARRIER_KINDS else f_in
@@ -340,17 +290,12 @@ class GearTrain:
                 base = [Line(b.frequency, f"{b.label} (= {s.name} 1x wave generator)", b.kind)
                         if b.kind == "shaft" and math.isclose(b.frequency, turns[j], rel_tol=1e-12) else b
                         for b in base]
-        lines = list(base)
-        for h in range(2, max_harmonic + 1):
-            lines += [Line(h * b.frequency, f"{h}x {b.label}", "harmonic", parents=(b.label,)) for b in base]
-        return self._finish(lines)
+        return self._finish(base + _harmonics(base, max_harmonic))
 
     def candidate_lines(self, max_harmonic: int = 4, sidebands: bool = True) -> list[Line]:
         """Every line that may explain a peak: declared lines, harmonics and sidebands."""
         base = self.declared_lines(1)
-        lines = list(base)
-        for h in range(2, max_harmonic + 1):
-            lines += [Line(h * b.frequency, f"{h}x {b.label}", "harmonic", parents=(b.label,)) for b in base]
+        lines = base + _harmonics(base, max_harmonic)
         if sidebands:
             for i, a in enumerate(base):
                 for b in base[i + 1:]:
@@ -377,34 +322,19 @@ class GearTrain:
 
     def label(self, frequency: float, tolerance: float, max_harmonic: int = 4, *, spacing: float | None = None,
               nyquist: float | None = None, known: Iterable[tuple[float, str]] = ()) -> Line | None:
-        """The simplest line within ``tolerance`` (cycles per unit) of ``frequency``, or None.
-
-        Simplest means: shaft before wave generator before mesh before harmonic before sideband;
-        among equals, the closest.
-
-        With ``spacing`` (the mean position spacing of the samples the frequency was measured
-        on) and no line at the frequency itself, a line above the position Nyquist frequency
-        (``nyquist``, default ``0.5 / spacing``) whose alias falls there: ``alias of <label>``
-        (:func:`alias_of`, which also tries the lines in ``known``).
-        """
-        best = None
-        for ln in _candidates(self, max_harmonic):
-            d = abs(ln.frequency - frequency)
-            if d <= tolerance:
-                key = (_KIND_RANK[ln.kind], d)
-                if best is None or key < best[0]:
-                    best = (key, ln)
+        """The simplest line (shaft, wave generator, mesh, harmonic, sideband; then the closest)
+        within ``tolerance`` (cycles per unit) of ``frequency``, or None.  With ``spacing`` (mean
+        position spacing of the samples) and no line there: the line whose alias falls there
+        (:func:`alias_of`, with ``nyquist`` and ``known``)."""
+        best = _simplest(_candidates(self, max_harmonic), lambda ln: abs(ln.frequency - frequency), tolerance)
         if best is None and spacing is not None:
             return alias_of(self, frequency, tolerance, spacing, nyquist=nyquist, known=known,
                             max_harmonic=max_harmonic)
-        return None if best is None else best[1]
+        return best
 
     def torque_from_current(self, current):
-        """Drive torque at the reference shaft from motor current: k_t * I (times N at the output).
-
-        The conversion at the output ignores the gear's efficiency: what it returns is the torque
-        the motor delivers, reflected through the ideal ratio.
-        """
+        """Drive torque at the reference shaft from motor current: k_t * I (times the ideal ratio N,
+        gear efficiency ignored, at the output)."""
         if self.torque_constant is None:
             raise InputError(f"gear spec '{self.name}' has no torque_constant (Nm/A): it is needed to turn "
                              "motor current into torque; add it to the spec, or record torque")
@@ -428,13 +358,20 @@ class GearTrain:
         return "\n".join(lines)
 
 
+def _harmonics(base: list[Line], max_harmonic: int) -> list[Line]:
+    return [Line(h * b.frequency, f"{h}x {b.label}", "harmonic", parents=(b.label,))
+            for h in range(2, max_harmonic + 1) for b in base]
+
+
+def _simplest(lines: Iterable[Line], distance, tol: float) -> Line | None:
+    """The line of the simplest kind within ``tol`` (``distance(line)``), the closest among equals."""
+    near = [((_KIND_RANK[ln.kind], d), ln) for ln in lines for d in [distance(ln)] if d <= tol]
+    return min(near, key=lambda x: x[0])[1] if near else None
+
+
 @functools.lru_cache(maxsize=64)
 def _candidates(gear: "GearTrain", max_harmonic: int) -> tuple[Line, ...]:
     return tuple(gear.candidate_lines(max_harmonic))
-
-
-def _opt_float(x):
-    return None if x is None else float(x)
 
 
 def _is_number(x) -> bool:
@@ -505,20 +442,14 @@ class IntegerOrder:
 
 def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_multiple: int | None = None,
                   coincidence: float = HINT_COINCIDENCE) -> IntegerOrder | None:
-    """The integer multiple (>= 2) of a shaft of ``gear`` within ``tol`` of ``frequency``, or None.
+    """The integer multiple (>= 2, at most ``max_multiple``) of a shaft of ``gear`` within ``tol`` of
+    ``frequency``, or None.
 
-    Every multiple is tried (72x, 96x, 144x of a motor shaft as well as 7x) that the frequency's
-    uncertainty ``tol`` can tell from its neighbours.  The bound: the multiples of a shaft at
-    ``f_s`` are ``f_s`` apart, so a frequency that has nothing to do with the shaft lands within
-    ``tol`` of one of them with probability ``2 tol / f_s`` (uniform between two multiples).
-    Shafts are tried fastest first (the smallest multiple wins), each only while the summed
-    chance over the shafts tried so far is at most ``coincidence`` (10 %): so the chance that an
-    unrelated frequency gets any hint at all stays below it (a union bound), and neighbouring
-    multiples are always far apart compared with ``tol`` (``tol <= coincidence * f_s / 2``,
-    against the ``f_s / 2`` at which they stop being distinguishable).  A slow shaft (a
-    planetary or output shaft) thus needs a frequency sharper by the ratio of the shafts, which
-    is what keeps hints such as "53x planetary output shaft" out.  ``max_multiple`` optionally
-    caps the multiple.
+    Any multiple that ``tol`` tells from its neighbours is tried: an unrelated frequency lands
+    within ``tol`` of a multiple of a shaft at ``f_s`` with probability ``2 tol / f_s``.  Shafts
+    are tried fastest first while the summed chance stays at most ``coincidence`` (a union bound
+    on a false hint); a slow shaft thus needs a sharper frequency, which keeps hints such as "53x
+    planetary output shaft" out.
     """
     if gear is None or not (frequency > 0) or not (tol >= 0):
         return None
@@ -537,26 +468,16 @@ def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_m
 
 def integer_hint(gear: GearTrain | None, frequency: float, tol: float, max_multiple: int | None = None,
                  coincidence: float = HINT_COINCIDENCE) -> str | None:
-    """'7x motor shaft' when ``frequency`` sits within ``tol`` of an integer multiple (>= 2) of a
-    shaft line of ``gear`` that ``tol`` resolves (:func:`integer_order`, which also gives the
-    exact frequency and order); None otherwise.
-
-    Not a label (a label is what the declared lines explain, :meth:`GearTrain.label`): a motor
-    pole-pair, slot or commutator count, or a cogging order shows up this way.
-
-    (The ``hint`` of :mod:`gearspec.spectrum`'s unexplained peaks and of diagnose's candidates.)
-    """
+    """'7x motor shaft' when :func:`integer_order` finds one, else None: a hint, not a label (a motor
+    pole-pair, slot or commutator count, or a cogging order shows up this way)."""
     io = integer_order(gear, frequency, tol, max_multiple=max_multiple, coincidence=coincidence)
     return None if io is None else io.hint
 
 
 # ---------------------------------------------------------------------- aliasing
 def alias_frequency(frequency: float, spacing: float) -> float:
-    """Where a line at ``frequency`` (cycles per unit) shows up in samples taken every ``spacing``
-    units of position: ``|f - m / spacing|`` for the nearest integer m (in [0, 0.5 / spacing]).
-
-    Exact for uniform spacing; with jittered spacing the alias is smeared around the value at
-    the mean spacing."""
+    """Where a line at ``frequency`` (cycles per unit) shows up in samples every ``spacing`` units of
+    position: ``|f - m / spacing|``, m the nearest integer (exact for uniform spacing)."""
     fs = 1.0 / spacing
     return abs(frequency - round(frequency / fs) * fs)
 
@@ -564,19 +485,12 @@ def alias_frequency(frequency: float, spacing: float) -> float:
 def alias_of(gear: GearTrain | None, frequency: float, tol: float, spacing: float, *,
              nyquist: float | None = None, known: Iterable[tuple[float, str]] = (), max_harmonic: int = 4,
              coincidence: float = HINT_COINCIDENCE) -> Line | None:
-    """The line above the position Nyquist frequency whose alias is within ``tol`` of the measured
-    ``frequency``, as a :class:`Line` labelled ``alias of <label>`` (kind ``"alias"``; its
-    ``frequency`` and ``order`` are the true line's), or None.
-
-    ``spacing`` is the mean position spacing of the samples (the alias is computed from it,
-    :func:`alias_frequency`); ``nyquist`` the position Nyquist frequency of the samples
-    (default ``0.5 / spacing``; :func:`gearspec.spectrum.position_nyquist`): only lines above it
-    alias.  Tried, simplest first: the lines :meth:`GearTrain.label` knows (declared lines,
-    harmonics up to ``max_harmonic``, sidebands), the lines in ``known`` (``(frequency, label)``
-    pairs, e.g. lines found in other segments) with their harmonics, then integer multiples of a
-    shaft in the first fold (true frequency ``1/spacing -+ frequency``) under the resolution
-    bound of :func:`integer_order`.
-    """
+    """The line above the position Nyquist frequency ``nyquist`` (default ``0.5 / spacing``) whose
+    alias (:func:`alias_frequency`, ``spacing`` the mean position spacing of the samples) is within
+    ``tol`` of ``frequency``: a :class:`Line` ``alias of <label>`` of kind ``"alias"`` with the true
+    line's frequency and order, or None.  Tried, simplest first: the lines :meth:`GearTrain.label`
+    knows, the ``(frequency, label)`` pairs in ``known`` with their harmonics, then integer multiples
+    of a shaft in the first fold (``1/spacing -+ frequency``, as :func:`integer_order` bounds them)."""
     if not (spacing > 0) or not (frequency >= 0) or not (tol >= 0):
         return None
     fs = 1.0 / spacing
@@ -585,17 +499,10 @@ def alias_of(gear: GearTrain | None, frequency: float, tol: float, spacing: floa
     for f0, lab in known:
         lines.append(Line(float(f0), str(lab), "found"))
         lines += [Line(h * float(f0), f"{h}x {lab}", "found") for h in range(2, max_harmonic + 1)]
-    best = None
-    for ln in lines:
-        if not (ln.frequency > fn):  # measurable at its own frequency: not an alias
-            continue
-        d = abs(alias_frequency(ln.frequency, spacing) - frequency)
-        if d <= tol:
-            key = (_KIND_RANK[ln.kind], d)
-            if best is None or key < best[0]:
-                best = (key, ln)
-    if best is not None:
-        ln = best[1]
+    # a line measurable at its own frequency (below fn) is not an alias
+    ln = _simplest((x for x in lines if x.frequency > fn),
+                   lambda x: abs(alias_frequency(x.frequency, spacing) - frequency), tol)
+    if ln is not None:
         order = gear.order(ln.frequency) if gear is not None else None
         return Line(ln.frequency, f"alias of {ln.label}", "alias", order, (ln.label,))
     for f_true in (fs - frequency, fs + frequency):

@@ -1,30 +1,20 @@
-"""Friction laws, once each, as plain functions of arrays (SI units).
+"""Friction laws as plain functions of arrays (SI units).
 
-Sign convention (``CONTRACTS.md``): *friction torque* is the torque the drive must supply to
-overcome friction; it has the sign of the velocity.  The SILO4 laws are written that way.  The
-Lola/CROPS laws (8) and (11) give the torque friction exerts *on the motor* (the opposite sign);
-:func:`lola8` and :func:`lola11` return it converted to the convention above, and say so.
+Each law is declared once in :mod:`gearspec.terms.registry` (parameters, units, columns, degraded
+forms); these functions are its signed form ``sign(v) * magnitude(|v|)``.  Sign convention
+(``CONTRACTS.md``): friction torque is the torque the drive must supply, with the sign of the
+velocity; the Lola/CROPS laws, printed as the torque on the motor, are returned converted to it.
+Units: positions rad (m), velocities rad/s (m/s), torques Nm (N), frequencies in cycles per unit of
+position (the papers' ``omega = 2 pi f``), decay constants s/rad (s/m), loads Nm at the output.
 
-Units: positions rad (or m), velocities rad/s (or m/s) of the reference shaft, torques Nm (or N),
-frequencies in cycles per unit of position (``omega = 2 pi f`` of the papers), decay constants in
-s/rad (or s/m), loads in Nm at the output.
-
-References
-----------
-SILO4: E. Garcia, P. Gonzalez de Santos, C. Canudas de Wit, "Velocity dependence in the cyclic
-friction arising with gears", Int. J. Robotics Research 21(9), 2002 -- eqs. (3), (6), (8), (11),
-(14).
-Lola/CROPS: "Experimental friction identification in robot drives" (the Lola/CROPS testbed
-paper) -- eqs. (8), (11), (12), (13).
-
-Each law is declared once in the term registry (:mod:`gearspec.terms.registry`: parameters,
-units, linear columns, degraded forms); these functions are its signed form,
-``sign(v) * magnitude(|v|)``, and the shapes they use are those of :mod:`gearspec.terms.shapes`.
+References: SILO4 (Garcia, Gonzalez de Santos, Canudas de Wit, IJRR 21(9), 2002) eqs. (3), (6),
+(8), (11), (14); Lola/CROPS ("Experimental friction identification in robot drives") eqs. (8),
+(11), (12), (13).
 """
 
 from __future__ import annotations
 
-from typing import Iterable, Mapping
+from typing import Mapping
 
 import numpy as np
 
@@ -35,85 +25,46 @@ __all__ = ["stribeck", "position_ripple", "meshing_ripple", "silo4_full", "load_
            "lola8", "lola11", "friction_from_load_current", "efficiency", "efficiency_from_friction",
            "motor_torque_from_efficiency"]
 
-def stribeck(v, tau_c, tau_s, v_s, viscous):
-    """Static + Stribeck + Coulomb + viscous friction (SILO4 eq. 3).
 
-    ``tau_f = [tau_c + (tau_s - tau_c) exp(-|v| / v_s) + viscous |v|] sign(v)``
-
-    Parameters
-    ----------
-    v : array_like
-        Velocity, rad/s (m/s).
-    tau_c : float
-        Coulomb friction, Nm (N).
-    tau_s : float
-        Static friction (the paper's tau_E), Nm (N).
-    v_s : float
-        Stribeck velocity, rad/s (m/s); > 0.
-    viscous : float
-        Viscous coefficient B, Nm s/rad (N s/m).
-
-    Returns
-    -------
-    ndarray
-        Friction torque with the sign of ``v`` (0 at v = 0).
-    """
+def _signed(law: str, v, load, *params):
     v = np.asarray(v, dtype=float)
-    return BASE_LAWS["stribeck"].magnitude(np.abs(v), None, tau_c, tau_s, v_s, viscous) * np.sign(v)
+    return np.sign(v) * BASE_LAWS[law].magnitude(np.abs(v), load, *params)
+
+
+def stribeck(v, tau_c, tau_s, v_s, viscous):
+    """Static + Stribeck + Coulomb + viscous friction (SILO4 eq. 3), 0 at v = 0:
+    ``[tau_c + (tau_s - tau_c) exp(-|v| / v_s) + viscous |v|] sign(v)``.
+
+    ``v`` rad/s (m/s); ``tau_c`` Coulomb and ``tau_s`` static (the paper's tau_E) friction, Nm (N);
+    ``v_s`` Stribeck velocity > 0, rad/s (m/s); ``viscous`` B, Nm s/rad (N s/m).
+    """
+    return _signed("stribeck", v, None, tau_c, tau_s, v_s, viscous)
 
 
 def position_ripple(theta, amplitude, frequency, phase):
-    """Position-dependent friction (SILO4 eq. 6): ``A sin(2 pi f theta + phi)``.
-
-    ``frequency`` in cycles per unit of theta (the paper's omega is ``2 pi f``).  A magnitude: in
-    eq. 11 it is multiplied by sign(v) with the rest.
-    """
+    """Position-dependent friction (SILO4 eq. 6), a magnitude: ``A sin(2 pi f theta + phi)``,
+    ``frequency`` in cycles per unit of theta."""
     return amplitude * sinusoid(theta, frequency, phase)
 
 
 def meshing_ripple(theta, v, amplitude, decay, frequency, phase):
-    """Meshing friction (SILO4 eq. 8): ``A exp(-b |v|) sin(2 pi f theta + phi)``.
-
-    ``decay`` b in s/rad (s/m); a magnitude, like :func:`position_ripple`.
-    """
+    """Meshing friction (SILO4 eq. 8), a magnitude: ``A exp(-b |v|) sin(2 pi f theta + phi)``,
+    ``decay`` b in s/rad (s/m)."""
     v = np.asarray(v, dtype=float)
     return amplitude * amplitude_law("exp", np.abs(v), decay) * sinusoid(theta, frequency, phase)
 
 
-def _harmonic_sum(theta, v, harmonics: Iterable) -> np.ndarray:
-    out = np.zeros(np.broadcast(np.asarray(theta), np.asarray(v)).shape)
-    for h in harmonics:
-        if isinstance(h, Mapping):
-            f, a, b, ph = h["frequency"], h["amplitude"], h.get("decay", 0.0), h.get("phase", 0.0)
-        else:
-            f, a, b, ph = h
-        out = out + meshing_ripple(theta, v, a, b, f, ph)
-    return out
-
-
 def silo4_full(theta, v, positive: Mapping, negative: Mapping):
-    """The full SILO4 model (eq. 11) with direction-dependent parameters.
+    """The full SILO4 model (eq. 11) with parameters per direction i of motion:
 
-    ``tau_f = [tau_c,i + (tau_s,i - tau_c,i) exp(-|v|/v_s,i) + B_i |v|
-               + sum_k A_k,i exp(-b_k,i |v|) sin(2 pi f_k theta + phi_k,i)] sign(v)``
+    ``[tau_c,i + (tau_s,i - tau_c,i) exp(-|v|/v_s,i) + B_i |v|
+       + sum_k A_k,i exp(-b_k,i |v|) sin(2 pi f_k theta + phi_k,i)] sign(v)``
 
-    with i the direction of motion.  Eq. 6 (a position ripple of constant amplitude) is the case
-    ``decay = 0``; the paper uses one Stribeck velocity for both directions, this function allows
-    one per direction.
-
-    Parameters
-    ----------
-    theta, v : array_like
-        Position and velocity (broadcast together).
-    positive, negative : mapping
-        ``tau_c``, ``tau_s``, ``v_s``, ``viscous`` and ``harmonics``: a sequence of mappings with
-        ``frequency``, ``amplitude``, ``decay`` (default 0) and ``phase`` (default 0), or of
-        tuples ``(frequency, amplitude, decay, phase)``.
-
-    Returns
-    -------
-    ndarray
-        Friction torque with the sign of ``v``.
+    (eq. 6 is ``decay = 0``; the paper has one Stribeck velocity for both directions).
+    ``theta``, ``v`` broadcast together; ``positive``, ``negative``: mappings of ``tau_c``,
+    ``tau_s``, ``v_s``, ``viscous`` and ``harmonics``, a sequence of mappings (``frequency``,
+    ``amplitude``, ``decay`` default 0, ``phase`` default 0) or of tuples ``(frequency,
+    amplitude, decay, phase)``.  Returns the friction torque with the sign of ``v``.
     """
     theta = np.asarray(theta, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -124,84 +75,49 @@ def silo4_full(theta, v, positive: Mapping, negative: Mapping):
             continue
         th = np.broadcast_to(theta, out.shape)[sel]
         vv = np.broadcast_to(v, out.shape)[sel]
-        mag = np.abs(stribeck(vv, p["tau_c"], p["tau_s"], p["v_s"], p["viscous"]))
-        mag = mag + _harmonic_sum(th, vv, p.get("harmonics", ()))
-        out[sel] = d * mag
+        ripple = np.zeros(th.shape)
+        for h in p.get("harmonics", ()):
+            if isinstance(h, Mapping):
+                h = h["frequency"], h["amplitude"], h.get("decay", 0.0), h.get("phase", 0.0)
+            f, a, b, ph = h
+            ripple = ripple + meshing_ripple(th, vv, a, b, f, ph)
+        out[sel] = d * (np.abs(stribeck(vv, p["tau_c"], p["tau_s"], p["v_s"], p["viscous"])) + ripple)
     return out
 
 
 def load_dependent_amplitude(load, amplitude0, load_coefficient):
-    """Meshing amplitude that grows with the square of the load (SILO4 eq. 14, 'future work').
-
-    The paper writes ``A2(tau_L^2)`` without a form; the simplest one consistent with Doehring
-    et al. (worm-gear friction ~ load^2) is used: ``A = A0 + k tau_L^2`` (k in 1/Nm).
-    Use it as the ``amplitude`` of :func:`meshing_ripple`.
-    """
+    """Meshing amplitude growing with the square of the load (SILO4 eq. 14, 'future work', whose
+    form the paper leaves open; Doehring et al.: worm-gear friction ~ load^2): ``A0 + k tau_L^2``
+    (k in 1/Nm), the ``amplitude`` of :func:`meshing_ripple`."""
     return load_amplitude(load, amplitude0, load_coefficient)
 
 
 def lola8(v, load, t_f0, mu, b, gamma):
-    """Lola/CROPS law (8): load-dependent Coulomb, viscous and coupled load-speed friction.
+    """Lola/CROPS law (8), as the torque the motor must supply (the paper's sign reversed):
+    ``sgn(v) (T_f0 + mu |T_l|) + (b + gamma |T_l|) v``.
 
-    The paper gives the torque on the motor, ``T_f = -sgn(v)(T_f0 + mu |T_l|) - (b + gamma |T_l|) v``;
-    this returns its negative, the friction torque the motor must supply:
-
-    ``tau_f = sgn(v) (T_f0 + mu |T_l|) + (b + gamma |T_l|) v``
-
-    Parameters
-    ----------
-    v : array_like
-        Motor (input) velocity, rad/s.
-    load : array_like
-        Load torque T_l at the output, Nm.
-    t_f0 : float
-        Static (load-free Coulomb) friction, Nm.
-    mu : float
-        Load coefficient of Coulomb friction, dimensionless (per Nm of output load).
-    b : float
-        Viscous coefficient, Nm s/rad.
-    gamma : float
-        Coupled load-speed coefficient, s/rad (Nm s/rad per Nm of load).
+    ``v`` motor velocity, rad/s; ``load`` T_l at the output, Nm; ``t_f0`` load-free Coulomb
+    friction, Nm; ``mu`` load coefficient (per Nm of output load); ``b`` viscous, Nm s/rad;
+    ``gamma`` coupled load-speed coefficient, s/rad.
     """
-    v = np.asarray(v, dtype=float)
-    return np.sign(v) * BASE_LAWS["lola8"].magnitude(np.abs(v), load, t_f0, mu, b, gamma)
+    return _signed("lola8", v, load, t_f0, mu, b, gamma)
 
 
 def lola11(v, load, t_f0, mu, b, t_fs, v_s):
-    """Lola/CROPS law (11), with a Stribeck term of the Hess-and-Soom (rational) form.
+    """Lola/CROPS law (11) with a Hess-and-Soom Stribeck term, in the drive-must-supply convention:
+    ``sgn(v) [T_f0 + mu |T_l| + (T_fS - T_f0) / (1 + (v/v_S)^2)] + b v``.
 
-    As printed the law is ``T_f = -sgn(v)(T_f0 + mu|T_l|) - b v - (T_fS - T_f0)/(1 + (v/v_S)^2)``:
-    its last term carries no sign and so does not reverse with the motion, which no friction
-    law can do.  Here it is made odd in velocity (multiplied by sgn(v)), and the whole law is
-    returned in the drive-must-supply convention:
-
-    ``tau_f = sgn(v) [T_f0 + mu |T_l| + (T_fS - T_f0) / (1 + (v/v_S)^2)] + b v``
-
-    so that friction starts at ``T_fS + mu |T_l|`` at standstill and falls towards
-    ``T_f0 + mu |T_l|`` above ``v_S``.
-
-    Parameters
-    ----------
-    v, load : array_like
-        Motor velocity (rad/s) and output load (Nm).
-    t_f0, mu, b : float
-        As in :func:`lola8` (the paper's barred values).
-    t_fs : float
-        Friction at standstill without load, Nm.
-    v_s : float
-        Stribeck velocity, rad/s (motor); > 0.
+    As printed, its Stribeck term carries no sign and would not reverse with the motion; it is
+    made odd here, so friction starts at ``T_fS + mu |T_l|`` and falls towards ``T_f0 + mu |T_l|``
+    above ``v_S``.  ``v``, ``load``, ``t_f0``, ``mu``, ``b`` as in :func:`lola8`; ``t_fs``
+    friction at standstill without load, Nm; ``v_s`` Stribeck velocity > 0, rad/s (motor).
     """
-    v = np.asarray(v, dtype=float)
-    return np.sign(v) * BASE_LAWS["lola11"].magnitude(np.abs(v), load, t_f0, mu, b, t_fs, v_s)
+    return _signed("lola11", v, load, t_f0, mu, b, t_fs, v_s)
 
 
 def friction_from_load_current(load, current, ratio, torque_constant):
-    """Friction at the motor from output load and motor current (Lola/CROPS eq. 12).
-
-    The paper's ``T_f = T_l / N - k_m I`` is the torque on the motor; this returns the friction
-    torque the motor supplies, ``k_m I - T_l / N`` (positive when the drive lifts the load while
-    turning forwards).
-    """
+    """Friction the motor supplies, from output load and motor current (Lola/CROPS eq. 12, sign
+    reversed): ``k_m I - T_l / N`` (positive when the drive lifts the load turning forwards)."""
     return torque_constant * np.asarray(current, dtype=float) - np.asarray(load, dtype=float) / ratio
 
 

@@ -1,10 +1,5 @@
-"""Progress of a command's stages on stderr (loading, segmenting, analysing, writing).
-
-One line per finished stage, ``gearspec: loaded 1,200,000 rows from 3 file(s) (2.1 s)``, so that the
-log of a batch job shows where the time went.  On a terminal the stage under way is shown too
-(``gearspec: loading 3 file(s) ...``) and overwritten by its line when it is done.  Silent when
-disabled (``--quiet``).
-"""
+"""Progress of a command's stages on stderr: one line per finished stage with its duration (so a
+batch log shows where the time went); on a terminal the stage under way too, overwritten when done."""
 
 from __future__ import annotations
 
@@ -15,15 +10,8 @@ __all__ = ["Stages"]
 
 
 class Stages:
-    """Stage lines for one command run.
-
-    Parameters
-    ----------
-    enabled : bool
-        False prints nothing (``--quiet``).
-    stream : file, optional
-        Default ``sys.stderr`` (looked up at each call, so that redirection and capture work).
-    """
+    """Stage lines for one command run; ``enabled`` False prints nothing (``--quiet``); ``stream``
+    default ``sys.stderr``, looked up at each call (so redirection and capture work)."""
 
     def __init__(self, enabled: bool = True, stream=None):
         self.enabled = enabled

@@ -30,10 +30,7 @@ def _check_time_unit(rec: Recording) -> None:
     t = rec.t
     if len(t) < 2:
         raise InputError(f"{', '.join(rec.sources)}: fewer than two usable rows")
-    dts = []
-    for _, s, e in rec.pieces():
-        if e - s > 1:
-            dts.append(np.median(np.diff(t[s:e])))
+    dts = [np.median(np.diff(t[s:e])) for _, s, e in rec.pieces() if e - s > 1]
     med = float(np.median(dts)) if dts else 0.0
     if dts and med < MIN_TIME_STEP:
         raise InputError(f"{', '.join(rec.sources)}: column 't' steps by {med:.3g} s (median), faster than any logger "
@@ -41,8 +38,6 @@ def _check_time_unit(rec: Recording) -> None:
     if med >= 1.0:
         warn(f"{', '.join(rec.sources)}: the median time step is {med:g} s; if 't' is in ms or sample numbers, "
              "use --scale t=0.001 or --fs HZ")
-
-
 
 
 def _check_signal(rec: Recording) -> None:
@@ -68,37 +63,34 @@ def _check_motion(rec: Recording) -> None:
     if np.ptp(theta) < MIN_POSITION_RANGE:
         raise InputError(f"{src}: column 'theta' moves by only {np.ptp(theta):.3g} {rec.unit} in all, less than any "
                          "encoder step: the drive did not move, or theta is in the wrong unit (--scale)")
-    moved = False
     pieces = rec.pieces()
     longest = max(e - s for _, s, e in pieces)
     if longest < 20:
         lost = ", ".join(f"{k} {v}" for k, v in sorted(rec.excluded.items())) or "none"
         raise InputError(f"{src}: no stretch of at least 20 contiguous usable rows (longest {longest}, "
                          f"{len(rec)} usable of {rec.n_read}; excluded: {lost}); nothing can be analysed")
-    for _, s, e in pieces:
-        th = theta[s:e]
-        if len(th) < 20:
-            continue
-        d = np.diff(th)
-        nz = np.abs(d[d != 0])
-        quantum = nz.min() if len(nz) else 0.0
-        noise = 1.4826 * np.median(np.abs(np.diff(d) - np.median(np.diff(d)))) / math.sqrt(6) if len(d) > 2 else 0.0
-        # two block lengths (not multiples of each other): a back-and-forth motion whose period is the
-        # block length returns to the same place every block and would look like no motion at one
-        for block in {max(10, len(th) // 200), max(10, len(th) // 1409)}:
-            disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
-            # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
-            # means too (averaging takes jitter down, a steady drift stays)
-            nb = len(th) // block
-            means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
-            if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
-                moved = True
-                break
-        if moved:
-            break
-    if not moved:
+    if not any(_moves(theta[s:e]) for _, s, e in pieces if e - s >= 20):
         raise InputError(f"{src}: no motion: 'theta' only jitters (range {np.ptp(theta):.3g} {rec.unit}) without "
                          "moving; friction needs the drive to turn")
+
+
+def _moves(th: np.ndarray) -> bool:
+    """Whether one piece of positions moves beyond its jitter and its encoder step."""
+    d = np.diff(th)
+    nz = np.abs(d[d != 0])
+    quantum = nz.min() if len(nz) else 0.0
+    noise = 1.4826 * np.median(np.abs(np.diff(d) - np.median(np.diff(d)))) / math.sqrt(6) if len(d) > 2 else 0.0
+    # two block lengths (not multiples of each other): a back-and-forth motion whose period is the
+    # block length returns to the same place every block and would look like no motion at one
+    for block in {max(10, len(th) // 200), max(10, len(th) // 1409)}:
+        disp = np.abs(th[block::block] - th[:-block:block]) if len(th) > block else np.array([abs(th[-1] - th[0])])
+        # slow motion seen by a coarse encoder moves less than a few counts per block: compare block
+        # means too (averaging takes jitter down, a steady drift stays)
+        nb = len(th) // block
+        means = th[:nb * block].reshape(nb, block).mean(axis=1) if nb > 1 else th[:1]
+        if max(disp.max(initial=0.0), np.ptp(means)) > 5 * max(noise * math.sqrt(2), quantum):
+            return True
+    return False
 
 
 def _check_units(rec: Recording) -> None:

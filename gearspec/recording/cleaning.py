@@ -1,6 +1,5 @@
-"""The exclusion ledger: rows excluded while loading (NaN or inf, backward and repeated time stamps,
-saturation), each counted under its reason, and positions unwrapped.  Nothing is dropped silently:
-``n_read == len(data) + sum(excluded.values())``."""
+"""The exclusion ledger (NaN or inf, backward and repeated time stamps, saturation; each row counted
+under its reason: ``n_read == len(data) + sum(excluded.values())``) and unwrapping of positions."""
 
 from __future__ import annotations
 
@@ -22,17 +21,12 @@ CLOCK_BURST_FRACTION = 0.01
 
 def _clean_rows(path, frame: pd.DataFrame, sig: str, unit: str, excluded: Counter, notes: list[str],
                 max_bad_fraction: float) -> pd.DataFrame:
-    """The rows of one file that can be analysed: NaN or inf, backward and repeated times (per run)
-    and saturation of the analysed signal ``sig`` excluded and counted in ``excluded``; theta
-    unwrapped."""
+    """The rows of one file that can be analysed (exclusions counted in ``excluded``), theta unwrapped."""
     frame = _exclude_nonfinite(path, frame, sig, excluded, max_bad_fraction)
-    # --- time: backward steps, copies, repeated stamps of a coarse clock; per run
     frame = _clean_times(path, frame, sig, excluded, notes, max_bad_fraction)
-    # --- saturation of the analysed signal
     frame, n_sat = _exclude_saturation(path, frame, sig)
     if n_sat:
         excluded["saturation"] += n_sat
-    # --- position: unwrap, plausibility
     return _unwrap_theta(path, frame, unit, notes)
 
 
@@ -62,20 +56,13 @@ def _exclude_nonfinite(path, frame: pd.DataFrame, sig: str, excluded: Counter,
 
 def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: list[str],
                  max_bad_fraction: float) -> pd.DataFrame:
-    """Backward and repeated time stamps, per run.
-
-    * A row stamped before an earlier row (``t`` below the running maximum) is excluded
-      (``non_increasing_time``); more than ``max_bad_fraction`` of them is refused (a file holding
-      several experiments without a ``run`` column).
-    * A row that repeats the previous row's stamp *and* its position and signal is a copy of it:
-      excluded (``duplicate_time``).
-    * Other rows that repeat a stamp are samples of a logger whose clock is coarser than its sample
-      rate.  When they are systematic (at least ``CLOCK_BURST_FRACTION`` of the run's rows), each
-      burst of rows sharing a stamp is spread evenly from that stamp towards the next distinct one
-      (no further than the run's typical sample period), with a note; nothing is lost.  When they
-      are isolated (rarer than that) there is no clock to read them by: excluded (``duplicate_time``).
-    * Times in whole seconds of a fast log (many repeats, distinct stamps 1 s or more apart) are the
-      unit mistake they look like: refused.
+    """Backward and repeated time stamps, per run.  A row stamped below the running maximum is
+    excluded (``non_increasing_time``; more than ``max_bad_fraction`` of them, likely several
+    experiments without a ``run`` column, is refused); a copy of the previous row (stamp, position
+    and signal) is excluded (``duplicate_time``).  Other repeats come from a logger clock coarser than
+    its rate: if systematic (at least ``CLOCK_BURST_FRACTION`` of the rows), each burst is spread
+    evenly towards the next stamp (at most the typical period), with a note; if isolated, excluded
+    (``duplicate_time``).  Whole-second times of a fast log are refused as the unit mistake they are.
     """
     t = frame["t"].to_numpy()
     runs = frame["run"].to_numpy()
@@ -132,10 +119,8 @@ def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: 
         new_t[ok] = to + offset * np.repeat(step, size)
         n_spread += n_rep
     n_drop = n_copy + n_isolated
-    if n_copy:
-        excluded["duplicate_time"] += n_copy
-    if n_isolated:
-        excluded["duplicate_time"] += n_isolated
+    if n_drop:
+        excluded["duplicate_time"] += n_drop
     if n_back:
         excluded["non_increasing_time"] += n_back
     if n_drop or n_back:

@@ -33,10 +33,8 @@ def parse_assignments(text: str | None, option: str, numeric: bool = False) -> d
         part = part.strip()
         if not part:
             continue
-        if "=" not in part:
-            raise InputError(f"{option}: '{part}' is not of the form name=value")
-        k, v = (s.strip() for s in part.split("=", 1))
-        if not k or not v:
+        k, eq, v = (s.strip() for s in part.partition("="))
+        if not eq or not k or not v:
             raise InputError(f"{option}: '{part}' is not of the form name=value")
         if k in out:
             raise InputError(f"{option}: '{k}' is given twice ({k}={out[k]} and {k}={v}); give it once")
@@ -55,35 +53,18 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
                    fs: float | None = None, sep: str | None = None, header: bool = True,
                    names: Sequence[str] | str | None = None, signal: str | None = None,
                    max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
-    """Load one or more recording files (or folders of them) into a validated :class:`Recording`.
+    """Load recording files (or folders of them) into a validated :class:`Recording`.
 
-    Parameters
-    ----------
-    paths : path or list of paths
-        ``.csv`` (``.txt``, ``.dat``, ``.tsv``), ``.parquet``, ``.mat`` (v5/v7) or ``.npz`` files, or
-        folders holding them.  Each file is one experiment: it gets its own ``run`` unless it has a
-        ``run`` column.
-    gear : GearTrain, preset name or TOML path, optional
-        Gives the unit of ``theta`` and the torque constant for ``current``.
-    map : dict or "canonical=source,..."
-        Source column names for canonical columns, e.g. ``{"theta": "qm", "torque": "vir"}``.
-    scale : dict or "column=factor,..."
-        Factors applied after mapping, e.g. ``{"torque": 35.15}``; a factor may name a scalar stored
-        in the file (``torque=gtau`` for the EMPS .mat files).
-    fs : float, optional
-        Sample rate in Hz, for files without a time column.
-    sep, header, names
-        For csv: separator (sniffed when None; "whitespace" for runs of blanks), whether the first
-        row is a header, and the column names when it is not.
-    signal : {"torque", "current"}, optional
-        The channel to analyse when both are present (default torque).
-    max_bad_fraction : float
-        Rows with NaN/inf, duplicate or backward times are excluded and counted; if more than this
-        fraction of a file's rows are bad, the file is refused instead.
-    max_gap : float, optional
-        A time step longer than this (s) is a gap that splits a run.  Default: chosen per run from
-        its own step distribution (:func:`auto_max_gap`: 5 x its 99th-percentile step) and reported
-        in ``notes``.
+    ``paths``: ``.csv`` (``.txt``, ``.dat``, ``.tsv``), ``.parquet``, ``.mat`` (v5/v7) or ``.npz``
+    files or folders; each file is one run unless it has a ``run`` column.  ``gear`` (GearTrain,
+    preset or TOML path): unit of ``theta``, torque constant for ``current``.  ``map``: source
+    columns of canonical ones (``{"theta": "qm"}`` or ``"theta=qm,..."``); ``scale``: factors applied
+    after mapping, a number or a scalar stored in the file (``torque=gtau``).  ``fs``: sample rate,
+    Hz, for files without a time column.  ``sep`` (sniffed when None; "whitespace"), ``header`` and
+    ``names``: for csv.  ``signal``: "torque" (default) or "current".  ``max_bad_fraction``: rows
+    with NaN/inf or duplicate or backward times are excluded and counted, or the file refused if
+    more than this fraction are.  ``max_gap``: a longer time step (s) splits a run (default per run,
+    :func:`auto_max_gap`, said in ``notes``).
     """
     if isinstance(paths, (str, Path)):
         paths = [paths]
@@ -162,31 +143,22 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
     return frame
 
 
-def _first_bad_cell(series: pd.Series) -> tuple[int, str] | None:
-    coerced = pd.to_numeric(series, errors="coerce")
-    bad = coerced.isna() & series.notna() & (series.astype(str).str.strip() != "")
-    if not bad.any():
-        return None
-    i = int(np.flatnonzero(bad.to_numpy())[0])
-    return i + 1, str(series.iloc[i])
-
-
 def _numeric_column(path, frame: pd.DataFrame, col: str) -> pd.Series:
     s = frame[col]
     if s.dtype.kind in "biuf":
         return s.astype(float)
-    bad = _first_bad_cell(s)
-    if bad is not None:
-        line, value = bad
-        raise InputError(f"{path}: column '{col}', data row {line}: '{value}' is not a number")
-    return pd.to_numeric(s, errors="coerce").astype(float)
+    coerced = pd.to_numeric(s, errors="coerce")
+    bad = coerced.isna() & s.notna() & (s.astype(str).str.strip() != "")
+    if bad.any():
+        i = int(np.flatnonzero(bad.to_numpy())[0])
+        raise InputError(f"{path}: column '{col}', data row {i + 1}: '{s.iloc[i]}' is not a number")
+    return coerced.astype(float)
 
 
 def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
               max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
-    """The :class:`Recording` of the tables ``parts`` (``(source, frame, meta)``, columns mapped and
-    scaled): each validated, given its runs, cleaned with every excluded row counted in the ledger,
-    then joined and checked for plausibility."""
+    """The :class:`Recording` of the mapped and scaled tables ``parts`` (``(source, frame, meta)``):
+    each validated, its runs numbered and rows cleaned into the ledger, then joined and checked."""
     unit, max_gap = _check_options(gear, unit, signal, fs, max_gap)
     excluded: Counter = Counter()
     notes: list[str] = []
@@ -226,8 +198,7 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
 
 def _check_options(gear: GearTrain | None, unit: str | None, signal: str | None, fs: float | None,
                    max_gap) -> tuple[str, float | None]:
-    """The unit of theta (given, the gear's, or rad) and ``max_gap`` (s) as a number, once the
-    loader's options are checked."""
+    """The unit of theta (given, the gear's, or rad) and ``max_gap`` (s), the options checked."""
     unit = unit or (gear.unit if gear is not None else "rad")
     if max_gap is not None:
         try:
@@ -247,8 +218,7 @@ def _check_options(gear: GearTrain | None, unit: str | None, signal: str | None,
 
 def _analysed_signal(path, frame: pd.DataFrame, signal: str | None, sig_used: str | None,
                      gear: GearTrain | None, fs: float | None) -> str:
-    """The channel analysed in this file ('torque' or 'current'), once the columns the analysis
-    needs are found there; the same in every file."""
+    """The channel analysed ('torque' or 'current'; the same in every file), the needed columns found."""
     cols = list(frame.columns)
     if "theta" not in frame:
         raise InputError(f"{path}: no column 'theta' (position); columns are: {_names(cols)}; "
@@ -276,8 +246,7 @@ def _analysed_signal(path, frame: pd.DataFrame, signal: str | None, sig_used: st
 
 
 def _numeric_frame(path, frame: pd.DataFrame, fs: float | None, notes: list[str]) -> pd.DataFrame:
-    """The canonical columns as numbers (a cell that is not one is refused), and ``t`` from ``fs``
-    when the file has no time column."""
+    """The canonical columns as numbers (refusing a cell that is not), ``t`` from ``fs`` if missing."""
     for col in CANONICAL:
         if col in frame:
             frame[col] = _numeric_column(path, frame, col)
@@ -288,8 +257,7 @@ def _numeric_frame(path, frame: pd.DataFrame, fs: float | None, notes: list[str]
 
 
 def _number_runs(path, frame: pd.DataFrame, run_offset: int, several: bool, notes: list[str]):
-    """Run ids numbered on from ``run_offset`` (a file without a ``run`` column is one run);
-    returns the frame and the next free id."""
+    """The frame with run ids from ``run_offset`` on (no ``run`` column: one run), and the next id."""
     if "run" in frame:
         r = frame["run"].to_numpy()
         ok = np.isfinite(r)

@@ -44,10 +44,7 @@ def _sniff_sep(path: Path) -> str:
                 break
         else:
             return ","
-    for sep in (",", ";", "\t"):
-        if sep in line:
-            return sep
-    return r"\s+"
+    return next((sep for sep in (",", ";", "\t") if sep in line), r"\s+")
 
 
 def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] | None):

@@ -22,29 +22,12 @@ __all__ = ["Recording", "auto_max_gap", "GAP_FACTOR", "GAP_QUANTILE"]
 class Recording:
     """Validated measurements of one drive, possibly over several runs.
 
-    Attributes
-    ----------
-    data : pandas.DataFrame
-        The usable rows: canonical columns (``t`` s, ``theta`` rad or m, ``torque`` Nm or N and/or
-        ``current`` A, optional ``velocity``, ``load``, ``temperature``), an integer ``run`` column
-        that is always present, and every other column of the source as an extra channel.
-    unit : {"rad", "m"}
-        Unit of ``theta``.
-    signal : {"torque", "current"}
-        The channel analysed; :attr:`tau` is it expressed as torque at the reference shaft.
-    excluded : collections.Counter
-        Rows excluded while loading, counted per reason.
-    n_read : int
-        Rows read from the sources.
-    notes : list of str
-        What was done to the data (unwrapping, conversions, gaps found, ...).
-    meta : dict
-        Scalars found in the source files (e.g. ``gtau`` in a .mat file).
-    gear : GearTrain or None
-    sources : list of str
-    max_gap : float or None
-        Longest time step (s) still taken as continuous sampling; a longer step is a gap that splits a
-        run (:meth:`pieces`).  None: chosen per run from the data (:func:`auto_max_gap`).
+    ``data``: the usable rows in canonical columns (``t`` s, ``theta`` rad or m, ``torque`` Nm or N
+    and/or ``current`` A, optional ``velocity``, ``load``, ``temperature``), an integer ``run``, and
+    every other source column as an extra channel.  ``signal``: the channel analysed (:attr:`tau`).
+    ``excluded``: rows excluded while loading, per reason, of ``n_read``; ``notes``: what was done to
+    the data; ``meta``: scalars of the source files (e.g. ``gtau``).  ``max_gap``: longest step (s)
+    taken as continuous sampling (None: per run, :func:`auto_max_gap`).
     """
 
     data: pd.DataFrame
@@ -78,10 +61,8 @@ class Recording:
     def tau(self) -> np.ndarray:
         """The analysed signal as drive torque at the reference shaft (Nm, or N on a linear axis)."""
         if self._tau is None:
-            if self.signal == "torque":
-                self._tau = self.data["torque"].to_numpy(dtype=float)
-            else:
-                self._tau = np.asarray(self.gear.torque_from_current(self.data["current"].to_numpy(dtype=float)))
+            raw = self.data[self.signal].to_numpy(dtype=float)
+            self._tau = raw if self.signal == "torque" else np.asarray(self.gear.torque_from_current(raw))
         return self._tau
 
     def channel(self, name: str) -> np.ndarray:
@@ -102,16 +83,12 @@ class Recording:
         return len(self.data)
 
     def gap_limits(self) -> dict[int, float]:
-        """The longest step (s) taken as continuous sampling, per run: :attr:`max_gap` when it is set,
-        otherwise :func:`auto_max_gap` of the run's time steps."""
+        """The longest continuous step (s) per run: :attr:`max_gap`, else :func:`auto_max_gap`."""
         return self._gaps()[1]
 
     def pieces(self, max_gap: float | None = None) -> list[tuple[int, int, int]]:
-        """Contiguous stretches ``(run, start, stop)``: split at run boundaries and at time gaps.
-
-        A gap is a step in ``t`` longer than ``max_gap`` seconds (default: the recording's rule,
-        :meth:`gap_limits`); nothing downstream treats data on both sides of a gap as continuous.
-        """
+        """Contiguous stretches ``(run, start, stop)``, split at runs and at steps in ``t`` longer than
+        ``max_gap`` s (default :meth:`gap_limits`): nothing downstream joins data across a gap."""
         if max_gap is not None:
             return _split_pieces(self.t, self.run, lambda dt, r: float(max_gap))[0]
         return list(self._gaps()[0])
@@ -171,17 +148,11 @@ GAP_QUANTILE = 0.99
 
 
 def auto_max_gap(dt: np.ndarray) -> float:
-    """The default longest continuous step (s) of a run with time steps ``dt`` (all > 0).
-
-    A gap is an *outlier* of the run's own step distribution: a step more than ``GAP_FACTOR`` (5)
-    times longer than the run's 99th-percentile step (the lower order statistic, so that at least
-    the longest step is always left out of it).  A steady log (1 kHz with jitter) has its 99th
-    percentile near the nominal period, so a dropout of more than about 5 periods splits it, as
-    before; a logger whose steps are broadly spread (rows stored only at rest: many short steps and
-    many long ones) has a long 99th percentile, so its regular long steps do not split it: only a
-    pause far beyond any regular step does.  A dropout is rare (under 1 % of the steps); steps that
-    are more common than that are part of how the file was logged.
-    """
+    """The default longest continuous step (s) of a run with time steps ``dt`` (all > 0):
+    ``GAP_FACTOR`` times the run's 99th-percentile step (lower order statistic, so the longest step
+    is never in it).  A gap is an outlier of the run's own steps: a dropout is rare (under 1 %),
+    while a logger with broadly spread steps (rows stored only at rest) is not split by its regular
+    long steps."""
     dt = np.asarray(dt, dtype=float)
     if len(dt) == 0:
         return math.inf

@@ -1,16 +1,5 @@
-"""The term registry: every base law and every additive term kind declared once.
-
-* :mod:`.shapes` -- the nonlinear shapes laws and terms share (Stribeck exp/gauss/rational,
-  amplitude laws exp/const/rational/power, the position-locked sinusoid, SILO4 eq. 14's load
-  amplitude);
-* :mod:`.registry` -- the base laws (:class:`BaseLaw`: parameters, units, papers' names,
-  magnitude, linear columns, nonlinear parameters with bounds and start grid, degraded forms);
-* :mod:`.kinds` -- the additive term kinds a model can be extended with (:data:`TERMS`).
-
-:mod:`gearspec.laws`, :mod:`gearspec.model`, :mod:`gearspec.identify`, the closed loop's design
-(:mod:`gearspec.diagnose.design`) and the explorer's library (:mod:`gearspec.discover.library`)
-build from these; none keeps its own copy of a law.
-"""
+"""The term registry: every base law (:mod:`.registry`), additive term kind (:mod:`.kinds`) and
+shared shape (:mod:`.shapes`) declared once; laws, model, identify, design and discover build on it."""
 
 from .kinds import TERM_LINEAR, TERMS, TermKind, evaluate_term, register_term, term_names
 from .registry import BASE_LAWS, LAW_LINEAR, fittable_laws, BaseLaw, Basis, Degraded, Nonlinear, basis, register_law

@@ -1,20 +1,11 @@
-"""Additive friction terms beyond a base law: the effects a model can be extended with.
+"""Additive friction terms beyond a base law, each kind declared once in :data:`TERMS`.
 
-A *term* is a plain JSON-able dict ``{"kind": KIND, ...parameters...}`` that a
-:class:`~gearspec.model.FrictionModel` adds to its base law.  Each kind has one evaluation function
-here, registered in :data:`TERMS`, so that a model read back from JSON evaluates identically
-without knowing which module created the term.
-
-Every function receives the model inputs as keyword arrays (``theta``, ``v``, ``load``,
-``temperature``, ``t``, ``acc``, ``run``; absent ones are None) plus the term's dict, and returns
-either a *magnitude* contribution (added to the friction magnitude, multiplied by sign(v) with the
-rest: friction terms) or a *signed* contribution (added to the drive torque as it is: inertia,
-offset).  Which one is declared with the kind.
-
-Terms may hold per-direction parameters: a term with ``"direction": 1`` or ``-1`` acts only while
-the drive moves that way; without it (or ``0``) it acts in both.
-
-Units: SI, as everywhere (rad, rad/s, Nm, degC, s).
+A term is a JSON-able dict ``{"kind": KIND, ...parameters...}`` that a
+:class:`~gearspec.model.FrictionModel` adds to its base law; its kind's function gets the model
+inputs as keyword arrays (``theta``, ``v``, ``load``, ``temperature``, ``t``, ``acc``, ``run``;
+absent ones None) and returns a friction *magnitude* contribution (times sign(v) with the rest) or
+a *signed* one (inertia, offset).  ``"direction": 1`` or ``-1`` limits a term to that direction of
+motion.  Units: SI (rad, rad/s, Nm, degC, s).
 """
 
 from __future__ import annotations
@@ -33,13 +24,10 @@ __all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", 
 
 @dataclass(frozen=True)
 class TermKind:
-    """How one kind of term is evaluated.
-
-    ``signed``: the contribution is added to the drive torque as is (True) or to the friction
-    magnitude (False).  ``needs``: the inputs it cannot do without.  ``params``: its parameters
-    (each may have ``<name>_se``).  ``describe(term)`` gives one readable line.  ``linear``: the
-    parameter the term is linear in (the closed loop fits it by least squares with the others
-    fixed; ``"trig"``: amplitude and phase as a sin/cos pair; None: the loop does not refit it).
+    """How one kind of term is evaluated: ``signed`` (added to the drive torque as is, else to the
+    friction magnitude); ``needs``: inputs it cannot do without; ``params`` (each may have
+    ``<name>_se``); ``describe(term)``: one readable line; ``linear``: the parameter the closed loop
+    refits by least squares (``"trig"``: amplitude and phase as a sin/cos pair; None: not refitted).
     """
 
     kind: str
@@ -77,8 +65,7 @@ def term_names() -> list[str]:
 
 
 def evaluate_term(term: dict, **inputs) -> tuple[np.ndarray, bool]:
-    """Evaluate one term; returns ``(contribution, signed)``.  Raises InputError when an input
-    the term needs is missing (e.g. a load term on a recording without ``load``)."""
+    """``(contribution, signed)`` of one term; InputError when an input it needs is missing."""
     kind = term.get("kind")
     if kind not in TERMS:
         raise InputError(f"unknown friction term kind '{kind}' (known: {', '.join(term_names())})")
@@ -101,13 +88,9 @@ def evaluate_term(term: dict, **inputs) -> tuple[np.ndarray, bool]:
                describe=lambda t: (f"periodic {t.get('label') or 'unlabelled'} at {t['frequency']:.6g} cycles/unit: "
                                    f"{t['amplitude']:.4g} x {t.get('law', 'exp')}(decay {t.get('decay', 0):.4g})"))
 def _periodic(term, *, theta, v, load=None, **_):
-    """``(A + k load^2) g(|v|) sin(2 pi f theta + phi)``: SILO4 eqs. 6, 8 and 14 with ``g`` the
-    amplitude law (``law``: exp (default), const, rational, power).
-
-    ``speed_range``: ``[min, max]`` of the speeds the amplitude law was fitted on; outside it the
-    amplitude is held at the range's edge (``g(clip(|v|, min, max))``): a law is never
-    extrapolated past the speeds that measured it.  Without ``speed_range`` (models written
-    before it existed) the law is evaluated at every speed as written."""
+    """``(A + k load^2) g(|v|) sin(2 pi f theta + phi)``: SILO4 eqs. 6, 8 and 14, ``g`` the amplitude
+    law ``law`` (exp by default).  With ``speed_range`` ``[min, max]`` (the speeds the law was
+    fitted on) ``g`` is held at the range's edges: never extrapolated (older models lack it)."""
     speed = clamp_speed(np.abs(np.asarray(v, dtype=float)), term.get("speed_range"))
     amp = term["amplitude"]
     k = term.get("load_coefficient", 0.0)
@@ -130,8 +113,7 @@ def _viscous_power(term, *, v, **_):
 @register_term("stribeck_extra", params=("amplitude", "v_s", "shape"), linear="amplitude",
                describe=lambda t: f"extra Stribeck dip {t['amplitude']:.4g} at v_s {t['v_s']:.4g} ({t.get('shape', 'exp')})")
 def _stribeck_extra(term, *, v, **_):
-    """An additional Stribeck-like term ``A g(|v|/v_s)`` with g exp (exp(-x)), gauss (exp(-x^2)) or
-    rational (1/(1+x^2), Lola's law (11))."""
+    """An additional Stribeck-like term ``A g(|v|/v_s)``, ``shape`` as :func:`.shapes.stribeck_term`."""
     speed = np.abs(np.asarray(v, dtype=float))
     return term["amplitude"] * stribeck_shape(term.get("shape", "exp"), speed, term["v_s"])
 
@@ -184,16 +166,10 @@ def _offset(term, *, v, **_):
 @register_term("hysteresis", needs=("theta",), params=("scale", "length"), linear="scale",
                describe=lambda t: f"presliding over {t['length']:.4g} after a reversal (depth {t['scale']:.3g})")
 def _hysteresis(term, *, theta, v, run=None, travel=None, **_):
-    """Presliding near reversals: just after the motion reverses, friction builds up over a
-    distance ``length`` instead of jumping (a Dahl-like exponential approach).
-
-    Contribution to the magnitude: ``-scale * exp(-|theta - theta_rev| / length)``, where
-    ``theta_rev`` is the position of the last reversal in the same run (none before the first one
-    in a run).  ``scale`` is in torque units (the friction level it removes at the reversal).
-    Evaluated on ordered samples, with the reversal rule of :func:`_travel_since_reversal`;
-    ``travel`` (unit of theta, ``inf`` before the first reversal), when given, is the travel
-    since the last reversal measured elsewhere (e.g. on the whole recording), used instead.
-    """
+    """Presliding: after a reversal friction builds up over a distance ``length`` (Dahl-like):
+    ``-scale * exp(-d / length)`` with ``d`` the travel since the last reversal in the run
+    (:func:`_travel_since_reversal`; nothing before the first), ``scale`` in torque units.
+    ``travel``, when given, is that travel measured elsewhere (e.g. on the whole recording)."""
     d = _travel(theta, v, run, travel)
     out = np.zeros(len(d))
     has = np.isfinite(d)
@@ -201,28 +177,21 @@ def _hysteresis(term, *, theta, v, run=None, travel=None, **_):
     return out
 
 
-# ---------------------------------------------------------------------- kinds added for the twins' effects
-# (gearspec.simulate.effects injects them into a truth model; any model may use them)
+# ---------------------------------------------------------------------- added for the twins' effects
 @register_term("cogging", signed=True, needs=("theta",), params=("frequency", "amplitude", "phase"), linear="trig",
                describe=lambda t: (f"cogging (same sign both ways) at {t['frequency']:.6g} cycles/unit: "
                                    f"{t['amplitude']:.4g}"))
 def _cogging(term, *, theta, v, **_):
-    """A conservative position-locked torque ``A sin(2 pi f theta + phi)`` (signed).
-
-    Motor cogging (detent torque of the magnets, commutation of a brushed motor), an unbalanced
-    shaft or a spring: unlike friction it does not reverse with the motion, so it is added to the
-    drive torque as it is (not multiplied by sign(v)).  In the friction magnitude that the
-    spectrum analyses (``direction * torque``) it shows at ``f`` with phases ``phi`` forwards and
-    ``phi + pi`` backwards.
-    """
+    """A conservative position-locked torque ``A sin(2 pi f theta + phi)``, signed: cogging, an
+    unbalanced shaft or a spring does not reverse with the motion (in the friction magnitude it
+    shows with phase ``phi`` forwards and ``phi + pi`` backwards)."""
     return term["amplitude"] * sinusoid(theta, term["frequency"], term.get("phase", 0.0))
 
 
 def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
-    """Distance travelled since the last reversal of the motion, per sample (inf before the first
-    reversal of a run): a reversal is a sample whose sign of v differs from the last nonzero sign
-    before it in the same run, and the turning point is the sample before it (``hysteresis`` and
-    ``backlash`` terms)."""
+    """Travel since the last reversal per sample (inf before a run's first): a reversal is a sample
+    whose sign of v differs from the last nonzero sign before it in the run; the turning point is
+    the sample before it."""
     theta = np.asarray(theta, dtype=float)
     s = np.sign(np.asarray(v, dtype=float))
     n = len(theta)
@@ -252,19 +221,14 @@ def _travel_since_reversal(theta, v, run=None) -> np.ndarray:
 
 
 def _travel(theta, v, run=None, travel=None) -> np.ndarray:
-    """``travel`` as given (float array), or :func:`_travel_since_reversal` of the samples."""
     return _travel_since_reversal(theta, v, run) if travel is None else np.asarray(travel, dtype=float)
 
 
 @register_term("backlash", needs=("theta",), params=("scale", "gap"), linear="scale",
                describe=lambda t: f"backlash: {t['scale']:.4g} less friction over {t['gap']:.4g} after a reversal")
 def _backlash(term, *, theta, v, run=None, travel=None, **_):
-    """Backlash seen from the motor: for a travel ``gap`` after every reversal of the motion the
-    teeth are not in contact, so the friction of everything behind the gap (``scale``, torque
-    units) is missing; then it is back at once.  Contribution to the magnitude: ``-scale`` while
-    ``|theta - theta_turn| < gap``, 0 otherwise (nothing before the first reversal of a run).
-    Evaluated on ordered samples, with the reversal rule of ``hysteresis`` (or on ``travel``,
-    when given, as ``hysteresis``).
-    """
+    """Backlash seen from the motor: for a travel ``gap`` after each reversal the teeth are apart
+    and the friction behind them (``scale``, torque units) is missing: ``-scale`` while the travel
+    (as for ``hysteresis``) is below ``gap``, else 0."""
     d = _travel(theta, v, run, travel)
     return np.where(d < term["gap"], -float(term["scale"]), 0.0)

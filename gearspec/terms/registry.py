@@ -1,19 +1,9 @@
-"""The base friction laws, each declared once.
+"""The base friction laws, each declared once as a :class:`BaseLaw` in :data:`BASE_LAWS`.
 
-A :class:`BaseLaw` says everything the engines need to know about a law: its parameters and their
-units, its name in the papers, its magnitude, which parameters it is linear in and the columns
-that make it so (``magnitude = columns(speed, load, *nonlinear) @ linear``), the nonlinear
-parameters with the bounds and start grid of their search, and the *degraded forms* it falls back
-to when a parameter is not identified (named linear subsets with their own columns).
-
-Built from it: the plain functions of :mod:`gearspec.laws`, ``gearspec.model.LAWS`` (the same
-objects), the joint fit's bases (:func:`basis`, read by :mod:`gearspec.identify`) and the closed
-loop's design (``gearspec.diagnose.design.LINEAR``).  A new law is one :class:`BaseLaw` in
-:data:`BASE_LAWS`.
-
-Units are for a rotary axis (Nm, rad/s, Nm s/rad, s/rad, ``-`` dimensionless); on a linear axis
-they follow (N, m/s, N s/m, s/m).  A magnitude takes ``speed = |v| >= 0``; the friction torque is
-``sign(v) * magnitude``.
+:mod:`gearspec.laws`, ``gearspec.model.LAWS``, the joint fit (:func:`basis`) and the closed loop's
+design are built from it.  Units are for a rotary axis (Nm, rad/s, Nm s/rad, s/rad, ``-``
+dimensionless; N, m/s, ... on a linear one).  A magnitude takes ``speed = |v| >= 0``; the friction
+torque is ``sign(v) * magnitude``.
 """
 
 from __future__ import annotations
@@ -32,11 +22,8 @@ __all__ = ["BaseLaw", "Nonlinear", "Degraded", "Basis", "BASE_LAWS", "fittable_l
 
 @dataclass(frozen=True)
 class Nonlinear:
-    """A nonlinear parameter of a law.
-
-    ``bounds(lo, hi)`` and ``grid(lo, hi)``: the values the joint fit searches, and its start
-    grid, given the lowest and highest plateau speeds ``lo``, ``hi`` (rad/s).
-    """
+    """A nonlinear parameter of a law: ``bounds(lo, hi)`` and ``grid(lo, hi)`` are the range and
+    start grid of the joint fit's search, given the lowest and highest plateau speeds (rad/s)."""
 
     name: str
     unit: str
@@ -46,13 +33,9 @@ class Nonlinear:
 
 @dataclass(frozen=True)
 class Degraded:
-    """What a law falls back to when the data cannot identify some of its parameters.
-
-    ``name``: the form's name (a basis of :func:`basis`); ``linear``: its linear parameters;
-    ``columns(speed, load) -> (n, len(linear))``; ``dropped``: the parameters it leaves out
-    (``None`` in a model); ``when``: ``"v_s"`` (the Stribeck velocity is not identified) or
-    ``"speed"`` (quasi-static data: no speed dependence at all).
-    """
+    """The form a law falls back to when some parameters are not identified: ``columns(speed,
+    load) -> (n, len(linear))``; ``dropped``: parameters left out (None in a model); ``when``:
+    ``"v_s"`` (Stribeck velocity not identified) or ``"speed"`` (quasi-static: no speed dependence)."""
 
     name: str
     linear: tuple[str, ...]
@@ -63,9 +46,8 @@ class Degraded:
 
 @dataclass(frozen=True)
 class Basis:
-    """A law (or a degraded form) as ``sum_j lin_j * column_j(speed, load; nonlin)``:
-    ``columns(speed, load, *nonlin) -> (n, len(lin))``; ``nonneg``: linear parameters the joint
-    fit constrains to >= 0; ``search``: the :class:`Nonlinear` of each ``nonlin``."""
+    """A law (or degraded form) as ``columns(speed, load, *nonlin) @ lin``; ``nonneg``: linear
+    parameters constrained to >= 0; ``search``: the :class:`Nonlinear` of each ``nonlin``."""
 
     lin: tuple[str, ...]
     nonlin: tuple[str, ...]
@@ -76,13 +58,10 @@ class Basis:
 
 @dataclass(frozen=True)
 class BaseLaw:
-    """One base friction law (see the module docstring).
-
-    ``params``: every parameter in the model's order, with ``units``; ``magnitude(speed, load,
-    *params)``: the friction magnitude (an ``optional`` parameter given as None drops the part it
-    defines, as the degraded forms do); ``paper``: its name and equation in the papers;
-    ``nonneg``: linear parameters the papers constrain to >= 0 (Lola/CROPS eq. 10).
-    """
+    """One base friction law: ``params`` in the model's order with their ``units``;
+    ``magnitude(speed, load, *params)`` (an ``optional`` parameter given as None drops its part);
+    ``magnitude == columns(speed, load, *nonlinear) @ linear``; ``nonneg``: linear parameters the
+    papers constrain to >= 0 (Lola/CROPS eq. 10); ``paper``: its name in the papers."""
 
     name: str
     params: tuple[str, ...]
@@ -112,8 +91,8 @@ class BaseLaw:
         return next((d for d in self.degraded if d.when == when), None)
 
     def design(self, lin, nonlin: dict, speed, load) -> np.ndarray:
-        """``(n, len(lin))``: the columns of the linear parameters ``lin`` (the law's own, a subset
-        of them, or a degraded form's) at the nonlinear values ``nonlin`` (name -> value)."""
+        """``(n, len(lin))`` columns of the linear parameters ``lin`` (the law's, a subset, or a
+        degraded form's) at the nonlinear values ``nonlin`` (name -> value)."""
         lin = tuple(lin)
         nl = [nonlin.get(k) for k in self.nonlinear_names]
         full = all(x is not None for x in nl)
@@ -192,11 +171,7 @@ def _vs_bounds(lo, hi):
     return lo / 10, 2 * hi
 
 
-def _vs_grid(lo, hi):
-    return np.geomspace(lo / 10, hi * 2, 25)
-
-
-_V_S = Nonlinear("v_s", "rad/s", _vs_bounds, _vs_grid)
+_V_S = Nonlinear("v_s", "rad/s", _vs_bounds, lambda lo, hi: np.geomspace(lo / 10, hi * 2, 25))
 _LEVEL = Degraded("level", ("tau_c",), _level_cols, ("tau_s", "v_s", "viscous"), "speed")
 _CV = Degraded("coulomb_viscous", ("tau_c", "viscous"), _cv_cols, ("tau_s", "v_s"), "v_s")
 _STRIBECK = dict(params=("tau_c", "tau_s", "v_s", "viscous"), units=("Nm", "Nm", "rad/s", "Nm s/rad"),
@@ -208,8 +183,7 @@ BASE_LAWS: dict[str, BaseLaw] = {}
 
 
 def register_law(law: BaseLaw) -> BaseLaw:
-    """Add ``law`` to :data:`BASE_LAWS` (its magnitude must equal its columns @ linear params:
-    ``tests/test_registry.py`` checks every registered law)."""
+    """Add ``law`` to :data:`BASE_LAWS` (``tests/test_registry.py`` checks magnitude == columns @ linear)."""
     BASE_LAWS[law.name] = law
     return law
 
@@ -238,8 +212,7 @@ for _law in (
 
 
 def fittable_laws() -> tuple[str, ...]:
-    """The laws a fit can identify: every registered base law with parameters (not ``none``), in
-    the order they were registered."""
+    """The laws a fit can identify: every registered base law with parameters, in registry order."""
     return tuple(name for name, law in BASE_LAWS.items() if law.params)
 
 
@@ -256,8 +229,8 @@ def basis(name: str) -> Basis:
 
 
 class LiveView(Mapping):
-    """A read-only mapping ``key -> value(source[key])`` over a registry, computed at each access
-    (so that what is registered later is in it too); keys whose value is None are left out."""
+    """Read-only ``key -> value(source[key])`` computed at each access (later registrations show);
+    keys whose value is None are left out."""
 
     def __init__(self, source: Mapping, value: Callable):
         self._source, self._value = source, value
@@ -275,6 +248,5 @@ class LiveView(Mapping):
         return sum(1 for _ in self)
 
 
-#: linear and nonlinear parameters of every base law (the magnitude is linear in the first given
-#: the second)
+#: ``(linear, nonlinear)`` parameters of every base law
 LAW_LINEAR: Mapping[str, tuple] = LiveView(BASE_LAWS, lambda law: (law.linear, law.nonlinear_names))

@@ -1,18 +1,7 @@
-"""The nonlinear shapes friction laws and terms share, written once.
-
-Every law of :mod:`.registry`, every term kind of :mod:`.kinds`, the plain functions of
-:mod:`gearspec.laws` and the families of the explorer's library (:mod:`gearspec.discover.library`)
-evaluate these functions; none writes its own copy.
-
-Units: speeds rad/s (m/s on a linear axis) and >= 0 (a magnitude's argument ``|v|``), Stribeck
-velocities in the same unit, decay constants in s/rad (s/m), positions rad (m), frequencies in
-cycles per unit of position, loads Nm.
-
-References
-----------
-SILO4: E. Garcia, P. Gonzalez de Santos, C. Canudas de Wit, "Velocity dependence in the cyclic
-friction arising with gears", IJRR 21(9), 2002 -- eqs. (3), (6), (8), (14).
-Lola/CROPS: "Experimental friction identification in robot drives" -- eq. (11).
+"""The nonlinear shapes friction laws and terms share, written once (laws, term kinds, the explorer's
+library all evaluate these).  Speeds ``|v| >= 0`` in rad/s (m/s), decay constants s/rad (s/m),
+positions rad (m), frequencies in cycles per unit of position, loads Nm; equations of SILO4 and
+Lola/CROPS as cited in :mod:`gearspec.laws`.
 """
 
 from __future__ import annotations
@@ -33,25 +22,11 @@ AMPLITUDE_LAWS = ("exp", "const", "rational", "power")
 
 
 def stribeck_term(shape: str, height, speed, v_s):
-    """A Stribeck term ``h g(|v| / v_s)``: the height ``h`` at standstill, falling with speed.
+    """A Stribeck term ``h g(x)``, ``x = speed / v_s``: height ``h`` (Nm or N, e.g. static minus
+    Coulomb friction) at standstill, falling with ``speed = |v|``; ``v_s`` > 0 in the unit of speed.
 
-    Parameters
-    ----------
-    shape : {"exp", "gauss", "rational"}
-        ``g(x) = exp(-x)`` (SILO4 eq. 3), ``exp(-x^2)`` (Gaussian) or ``1 / (1 + x^2)`` (Lola/CROPS
-        law (11), Hess and Soom; evaluated as ``h / (1 + x^2)``, as the paper writes it), with
-        ``x = speed / v_s``.
-    height : float or array_like
-        h, Nm (N): e.g. static minus Coulomb friction.
-    speed : array_like
-        ``|v|``, rad/s (m/s).
-    v_s : float or array_like
-        Stribeck velocity, rad/s (m/s); > 0.
-
-    Returns
-    -------
-    ndarray
-        The term, in the unit of ``height``.
+    ``shape``: ``"exp"`` ``g = exp(-x)`` (SILO4 eq. 3), ``"gauss"`` ``exp(-x^2)`` or ``"rational"``
+    ``1 / (1 + x^2)`` (Lola/CROPS law (11), Hess and Soom; evaluated as ``h / (1 + x^2)`` as printed).
     """
     x = np.asarray(speed, dtype=float) / v_s
     if shape == "exp":
@@ -70,23 +45,9 @@ def stribeck_shape(shape: str, speed, v_s):
 
 
 def amplitude_law(law: str, speed, decay):
-    """Amplitude factor of a position-locked line against speed (SILO4 eqs. 6 and 8 and others).
-
-    Parameters
-    ----------
-    law : {"exp", "const", "rational", "power"}
-        ``exp(-b |v|)`` (SILO4 eq. 8), 1 (eq. 6), ``1 / (1 + (b |v|)^2)`` (a Lorentzian fall-off) or
-        ``(1 + |v|)^(-b)`` (slow algebraic decay).
-    speed : array_like
-        ``|v|``, rad/s (m/s).
-    decay : float
-        b, s/rad (s/m); dimensionless for ``power``.
-
-    Returns
-    -------
-    ndarray
-        Dimensionless factor.
-    """
+    """Dimensionless amplitude factor of a position-locked line at ``speed = |v|``: ``law`` ``"exp"``
+    ``exp(-b |v|)`` (SILO4 eq. 8), ``"const"`` 1 (eq. 6), ``"rational"`` ``1 / (1 + (b |v|)^2)`` or
+    ``"power"`` ``(1 + |v|)^(-b)``; ``decay`` b in s/rad (s/m), dimensionless for ``power``."""
     if law == "exp":
         return np.exp(-decay * speed)
     if law == "const":
@@ -99,9 +60,8 @@ def amplitude_law(law: str, speed, decay):
 
 
 def clamp_speed(speed, speed_range):
-    """``|v|`` held within ``speed_range`` (``[min, max]``, either may be None; None: unchanged):
-    where an amplitude law is evaluated outside the speeds it was fitted on, it gives the value at
-    the nearest edge of that range."""
+    """``|v|`` held within ``speed_range`` (``[min, max]``, either may be None; None: unchanged), so
+    that an amplitude law is not extrapolated past the speeds it was fitted on."""
     if not speed_range:
         return speed
     lo, hi = speed_range
@@ -109,11 +69,8 @@ def clamp_speed(speed, speed_range):
 
 
 def sinusoid(theta, frequency, phase=0.0):
-    """``sin(2 pi f theta + phi)``: the position-locked factor of SILO4 eqs. 6 and 8.
-
-    ``theta`` in rad (m), ``frequency`` in cycles per unit of theta (the paper's omega is
-    ``2 pi f``), ``phase`` in rad.
-    """
+    """``sin(2 pi f theta + phi)`` (SILO4 eqs. 6, 8): ``frequency`` in cycles per unit of theta,
+    ``phase`` in rad."""
     return np.sin(_TWO_PI * frequency * np.asarray(theta, dtype=float) + phase)
 
 
