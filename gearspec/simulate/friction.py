@@ -1,9 +1,6 @@
-"""The friction inside the SILO4 twin's closed loop, evaluated one control step at a time.
-
-:class:`FrictionModel.evaluate <gearspec.model.FrictionModel.evaluate>` works on whole arrays; the
-loop needs the friction of every run at one instant, thousands of times per second of simulated
-time, so the twin evaluates the same model pointwise here (base law, harmonics, extra terms through
-:func:`gearspec.terms.evaluate_term`; history terms along the motion), with the model's laws.
+"""The friction inside the SILO4 twin's closed loop: the same numbers as
+:meth:`FrictionModel.evaluate <gearspec.model.FrictionModel.evaluate>`, for every run at one
+instant (thousands of calls per simulated second), history terms carried along the motion.
 """
 
 from __future__ import annotations
@@ -16,22 +13,15 @@ from ..model import FrictionModel
 from ..terms import TERMS, evaluate_term
 
 
-# ---------------------------------------------------------------------- the friction inside the loop
 _HISTORY = ("hysteresis", "backlash")
 
 
 class _Pointwise:
-    """Evaluation of a model without signed or history terms, fast for small vectors.
-
-    Same numbers as ``model.evaluate`` (a test checks it), with less overhead per call: the
-    base law of both directions on every sample then a select (instead of boolean indexing),
-    and the exponential-decay harmonics of each direction in one broadcast call of
-    :func:`gearspec.laws.meshing_ripple`.  Harmonics of other amplitude laws or with a load
-    coefficient go through the ``periodic`` term as in the model.
-    """
+    """Evaluation of a model without signed or history terms, fast for small vectors: the base law
+    of both directions on every sample then a select, and the exponential-decay harmonics in one
+    broadcast :func:`gearspec.laws.meshing_ripple` call (other harmonics through the ``periodic`` term)."""
 
     def __init__(self, model: FrictionModel):
-        self.model = model
         self.law = model.law_spec
         params, fast, self.slow = [], [], []
         for name in ("positive", "negative"):

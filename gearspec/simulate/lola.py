@@ -1,46 +1,36 @@
 """Digital twin of the Lola/CROPS friction testbed (section IV of the testbed paper).
 
-The bench: a drive module (BLDC motor with speed control, HarmonicDrive gear) turns at a set
-motor speed while a current-controlled hysteresis brake, behind a torque sensor, loads its output.
-The automatic mode sets a speed, then raises the controlled load torque step by step to its
-maximum, holding each operating point several seconds, before moving on to the next speed.
-Afterwards current and load torque are low-pass filtered and averaged per point; friction and
-efficiency follow from eqs. (12) and (13).
+A speed-controlled drive module (BLDC motor, HarmonicDrive gear) is loaded by a current-controlled
+hysteresis brake behind a torque sensor; the automatic mode sets a speed, raises the load step by
+step to its maximum, holding each operating point several seconds, then moves to the next speed.
+Current and load are low-pass filtered and averaged per point; friction and efficiency follow from
+eqs. (12) and (13).  The twin's friction is law (11) with Table IV's values (:func:`table4_model`)
+or any ``truth`` model, plus the effects of :mod:`gearspec.simulate.effects`.  SI at the motor
+(wave-generator) side: theta in motor rad, speeds in rad/s of the motor, load in Nm at the output,
+friction in Nm at the motor with the sign of the velocity.
 
-The twin does the same with a known friction: law (11) with Table IV's values
-(:func:`table4_model`), or any :class:`~gearspec.model.FrictionModel` as ``truth``, plus the
-effects of :mod:`gearspec.simulate.effects`.  Everything is at the motor (wave-generator) side in
-SI: theta in motor rad, speeds in rad/s of the motor, load in Nm at the output, friction in Nm at
-the motor with the sign of the velocity (the Lola laws' sign is converted in
-:mod:`gearspec.laws`).
-
-The unknowns, chosen (the paper does not give them)
----------------------------------------------------
-* Grid: "points equally spaced between maximum and minimum speeds and torques".  Speeds: 8 per
-  direction, from 25 to 400 rad/s of the motor for A and C (0.25-4 times their Stribeck velocity
-  of 100 rad/s, 240-3800 rpm, within the gears' rated input speeds) and from 10 to 290 rad/s for
-  B (Stribeck velocity 31.5 rad/s).  Loads: 8, from 5 % to 80 % of the module's nominal output
-  torque ``k_m I_nom N`` (A 91 Nm, B 72.75 Nm, C 26.25 Nm): the paper's loads reach "the nominal
-  torque".  Each point is held 5 s.
-* Brake: torque ``K_b U`` through a first-order coil lag of 50 ms, 0-24 V, at least 0.092 Nm
-  (the brake's minimum), at most 17 Nm; loads above 17 Nm use the second configuration (the
-  brake behind the 5:1 testbed gear: 0.46-85 Nm).  The two configurations are two campaigns over
-  all speeds, as on the real bench (a mechanical change).  PI control with anti-windup, its zero
-  on the coil pole, closed-loop time constant 0.25 s: settled (2 %) in about 1 s, as in the
-  paper's Fig. 4.
-* Torque sensor: noise 0.05 % of the range in use (0.01 Nm of 20 Nm, 0.1 Nm of 200 Nm).
-  Motor current (the controller's measurement): noise 0.5 % of the nominal current.  Encoder on
-  the motor: 8192 counts per revolution.  Recording at 1 kHz.
-* Motor speed control is taken as ideal (the controller's loops are orders of magnitude faster
-  than a 5 s point): the motor follows the set speed, with 1 s linear ramps between speeds; the
-  current is ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia: A
-  3e-5, B 8e-5, C 1.2e-5 kg m^2 (they only matter on the ramps).
-* Per point: current and load are filtered (2nd-order Butterworth, 2 Hz, forwards and backwards)
-  and averaged over the last 3 s of the point (the brake has settled).
+The unknowns, chosen (the paper does not give them; values in :data:`TESTBED`, :data:`MODULES`)
+-------------------------------------------------------------------------------------------------
+* Grid ("points equally spaced between maximum and minimum speeds and torques"): 8 speeds per
+  direction, 25-400 rad/s for A and C (0.25-4 times their Stribeck velocity of 100 rad/s) and
+  10-290 rad/s for B (Stribeck velocity 31.5 rad/s); 8 loads from 5 % to 80 % of the nominal output
+  torque ``k_m I_nom N`` (the paper's loads reach "the nominal torque"); 5 s per point.
+* Brake: torque ``K_b U`` through a 50 ms coil lag, 0-24 V, 0.092-17 Nm; loads above 17 Nm use the
+  brake behind the 5:1 testbed gear (0.46-85 Nm), a second campaign over all speeds as on the real
+  bench.  PI control with anti-windup, its zero on the coil pole, closed-loop time constant 0.25 s:
+  settled in about 1 s, as in the paper's Fig. 4.
+* Torque sensor noise 0.05 % of the range in use (20 or 200 Nm); current noise 0.5 % of the nominal
+  current; encoder 8192 counts/rev; 1 kHz.
+* Ideal motor speed control (its loops are far faster than a 5 s point), 1 s linear ramps between
+  speeds; current ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia
+  A 3e-5, B 8e-5, C 1.2e-5 kg m^2 (they matter only on the ramps).
+* Per point: current and load filtered (2nd-order Butterworth, 2 Hz, forwards and backwards) and
+  averaged over the last 3 s (the brake has settled).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Iterable, Sequence
 
@@ -110,37 +100,33 @@ TESTBED = {
 }
 
 
-def _module(module: str) -> dict:
+def _key(module: str) -> str:
     key = str(module).upper().replace("LOLA-", "")
     if key not in MODULES:
         raise InputError(f"unknown Lola/CROPS module '{module}' (A, B or C)")
-    return MODULES[key]
+    return key
 
 
-def _key(module: str) -> str:
-    return str(module).upper().replace("LOLA-", "")
+def _module(module: str) -> dict:
+    return MODULES[_key(module)]
 
 
 def table4_model(module: str) -> FrictionModel:
     """Law (11) with Table IV's values for module A, B or C (symmetric; SI at the motor)."""
-    p = {k: v for k, v in PAPER_TABLE4[_key(module)].items() if k != "rms"} if _key(module) in PAPER_TABLE4 else None
-    if p is None:
-        _module(module)
-    return FrictionModel("lola11", p, name=f"Lola/CROPS {_key(module)} Table IV",
-                         notes=["law (11) made odd in velocity (gearspec.laws.lola11)"])
+    key = _key(module)
+    return FrictionModel("lola11", {k: v for k, v in PAPER_TABLE4[key].items() if k != "rms"},
+                         name=f"Lola/CROPS {key} Table IV", notes=["law (11) made odd in velocity (gearspec.laws.lola11)"])
 
 
 def table3_model(module: str) -> FrictionModel:
     """Law (8) with Table III's values for module A, B or C (symmetric; SI at the motor)."""
-    _module(module)
-    p = {k: v for k, v in PAPER_TABLE3[_key(module)].items() if k != "rms"}
-    return FrictionModel("lola8", p, name=f"Lola/CROPS {_key(module)} Table III")
+    key = _key(module)
+    return FrictionModel("lola8", {k: v for k, v in PAPER_TABLE3[key].items() if k != "rms"},
+                         name=f"Lola/CROPS {key} Table III")
 
 
 def module_gear(module: str) -> GearTrain:
     """The module's gear preset (lola-a/-b/-c, with its torque constant) and the twin's inertia."""
-    import dataclasses
-
     m = _module(module)
     g = load_gear(m["gear"])
     if not math.isclose(g.total_ratio, m["ratio"]):
@@ -244,14 +230,12 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
         ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth` (model,
         effects, settings).
     """
-    P = dict(TESTBED)
-    P.update(testbed or {})
-    if fs is not None:
-        P["fs"] = float(fs)
-    if hold is not None:
-        P["hold"] = float(hold)
-    mod = _module(module)
+    P = {**TESTBED, **(testbed or {})}
+    for k, v in (("fs", fs), ("hold", hold)):
+        if v is not None:
+            P[k] = float(v)
     key = _key(module)
+    mod = MODULES[key]
     N, km = mod["ratio"], mod["torque_constant"]
     rng = np.random.default_rng(seed)
     speeds, loads = _grid(key, speeds, loads, P)
@@ -271,10 +255,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     if n_hold < 10:
         raise InputError("lola_twin: hold must be at least 10 samples")
     pieces, point_rows = _operating_points(speeds, loads, P, n_hold, n_ramp, rng)
-    v = np.concatenate([p[0] for p in pieces])
-    T_act = np.concatenate([p[1] for p in pieces])
-    T_meas = np.concatenate([p[2] for p in pieces])
-    run = np.concatenate([p[3] for p in pieces]).astype(np.int64)
+    v, T_act, T_meas, run = (np.concatenate(c) for c in zip(*pieces))
+    run = run.astype(np.int64)
     n = len(v)
     t = np.arange(n) * dt
     theta = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1])) * dt))

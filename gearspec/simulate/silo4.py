@@ -1,69 +1,44 @@
 """Digital twin of the SILO4 leg's joint 3 (Garcia, Gonzalez de Santos, Canudas de Wit, IJRR 2002).
 
-The test bench of the paper, section 2, rebuilt as a simulation whose friction is known:
+The paper's bench (section 2) with a known friction: a PID on a quantised encoder drives a DC motor
+(back-EMF, R) through a PWM voltage; rotor inertia J; friction of motor + planetary 14 + worm 20.5
+(eq. 11, Table 2's values, :func:`table2_model`, or any ``truth`` model, plus the effects of
+:mod:`gearspec.simulate.effects`); the armature current goes through a 1 kHz 4th-order Bessel filter
+and is sampled every 4 ms with noise.  One *run* is one experiment: from standstill an
+acceleration-limited ramp, a held speed, a ramp back to rest; ten repetitions per speed.
 
-    PID (position + velocity, quantised encoder) -> PWM voltage -> DC motor (back-EMF, R)
-        -> rotor inertia J -> friction of motor + planetary 14 + worm 20.5 (SILO4 eq. 11)
-    armature current -> 1 kHz 4th-order Bessel filter -> sampled every 4 ms (+ noise)
+SI throughout, at the MOTOR: theta and speeds in rad, rad/s; torques in Nm; current in A.  Table
+2's omegas (3.5e-3 = 1/287, 0.071 = 1/14, 1) are per motor rad: the harmonics are at 1/(2 pi 287),
+1/(2 pi 14) and 1/(2 pi) cycles per motor rad -- output, worm (= planetary output) and motor shaft.
 
-One *run* is one experiment of the paper: from standstill the controller follows a velocity-
-mode trajectory (acceleration-limited ramp, a held speed, a ramp back to rest); ten repetitions
-per speed, speeds over the paper's range in both directions.  Friction is the full model (11)
-with the values of Table 2 (:func:`table2_model`), or any :class:`~gearspec.model.FrictionModel`
-given as ``truth``, plus the effects of :mod:`gearspec.simulate.effects`.
+The unknowns, chosen (the paper does not give them; values in :data:`PLANT`)
+-----------------------------------------------------------------------------
+* Motor, 24 V graphite-brush DC, ``k_M = 0.0231 Nm/A``, ``R = 1.6 ohm``: 6500 rpm is reachable
+  against Table 2's friction there (94 mNm, 4.1 A: ``k_M w + R I = 15.7 V + 6.5 V < 24 V``), and the
+  electrical damping ``k_M^2 / R = 3.3e-4 Nm s/rad`` is *below* the Stribeck law's velocity-weakening
+  slope at standstill (5.0e-4 positive, 5.4e-4 negative): near standstill the drive is negatively
+  damped unless the derivative acts -- which a 2000-count encoder cannot below a count per
+  derivative interval.  That is the stick-slip of Fig. 3.
+* ``J = 2.0e-6 kg m^2`` at the motor (rotor about 1.5e-6 plus the reflected gears); encoder 500
+  lines in quadrature (2000 counts/rev).
+* PID on the encoder position error for a triple closed-loop pole at 2 pi 15 Hz:
+  ``Kd + k_M^2/R = 3 J w``, ``Kp = 3 J w^2``, ``Ki = J w^3`` (torque units; times ``R / k_M`` in
+  volts); derivative over 5 ms, anti-windup while the voltage saturates, trajectory limited to
+  2000 rad/s^2.  A stiffer loop (30 Hz, 2 ms) made the encoder's quantisation sawtooth, folded by
+  the 4 ms sampling into lines at fixed *time* frequencies, 0.2-0.8 mNm (above the motor-shaft
+  ripple); at 15 Hz and 5 ms they are 0.05-0.13 mNm, about the noise per sample.  They are physical
+  and not locked to position, so an analysis can tell them from the gear lines.
+* Control and integration at 4 kHz, not the paper's 16 kHz: the crossover (~15 Hz) and the fastest
+  ripple (108 Hz) are 40-270 times below it.  The Bessel filter is discretised exactly for a
+  current held over each control period (zero-order hold), which a PWM-averaged current is.
+* Current noise 4 mA (0.09 mNm, about 1 % of the friction) per sample and a repetition-to-repetition
+  friction variation of 1 %, inside the paper's "< 3 %".  Every repetition starts from the same
+  position (the bench returns home), so the position ripple does not add to the scatter.
+* Stick-slip: a motor at rest stays at rest while the net drive torque is below the static friction
+  at its position (the model at zero speed, ripple included); a velocity that would change sign
+  within a step stops instead.
 
-Units
------
-SI throughout: theta and speeds at the MOTOR (rad, rad/s), torques at the motor (Nm), current in
-A.  Table 2's speeds are motor rpm; its omega column is the shaft frequency per radian of MOTOR
-position (3.5e-3 = 1/287, 0.071 = 1/14, 1 = 1/1), so the harmonics are at 1/(2 pi 287),
-1/(2 pi 14) and 1/(2 pi) cycles per motor rad: the output shaft (joint), the worm shaft (=
-planetary output) and the motor shaft -- the preset ``silo4-joint3``'s declared lines.
-
-The unknowns, chosen (the paper does not give them)
----------------------------------------------------
-* Motor: a 24 V graphite-brush DC motor with ``k_M = 0.0231 Nm/A`` and ``R = 1.6 ohm``.  Chosen so
-  that the top speed of the paper's figures, 6500 rpm, is reachable against Table 2's friction
-  there (7.1 mNm + 0.0134 mNm/rpm x 6500 = 94 mNm, i.e. 4.1 A): ``k_M w + R I = 15.7 V + 6.5 V
-  < 24 V``; and so that the electrical damping ``k_M^2 / R = 3.3e-4 Nm s/rad`` is *below* the
-  velocity-weakening slope of the Stribeck law at standstill, ``(tau_E - tau_C) / v_s = 5.0e-4``
-  (positive) and ``5.4e-4`` (negative): near standstill the drive is negatively damped unless the
-  controller's derivative acts -- which, with a 2000-count encoder, it cannot below a count per
-  derivative interval.  That is the stick-slip of the paper's Fig. 3.  Friction at low speed is
-  then 0.37 A.
-* Inertia at the motor ``J = 2.0e-6 kg m^2``: rotor (about 1.5e-6 for a motor of this size) plus
-  the planetary stage and worm reflected through 14 and 287 (small).
-* Encoder: 500 lines read in quadrature, 2000 counts per revolution (3.1 mrad per count).
-* Controller: a PID on the encoder position error, tuned for a triple closed-loop pole at
-  ``bandwidth = 2 pi 15 Hz`` with the motor model: ``Kd + k_M^2/R = 3 J w``, ``Kp = 3 J w^2``,
-  ``Ki = J w^3`` (in torque units; times ``R / k_M`` in volts).  The derivative is the error
-  difference over a 5 ms derivative interval (as digital motion-control PIDs of the time did),
-  the integral stops while the voltage saturates (anti-windup), the trajectory is acceleration-
-  limited to 2000 rad/s^2 (6500 rpm in 0.34 s).
-* Control and integration rate 4 kHz, not the paper's 16 kHz: the loop's crossover (~15 Hz) and
-  the fastest friction ripple (the motor shaft at 6500 rpm, 108 Hz) are 40-270 times below it, so
-  the closed loop behaves the same (half a 4 kHz sample of delay is 0.7 degree at 15 Hz) while the
-  simulation is four times cheaper.  The Bessel filter is discretised exactly for a current held
-  over each control period (zero-order hold), which is what a PWM-averaged current is.
-* Why these gains: the encoder's quantisation enters the current through the P and D terms as a
-  sawtooth at the count rate (motor speed x 2000 / 2 pi), which the 4 ms sampling folds into lines
-  at fixed *time* frequencies (e.g. 83.3 Hz at round rpm values).  A stiffer loop (30 Hz, 2 ms
-  derivative) made them 0.2-0.8 mNm, larger than the motor-shaft ripple; at 15 Hz and 5 ms they are
-  0.05-0.13 mNm, about the measurement noise per sample.  They are physical (a real digital loop
-  with this encoder and this sampling makes them too) and not locked to position: their frequency
-  per radian changes with speed, so an analysis can tell them from the gear lines.
-* Measurement: current noise 4 mA (0.09 mNm, about 1 % of the friction: Table 3's model errors
-  of 0.12-0.21 mNm include it) on each 4 ms sample, and a repetition-to-repetition variation of
-  the whole friction of 1 % (lubricant state, temperature), so that repetitions scatter by about
-  1 %, inside the paper's "< 3 %".  Each repetition starts from the same position (the bench
-  returns to its home position), so that the position ripple does not add to the scatter.
-* Stick-slip is handled as such: a motor at rest stays at rest while the net drive torque is
-  below the static friction at its position (the model's friction at zero speed, ripple
-  included); a moving motor whose velocity would change sign within a step stops instead.
-
-Performance: all runs are integrated together, one numpy step per control period over the
-vector of runs (runs that have finished drop out); the default twin (40 speeds x 10 repetitions)
-takes some seconds.
+All runs are integrated together, one numpy step per control period over the vector of runs.
 """
 
 from __future__ import annotations
@@ -73,6 +48,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
@@ -194,24 +170,11 @@ def default_hold(speed: float) -> float:
 # ---------------------------------------------------------------------- truth record
 @dataclass
 class TwinTruth:
-    """What a twin knows and a recording does not.
-
-    Attributes
-    ----------
-    twin : str
-    model : FrictionModel
-        The friction that was simulated (effects applied).
-    gear : GearTrain
-        The spec to read the recording with (torque constant, inertia as the twin's).
-    effects : list of dict
-        Ground truth of the injected effects (:func:`~gearspec.simulate.effects.effects_truth`).
-    runs : DataFrame
-        One row per run (see the twin's docstring).
-    settings : dict
-        Every setting of the bench (plant, controller, sensors, seed).
-    points : DataFrame or None
-        Operating points (the Lola testbed).
-    """
+    """What a twin knows and a recording does not: the twin's name, the friction ``model`` simulated
+    (effects applied), the ``gear`` spec to read the recording with (the twin's torque constant and
+    inertia), the ground truth of the injected ``effects`` (:func:`~.effects.effects_truth`), one row
+    per run (``runs``, see the twin's docstring), every setting of the bench (plant, controller,
+    sensors, seed) and the operating ``points`` (or None)."""
 
     twin: str
     model: FrictionModel
@@ -245,7 +208,7 @@ def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
     return Ad, Bd[:, 0], Cd[0], float(Dd[0, 0])
 
 
-def _channel_values(spec, name, t, run, n_rep):
+def _channel_values(spec, t, run, n_rep):
     """A channel from a scalar, a sequence (one value per repetition, cycled) or callable(t, run)."""
     if spec is None:
         return None
@@ -317,16 +280,13 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         channel); the drive supplies ``load / 287`` more at the motor.  SILO4 was measured without
         load; an effect may supply one (``load_meshing(loads=...)``).
     theta0 : float or "auto"
-        Motor position at the start of every run (rad), the same for every repetition (the bench
-        returns home between repetitions, so that they scatter only by noise and friction
-        variation).  "auto" (default): per speed, the start that centres the held travel where the
-        position ripple of ``truth`` (without effects) averages out over it -- at low speed a
-        10 s plateau covers a fraction of a worm-shaft cycle (88 rad), and its average would
-        otherwise carry the ripple at one position (up to +-0.9 mNm, 10 %), which the Stribeck
-        curve of Fig. 4 does not.
+        Motor position at the start of every run (rad), the same for every repetition.  "auto"
+        (default): per speed, the start that centres the held travel where the position ripple of
+        ``truth`` (without effects) averages out -- at low speed a 10 s plateau covers a fraction of
+        a worm-shaft cycle (88 rad) and would otherwise carry the ripple at one position (up to
+        +-0.9 mNm, 10 %), which the Stribeck curve of Fig. 4 does not.
     record_velocity : bool
-        Add a ``velocity`` column: the true motor velocity at each sample (the bench did not
-        measure it; for plots and checks).
+        Add a ``velocity`` column: the true motor velocity (the bench did not measure it).
     sample_interval, current_noise, repeatability : float, optional
         Override :data:`PLANT`'s 4 ms, 4 mA and 1 %.
     plant : dict, optional
@@ -341,21 +301,16 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         with :func:`twin_gear` (torque constant and inertia).
     truth : TwinTruth
         ``runs``: one row per run with ``run, speed_rpm, velocity`` (commanded, rad/s),
-        ``direction, repetition, t_start, t_stop, t0, t1`` (the held part, settled, on the
-        clock), ``scale`` (this repetition's friction factor), ``level`` (the truth model's
-        position-averaged friction at the speed, :meth:`FrictionModel.mean_level`, times
-        ``scale``), ``friction_mean`` (mean of the true friction magnitude over the held samples:
-        what a plateau average measures, position ripple included), ``velocity_mean`` (true
-        mean velocity over the held part), ``stuck_fraction`` (of held samples at rest).
+        ``direction, repetition, t_start, t_stop, t0, t1`` (the settled held part, on the clock),
+        ``scale`` (the repetition's friction factor), ``level`` (``scale`` times the truth's
+        :meth:`~FrictionModel.mean_level` at the speed), ``friction_mean`` (mean true friction
+        magnitude over the held samples, ripple included), ``velocity_mean``, ``stuck_fraction``.
     """
-    P = dict(PLANT)
-    P.update(plant or {})
-    if sample_interval is not None:
-        P["sample_interval"] = float(sample_interval)
-    if current_noise is not None:
-        P["current_noise"] = float(current_noise)
-    if repeatability is not None:
-        P["repeatability"] = float(repeatability)
+    P = {**PLANT, **(plant or {})}
+    for k, v in (("sample_interval", sample_interval), ("current_noise", current_noise),
+                 ("repeatability", repeatability)):
+        if v is not None:
+            P[k] = float(v)
     rng = np.random.default_rng(seed)
     if speeds_rpm is None:
         speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
@@ -402,36 +357,12 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     return rec, truth_info
 
 
-@dataclass
-class _Runs:
-    """The runs of a twin, one per (speed, repetition): commanded velocity (rad/s), held seconds,
-    the profile's times (s from the run's start: end of the ramp up, of the hold, of the ramp
-    down, of the record), samples and the start on the experiment clock, the friction factor of
-    the repetition; and the clock's steps (control ``dt``, ``n_sub`` of them per sample ``dt_s``)."""
-
-    w_cmd: np.ndarray
-    rep: np.ndarray
-    holds: np.ndarray
-    acc: float
-    t_acc: np.ndarray
-    t_hold_end: np.ndarray
-    t_end: np.ndarray
-    t_stop: np.ndarray
-    rate: float
-    dt: float
-    n_sub: int
-    dt_s: float
-    n_samp: np.ndarray
-    t_start: np.ndarray
-    scale: np.ndarray
-
-    @property
-    def n(self) -> int:
-        return len(self.w_cmd)
-
-
-def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Generator) -> _Runs:
-    """The runs (speed, repetition) in order, their acceleration-limited profiles and clock."""
+def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Generator) -> SimpleNamespace:
+    """The runs of a twin, one per (speed, repetition), in order: commanded velocity ``w_cmd``
+    (rad/s), ``rep``, held seconds ``holds``, the profile's times (s from the run's start: end of the
+    ramp up ``t_acc``, of the hold, of the ramp down, of the record ``t_stop``), ``n_samp`` samples,
+    ``t_start`` on the experiment clock, the friction factor ``scale`` of the repetition; and the
+    clock: control step ``dt``, ``n_sub`` of them per sample interval ``dt_s``."""
     n_sp = len(speeds_rpm)
     w_cmd = np.repeat(np.asarray(speeds_rpm) * RPM, repetitions)
     rep = np.tile(np.arange(repetitions), n_sp)
@@ -461,8 +392,9 @@ def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Ge
     n_samp = np.floor(t_stop / dt_s).astype(int) + 1
     t_start = np.concatenate(([0.0], np.cumsum(n_samp * dt_s + float(P["pause"]))[:-1]))
     scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(w_cmd))
-    return _Runs(w_cmd, rep, holds, acc, t_acc, t_hold_end, t_end, t_stop, rate, dt, n_sub, dt_s, n_samp, t_start,
-                 scale)
+    return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
+                           t_end=t_end, t_stop=t_stop, rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp,
+                           t_start=t_start, scale=scale)
 
 
 class _Bench:
@@ -500,7 +432,7 @@ class _Channels:
         if self.load is not None:
             if "load" in ch:
                 raise InputError("silo4_twin: both the load argument and an effect supply the load")
-            ch["load"] = _channel_values(self.load, "load", clock, idx, self.rep[idx])
+            ch["load"] = _channel_values(self.load, clock, idx, self.rep[idx])
             rec_names = rec_names | {"load"}
         return clock, ch, rec_names
 
@@ -512,28 +444,17 @@ class _ClosedLoop:
 
     _CHUNK = 1024  # control steps whose reference trajectory is computed at once
 
-    def __init__(self, runs: _Runs, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
+    def __init__(self, runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
                  starts: np.ndarray):
         self.runs, self.bench, self.lf, self.channels = runs, bench, lf, channels
-        R_ = runs.n
-        order = np.argsort(-runs.t_stop, kind="stable")
-        self.inv = np.empty(R_, int)
-        self.inv[order] = np.arange(R_)
-        self.W = runs.w_cmd[order]
-        self.TA, self.TH, self.TE, self.TS = (runs.t_acc[order], runs.t_hold_end[order], runs.t_end[order],
-                                              runs.t_stop[order])
-        self.SC = runs.scale[order]
-        self.NS = runs.n_samp[order]
-        self.run_idx = order.copy()  # run id of each state slot
-        self.T0 = runs.t_start[order]
-        self.TH0 = starts[order]
-        self.const_ch = {k: v[order] for k, v in ch0.items()}
-        ns_max = int(runs.n_samp.max())
-        self.out_th = np.full((ns_max, R_), np.nan)
-        self.out_i = np.full((ns_max, R_), np.nan)
-        self.out_f = np.full((ns_max, R_), np.nan)
-        self.out_v = np.full((ns_max, R_), np.nan)
-        self.out_ch = {k: np.full((ns_max, R_), np.nan) for k in ch0}
+        self.order = np.argsort(-runs.t_stop, kind="stable")  # run id of each state slot
+        self.inv = np.empty(runs.n, int)
+        self.inv[self.order] = np.arange(runs.n)
+        self.TH0 = starts[self.order]
+        self.const_ch = {k: v[self.order] for k, v in ch0.items()}
+        shape = (int(runs.n_samp.max()), runs.n)
+        self.out_th, self.out_i, self.out_f, self.out_v = (np.full(shape, np.nan) for _ in range(4))
+        self.out_ch = {k: np.full(shape, np.nan) for k in ch0}
         terms = lf.model.terms
         self.needs_t = any("t" in TERMS[t["kind"]].needs for t in terms)
         self.needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in terms)
@@ -544,20 +465,18 @@ class _ClosedLoop:
         R_, dt, n_sub, rate = runs.n, runs.dt, runs.n_sub, runs.rate
         kM, Rw, Vmax, q, m_der = bench.kM, bench.Rw, bench.Vmax, bench.q, bench.m_der
         Bd, Cd, Dd = bench.Bd, bench.Cd, bench.Dd
-        TA, TH, TE, TS, SC, NS, T0, TH0 = self.TA, self.TH, self.TE, self.TS, self.SC, self.NS, self.T0, self.TH0
-        run_idx, const_ch, dynamic_ch = self.run_idx, self.const_ch, channels.dynamic
+        run_idx, TH0, const_ch, dynamic_ch = self.order, self.TH0, self.const_ch, channels.dynamic
+        TA, TH, TE, TS, SC, NS, T0, W = (getattr(runs, k)[run_idx] for k in (
+            "t_acc", "t_hold_end", "t_end", "t_stop", "scale", "n_samp", "t_start", "w_cmd"))
         out_th, out_i, out_f, out_v, out_ch = self.out_th, self.out_i, self.out_f, self.out_v, self.out_ch
-        sw, Wa = np.sign(self.W), np.abs(self.W)
+        sw, Wa = np.sign(W), np.abs(W)
         half_a = 0.5 * runs.acc
-        theta = TH0.copy()
-        vel = np.zeros(R_)
-        integ = np.zeros(R_)
+        # state per slot; f_acc: the friction summed over the current sample interval
+        theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
+        vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
         ebuf = np.zeros((m_der, R_))
         X = np.zeros((R_, len(Bd)))
         AdT = np.ascontiguousarray(bench.Ad.T)
-        turn_theta = np.full(R_, np.nan)
-        last_sign = np.zeros(R_)
-        f_acc = np.zeros(R_)  # friction summed over the current sample interval
         n_steps = int(round(TS.max() * rate)) + 1
         kp_v, ki_v, kd_v = bench.volt * bench.Kp, bench.volt * bench.Ki, bench.volt * bench.Kd / (m_der * dt)
         dt_J = dt / bench.J
@@ -565,10 +484,6 @@ class _ClosedLoop:
         chunk = self._CHUNK
         for k0 in range(0, n_steps, chunk):
             # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
-            while n_act > 0 and k0 * dt > TS[n_act - 1] + 1e-9:
-                n_act -= 1
-            if n_act == 0:
-                break
             tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
             a = slice(0, n_act)
             t1 = np.minimum(tl_c, TA[a])
@@ -578,12 +493,11 @@ class _ClosedLoop:
             for kk_ in range(len(tl_c)):
                 k = k0 + kk_
                 tl = k * dt
-                if tl > TS[n_act - 1] + 1e-9:
-                    while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
-                        n_act -= 1
-                    if n_act == 0:
-                        break
-                    a = slice(0, n_act)
+                while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
+                    n_act -= 1
+                if n_act == 0:
+                    break
+                a = slice(0, n_act)
                 th = theta[a]
                 v = vel[a]
                 # PID on the encoder count (voltage out, anti-windup: no integration while the
@@ -597,13 +511,9 @@ class _ClosedLoop:
                 current = (U - kM * v) * (1.0 / Rw)
                 # channels, external torques, friction (at rest: the static friction, the model at
                 # 0+ in the direction the drive pushes)
-                kw = {}
-                if const_ch or dynamic_ch:
-                    ch = channels.at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
-                        {kk: vv[a] for kk, vv in const_ch.items()}
-                    kw = {kk: ch.get(kk) for kk in ("load", "temperature")}
-                else:
-                    ch = {}
+                ch = channels.at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
+                    {kk: vv[a] for kk, vv in const_ch.items()}
+                kw = {kk: ch.get(kk) for kk in ("load", "temperature")} if ch else {}
                 if self.needs_t:
                     kw["t"] = T0[a] + tl
                 if self.needs_run:
@@ -644,26 +554,26 @@ class _ClosedLoop:
         return self
 
 
-def _twin_columns(runs: _Runs, out: _ClosedLoop, model: FrictionModel, P: dict, rng: np.random.Generator,
+def _twin_columns(runs: SimpleNamespace, out: _ClosedLoop, model: FrictionModel, P: dict, rng: np.random.Generator,
                   speeds_rpm, repetitions: int, starts: np.ndarray) -> tuple[dict, list[dict]]:
     """The columns of the recording (runs in their own order, the current with its measurement
     noise) and one row of truth per run (the held part, its true friction and velocity)."""
     noise = float(P["current_noise"])
     out_ch, dt_s = out.out_ch, runs.dt_s
-    cols = {k: [] for k in ("t", "theta", "current", "run", "velocity", *out_ch)}
+    per_run = [(int(runs.n_samp[r]), out.inv[r]) for r in range(runs.n)]  # samples, state slot
+
+    def column(a):
+        return np.concatenate([a[:n, s] for n, s in per_run])
+
+    total = int(runs.n_samp.sum())
+    cols = {"t": np.concatenate([runs.t_start[r] + np.arange(n) * dt_s for r, (n, _) in enumerate(per_run)]),
+            "theta": column(out.out_th),
+            "current": column(out.out_i) + (noise * rng.standard_normal(total) if noise else 0.0),
+            "run": np.repeat(np.arange(runs.n, dtype=np.int64), runs.n_samp), "velocity": column(out.out_v),
+            **{k: column(v) for k, v in out_ch.items()}}
     rows = []
-    for r in range(runs.n):
-        s = out.inv[r]
-        n = int(runs.n_samp[r])
+    for r, (n, s) in enumerate(per_run):
         tl = np.arange(n) * dt_s
-        cur = out.out_i[:n, s] + (noise * rng.standard_normal(n) if noise else 0.0)
-        cols["t"].append(runs.t_start[r] + tl)
-        cols["theta"].append(out.out_th[:n, s])
-        cols["current"].append(cur)
-        cols["run"].append(np.full(n, r, np.int64))
-        cols["velocity"].append(out.out_v[:n, s])
-        for kk in out_ch:
-            cols[kk].append(out_ch[kk][:n, s])
         held = (tl >= runs.t_acc[r] + 0.25 * min(1.0, runs.holds[r])) & (tl <= runs.t_hold_end[r])
         if not held.any():
             held = (tl >= runs.t_acc[r]) & (tl <= runs.t_hold_end[r])
@@ -686,7 +596,7 @@ def _twin_columns(runs: _Runs, out: _ClosedLoop, model: FrictionModel, P: dict, 
                      "friction_mean": float(np.mean(f_mag)),
                      "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(stuck)),
                      "n_held": int(held.sum())})
-    return {k: np.concatenate(v) for k, v in cols.items()}, rows
+    return cols, rows
 
 
 def stick_slip_run(joint_speed: float = FIG3_JOINT_SPEED, duration: float = 30.0, *, seed: int | None = 0,
