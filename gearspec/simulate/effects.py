@@ -249,11 +249,8 @@ class _Targeted(Effect):
         return [None if isinstance(self.target, str) else float(self.target)]
 
     def truth(self):
-        out = super().truth()
-        if isinstance(self.target, str):
-            for o in out:
-                o["label"] = self.target
-        return out
+        label = self.target if isinstance(self.target, str) else None
+        return [{**o, "label": label} for o in super().truth()]
 
 
 @dataclass(frozen=True)
@@ -308,10 +305,6 @@ class LoadMeshing(_Targeted):
         run = np.zeros(np.shape(t), int) if run is None else np.asarray(run)
         levels = np.asarray(self.loads, dtype=float)
         return {"load": levels[np.asarray(run, dtype=np.int64) % len(levels)] * np.ones(np.shape(t))}
-
-    @property
-    def recorded(self):
-        return ("load",) if self.loads else ()
 
 
 # ---------------------------------------------------------------------- temperature, time

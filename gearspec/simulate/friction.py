@@ -62,15 +62,11 @@ class _Pointwise:
 
 
 class _LoopFriction:
-    """A truth model split for step-by-step use in a closed loop.
-
-    * pointwise friction (base law, harmonics, magnitude terms): :class:`_Pointwise` per step;
-    * signed terms (cogging, offset): external torques, ``evaluate_term`` per step;
-    * inertia terms: added to the rotor inertia;
-    * history terms (hysteresis, backlash: they depend on the last reversal): evaluated with the
-      term's own function on two-sample sequences ``[turning point, now]`` per run, the turning
-      point kept as state -- the same numbers as evaluating the whole trajectory at once.
-    """
+    """A truth model split for step-by-step use in a closed loop: pointwise friction (base law,
+    harmonics, magnitude terms, :class:`_Pointwise`), signed terms (cogging, offset) as external
+    torques, inertia terms added to the rotor inertia, and history terms (hysteresis, backlash)
+    evaluated on two-sample sequences ``[turning point, now]`` per run, the turning point kept as
+    state -- the same numbers as evaluating the whole trajectory at once."""
 
     def __init__(self, model: FrictionModel):
         self.model = model

@@ -152,12 +152,9 @@ def default_loads(module: str) -> list[float]:
 # ---------------------------------------------------------------------- brake loop
 def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, kb: float, P: dict,
            rng: np.random.Generator, sensor_sd: float, t_min: float) -> tuple[np.ndarray, np.ndarray]:
-    """PI-controlled hysteresis brake for a batch of blocks (same load schedule, one per speed).
-
-    Returns the actual brake torque magnitude and the measured one (sensor noise), shape
-    (n_samples, n_blocks).  ``commands``: the load levels of the block (Nm); the block starts
-    with ``n_ramp`` samples at the first command (the speed ramp), then ``n_hold`` per level.
-    """
+    """PI-controlled hysteresis brake for a batch of blocks (same load schedule, one per speed):
+    ``n_ramp`` samples at the first of ``commands`` (Nm; the speed ramp), then ``n_hold`` per level.
+    Returns the actual and the measured (sensor noise) brake torque magnitude, (n_samples, n_blocks)."""
     dt = 1.0 / P["fs"]
     tau_c = P["brake_time_constant"]
     ki = 1.0 / (kb * P["brake_closed_loop"])
@@ -196,39 +193,32 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     speeds : sequence of float, optional
         Signed motor speeds (rad/s), visited in order (default :func:`default_speeds`).
     loads : sequence of float, optional
-        Load torque magnitudes (Nm at the output), applied in increasing order at every speed
-        (default :func:`default_loads`); those above 17 Nm in a second campaign with the
-        testbed gear.
+        Load torque magnitudes (Nm at the output), in increasing order at every speed (default
+        :func:`default_loads`); those above 17 Nm in a second campaign with the testbed gear.
     hold : float, optional
         Seconds per operating point (default 5; the last 3 s, or the last 60 %, are averaged).
     truth : FrictionModel, optional
         The friction (default :func:`table4_model`); needs the load as law (11) does.
     effects : sequence of Effect
-        Injected into ``truth``; their channels (temperature) are fed to the model and recorded.
+        Injected into ``truth``; their channels (temperature) are fed to the model and recorded;
         ``load_meshing`` uses the brake's load (leave its ``loads`` empty).
-    seed : int or None
-    fs : float, optional
-        Sample rate (default 1 kHz).
-    testbed : dict, optional
-        Overrides of :data:`TESTBED`.
+    seed, fs, testbed
+        Seed of the noise; sample rate (default 1 kHz); overrides of :data:`TESTBED`.
 
     Returns
     -------
     recording : Recording
-        ``t`` (s, experiment clock), ``theta`` (motor rad, 8192 counts/rev), ``current`` (A,
-        raw, noisy), ``load`` (Nm at the output, the torque sensor, signed like the velocity:
-        the brake opposes the motion), ``run`` (one per operating point), ``temperature`` where an
-        effect supplies it.  Read it with :func:`module_gear` (torque constant, ratio).
+        ``t`` (s, experiment clock), ``theta`` (motor rad, 8192 counts/rev), ``current`` (A, raw),
+        ``load`` (Nm at the output, the torque sensor, signed like the velocity), ``run`` (one per
+        operating point), ``temperature`` where an effect supplies it; read it with :func:`module_gear`.
     points : DataFrame
         One row per operating point: ``point`` (= run), ``campaign`` (1 or 2), ``speed_cmd``,
         ``load_cmd``, ``speed`` (mean motor speed from the encoder, rad/s), ``load`` (Nm, signed),
         ``current`` (A), ``friction`` (eq. 12 at the motor, ``k_m I - T_l / N``, sign of the
-        velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth:
-        ``friction_true`` (mean of the simulated friction over the window), ``load_true``,
-        ``efficiency_true``, ``level_true`` (``truth`` without effects, position-averaged, at the
-        commanded speed and load: law (11) itself for the default truth).
-        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth` (model,
-        effects, settings).
+        velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth over
+        the window: ``friction_true``, ``load_true``, ``efficiency_true``, and ``level_true``
+        (``truth`` without effects, position-averaged, at the commanded speed and load).
+        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth`.
     """
     P = {**TESTBED, **(testbed or {})}
     for k, v in (("fs", fs), ("hold", hold)):
@@ -280,9 +270,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     sim = {"t": t, "theta_meas": theta_meas, "current": current, "load_meas": load_meas, "load_true": load_true,
            "friction": friction, "run": run, "temperature": ch.get("temperature")}
     points = pd.DataFrame(_point_rows(point_rows, sim, starts, base, P, n_avg, N, km))
-    data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run}
-    for k in recorded:
-        data[k] = ch[k]
+    data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run,
+            **{k: ch[k] for k in recorded}}
     rec = Recording.from_arrays(gear=gear, source=f"lola twin {key}", **data)
     settings = {**P, "module": key, **{f"module_{k}": v for k, v in mod.items()}, "seed": seed,
                 "speeds": speeds, "loads": loads, "inertia_total": J}
@@ -322,18 +311,15 @@ def _operating_points(speeds, loads, P: dict, n_hold: int, n_ramp: int, rng: np.
     for camp, levels, gear_ratio, rng_sensor in campaigns:
         kb = P["brake_max"] * gear_ratio / P["brake_voltage"]
         t_min = P["brake_min"] * gear_ratio
-        B = len(speeds)
-        T_init = np.full(B, max(levels))
+        T_init = np.full(len(speeds), max(levels))
         T_init[0] = 0.0
         act, meas = _brake(np.asarray(levels), n_hold, n_ramp, T_init, kb, P, rng, P["sensor_noise"] * rng_sensor,
                            t_min)
         for b, sp in enumerate(speeds):
             v = np.concatenate((np.linspace(v_prev, sp, n_ramp, endpoint=False), np.full(n_hold * len(levels), sp)))
             pt = np.concatenate((np.zeros(n_ramp, int), np.repeat(np.arange(len(levels)), n_hold)))
-            first = len(point_rows)
-            for j, lv in enumerate(levels):
-                point_rows.append({"campaign": camp, "speed_cmd": sp, "load_cmd": lv})
-            pieces.append((v, act[:, b], meas[:, b], pt + first))
+            pieces.append((v, act[:, b], meas[:, b], pt + len(point_rows)))
+            point_rows += [{"campaign": camp, "speed_cmd": sp, "load_cmd": lv} for lv in levels]
             v_prev = sp
     return pieces, point_rows
 
@@ -343,16 +329,11 @@ def _point_rows(point_rows: list[dict], sim: dict, starts: np.ndarray, base: Fri
     """Per operating point: current and load low-pass filtered (forwards and backwards, per speed
     block) and averaged over the settled end of the point; friction (eq. 12) and efficiency
     (eq. 13) from them, and the truth over the same samples."""
-    fs_ = P["fs"]
-    dt = 1.0 / fs_
+    dt = 1.0 / P["fs"]
     t, theta_meas, run, temperature = sim["t"], sim["theta_meas"], sim["run"], sim["temperature"]
-    n = len(t)
-    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=fs_, output="sos")
-    cur_f = np.empty(n)
-    load_f = np.empty(n)
-    for a, b in zip(starts[:-1], starts[1:]):
-        cur_f[a:b] = signal.sosfiltfilt(bq, sim["current"][a:b])
-        load_f[a:b] = signal.sosfiltfilt(bq, sim["load_meas"][a:b])
+    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=P["fs"], output="sos")
+    cur_f, load_f = (np.concatenate([signal.sosfiltfilt(bq, sim[k][a:b]) for a, b in zip(starts[:-1], starts[1:])])
+                     for k in ("current", "load_meas"))
     rows = []
     ends = np.flatnonzero(np.diff(np.concatenate((run, [-1]))) != 0)  # last sample of each run
     for pi, row in enumerate(point_rows):

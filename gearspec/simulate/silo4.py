@@ -208,18 +208,6 @@ def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
     return Ad, Bd[:, 0], Cd[0], float(Dd[0, 0])
 
 
-def _channel_values(spec, t, run, n_rep):
-    """A channel from a scalar, a sequence (one value per repetition, cycled) or callable(t, run)."""
-    if spec is None:
-        return None
-    if callable(spec):
-        return np.asarray(spec(t, run), dtype=float) * np.ones(np.shape(t))
-    if np.ndim(spec) == 0:
-        return np.full(np.shape(t), float(spec))
-    vals = np.asarray(spec, dtype=float)
-    return vals[np.asarray(n_rep) % len(vals)] * np.ones(np.shape(t))
-
-
 def _auto_starts(model: FrictionModel, w_cmd, holds, acc, step: float = 0.05) -> np.ndarray:
     """Start positions that centre each run's held travel where the model's position ripple
     (friction minus its position average, at the run's speed) averages to about zero over the
@@ -269,16 +257,15 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     truth : FrictionModel, optional
         The friction (default :func:`table2_model`); theta at the motor, SI.
     effects : sequence of Effect
-        Injected into ``truth`` (:func:`~gearspec.simulate.effects.apply_effects`); channels they
-        supply (temperature, load) are fed to the model and recorded.
+        Injected into ``truth``; the channels they supply (temperature, load) are fed to the model
+        and recorded.
     duration : float, sequence (one per speed) or callable(speed rad/s) -> s, optional
         Seconds held at speed (default :func:`default_hold`).
     seed : int or None
         Noise and repetition-to-repetition variation.
     load : float, sequence (per repetition, cycled) or callable(t, run), optional
-        Output load torque (Nm, the torque the drive delivers to the load, as in the ``load``
-        channel); the drive supplies ``load / 287`` more at the motor.  SILO4 was measured without
-        load; an effect may supply one (``load_meshing(loads=...)``).
+        Output load torque (Nm); the drive supplies ``load / 287`` more at the motor.  SILO4 was
+        measured without load; an effect may supply one (``load_meshing(loads=...)``).
     theta0 : float or "auto"
         Motor position at the start of every run (rad), the same for every repetition.  "auto"
         (default): per speed, the start that centres the held travel where the position ripple of
@@ -295,10 +282,9 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     Returns
     -------
     recording : Recording
-        Columns ``t`` (s on the experiment clock: runs follow each other with a pause), ``theta``
-        (motor rad, encoder-quantised to 2 pi / 2000), ``current`` (A, Bessel-filtered, sampled,
-        noisy), ``run``, and ``load`` / ``temperature`` / ``velocity`` where present.  Read it
-        with :func:`twin_gear` (torque constant and inertia).
+        ``t`` (s on the experiment clock, a pause between runs), ``theta`` (motor rad, encoder-
+        quantised), ``current`` (A, filtered, sampled, noisy), ``run``, and ``load`` /
+        ``temperature`` / ``velocity`` where present; read it with :func:`twin_gear`.
     truth : TwinTruth
         ``runs``: one row per run with ``run, speed_rpm, velocity`` (commanded, rad/s),
         ``direction, repetition, t_start, t_stop, t0, t1`` (the settled held part, on the clock),
@@ -327,14 +313,13 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     runs = _schedule(speeds_rpm, repetitions, duration, P, rng)
     bench = _Bench(P, lf.extra_inertia, runs.dt)
     channels = _Channels(effects, load, runs.t_start, runs.rep)
-    _, ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
+    ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
     missing = {n for e in effects for n in e.needs} - set(ch0)
     if missing:
         raise InputError(f"silo4_twin: an effect needs the {', '.join(sorted(missing))} channel, which this twin "
                          "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
     if model.law_spec.needs_load and "load" not in ch0:
         raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
-    channels.dynamic = callable(load) or any(e.name == "warming" for e in effects)
     if isinstance(theta0, str):
         if theta0 != "auto":
             raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
@@ -419,22 +404,29 @@ class _Bench:
 
 class _Channels:
     """The channels (load, temperature) of the runs: constant per run or functions of the
-    experiment clock; ``dynamic`` when they change within a run."""
+    experiment clock (``dynamic``: they change within a run, warming or a callable load)."""
 
     def __init__(self, effects, load, t_start: np.ndarray, rep: np.ndarray):
         self.effects, self.load, self.t_start, self.rep = effects, load, t_start, rep
-        self.dynamic = False
+        self.dynamic = callable(load) or any(e.name == "warming" for e in effects)
 
     def at(self, tl, idx):
-        """``(clock, channels, names recorded)`` at run times ``tl`` of the runs ``idx``."""
+        """``(channels, names recorded)`` at run times ``tl`` of the runs ``idx``; the ``load``
+        argument: a scalar, a sequence (one value per repetition, cycled) or callable(t, run)."""
         clock = self.t_start[idx] + tl
         ch, rec_names = effect_channels(self.effects, clock, idx)
         if self.load is not None:
             if "load" in ch:
                 raise InputError("silo4_twin: both the load argument and an effect supply the load")
-            ch["load"] = _channel_values(self.load, clock, idx, self.rep[idx])
+            if callable(self.load):
+                ch["load"] = np.asarray(self.load(clock, idx), dtype=float) * np.ones(np.shape(clock))
+            elif np.ndim(self.load) == 0:
+                ch["load"] = np.full(np.shape(clock), float(self.load))
+            else:
+                vals = np.asarray(self.load, dtype=float)
+                ch["load"] = vals[np.asarray(self.rep[idx]) % len(vals)] * np.ones(np.shape(clock))
             rec_names = rec_names | {"load"}
-        return clock, ch, rec_names
+        return ch, rec_names
 
 
 class _ClosedLoop:
@@ -511,7 +503,7 @@ class _ClosedLoop:
                 current = (U - kM * v) * (1.0 / Rw)
                 # channels, external torques, friction (at rest: the static friction, the model at
                 # 0+ in the direction the drive pushes)
-                ch = channels.at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
+                ch = channels.at(np.full(n_act, tl), run_idx[a])[0] if dynamic_ch else \
                     {kk: vv[a] for kk, vv in const_ch.items()}
                 kw = {kk: ch.get(kk) for kk in ("load", "temperature")} if ch else {}
                 if self.needs_t:

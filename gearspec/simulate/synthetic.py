@@ -228,20 +228,13 @@ def quasi_static_recording(*, step=0.002, revolutions=1.0, levels=(0.05, 0.04), 
     (log-sd ``dt_spread``), now and then (``gap_probability``) a pause uniform up to ``max_gap`` s,
     and with ``repeat_probability`` a further row at the same position (the loop stored twice).
 
-    The friction magnitude at rest is that of the direction of the last step,
+    The friction magnitude at rest is that of the direction d of the last step: torque = d * y + noise,
+    ``y = level_d + sum_k A_k,d sin(2 pi f_k theta + phi_k,d)`` (``level = (forward, backward)``;
+    ``ripples``: :class:`Ripple` with per-direction amplitude and phase, decay ignored).
 
-        y = level_d + sum_k A_k,d sin(2 pi f_k theta + phi_k,d),    torque = d * y + noise
-
-    (``level = (forward, backward)``; ``ripples`` are :class:`Ripple` with per-direction amplitude
-    and phase; their decay is ignored: there is no speed).
-
-    Returns
-    -------
-    recording : Recording
-    truth : dict
-        ``directions``: for +1 and -1, ``level`` and ``ripples`` (``frequency``, ``amplitude``,
-        ``phase``) in the friction-magnitude frame; ``sweeps``: (start, stop, direction) rows;
-        ``n``: rows.
+    Returns the recording and the truth: ``directions`` (for +1 and -1, ``level`` and ``ripples``:
+    ``frequency``, ``amplitude``, ``phase`` in the friction-magnitude frame), ``sweeps`` ((start,
+    stop, direction) rows) and ``n`` (rows).
     """
     rng = np.random.default_rng(seed)
     n_steps = int(round(revolutions * 2 * np.pi / step))
@@ -297,12 +290,8 @@ def excitation_recording(*, fs=250.0, move=10.0, amplitude=2.0, cruise_speed=1.5
     rest over ``creep_time`` s (a position loop settling against friction), in the direction of the
     last motion.  Torque: ``sign(v) (level + viscous |v|) + inertia * acc`` plus white noise.
 
-    Returns
-    -------
-    recording : Recording
-    truth : dict
-        ``velocity`` (true velocity at every row), ``acceleration``, ``cruise``: list of
-        (t0, t1, speed) of the genuine constant-speed stretches, ``tails``: list of (t0, t1).
+    Returns the recording and the truth: ``velocity`` (true, every row), ``acceleration``,
+    ``cruise`` ((t0, t1, speed) of the genuine constant-speed stretches), ``tails`` ((t0, t1)).
     """
     rng = np.random.default_rng(seed)
     dt = 1.0 / fs
