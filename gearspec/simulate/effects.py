@@ -257,15 +257,12 @@ class _Targeted(Effect):
 class LoadMeshing(_Targeted):
     """Meshing amplitude growing with the square of the load (SILO4 eq. 14, "future work").
 
-    The harmonics of the model matching ``target`` (a label such as "planetary output shaft",
-    or a frequency in cycles per unit of theta) get ``A = A0 + coefficient * load^2``
-    (:func:`gearspec.laws.load_dependent_amplitude`).  A frequency that no harmonic has becomes a
-    new component ``coefficient * load^2 * sin(2 pi f theta)``.
-
-    ``loads``: output loads (Nm) that the effect supplies as the ``load`` channel, one per run,
-    cycled (``loads[run % len(loads)]``), for twins that have no load of their own (SILO4's leg
-    was measured without its links); leave it empty on the Lola testbed, whose brake is the load.
-    The load acts on the drive too: the drive supplies ``load / N`` more torque.
+    The harmonics matching ``target`` (a label or a frequency) get ``A = A0 + coefficient * load^2``
+    (:func:`gearspec.laws.load_dependent_amplitude`); a frequency no harmonic has becomes a new
+    component ``coefficient * load^2 * sin(2 pi f theta)``.  ``loads``: output loads (Nm) the effect
+    supplies as the ``load`` channel, ``loads[run % len(loads)]``, for twins without a load of their
+    own (SILO4); leave it empty on the Lola testbed, whose brake is the load.  The drive supplies
+    ``load / N`` more torque.
     """
 
     target: str | float = "planetary output shaft"

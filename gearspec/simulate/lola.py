@@ -24,8 +24,7 @@ The unknowns, chosen (the paper does not give them; values in :data:`TESTBED`, :
 * Ideal motor speed control (its loops are far faster than a 5 s point), 1 s linear ramps between
   speeds; current ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia
   A 3e-5, B 8e-5, C 1.2e-5 kg m^2 (they matter only on the ramps).
-* Per point: current and load filtered (2nd-order Butterworth, 2 Hz, forwards and backwards) and
-  averaged over the last 3 s (the brake has settled).
+* Per point: current and load filtered (Butterworth, 2 Hz) and averaged over the last 3 s.
 """
 
 from __future__ import annotations
@@ -115,7 +114,8 @@ def table4_model(module: str) -> FrictionModel:
     """Law (11) with Table IV's values for module A, B or C (symmetric; SI at the motor)."""
     key = _key(module)
     return FrictionModel("lola11", {k: v for k, v in PAPER_TABLE4[key].items() if k != "rms"},
-                         name=f"Lola/CROPS {key} Table IV", notes=["law (11) made odd in velocity (gearspec.laws.lola11)"])
+                         name=f"Lola/CROPS {key} Table IV",
+                         notes=["law (11) made odd in velocity (gearspec.laws.lola11)"])
 
 
 def table3_model(module: str) -> FrictionModel:

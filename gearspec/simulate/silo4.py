@@ -37,8 +37,6 @@ The unknowns, chosen (the paper does not give them; values in :data:`PLANT`)
 * Stick-slip: a motor at rest stays at rest while the net drive torque is below the static friction
   at its position (the model at zero speed, ripple included); a velocity that would change sign
   within a step stops instead.
-
-All runs are integrated together, one numpy step per control period over the vector of runs.
 """
 
 from __future__ import annotations
@@ -127,22 +125,15 @@ _FREQS = {1: 1.0 / (2 * _PI * RATIO), 2: 1.0 / (2 * _PI * RATIO_PLANETARY), 3: 1
 
 
 def table2_model() -> FrictionModel:
-    """The full SILO4 model (eq. 11) with Table 2's values, in SI units at the motor.
-
-    ``tau`` in Nm (mNm / 1000), Stribeck velocity ``v_s`` in rad/s of the motor (rpm x 2 pi / 60),
-    viscous in Nm s/rad (mNm/rpm x 1e-3 x 60 / 2 pi), decays in s/rad (1/rpm x 60 / 2 pi), the
-    harmonics at the output shaft (1/(2 pi 287)), worm shaft (1/(2 pi 14)) and motor shaft
-    (1/(2 pi)) cycles per motor rad, labelled as the ``silo4-joint3`` preset labels its lines.
-    The paper uses one Stribeck velocity per direction (28.18 / 26.58 rpm).
-    """
+    """The full SILO4 model (eq. 11) with Table 2's values, in SI units at the motor: torques in Nm,
+    ``v_s`` in rad/s, viscous in Nm s/rad, decays in s/rad, the harmonics at the exact shaft
+    frequencies (cycles per motor rad) labelled as the ``silo4-joint3`` preset labels its lines.
+    The paper uses one Stribeck velocity per direction (28.18 / 26.58 rpm)."""
     dirs = {}
     for d in ("positive", "negative"):
         P = {k: v[d] for k, v in PAPER_TABLE2.items()}
-        harmonics = []
-        for k in (1, 2, 3):
-            b = 0.0 if k == 1 else P[f"b{k}"]
-            harmonics.append({"frequency": _FREQS[k], "amplitude": P[f"A{k}"] * 1e-3, "decay": b / RPM,
-                              "phase": P[f"phi{k}"], "label": _LABELS[k]})
+        harmonics = [{"frequency": _FREQS[k], "amplitude": P[f"A{k}"] * 1e-3, "decay": P.get(f"b{k}", 0.0) / RPM,
+                      "phase": P[f"phi{k}"], "label": _LABELS[k]} for k in (1, 2, 3)]
         dirs[d] = {"tau_c": P["tau_C"] * 1e-3, "tau_s": P["tau_E"] * 1e-3, "v_s": P["theta_s"] * RPM,
                    "viscous": P["B"] * 1e-3 / RPM, "harmonics": harmonics}
     return FrictionModel("silo4", dirs["positive"], dirs["negative"], name="SILO4 Table 2",
@@ -214,28 +205,22 @@ def _auto_starts(model: FrictionModel, w_cmd, holds, acc, step: float = 0.05) ->
     travel; searched over one output revolution, the nearest to 0 among the best."""
     out = np.zeros(len(w_cmd))
     period = 2 * _PI * RATIO
-    cache: dict = {}
-    for r, (w, hold) in enumerate(zip(w_cmd, holds)):
-        key = (float(w), float(hold))
-        if key not in cache:
-            d = 1.0 if w > 0 else -1.0
-            travel = abs(w) * hold
-            ramp = w * w / (2 * acc)
-            if travel >= period:
-                cache[key] = 0.0
-            else:
-                n_w = max(1, int(round(travel / step)))
-                grid = np.arange(-n_w, int(period / step) + n_w + 1) * step
-                ripple = d * model.friction(grid, np.full(len(grid), w)) - model.mean_level(abs(w), d)[0]
-                c = np.concatenate(([0.0], np.cumsum(ripple)))
-                avg = (c[n_w:] - c[:-n_w]) / n_w  # mean over windows of n_w samples
-                centres = grid[:len(avg)] + 0.5 * n_w * step
-                ok = (centres >= 0) & (centres < period)
-                best = np.min(np.abs(avg[ok]))
-                cand = centres[ok][np.abs(avg[ok]) <= best + 1e-3 * np.std(ripple) + 1e-15]
-                centre = float(cand[np.argmin(np.abs(cand))])
-                cache[key] = centre - d * (ramp + 0.5 * travel)
-        out[r] = cache[key]
+    for w, hold in dict.fromkeys(zip(w_cmd.tolist(), holds.tolist())):  # each (speed, hold) once, in order
+        d = 1.0 if w > 0 else -1.0
+        travel = abs(w) * hold
+        if travel >= period:
+            continue
+        n_w = max(1, int(round(travel / step)))
+        grid = np.arange(-n_w, int(period / step) + n_w + 1) * step
+        ripple = d * model.friction(grid, np.full(len(grid), w)) - model.mean_level(abs(w), d)[0]
+        c = np.concatenate(([0.0], np.cumsum(ripple)))
+        avg = (c[n_w:] - c[:-n_w]) / n_w  # mean over windows of n_w samples
+        centres = grid[:len(avg)] + 0.5 * n_w * step
+        ok = (centres >= 0) & (centres < period)
+        best = np.min(np.abs(avg[ok]))
+        cand = centres[ok][np.abs(avg[ok]) <= best + 1e-3 * np.std(ripple) + 1e-15]
+        centre = float(cand[np.argmin(np.abs(cand))])
+        out[(w_cmd == w) & (holds == hold)] = centre - d * (w * w / (2 * acc) + 0.5 * travel)
     return out
 
 
@@ -326,7 +311,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc)
     else:
         starts = np.full(runs.n, float(theta0))
-    out = _ClosedLoop(runs, bench, lf, channels, ch0, starts).run()
+    out = _closed_loop(runs, bench, lf, channels, ch0, starts)
     cols, rows = _twin_columns(runs, out, model, P, rng, speeds_rpm, repetitions, starts)
     data = {k: cols[k] for k in ("t", "theta", "current", "run")}
     data.update({k: cols[k] for k in out.out_ch if k in recorded})
@@ -429,124 +414,112 @@ class _Channels:
         return ch, rec_names
 
 
-class _ClosedLoop:
-    """Every run of a twin integrated together: one numpy step per control period over the vector of
-    runs, ordered by stop time (longest first) so that the runs still active are a prefix; what is
-    recorded at each sample kept per run slot (``inv`` maps a run to its slot)."""
-
-    _CHUNK = 1024  # control steps whose reference trajectory is computed at once
-
-    def __init__(self, runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
-                 starts: np.ndarray):
-        self.runs, self.bench, self.lf, self.channels = runs, bench, lf, channels
-        self.order = np.argsort(-runs.t_stop, kind="stable")  # run id of each state slot
-        self.inv = np.empty(runs.n, int)
-        self.inv[self.order] = np.arange(runs.n)
-        self.TH0 = starts[self.order]
-        self.const_ch = {k: v[self.order] for k, v in ch0.items()}
-        shape = (int(runs.n_samp.max()), runs.n)
-        self.out_th, self.out_i, self.out_f, self.out_v = (np.full(shape, np.nan) for _ in range(4))
-        self.out_ch = {k: np.full(shape, np.nan) for k in ch0}
-        terms = lf.model.terms
-        self.needs_t = any("t" in TERMS[t["kind"]].needs for t in terms)
-        self.needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in terms)
-
-    def run(self) -> "_ClosedLoop":
-        """Integrate every run to its stop; the recorded samples are in ``out_*``."""
-        runs, bench, lf, channels = self.runs, self.bench, self.lf, self.channels
-        R_, dt, n_sub, rate = runs.n, runs.dt, runs.n_sub, runs.rate
-        kM, Rw, Vmax, q, m_der = bench.kM, bench.Rw, bench.Vmax, bench.q, bench.m_der
-        Bd, Cd, Dd = bench.Bd, bench.Cd, bench.Dd
-        run_idx, TH0, const_ch, dynamic_ch = self.order, self.TH0, self.const_ch, channels.dynamic
-        TA, TH, TE, TS, SC, NS, T0, W = (getattr(runs, k)[run_idx] for k in (
-            "t_acc", "t_hold_end", "t_end", "t_stop", "scale", "n_samp", "t_start", "w_cmd"))
-        out_th, out_i, out_f, out_v, out_ch = self.out_th, self.out_i, self.out_f, self.out_v, self.out_ch
-        sw, Wa = np.sign(W), np.abs(W)
-        half_a = 0.5 * runs.acc
-        # state per slot; f_acc: the friction summed over the current sample interval
-        theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
-        vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
-        ebuf = np.zeros((m_der, R_))
-        X = np.zeros((R_, len(Bd)))
-        AdT = np.ascontiguousarray(bench.Ad.T)
-        n_steps = int(round(TS.max() * rate)) + 1
-        kp_v, ki_v, kd_v = bench.volt * bench.Kp, bench.volt * bench.Ki, bench.volt * bench.Kd / (m_der * dt)
-        dt_J = dt / bench.J
-        n_act = R_
-        chunk = self._CHUNK
-        for k0 in range(0, n_steps, chunk):
-            # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
-            tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
+def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
+                 starts: np.ndarray) -> SimpleNamespace:
+    """Every run of a twin integrated together to its stop: one numpy step per control period over
+    the vector of runs, ordered by stop time (longest first) so that the runs still active are a
+    prefix.  Returns what is recorded at each sample (``out_*``, per run slot; ``inv`` maps a run
+    to its slot)."""
+    R_, dt, n_sub, rate = runs.n, runs.dt, runs.n_sub, runs.rate
+    kM, Rw, Vmax, q, m_der = bench.kM, bench.Rw, bench.Vmax, bench.q, bench.m_der
+    Bd, Cd, Dd = bench.Bd, bench.Cd, bench.Dd
+    run_idx = np.argsort(-runs.t_stop, kind="stable")  # run id of each state slot
+    TA, TH, TE, TS, SC, NS, T0, W = (getattr(runs, k)[run_idx] for k in (
+        "t_acc", "t_hold_end", "t_end", "t_stop", "scale", "n_samp", "t_start", "w_cmd"))
+    TH0, const_ch, dynamic_ch = starts[run_idx], {k: v[run_idx] for k, v in ch0.items()}, channels.dynamic
+    shape = (int(runs.n_samp.max()), R_)
+    out_th, out_i, out_f, out_v = (np.full(shape, np.nan) for _ in range(4))
+    out_ch = {k: np.full(shape, np.nan) for k in ch0}
+    needs_t = any("t" in TERMS[t["kind"]].needs for t in lf.model.terms)
+    needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in lf.model.terms)
+    sw, Wa = np.sign(W), np.abs(W)
+    half_a = 0.5 * runs.acc
+    # state per slot; f_acc: the friction summed over the current sample interval
+    theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
+    vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
+    ebuf = np.zeros((m_der, R_))
+    X = np.zeros((R_, len(Bd)))
+    AdT = np.ascontiguousarray(bench.Ad.T)
+    n_steps = int(round(TS.max() * rate)) + 1
+    kp_v, ki_v, kd_v = bench.volt * bench.Kp, bench.volt * bench.Ki, bench.volt * bench.Kd / (m_der * dt)
+    dt_J = dt / bench.J
+    n_act = R_
+    chunk = 1024  # control steps whose reference trajectory is computed at once
+    for k0 in range(0, n_steps, chunk):
+        # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
+        tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
+        a = slice(0, n_act)
+        t1 = np.minimum(tl_c, TA[a])
+        t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
+        t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
+        ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+        for kk_ in range(len(tl_c)):
+            k = k0 + kk_
+            tl = k * dt
+            while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
+                n_act -= 1
+            if n_act == 0:
+                break
             a = slice(0, n_act)
-            t1 = np.minimum(tl_c, TA[a])
-            t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
-            t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
-            ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
-            for kk_ in range(len(tl_c)):
-                k = k0 + kk_
-                tl = k * dt
-                while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
-                    n_act -= 1
-                if n_act == 0:
-                    break
-                a = slice(0, n_act)
-                th = theta[a]
-                v = vel[a]
-                # PID on the encoder count (voltage out, anti-windup: no integration while the
-                # voltage saturates in the direction of the error)
-                e = ref_c[kk_, :n_act] - np.floor(th / q) * q
-                j = k % m_der
-                u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
-                ebuf[j, a] = e
-                U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
-                integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
-                current = (U - kM * v) * (1.0 / Rw)
-                # channels, external torques, friction (at rest: the static friction, the model at
-                # 0+ in the direction the drive pushes)
-                ch = channels.at(np.full(n_act, tl), run_idx[a])[0] if dynamic_ch else \
-                    {kk: vv[a] for kk, vv in const_ch.items()}
-                kw = {kk: ch.get(kk) for kk in ("load", "temperature")} if ch else {}
-                if self.needs_t:
-                    kw["t"] = T0[a] + tl
-                if self.needs_run:
-                    kw["run"] = run_idx[a]
-                drive = kM * current
-                if kw.get("load") is not None:
-                    drive = drive - kw["load"] / RATIO
-                if lf.signed:
-                    drive = drive - lf.external(th, v, **kw)
-                moving = v != 0
-                v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
-                F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
-                # record the state at the start of the step (filter output up to the previous step)
-                if k % n_sub == 0:
-                    i = k // n_sub
-                    cols_ = np.flatnonzero(i < NS[a])
-                    out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
-                    out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
-                    out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
-                    out_v[i, cols_] = v[cols_]
-                    for kk, vv in ch.items():
-                        out_ch[kk][i, cols_] = vv[cols_]
-                    f_acc[a] = 0.0
-                # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
-                # that would change sign within the step stops instead
-                v_new = v + (drive - F) * dt_J
-                v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
-                f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
-                if lf.history:
-                    s_new = np.sign(v_new)
-                    ls = last_sign[a]
-                    rev = (s_new != 0) & (ls != 0) & (s_new != ls)
-                    turn_theta[a] = np.where(rev, th, turn_theta[a])
-                    last_sign[a] = np.where(s_new != 0, s_new, ls)
-                theta[a] = th + v_new * dt
-                vel[a] = v_new
-                X[a] = X[a] @ AdT + current[:, None] * Bd
-        return self
+            th = theta[a]
+            v = vel[a]
+            # PID on the encoder count (voltage out, anti-windup: no integration while the
+            # voltage saturates in the direction of the error)
+            e = ref_c[kk_, :n_act] - np.floor(th / q) * q
+            j = k % m_der
+            u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
+            ebuf[j, a] = e
+            U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
+            integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
+            current = (U - kM * v) * (1.0 / Rw)
+            # channels, external torques, friction (at rest: the static friction, the model at
+            # 0+ in the direction the drive pushes)
+            ch = channels.at(np.full(n_act, tl), run_idx[a])[0] if dynamic_ch else \
+                {kk: vv[a] for kk, vv in const_ch.items()}
+            kw = {kk: ch.get(kk) for kk in ("load", "temperature")} if ch else {}
+            if needs_t:
+                kw["t"] = T0[a] + tl
+            if needs_run:
+                kw["run"] = run_idx[a]
+            drive = kM * current
+            if kw.get("load") is not None:
+                drive = drive - kw["load"] / RATIO
+            if lf.signed:
+                drive = drive - lf.external(th, v, **kw)
+            moving = v != 0
+            v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
+            F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
+            # record the state at the start of the step (filter output up to the previous step)
+            if k % n_sub == 0:
+                i = k // n_sub
+                cols_ = np.flatnonzero(i < NS[a])
+                out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
+                out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
+                out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
+                out_v[i, cols_] = v[cols_]
+                for kk, vv in ch.items():
+                    out_ch[kk][i, cols_] = vv[cols_]
+                f_acc[a] = 0.0
+            # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
+            # that would change sign within the step stops instead
+            v_new = v + (drive - F) * dt_J
+            v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
+            f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
+            if lf.history:
+                s_new = np.sign(v_new)
+                ls = last_sign[a]
+                rev = (s_new != 0) & (ls != 0) & (s_new != ls)
+                turn_theta[a] = np.where(rev, th, turn_theta[a])
+                last_sign[a] = np.where(s_new != 0, s_new, ls)
+            theta[a] = th + v_new * dt
+            vel[a] = v_new
+            X[a] = X[a] @ AdT + current[:, None] * Bd
+    inv = np.empty(R_, int)
+    inv[run_idx] = np.arange(R_)
+    return SimpleNamespace(inv=inv, out_th=out_th, out_i=out_i, out_f=out_f, out_v=out_v, out_ch=out_ch)
 
 
-def _twin_columns(runs: SimpleNamespace, out: _ClosedLoop, model: FrictionModel, P: dict, rng: np.random.Generator,
+def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionModel, P: dict, rng: np.random.Generator,
                   speeds_rpm, repetitions: int, starts: np.ndarray) -> tuple[dict, list[dict]]:
     """The columns of the recording (runs in their own order, the current with its measurement
     noise) and one row of truth per run (the held part, its true friction and velocity)."""
