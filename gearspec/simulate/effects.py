@@ -521,8 +521,7 @@ def effects_truth(effects: Iterable[Effect], gear=None) -> list[dict]:
     """
     out = []
     for e in effects or ():
-        for t in e.truth():
-            t = dict(t)
+        for t in e.truth():  # fresh dicts
             if gear is not None and t["frequency"] is not None and t["label"] is None:
                 ln = gear.label(t["frequency"], 1e-6 * t["frequency"])
                 t["label"] = None if ln is None else ln.label

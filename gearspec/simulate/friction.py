@@ -38,10 +38,9 @@ class _Pointwise:
         n_h = max(len(f) for f in fast)
         self.harm = None
         if n_h:
-            def stack(key, default):
-                return np.array([[[h.get(key, default)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast], dtype=float)
-            # padding harmonics have zero amplitude
-            self.harm = (stack("amplitude", 0.0), stack("decay", 0.0), stack("frequency", 0.0), stack("phase", 0.0))
+            # (direction, harmonic, 1) arrays; padding harmonics have zero amplitude
+            self.harm = tuple(np.array([[[h.get(key, 0.0)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast],
+                                       dtype=float) for key in ("amplitude", "decay", "frequency", "phase"))
         self.terms = list(model.terms)
 
     def __call__(self, theta, v, *, load=None, temperature=None, t=None, run=None):

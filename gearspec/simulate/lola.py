@@ -251,9 +251,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     t = np.arange(n) * dt
     theta = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1])) * dt))
     acc = np.gradient(v, dt)
-    sgn = np.sign(v)
-    load_true = sgn * T_act
-    load_meas = sgn * T_meas
+    load_true = np.sign(v) * T_act  # the brake opposes the motion
+    load_meas = np.sign(v) * T_meas
     ch, recorded = effect_channels(effects, t, run)
     if "load" in ch:
         raise InputError("lola_twin: the brake is the load here; give load_meshing no loads")

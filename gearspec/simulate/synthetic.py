@@ -83,14 +83,14 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
     speeds = list(speeds)
     lvl = level if callable(level) else (lambda s, d, _c=float(level): _c)
     f_r = speed_ripple_frequency if speed_ripple_frequency is not None else (ripples[0].frequency if ripples else 1.0)
-    t, theta, v_actual, hold, idx, run, durations = _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0,
-                                                             one_run_per_plateau)
+    t, theta, v_actual, hold, idx, run = _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0,
+                                                  one_run_per_plateau)
     n = len(t)
     # friction magnitude
     direction = np.sign(v_actual)
     torque = np.zeros(n)
     truth = []
-    for j, (v, dur) in enumerate(zip(speeds, durations)):
+    for j, v in enumerate(speeds):
         d = 1 if v > 0 else -1
         sel = idx == j
         spd = np.abs(v_actual[sel])
@@ -114,7 +114,7 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
 
 def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_plateau):
     """Velocity profile of plateaus joined by linear ramps, with a position-locked speed ripple on
-    the plateaus; returns ``t, theta, v, hold, plateau_index, run, durations``."""
+    the plateaus; returns ``t, theta, v, hold, plateau_index, run``."""
     durations = list(duration) if np.ndim(duration) else [float(duration)] * len(speeds)
     if len(durations) != len(speeds):
         raise ValueError(f"{len(durations)} durations for {len(speeds)} plateaus")
@@ -159,7 +159,7 @@ def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_
     else:
         run = np.zeros(n, np.int64)
         t = np.arange(n) * dt
-    return t, theta, v_actual, hold, idx, run, durations
+    return t, theta, v_actual, hold, idx, run
 
 
 def _per_plateau(value, idx, t, name, n_plateaus):
@@ -194,8 +194,8 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
     """
     rng = np.random.default_rng(seed)
     speeds = list(speeds)
-    t, theta, v, hold, idx, run, durations = _profile(speeds, duration, fs, ramp, speed_ripple,
-                                                      speed_ripple_frequency, theta0, one_run_per_plateau)
+    t, theta, v, hold, idx, run = _profile(speeds, duration, fs, ramp, speed_ripple, speed_ripple_frequency, theta0,
+                                           one_run_per_plateau)
     ld = _per_plateau(load, idx, t, "load", len(speeds))
     temp = _per_plateau(temperature, idx, t, "temperature", len(speeds))
     acc = np.gradient(v, 1.0 / fs)
@@ -213,7 +213,6 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
     rec = Recording.from_arrays(t=t, theta=meas_theta, torque=torque, run=run, load=ld, temperature=temp, gear=gear,
                                 unit=unit, source="synthetic")
     return rec, truth
-
 
 
 # ---------------------------------------------------------------------- quasi-static maps
