@@ -328,12 +328,9 @@ class Warming(Effect):
     def kind(self):  # type: ignore[override]
         return "temperature" if self.record else "drift"
 
-    def temperature(self, t) -> np.ndarray:
-        t = np.asarray(t, dtype=float)
-        return self.ambient + self.rise * (1.0 - np.exp(-np.maximum(t, 0.0) / self.time_constant))
-
     def channels(self, t, run=None):
-        return {"temperature": self.temperature(t)}
+        t = np.asarray(t, dtype=float)
+        return {"temperature": self.ambient + self.rise * (1.0 - np.exp(-np.maximum(t, 0.0) / self.time_constant))}
 
     @property
     def recorded(self):

@@ -19,8 +19,6 @@ The unknowns, chosen (the paper does not give them; values in :data:`TESTBED`, :
   brake behind the 5:1 testbed gear (0.46-85 Nm), a second campaign over all speeds as on the real
   bench.  PI control with anti-windup, its zero on the coil pole, closed-loop time constant 0.25 s:
   settled in about 1 s, as in the paper's Fig. 4.
-* Torque sensor noise 0.05 % of the range in use (20 or 200 Nm); current noise 0.5 % of the nominal
-  current; encoder 8192 counts/rev; 1 kHz.
 * Ideal motor speed control (its loops are far faster than a 5 s point), 1 s linear ramps between
   speeds; current ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia
   A 3e-5, B 8e-5, C 1.2e-5 kg m^2 (they matter only on the ramps).
@@ -166,18 +164,15 @@ def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, k
     integ = T / (kb * ki)  # steady state at the initial torque
     Umax = P["brake_voltage"]
     act = np.empty((n, B))
-    meas = np.empty((n, B))
     noise = sensor_sd * rng.standard_normal((n, B))
     for k in range(n):
-        Ta = np.maximum(T, t_min)
-        act[k] = Ta
-        meas[k] = Ta + noise[k]
-        e = cmd[k] - meas[k]
+        act[k] = np.maximum(T, t_min)
+        e = cmd[k] - (act[k] + noise[k])
         u = kp * e + ki * integ
         U = np.clip(u, 0.0, Umax)
         integ += np.where((U != u) & ((u > Umax) == (e > 0)), 0.0, e * dt)
         T = alpha * T + (1 - alpha) * kb * U
-    return act, meas
+    return act, act + noise
 
 
 # ---------------------------------------------------------------------- the twin

@@ -8,8 +8,7 @@ and is sampled every 4 ms with noise.  One *run* is one experiment: from standst
 acceleration-limited ramp, a held speed, a ramp back to rest; ten repetitions per speed.
 
 SI throughout, at the MOTOR: theta and speeds in rad, rad/s; torques in Nm; current in A.  Table
-2's omegas (3.5e-3 = 1/287, 0.071 = 1/14, 1) are per motor rad: the harmonics are at 1/(2 pi 287),
-1/(2 pi 14) and 1/(2 pi) cycles per motor rad -- output, worm (= planetary output) and motor shaft.
+2's omegas are per motor rad: output, worm (= planetary output) and motor shaft.
 
 The unknowns, chosen (the paper does not give them; values in :data:`PLANT`)
 -----------------------------------------------------------------------------
