@@ -575,8 +575,7 @@ def parse_effect(text: str) -> Effect:
 
     Tuples (``loads``) are written with ``/`` or ``;`` between values: ``loads=0/2/4``.
     """
-    text = str(text).strip()
-    name, _, rest = text.partition(":")
+    name, _, rest = str(text).strip().partition(":")
     name = name.strip().replace("-", "_")
     if name not in EFFECTS:
         raise InputError(f"--effect: unknown effect '{name}' (known: {', '.join(sorted(EFFECTS))})")

@@ -77,10 +77,7 @@ class _LoopFriction:
         self.extra_inertia = float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
 
     def external(self, theta, v, **kw):
-        out = 0.0
-        for term in self.signed:
-            out = out + evaluate_term(term, theta=theta, v=v, **kw)[0]
-        return out
+        return sum((evaluate_term(term, theta=theta, v=v, **kw)[0] for term in self.signed), 0.0)
 
     def friction(self, theta, v, turn_theta, last_sign, prev_theta=None, **kw):
         """Signed friction at (theta, v); ``turn_theta``/``last_sign`` per run: the turning point of

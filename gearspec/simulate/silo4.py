@@ -544,10 +544,7 @@ def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionMo
         d = 1 if runs.w_cmd[r] > 0 else -1
         f_mag = d * out.out_f[:n, s][held]
         v_held = out.out_v[:n, s][held]
-        stuck = v_held == 0
-        kw_lvl = {}
-        if "load" in out_ch:
-            kw_lvl["load"] = np.array([np.nanmean(out_ch["load"][:n, s][held])])
+        kw_lvl = {"load": np.array([np.nanmean(out_ch["load"][:n, s][held])])} if "load" in out_ch else {}
         try:
             lvl = float(model.mean_level(abs(runs.w_cmd[r]), d, **kw_lvl)[0]) * runs.scale[r]
         except InputError:
@@ -558,7 +555,7 @@ def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionMo
                      "t_stop": t0 + (n - 1) * dt_s, "t0": t0 + tl[held][0], "t1": t0 + tl[held][-1],
                      "hold": runs.holds[r], "scale": runs.scale[r], "level": lvl,
                      "friction_mean": float(np.mean(f_mag)),
-                     "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(stuck)),
+                     "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(v_held == 0)),
                      "n_held": int(held.sum())})
     return cols, rows
 

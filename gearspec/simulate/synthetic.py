@@ -86,7 +86,6 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
     t, theta, v_actual, hold, idx, run = _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0,
                                                   one_run_per_plateau)
     n = len(t)
-    # friction magnitude
     direction = np.sign(v_actual)
     torque = np.zeros(n)
     truth = []
