@@ -1,16 +1,6 @@
-"""Simulated recordings with known ground truth (twins and synthetic test signals).
-
-Simulations produce recordings and know nothing of the analysis.
-
-* :mod:`.synthetic` -- open-loop plateau recordings with known ripple, or whose friction is any
-  :class:`~gearspec.model.FrictionModel` (:func:`model_recording`).
-* :mod:`.silo4` -- the SILO4 joint-3 bench (closed-loop speed control, stick-slip, encoder,
-  Bessel-filtered current, ten repetitions per speed): :func:`silo4_twin`, :func:`table2_model`.
-* :mod:`.lola` -- the Lola/CROPS friction testbed (quasi-static grid of speeds x brake loads):
-  :func:`lola_twin`, :func:`table4_model`, :func:`table3_model`.
-* :mod:`.effects` -- effects the declared model lacks (cogging, extra orders, sidebands,
-  load-dependent meshing, warming, drift, other decay laws, asymmetry, hysteresis, backlash,
-  inertia), injected into a twin's truth with their ground truth.
+"""Simulated recordings with known ground truth, knowing nothing of the analysis: synthetic test
+signals (:mod:`.synthetic`), the SILO4 joint-3 twin (:mod:`.silo4`), the Lola/CROPS testbed twin
+(:mod:`.lola`) and effects the declared model lacks, injected into a twin's truth (:mod:`.effects`).
 """
 
 from . import effects

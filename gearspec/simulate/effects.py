@@ -1,36 +1,18 @@
 """Effects a declared model lacks, injected into the truth of a twin (or of any synthetic recording).
 
-Every later test of detection and diagnosis needs data with an *undeclared* effect in it and the
-ground truth of that effect.  An effect here is a small frozen dataclass that
+An effect is a small frozen dataclass that changes a truth :class:`~gearspec.model.FrictionModel`
+(:meth:`Effect.apply`: adds a :mod:`gearspec.terms` term, or changes a harmonic or a base-law
+parameter), may supply channels the model then needs (:meth:`Effect.channels`: a warming
+temperature, the load of each run) and reports its ground truth (:meth:`Effect.truth`: one dict per
+component with a ``kind`` of ``CONTRACTS.md`` section 4, ``frequency`` in cycles per unit of theta
+or None, ``direction`` +1, -1 or 0 for both) -- what a detector should find.
 
-* changes a truth :class:`~gearspec.model.FrictionModel` (:meth:`Effect.apply`): adds a term of
-  :mod:`gearspec.terms`, or changes a harmonic or a base-law parameter of the model;
-* may supply channels the model then needs (:meth:`Effect.channels`): a temperature that warms
-  up over the experiment, the output load of each run;
-* reports its ground truth (:meth:`Effect.truth`): one dict per component with ``kind`` (one of
-  the kinds of ``CONTRACTS.md`` section 4: periodic, speed_law, load, temperature, drift,
-  asymmetry, inertia, hysteresis, other), ``frequency`` (cycles per unit of theta, for
-  position-locked components, else None), ``direction`` (+1, -1 or 0 for both) and a
-  description -- what a detector should find.
+>>> rec, truth = silo4_twin(effects=[cogging(count=7, amplitude=2e-4), drift(-2e-7)])  # doctest: +SKIP
 
-Use
----
->>> from gearspec.simulate import silo4_twin, effects as fx
->>> rec, truth = silo4_twin(effects=[fx.cogging(count=7, amplitude=2e-4), fx.drift(-2e-7)])  # doctest: +SKIP
-
-With :func:`~gearspec.simulate.model_recording` (an open-loop plateau recording):
-
->>> model = fx.apply_effects(table2_model(), [fx.warming(coefficient=-4e-5)])       # doctest: +SKIP
->>> rec, truth = model_recording(model, speeds, temperature=fx.channel_function(effs, "temperature"))  # doctest: +SKIP
-
-Time
-----
-Channels are functions of the *experiment clock* (seconds since the experiment started; the twins
-record it as ``t``, which runs on from one run to the next), and of the run id.  Drift and
-warming therefore accumulate over the whole experiment, as they do on a test bench.
-
-From the command line an effect is written ``NAME:key=value,key=value`` (:func:`parse_effect`),
-e.g. ``cogging:count=7,amplitude=2e-4`` or ``load_meshing:target=planetary output shaft,coefficient=2e-5``.
+Channels are functions of the *experiment clock* (the twins' ``t``, running on from one run to the
+next) and of the run id, so drift and warming accumulate over the whole experiment, as on a bench.
+On the command line an effect is ``NAME:key=value,...`` (:func:`parse_effect`), e.g.
+``cogging:count=7,amplitude=2e-4``.
 """
 
 from __future__ import annotations
@@ -63,11 +45,6 @@ EFFECTS: dict[str, type] = {}
 _TWO_PI = 2.0 * math.pi
 
 
-def _register(cls):
-    EFFECTS[cls.name] = cls
-    return cls
-
-
 def _dirs(direction) -> tuple[str, ...]:
     """Direction names an effect acts in: 0/None -> both."""
     if direction in (0, None, "both"):
@@ -82,6 +59,17 @@ def _dirs(direction) -> tuple[str, ...]:
 def _dir_int(direction) -> int:
     d = _dirs(direction)
     return 0 if len(d) == 2 else (1 if d[0] == "positive" else -1)
+
+
+def _check_law(effect: str, law: str) -> None:
+    if law not in AMPLITUDE_LAWS:
+        raise InputError(f"{effect}: unknown amplitude law '{law}' ({', '.join(AMPLITUDE_LAWS)})")
+
+
+def _with_direction(term: dict, direction) -> dict:
+    """``term`` with a ``direction`` key when the effect acts in one direction only."""
+    d = _dir_int(direction)
+    return {**term, "direction": d} if d else term
 
 
 def _matches(h: Mapping, target, rel: float = 1e-6) -> bool:
@@ -105,6 +93,11 @@ class Effect:
     kind: ClassVar[str] = "other"
     #: channels the effect's term needs from the twin (e.g. "load")
     needs: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "name" in cls.__dict__:  # a concrete effect: register it under its name
+            EFFECTS[cls.name] = cls
 
     def apply(self, model: FrictionModel) -> FrictionModel:
         """A copy of ``model`` with the effect in it."""
@@ -139,25 +132,14 @@ class Effect:
 
 
 # ---------------------------------------------------------------------- position-locked
-@_register
 @dataclass(frozen=True)
 class Cogging(Effect):
     """Motor cogging: ``amplitude * sin(count * motor angle + phase)``, the same torque in both
-    directions (a ``cogging`` term, signed: it does not reverse with the motion).
-
-    Parameters
-    ----------
-    count : int
-        Cycles per motor revolution (e.g. the number of magnet poles, slots or commutator
-        segments, or their least common multiple).
-    amplitude : float
-        Torque amplitude at theta's shaft, Nm.  (SILO4: "cogging effects due to graphite
-        commutation are apparent at low speeds ... less than 1 % of the meshing friction".)
-    phase : float
-        rad, at theta = 0.
-    motor_turns_per_theta_turn : float
-        1 when theta is the motor angle (all the twins); the gear ratio when theta is at the output.
-    """
+    directions (a ``cogging`` term, signed: it does not reverse with the motion).  ``count``: cycles
+    per motor revolution (poles, slots or commutator segments, or their least common multiple);
+    ``amplitude``: Nm at theta's shaft (SILO4: cogging "less than 1 % of the meshing friction");
+    ``phase``: rad at theta = 0; ``motor_turns_per_theta_turn``: 1 when theta is the motor angle (all
+    the twins), the gear ratio when theta is at the output."""
 
     count: int = 7
     amplitude: float = 2e-4
@@ -178,7 +160,6 @@ class Cogging(Effect):
                                  "phase": float(self.phase), "label": f"cogging {self.count}x motor"})
 
 
-@_register
 @dataclass(frozen=True)
 class ExtraOrder(Effect):
     """An extra position-locked friction component the gear spec does not declare.
@@ -199,8 +180,7 @@ class ExtraOrder(Effect):
     kind: ClassVar[str] = "periodic"
 
     def __post_init__(self):
-        if self.law not in AMPLITUDE_LAWS:
-            raise InputError(f"extra_order: unknown amplitude law '{self.law}' ({', '.join(AMPLITUDE_LAWS)})")
+        _check_law("extra_order", self.law)
         if not self.frequency > 0:
             raise InputError(f"extra_order: frequency must be positive (cycles per unit of theta), got {self.frequency}")
 
@@ -208,18 +188,14 @@ class ExtraOrder(Effect):
         return [float(self.frequency)]
 
     def _term(self, frequency, amplitude, label):
-        t = {"kind": "periodic", "frequency": float(frequency), "amplitude": float(amplitude),
-             "decay": float(self.decay), "law": self.law, "phase": float(self.phase), "label": label}
-        d = _dir_int(self.direction)
-        if d:
-            t["direction"] = d
-        return t
+        return _with_direction({"kind": "periodic", "frequency": float(frequency), "amplitude": float(amplitude),
+                                "decay": float(self.decay), "law": self.law, "phase": float(self.phase),
+                                "label": label}, self.direction)
 
     def apply(self, model):
         return model.with_terms(self._term(self.frequency, self.amplitude, f"extra order {self.frequency:.6g}"))
 
 
-@_register
 @dataclass(frozen=True)
 class Sideband(ExtraOrder):
     """Sidebands of two lines ``f1`` and ``f2`` (cycles per unit of theta): components at
@@ -236,8 +212,7 @@ class Sideband(ExtraOrder):
     def __post_init__(self):
         if self.which not in ("both", "sum", "difference"):
             raise InputError(f"sideband: which must be both, sum or difference, got '{self.which}'")
-        if self.law not in AMPLITUDE_LAWS:
-            raise InputError(f"sideband: unknown amplitude law '{self.law}' ({', '.join(AMPLITUDE_LAWS)})")
+        _check_law("sideband", self.law)
         if not (self.f1 > 0 and self.f2 > 0) or math.isclose(self.f1, self.f2):
             raise InputError("sideband: f1 and f2 must be positive and different")
 
@@ -259,20 +234,35 @@ class Sideband(ExtraOrder):
 
 
 # ---------------------------------------------------------------------- load
-@_register
+class _Targeted(Effect):
+    """An effect on the model's harmonics matching ``target``: a label, or a frequency in cycles per
+    unit of theta (a number given as text is read as a frequency)."""
+
+    def __post_init__(self):
+        if isinstance(self.target, str):
+            try:
+                object.__setattr__(self, "target", float(self.target))
+            except ValueError:
+                pass
+
+    def frequencies(self):
+        return [None if isinstance(self.target, str) else float(self.target)]
+
+    def truth(self):
+        label = self.target if isinstance(self.target, str) else None
+        return [{**o, "label": label} for o in super().truth()]
+
+
 @dataclass(frozen=True)
-class LoadMeshing(Effect):
+class LoadMeshing(_Targeted):
     """Meshing amplitude growing with the square of the load (SILO4 eq. 14, "future work").
 
-    The harmonics of the model matching ``target`` (a label such as "planetary output shaft",
-    or a frequency in cycles per unit of theta) get ``A = A0 + coefficient * load^2``
-    (:func:`gearspec.laws.load_dependent_amplitude`).  A frequency that no harmonic has becomes a
-    new component ``coefficient * load^2 * sin(2 pi f theta)``.
-
-    ``loads``: output loads (Nm) that the effect supplies as the ``load`` channel, one per run,
-    cycled (``loads[run % len(loads)]``), for twins that have no load of their own (SILO4's leg
-    was measured without its links); leave it empty on the Lola testbed, whose brake is the load.
-    The load acts on the drive too: the drive supplies ``load / N`` more torque.
+    The harmonics matching ``target`` (a label or a frequency) get ``A = A0 + coefficient * load^2``
+    (:func:`gearspec.laws.load_dependent_amplitude`); a frequency no harmonic has becomes a new
+    component ``coefficient * load^2 * sin(2 pi f theta)``.  ``loads``: output loads (Nm) the effect
+    supplies as the ``load`` channel, ``loads[run % len(loads)]``, for twins without a load of their
+    own (SILO4); leave it empty on the Lola testbed, whose brake is the load.  The drive supplies
+    ``load / N`` more torque.
     """
 
     target: str | float = "planetary output shaft"
@@ -283,15 +273,9 @@ class LoadMeshing(Effect):
     needs: ClassVar[tuple[str, ...]] = ("load",)
 
     def __post_init__(self):
-        if isinstance(self.loads, (int, float)):
-            object.__setattr__(self, "loads", (float(self.loads),))
-        else:
-            object.__setattr__(self, "loads", tuple(float(x) for x in self.loads))
-        if isinstance(self.target, str):
-            try:
-                object.__setattr__(self, "target", float(self.target))
-            except ValueError:
-                pass
+        super().__post_init__()
+        loads = (self.loads,) if isinstance(self.loads, (int, float)) else self.loads
+        object.__setattr__(self, "loads", tuple(float(x) for x in loads))
 
     def apply(self, model):
         m = model.copy()
@@ -312,16 +296,6 @@ class LoadMeshing(Effect):
                              "load_coefficient": float(self.coefficient), "law": "const",
                              "label": f"load meshing {float(self.target):.6g}"})
 
-    def frequencies(self):
-        return [None if isinstance(self.target, str) else float(self.target)]
-
-    def truth(self):
-        out = super().truth()
-        if isinstance(self.target, str):
-            for o in out:
-                o["label"] = self.target
-        return out
-
     def channels(self, t, run=None):
         if not self.loads:
             return {}
@@ -329,13 +303,8 @@ class LoadMeshing(Effect):
         levels = np.asarray(self.loads, dtype=float)
         return {"load": levels[np.asarray(run, dtype=np.int64) % len(levels)] * np.ones(np.shape(t))}
 
-    @property
-    def recorded(self):
-        return ("load",) if self.loads else ()
-
 
 # ---------------------------------------------------------------------- temperature, time
-@_register
 @dataclass(frozen=True)
 class Warming(Effect):
     """The drive warms up over the experiment and its friction changes with temperature.
@@ -359,12 +328,9 @@ class Warming(Effect):
     def kind(self):  # type: ignore[override]
         return "temperature" if self.record else "drift"
 
-    def temperature(self, t) -> np.ndarray:
-        t = np.asarray(t, dtype=float)
-        return self.ambient + self.rise * (1.0 - np.exp(-np.maximum(t, 0.0) / self.time_constant))
-
     def channels(self, t, run=None):
-        return {"temperature": self.temperature(t)}
+        t = np.asarray(t, dtype=float)
+        return {"temperature": self.ambient + self.rise * (1.0 - np.exp(-np.maximum(t, 0.0) / self.time_constant))}
 
     @property
     def recorded(self):
@@ -375,7 +341,6 @@ class Warming(Effect):
                                  "reference": float(self.ambient)})
 
 
-@_register
 @dataclass(frozen=True)
 class Drift(Effect):
     """Slow linear change of the friction level over the experiment clock:
@@ -393,9 +358,8 @@ class Drift(Effect):
 
 
 # ---------------------------------------------------------------------- speed laws, asymmetry
-@_register
 @dataclass(frozen=True)
-class DecayShape(Effect):
+class DecayShape(_Targeted):
     """The meshing amplitude of a harmonic decays with speed by another law than SILO4's
     exponential: the harmonics matching ``target`` (label or frequency) get amplitude law ``law``
     (const, rational ``1/(1+(b|v|)^2)``, power ``(1+|v|)^-b``, exp) with decay ``decay`` (in the
@@ -409,13 +373,8 @@ class DecayShape(Effect):
     kind: ClassVar[str] = "speed_law"
 
     def __post_init__(self):
-        if self.law not in AMPLITUDE_LAWS:
-            raise InputError(f"decay_shape: unknown amplitude law '{self.law}' ({', '.join(AMPLITUDE_LAWS)})")
-        if isinstance(self.target, str):
-            try:
-                object.__setattr__(self, "target", float(self.target))
-            except ValueError:
-                pass
+        _check_law("decay_shape", self.law)
+        super().__post_init__()
 
     def apply(self, model):
         m = model.copy()
@@ -432,18 +391,7 @@ class DecayShape(Effect):
         m.rmse = m.rmse_holdout = None
         return m
 
-    def frequencies(self):
-        return [None if isinstance(self.target, str) else float(self.target)]
 
-    def truth(self):
-        out = super().truth()
-        if isinstance(self.target, str):
-            for o in out:
-                o["label"] = self.target
-        return out
-
-
-@_register
 @dataclass(frozen=True)
 class NonlinearViscous(Effect):
     """Viscous friction that is not linear in speed: ``coefficient * |v|^exponent`` added to the
@@ -456,13 +404,10 @@ class NonlinearViscous(Effect):
     kind: ClassVar[str] = "speed_law"
 
     def apply(self, model):
-        t = {"kind": "viscous_power", "coefficient": float(self.coefficient), "exponent": float(self.exponent)}
-        if _dir_int(self.direction):
-            t["direction"] = _dir_int(self.direction)
-        return model.with_terms(t)
+        return model.with_terms(_with_direction({"kind": "viscous_power", "coefficient": float(self.coefficient),
+                                                 "exponent": float(self.exponent)}, self.direction))
 
 
-@_register
 @dataclass(frozen=True)
 class Asymmetry(Effect):
     """One direction's base-law parameter differs: ``parameter`` (e.g. tau_c, t_f0, viscous) is
@@ -488,7 +433,6 @@ class Asymmetry(Effect):
 
 
 # ---------------------------------------------------------------------- reversals, inertia
-@_register
 @dataclass(frozen=True)
 class Hysteresis(Effect):
     """Presliding after reversals: friction builds up over a travel ``length`` instead of jumping
@@ -504,7 +448,6 @@ class Hysteresis(Effect):
         return model.with_terms({"kind": "hysteresis", "scale": float(self.scale), "length": float(self.length)})
 
 
-@_register
 @dataclass(frozen=True)
 class Backlash(Effect):
     """Backlash: for a travel ``gap`` (unit of theta) after every reversal the friction behind
@@ -520,7 +463,6 @@ class Backlash(Effect):
         return model.with_terms({"kind": "backlash", "scale": float(self.scale), "gap": float(self.gap)})
 
 
-@_register
 @dataclass(frozen=True)
 class ExtraInertia(Effect):
     """More inertia than the gear spec declares (kg m^2 at theta's shaft): an ``inertia`` term
@@ -576,8 +518,7 @@ def effects_truth(effects: Iterable[Effect], gear=None) -> list[dict]:
     """
     out = []
     for e in effects or ():
-        for t in e.truth():
-            t = dict(t)
+        for t in e.truth():  # fresh dicts
             if gear is not None and t["frequency"] is not None and t["label"] is None:
                 ln = gear.label(t["frequency"], 1e-6 * t["frequency"])
                 t["label"] = None if ln is None else ln.label
@@ -612,22 +553,19 @@ def channel_function(effects: Iterable[Effect], name: str) -> Callable | None:
     return f
 
 
-def _convert(value: str, ftype):
-    text = str(value).strip()
-    if ftype in ("int", int):
+def _convert(text: str, ftype: str):
+    """``text`` as a value of a field annotated ``ftype`` (int, bool, tuple, float; else a number or text)."""
+    if ftype == "int":
         return int(float(text))
-    if ftype in ("bool", bool):
-        if text.lower() in ("1", "true", "yes", "on"):
-            return True
-        if text.lower() in ("0", "false", "no", "off"):
-            return False
-        raise ValueError(text)
-    if ftype in ("tuple", tuple):
+    if ftype == "bool":
+        return {"1": True, "true": True, "yes": True, "on": True,
+                "0": False, "false": False, "no": False, "off": False}[text.lower()]
+    if ftype == "tuple":
         return tuple(float(x) for x in text.replace(";", " ").replace("/", " ").split())
     try:
         return float(text)
     except ValueError:
-        if ftype in ("float", float):
+        if ftype == "float":
             raise
         return text
 
@@ -637,8 +575,7 @@ def parse_effect(text: str) -> Effect:
 
     Tuples (``loads``) are written with ``/`` or ``;`` between values: ``loads=0/2/4``.
     """
-    text = str(text).strip()
-    name, _, rest = text.partition(":")
+    name, _, rest = str(text).strip().partition(":")
     name = name.strip().replace("-", "_")
     if name not in EFFECTS:
         raise InputError(f"--effect: unknown effect '{name}' (known: {', '.join(sorted(EFFECTS))})")
@@ -653,11 +590,10 @@ def parse_effect(text: str) -> Effect:
         k, v = (s.strip() for s in part.split("=", 1))
         if k not in ftypes:
             raise InputError(f"--effect {name}: no parameter '{k}' (parameters: {', '.join(ftypes)})")
-        ft = ftypes[k]
-        ft = ft if not isinstance(ft, str) else ft.split("|")[0].strip()
+        ft = ftypes[k].split("|")[0].strip()  # the annotation's text (from __future__ import annotations)
         try:
             kwargs[k] = _convert(v, ft)
-        except ValueError:
+        except (ValueError, KeyError):
             raise InputError(f"--effect {name}: {k}={v} is not a valid {ft}") from None
     try:
         return cls(**kwargs)

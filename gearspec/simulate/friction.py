@@ -1,9 +1,6 @@
-"""The friction inside the SILO4 twin's closed loop, evaluated one control step at a time.
-
-:class:`FrictionModel.evaluate <gearspec.model.FrictionModel.evaluate>` works on whole arrays; the
-loop needs the friction of every run at one instant, thousands of times per second of simulated
-time, so the twin evaluates the same model pointwise here (base law, harmonics, extra terms through
-:func:`gearspec.terms.evaluate_term`; history terms along the motion), with the model's laws.
+"""The friction inside the SILO4 twin's closed loop: the same numbers as
+:meth:`FrictionModel.evaluate <gearspec.model.FrictionModel.evaluate>`, for every run at one
+instant (thousands of calls per simulated second), history terms carried along the motion.
 """
 
 from __future__ import annotations
@@ -16,22 +13,15 @@ from ..model import FrictionModel
 from ..terms import TERMS, evaluate_term
 
 
-# ---------------------------------------------------------------------- the friction inside the loop
 _HISTORY = ("hysteresis", "backlash")
 
 
 class _Pointwise:
-    """Evaluation of a model without signed or history terms, fast for small vectors.
-
-    Same numbers as ``model.evaluate`` (a test checks it), with less overhead per call: the
-    base law of both directions on every sample then a select (instead of boolean indexing),
-    and the exponential-decay harmonics of each direction in one broadcast call of
-    :func:`gearspec.laws.meshing_ripple`.  Harmonics of other amplitude laws or with a load
-    coefficient go through the ``periodic`` term as in the model.
-    """
+    """Evaluation of a model without signed or history terms, fast for small vectors: the base law
+    of both directions on every sample then a select, and the exponential-decay harmonics in one
+    broadcast :func:`gearspec.laws.meshing_ripple` call (other harmonics through the ``periodic`` term)."""
 
     def __init__(self, model: FrictionModel):
-        self.model = model
         self.law = model.law_spec
         params, fast, self.slow = [], [], []
         for name in ("positive", "negative"):
@@ -48,10 +38,9 @@ class _Pointwise:
         n_h = max(len(f) for f in fast)
         self.harm = None
         if n_h:
-            def stack(key, default):
-                return np.array([[[h.get(key, default)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast], dtype=float)
-            # padding harmonics have zero amplitude
-            self.harm = (stack("amplitude", 0.0), stack("decay", 0.0), stack("frequency", 0.0), stack("phase", 0.0))
+            # (direction, harmonic, 1) arrays; padding harmonics have zero amplitude
+            self.harm = tuple(np.array([[[h.get(key, 0.0)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast],
+                                       dtype=float) for key in ("amplitude", "decay", "frequency", "phase"))
         self.terms = list(model.terms)
 
     def __call__(self, theta, v, *, load=None, temperature=None, t=None, run=None):
@@ -72,15 +61,11 @@ class _Pointwise:
 
 
 class _LoopFriction:
-    """A truth model split for step-by-step use in a closed loop.
-
-    * pointwise friction (base law, harmonics, magnitude terms): :class:`_Pointwise` per step;
-    * signed terms (cogging, offset): external torques, ``evaluate_term`` per step;
-    * inertia terms: added to the rotor inertia;
-    * history terms (hysteresis, backlash: they depend on the last reversal): evaluated with the
-      term's own function on two-sample sequences ``[turning point, now]`` per run, the turning
-      point kept as state -- the same numbers as evaluating the whole trajectory at once.
-    """
+    """A truth model split for step-by-step use in a closed loop: pointwise friction (base law,
+    harmonics, magnitude terms, :class:`_Pointwise`), signed terms (cogging, offset) as external
+    torques, inertia terms added to the rotor inertia, and history terms (hysteresis, backlash)
+    evaluated on two-sample sequences ``[turning point, now]`` per run, the turning point kept as
+    state -- the same numbers as evaluating the whole trajectory at once."""
 
     def __init__(self, model: FrictionModel):
         self.model = model
@@ -92,10 +77,7 @@ class _LoopFriction:
         self.extra_inertia = float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
 
     def external(self, theta, v, **kw):
-        out = 0.0
-        for term in self.signed:
-            out = out + evaluate_term(term, theta=theta, v=v, **kw)[0]
-        return out
+        return sum((evaluate_term(term, theta=theta, v=v, **kw)[0] for term in self.signed), 0.0)
 
     def friction(self, theta, v, turn_theta, last_sign, prev_theta=None, **kw):
         """Signed friction at (theta, v); ``turn_theta``/``last_sign`` per run: the turning point of

@@ -1,46 +1,33 @@
 """Digital twin of the Lola/CROPS friction testbed (section IV of the testbed paper).
 
-The bench: a drive module (BLDC motor with speed control, HarmonicDrive gear) turns at a set
-motor speed while a current-controlled hysteresis brake, behind a torque sensor, loads its output.
-The automatic mode sets a speed, then raises the controlled load torque step by step to its
-maximum, holding each operating point several seconds, before moving on to the next speed.
-Afterwards current and load torque are low-pass filtered and averaged per point; friction and
-efficiency follow from eqs. (12) and (13).
+A speed-controlled drive module (BLDC motor, HarmonicDrive gear) is loaded by a current-controlled
+hysteresis brake behind a torque sensor; the automatic mode sets a speed, raises the load step by
+step to its maximum, holding each operating point several seconds, then moves to the next speed.
+Current and load are low-pass filtered and averaged per point; friction and efficiency follow from
+eqs. (12) and (13).  The twin's friction is law (11) with Table IV's values (:func:`table4_model`)
+or any ``truth`` model, plus the effects of :mod:`gearspec.simulate.effects`.  SI at the motor
+(wave-generator) side: theta in motor rad, speeds in rad/s of the motor, load in Nm at the output,
+friction in Nm at the motor with the sign of the velocity.
 
-The twin does the same with a known friction: law (11) with Table IV's values
-(:func:`table4_model`), or any :class:`~gearspec.model.FrictionModel` as ``truth``, plus the
-effects of :mod:`gearspec.simulate.effects`.  Everything is at the motor (wave-generator) side in
-SI: theta in motor rad, speeds in rad/s of the motor, load in Nm at the output, friction in Nm at
-the motor with the sign of the velocity (the Lola laws' sign is converted in
-:mod:`gearspec.laws`).
-
-The unknowns, chosen (the paper does not give them)
----------------------------------------------------
-* Grid: "points equally spaced between maximum and minimum speeds and torques".  Speeds: 8 per
-  direction, from 25 to 400 rad/s of the motor for A and C (0.25-4 times their Stribeck velocity
-  of 100 rad/s, 240-3800 rpm, within the gears' rated input speeds) and from 10 to 290 rad/s for
-  B (Stribeck velocity 31.5 rad/s).  Loads: 8, from 5 % to 80 % of the module's nominal output
-  torque ``k_m I_nom N`` (A 91 Nm, B 72.75 Nm, C 26.25 Nm): the paper's loads reach "the nominal
-  torque".  Each point is held 5 s.
-* Brake: torque ``K_b U`` through a first-order coil lag of 50 ms, 0-24 V, at least 0.092 Nm
-  (the brake's minimum), at most 17 Nm; loads above 17 Nm use the second configuration (the
-  brake behind the 5:1 testbed gear: 0.46-85 Nm).  The two configurations are two campaigns over
-  all speeds, as on the real bench (a mechanical change).  PI control with anti-windup, its zero
-  on the coil pole, closed-loop time constant 0.25 s: settled (2 %) in about 1 s, as in the
-  paper's Fig. 4.
-* Torque sensor: noise 0.05 % of the range in use (0.01 Nm of 20 Nm, 0.1 Nm of 200 Nm).
-  Motor current (the controller's measurement): noise 0.5 % of the nominal current.  Encoder on
-  the motor: 8192 counts per revolution.  Recording at 1 kHz.
-* Motor speed control is taken as ideal (the controller's loops are orders of magnitude faster
-  than a 5 s point): the motor follows the set speed, with 1 s linear ramps between speeds; the
-  current is ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia: A
-  3e-5, B 8e-5, C 1.2e-5 kg m^2 (they only matter on the ramps).
-* Per point: current and load are filtered (2nd-order Butterworth, 2 Hz, forwards and backwards)
-  and averaged over the last 3 s of the point (the brake has settled).
+The unknowns, chosen (the paper does not give them; values in :data:`TESTBED`, :data:`MODULES`)
+-------------------------------------------------------------------------------------------------
+* Grid ("points equally spaced between maximum and minimum speeds and torques"): 8 speeds per
+  direction, 25-400 rad/s for A and C (0.25-4 times their Stribeck velocity of 100 rad/s) and
+  10-290 rad/s for B (Stribeck velocity 31.5 rad/s); 8 loads from 5 % to 80 % of the nominal output
+  torque ``k_m I_nom N`` (the paper's loads reach "the nominal torque"); 5 s per point.
+* Brake: torque ``K_b U`` through a 50 ms coil lag, 0-24 V, 0.092-17 Nm; loads above 17 Nm use the
+  brake behind the 5:1 testbed gear (0.46-85 Nm), a second campaign over all speeds as on the real
+  bench.  PI control with anti-windup, its zero on the coil pole, closed-loop time constant 0.25 s:
+  settled in about 1 s, as in the paper's Fig. 4.
+* Ideal motor speed control (its loops are far faster than a 5 s point), 1 s linear ramps between
+  speeds; current ``(friction + load / N + J thetadd) / k_m``.  Motor + wave-generator inertia
+  A 3e-5, B 8e-5, C 1.2e-5 kg m^2 (they matter only on the ramps).
+* Per point: current and load filtered (Butterworth, 2 Hz) and averaged over the last 3 s.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Iterable, Sequence
 
@@ -110,37 +97,34 @@ TESTBED = {
 }
 
 
-def _module(module: str) -> dict:
+def _key(module: str) -> str:
     key = str(module).upper().replace("LOLA-", "")
     if key not in MODULES:
         raise InputError(f"unknown Lola/CROPS module '{module}' (A, B or C)")
-    return MODULES[key]
+    return key
 
 
-def _key(module: str) -> str:
-    return str(module).upper().replace("LOLA-", "")
+def _module(module: str) -> dict:
+    return MODULES[_key(module)]
 
 
 def table4_model(module: str) -> FrictionModel:
     """Law (11) with Table IV's values for module A, B or C (symmetric; SI at the motor)."""
-    p = {k: v for k, v in PAPER_TABLE4[_key(module)].items() if k != "rms"} if _key(module) in PAPER_TABLE4 else None
-    if p is None:
-        _module(module)
-    return FrictionModel("lola11", p, name=f"Lola/CROPS {_key(module)} Table IV",
+    key = _key(module)
+    return FrictionModel("lola11", {k: v for k, v in PAPER_TABLE4[key].items() if k != "rms"},
+                         name=f"Lola/CROPS {key} Table IV",
                          notes=["law (11) made odd in velocity (gearspec.laws.lola11)"])
 
 
 def table3_model(module: str) -> FrictionModel:
     """Law (8) with Table III's values for module A, B or C (symmetric; SI at the motor)."""
-    _module(module)
-    p = {k: v for k, v in PAPER_TABLE3[_key(module)].items() if k != "rms"}
-    return FrictionModel("lola8", p, name=f"Lola/CROPS {_key(module)} Table III")
+    key = _key(module)
+    return FrictionModel("lola8", {k: v for k, v in PAPER_TABLE3[key].items() if k != "rms"},
+                         name=f"Lola/CROPS {key} Table III")
 
 
 def module_gear(module: str) -> GearTrain:
     """The module's gear preset (lola-a/-b/-c, with its torque constant) and the twin's inertia."""
-    import dataclasses
-
     m = _module(module)
     g = load_gear(m["gear"])
     if not math.isclose(g.total_ratio, m["ratio"]):
@@ -166,12 +150,9 @@ def default_loads(module: str) -> list[float]:
 # ---------------------------------------------------------------------- brake loop
 def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, kb: float, P: dict,
            rng: np.random.Generator, sensor_sd: float, t_min: float) -> tuple[np.ndarray, np.ndarray]:
-    """PI-controlled hysteresis brake for a batch of blocks (same load schedule, one per speed).
-
-    Returns the actual brake torque magnitude and the measured one (sensor noise), shape
-    (n_samples, n_blocks).  ``commands``: the load levels of the block (Nm); the block starts
-    with ``n_ramp`` samples at the first command (the speed ramp), then ``n_hold`` per level.
-    """
+    """PI-controlled hysteresis brake for a batch of blocks (same load schedule, one per speed):
+    ``n_ramp`` samples at the first of ``commands`` (Nm; the speed ramp), then ``n_hold`` per level.
+    Returns the actual and the measured (sensor noise) brake torque magnitude, (n_samples, n_blocks)."""
     dt = 1.0 / P["fs"]
     tau_c = P["brake_time_constant"]
     ki = 1.0 / (kb * P["brake_closed_loop"])
@@ -183,18 +164,15 @@ def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, k
     integ = T / (kb * ki)  # steady state at the initial torque
     Umax = P["brake_voltage"]
     act = np.empty((n, B))
-    meas = np.empty((n, B))
     noise = sensor_sd * rng.standard_normal((n, B))
     for k in range(n):
-        Ta = np.maximum(T, t_min)
-        act[k] = Ta
-        meas[k] = Ta + noise[k]
-        e = cmd[k] - meas[k]
+        act[k] = np.maximum(T, t_min)
+        e = cmd[k] - (act[k] + noise[k])
         u = kp * e + ki * integ
         U = np.clip(u, 0.0, Umax)
         integ += np.where((U != u) & ((u > Umax) == (e > 0)), 0.0, e * dt)
         T = alpha * T + (1 - alpha) * kb * U
-    return act, meas
+    return act, act + noise
 
 
 # ---------------------------------------------------------------------- the twin
@@ -210,48 +188,39 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     speeds : sequence of float, optional
         Signed motor speeds (rad/s), visited in order (default :func:`default_speeds`).
     loads : sequence of float, optional
-        Load torque magnitudes (Nm at the output), applied in increasing order at every speed
-        (default :func:`default_loads`); those above 17 Nm in a second campaign with the
-        testbed gear.
+        Load torque magnitudes (Nm at the output), in increasing order at every speed (default
+        :func:`default_loads`); those above 17 Nm in a second campaign with the testbed gear.
     hold : float, optional
         Seconds per operating point (default 5; the last 3 s, or the last 60 %, are averaged).
     truth : FrictionModel, optional
         The friction (default :func:`table4_model`); needs the load as law (11) does.
     effects : sequence of Effect
-        Injected into ``truth``; their channels (temperature) are fed to the model and recorded.
+        Injected into ``truth``; their channels (temperature) are fed to the model and recorded;
         ``load_meshing`` uses the brake's load (leave its ``loads`` empty).
-    seed : int or None
-    fs : float, optional
-        Sample rate (default 1 kHz).
-    testbed : dict, optional
-        Overrides of :data:`TESTBED`.
+    seed, fs, testbed
+        Seed of the noise; sample rate (default 1 kHz); overrides of :data:`TESTBED`.
 
     Returns
     -------
     recording : Recording
-        ``t`` (s, experiment clock), ``theta`` (motor rad, 8192 counts/rev), ``current`` (A,
-        raw, noisy), ``load`` (Nm at the output, the torque sensor, signed like the velocity:
-        the brake opposes the motion), ``run`` (one per operating point), ``temperature`` where an
-        effect supplies it.  Read it with :func:`module_gear` (torque constant, ratio).
+        ``t`` (s, experiment clock), ``theta`` (motor rad, 8192 counts/rev), ``current`` (A, raw),
+        ``load`` (Nm at the output, the torque sensor, signed like the velocity), ``run`` (one per
+        operating point), ``temperature`` where an effect supplies it; read it with :func:`module_gear`.
     points : DataFrame
         One row per operating point: ``point`` (= run), ``campaign`` (1 or 2), ``speed_cmd``,
         ``load_cmd``, ``speed`` (mean motor speed from the encoder, rad/s), ``load`` (Nm, signed),
         ``current`` (A), ``friction`` (eq. 12 at the motor, ``k_m I - T_l / N``, sign of the
-        velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth:
-        ``friction_true`` (mean of the simulated friction over the window), ``load_true``,
-        ``efficiency_true``, ``level_true`` (``truth`` without effects, position-averaged, at the
-        commanded speed and load: law (11) itself for the default truth).
-        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth` (model,
-        effects, settings).
+        velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth over
+        the window: ``friction_true``, ``load_true``, ``efficiency_true``, and ``level_true``
+        (``truth`` without effects, position-averaged, at the commanded speed and load).
+        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth`.
     """
-    P = dict(TESTBED)
-    P.update(testbed or {})
-    if fs is not None:
-        P["fs"] = float(fs)
-    if hold is not None:
-        P["hold"] = float(hold)
-    mod = _module(module)
+    P = {**TESTBED, **(testbed or {})}
+    for k, v in (("fs", fs), ("hold", hold)):
+        if v is not None:
+            P[k] = float(v)
     key = _key(module)
+    mod = MODULES[key]
     N, km = mod["ratio"], mod["torque_constant"]
     rng = np.random.default_rng(seed)
     speeds, loads = _grid(key, speeds, loads, P)
@@ -271,17 +240,14 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     if n_hold < 10:
         raise InputError("lola_twin: hold must be at least 10 samples")
     pieces, point_rows = _operating_points(speeds, loads, P, n_hold, n_ramp, rng)
-    v = np.concatenate([p[0] for p in pieces])
-    T_act = np.concatenate([p[1] for p in pieces])
-    T_meas = np.concatenate([p[2] for p in pieces])
-    run = np.concatenate([p[3] for p in pieces]).astype(np.int64)
+    v, T_act, T_meas, run = (np.concatenate(c) for c in zip(*pieces))
+    run = run.astype(np.int64)
     n = len(v)
     t = np.arange(n) * dt
     theta = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1])) * dt))
     acc = np.gradient(v, dt)
-    sgn = np.sign(v)
-    load_true = sgn * T_act
-    load_meas = sgn * T_meas
+    load_true = np.sign(v) * T_act  # the brake opposes the motion
+    load_meas = np.sign(v) * T_meas
     ch, recorded = effect_channels(effects, t, run)
     if "load" in ch:
         raise InputError("lola_twin: the brake is the load here; give load_meshing no loads")
@@ -298,9 +264,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     sim = {"t": t, "theta_meas": theta_meas, "current": current, "load_meas": load_meas, "load_true": load_true,
            "friction": friction, "run": run, "temperature": ch.get("temperature")}
     points = pd.DataFrame(_point_rows(point_rows, sim, starts, base, P, n_avg, N, km))
-    data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run}
-    for k in recorded:
-        data[k] = ch[k]
+    data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run,
+            **{k: ch[k] for k in recorded}}
     rec = Recording.from_arrays(gear=gear, source=f"lola twin {key}", **data)
     settings = {**P, "module": key, **{f"module_{k}": v for k, v in mod.items()}, "seed": seed,
                 "speeds": speeds, "loads": loads, "inertia_total": J}
@@ -340,18 +305,15 @@ def _operating_points(speeds, loads, P: dict, n_hold: int, n_ramp: int, rng: np.
     for camp, levels, gear_ratio, rng_sensor in campaigns:
         kb = P["brake_max"] * gear_ratio / P["brake_voltage"]
         t_min = P["brake_min"] * gear_ratio
-        B = len(speeds)
-        T_init = np.full(B, max(levels))
+        T_init = np.full(len(speeds), max(levels))
         T_init[0] = 0.0
         act, meas = _brake(np.asarray(levels), n_hold, n_ramp, T_init, kb, P, rng, P["sensor_noise"] * rng_sensor,
                            t_min)
         for b, sp in enumerate(speeds):
             v = np.concatenate((np.linspace(v_prev, sp, n_ramp, endpoint=False), np.full(n_hold * len(levels), sp)))
             pt = np.concatenate((np.zeros(n_ramp, int), np.repeat(np.arange(len(levels)), n_hold)))
-            first = len(point_rows)
-            for j, lv in enumerate(levels):
-                point_rows.append({"campaign": camp, "speed_cmd": sp, "load_cmd": lv})
-            pieces.append((v, act[:, b], meas[:, b], pt + first))
+            pieces.append((v, act[:, b], meas[:, b], pt + len(point_rows)))
+            point_rows += [{"campaign": camp, "speed_cmd": sp, "load_cmd": lv} for lv in levels]
             v_prev = sp
     return pieces, point_rows
 
@@ -361,16 +323,11 @@ def _point_rows(point_rows: list[dict], sim: dict, starts: np.ndarray, base: Fri
     """Per operating point: current and load low-pass filtered (forwards and backwards, per speed
     block) and averaged over the settled end of the point; friction (eq. 12) and efficiency
     (eq. 13) from them, and the truth over the same samples."""
-    fs_ = P["fs"]
-    dt = 1.0 / fs_
+    dt = 1.0 / P["fs"]
     t, theta_meas, run, temperature = sim["t"], sim["theta_meas"], sim["run"], sim["temperature"]
-    n = len(t)
-    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=fs_, output="sos")
-    cur_f = np.empty(n)
-    load_f = np.empty(n)
-    for a, b in zip(starts[:-1], starts[1:]):
-        cur_f[a:b] = signal.sosfiltfilt(bq, sim["current"][a:b])
-        load_f[a:b] = signal.sosfiltfilt(bq, sim["load_meas"][a:b])
+    bq = signal.butter(P["filter_order"], P["filter_cutoff"], fs=P["fs"], output="sos")
+    cur_f, load_f = (np.concatenate([signal.sosfiltfilt(bq, sim[k][a:b]) for a, b in zip(starts[:-1], starts[1:])])
+                     for k in ("current", "load_meas"))
     rows = []
     ends = np.flatnonzero(np.diff(np.concatenate((run, [-1]))) != 0)  # last sample of each run
     for pi, row in enumerate(point_rows):

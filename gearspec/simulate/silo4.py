@@ -1,69 +1,41 @@
 """Digital twin of the SILO4 leg's joint 3 (Garcia, Gonzalez de Santos, Canudas de Wit, IJRR 2002).
 
-The test bench of the paper, section 2, rebuilt as a simulation whose friction is known:
+The paper's bench (section 2) with a known friction: a PID on a quantised encoder drives a DC motor
+(back-EMF, R) through a PWM voltage; rotor inertia J; friction of motor + planetary 14 + worm 20.5
+(eq. 11, Table 2's values, :func:`table2_model`, or any ``truth`` model, plus the effects of
+:mod:`gearspec.simulate.effects`); the armature current goes through a 1 kHz 4th-order Bessel filter
+and is sampled every 4 ms with noise.  One *run* is one experiment: from standstill an
+acceleration-limited ramp, a held speed, a ramp back to rest; ten repetitions per speed.
 
-    PID (position + velocity, quantised encoder) -> PWM voltage -> DC motor (back-EMF, R)
-        -> rotor inertia J -> friction of motor + planetary 14 + worm 20.5 (SILO4 eq. 11)
-    armature current -> 1 kHz 4th-order Bessel filter -> sampled every 4 ms (+ noise)
+SI throughout, at the MOTOR: theta and speeds in rad, rad/s; torques in Nm; current in A.  Table
+2's omegas are per motor rad: output, worm (= planetary output) and motor shaft.
 
-One *run* is one experiment of the paper: from standstill the controller follows a velocity-
-mode trajectory (acceleration-limited ramp, a held speed, a ramp back to rest); ten repetitions
-per speed, speeds over the paper's range in both directions.  Friction is the full model (11)
-with the values of Table 2 (:func:`table2_model`), or any :class:`~gearspec.model.FrictionModel`
-given as ``truth``, plus the effects of :mod:`gearspec.simulate.effects`.
-
-Units
------
-SI throughout: theta and speeds at the MOTOR (rad, rad/s), torques at the motor (Nm), current in
-A.  Table 2's speeds are motor rpm; its omega column is the shaft frequency per radian of MOTOR
-position (3.5e-3 = 1/287, 0.071 = 1/14, 1 = 1/1), so the harmonics are at 1/(2 pi 287),
-1/(2 pi 14) and 1/(2 pi) cycles per motor rad: the output shaft (joint), the worm shaft (=
-planetary output) and the motor shaft -- the preset ``silo4-joint3``'s declared lines.
-
-The unknowns, chosen (the paper does not give them)
----------------------------------------------------
-* Motor: a 24 V graphite-brush DC motor with ``k_M = 0.0231 Nm/A`` and ``R = 1.6 ohm``.  Chosen so
-  that the top speed of the paper's figures, 6500 rpm, is reachable against Table 2's friction
-  there (7.1 mNm + 0.0134 mNm/rpm x 6500 = 94 mNm, i.e. 4.1 A): ``k_M w + R I = 15.7 V + 6.5 V
-  < 24 V``; and so that the electrical damping ``k_M^2 / R = 3.3e-4 Nm s/rad`` is *below* the
-  velocity-weakening slope of the Stribeck law at standstill, ``(tau_E - tau_C) / v_s = 5.0e-4``
-  (positive) and ``5.4e-4`` (negative): near standstill the drive is negatively damped unless the
-  controller's derivative acts -- which, with a 2000-count encoder, it cannot below a count per
-  derivative interval.  That is the stick-slip of the paper's Fig. 3.  Friction at low speed is
-  then 0.37 A.
-* Inertia at the motor ``J = 2.0e-6 kg m^2``: rotor (about 1.5e-6 for a motor of this size) plus
-  the planetary stage and worm reflected through 14 and 287 (small).
-* Encoder: 500 lines read in quadrature, 2000 counts per revolution (3.1 mrad per count).
-* Controller: a PID on the encoder position error, tuned for a triple closed-loop pole at
-  ``bandwidth = 2 pi 15 Hz`` with the motor model: ``Kd + k_M^2/R = 3 J w``, ``Kp = 3 J w^2``,
-  ``Ki = J w^3`` (in torque units; times ``R / k_M`` in volts).  The derivative is the error
-  difference over a 5 ms derivative interval (as digital motion-control PIDs of the time did),
-  the integral stops while the voltage saturates (anti-windup), the trajectory is acceleration-
-  limited to 2000 rad/s^2 (6500 rpm in 0.34 s).
-* Control and integration rate 4 kHz, not the paper's 16 kHz: the loop's crossover (~15 Hz) and
-  the fastest friction ripple (the motor shaft at 6500 rpm, 108 Hz) are 40-270 times below it, so
-  the closed loop behaves the same (half a 4 kHz sample of delay is 0.7 degree at 15 Hz) while the
-  simulation is four times cheaper.  The Bessel filter is discretised exactly for a current held
-  over each control period (zero-order hold), which is what a PWM-averaged current is.
-* Why these gains: the encoder's quantisation enters the current through the P and D terms as a
-  sawtooth at the count rate (motor speed x 2000 / 2 pi), which the 4 ms sampling folds into lines
-  at fixed *time* frequencies (e.g. 83.3 Hz at round rpm values).  A stiffer loop (30 Hz, 2 ms
-  derivative) made them 0.2-0.8 mNm, larger than the motor-shaft ripple; at 15 Hz and 5 ms they are
-  0.05-0.13 mNm, about the measurement noise per sample.  They are physical (a real digital loop
-  with this encoder and this sampling makes them too) and not locked to position: their frequency
-  per radian changes with speed, so an analysis can tell them from the gear lines.
-* Measurement: current noise 4 mA (0.09 mNm, about 1 % of the friction: Table 3's model errors
-  of 0.12-0.21 mNm include it) on each 4 ms sample, and a repetition-to-repetition variation of
-  the whole friction of 1 % (lubricant state, temperature), so that repetitions scatter by about
-  1 %, inside the paper's "< 3 %".  Each repetition starts from the same position (the bench
-  returns to its home position), so that the position ripple does not add to the scatter.
-* Stick-slip is handled as such: a motor at rest stays at rest while the net drive torque is
-  below the static friction at its position (the model's friction at zero speed, ripple
-  included); a moving motor whose velocity would change sign within a step stops instead.
-
-Performance: all runs are integrated together, one numpy step per control period over the
-vector of runs (runs that have finished drop out); the default twin (40 speeds x 10 repetitions)
-takes some seconds.
+The unknowns, chosen (the paper does not give them; values in :data:`PLANT`)
+-----------------------------------------------------------------------------
+* Motor, 24 V graphite-brush DC, ``k_M = 0.0231 Nm/A``, ``R = 1.6 ohm``: 6500 rpm is reachable
+  against Table 2's friction there (94 mNm, 4.1 A: ``k_M w + R I = 15.7 V + 6.5 V < 24 V``), and the
+  electrical damping ``k_M^2 / R = 3.3e-4 Nm s/rad`` is *below* the Stribeck law's velocity-weakening
+  slope at standstill (5.0e-4 positive, 5.4e-4 negative): near standstill the drive is negatively
+  damped unless the derivative acts -- which a 2000-count encoder cannot below a count per
+  derivative interval.  That is the stick-slip of Fig. 3.
+* ``J = 2.0e-6 kg m^2`` at the motor (rotor about 1.5e-6 plus the reflected gears); encoder 500
+  lines in quadrature (2000 counts/rev).
+* PID on the encoder position error for a triple closed-loop pole at 2 pi 15 Hz:
+  ``Kd + k_M^2/R = 3 J w``, ``Kp = 3 J w^2``, ``Ki = J w^3`` (torque units; times ``R / k_M`` in
+  volts); derivative over 5 ms, anti-windup while the voltage saturates, trajectory limited to
+  2000 rad/s^2.  A stiffer loop (30 Hz, 2 ms) made the encoder's quantisation sawtooth, folded by
+  the 4 ms sampling into lines at fixed *time* frequencies, 0.2-0.8 mNm (above the motor-shaft
+  ripple); at 15 Hz and 5 ms they are 0.05-0.13 mNm, about the noise per sample.  They are physical
+  and not locked to position, so an analysis can tell them from the gear lines.
+* Control and integration at 4 kHz, not the paper's 16 kHz: the crossover (~15 Hz) and the fastest
+  ripple (108 Hz) are 40-270 times below it.  The Bessel filter is discretised exactly for a
+  current held over each control period (zero-order hold), which a PWM-averaged current is.
+* Current noise 4 mA (0.09 mNm, about 1 % of the friction) per sample and a repetition-to-repetition
+  friction variation of 1 %, inside the paper's "< 3 %".  Every repetition starts from the same
+  position (the bench returns home), so the position ripple does not add to the scatter.
+* Stick-slip: a motor at rest stays at rest while the net drive torque is below the static friction
+  at its position (the model at zero speed, ripple included); a velocity that would change sign
+  within a step stops instead.
 """
 
 from __future__ import annotations
@@ -73,6 +45,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
@@ -151,22 +124,15 @@ _FREQS = {1: 1.0 / (2 * _PI * RATIO), 2: 1.0 / (2 * _PI * RATIO_PLANETARY), 3: 1
 
 
 def table2_model() -> FrictionModel:
-    """The full SILO4 model (eq. 11) with Table 2's values, in SI units at the motor.
-
-    ``tau`` in Nm (mNm / 1000), Stribeck velocity ``v_s`` in rad/s of the motor (rpm x 2 pi / 60),
-    viscous in Nm s/rad (mNm/rpm x 1e-3 x 60 / 2 pi), decays in s/rad (1/rpm x 60 / 2 pi), the
-    harmonics at the output shaft (1/(2 pi 287)), worm shaft (1/(2 pi 14)) and motor shaft
-    (1/(2 pi)) cycles per motor rad, labelled as the ``silo4-joint3`` preset labels its lines.
-    The paper uses one Stribeck velocity per direction (28.18 / 26.58 rpm).
-    """
+    """The full SILO4 model (eq. 11) with Table 2's values, in SI units at the motor: torques in Nm,
+    ``v_s`` in rad/s, viscous in Nm s/rad, decays in s/rad, the harmonics at the exact shaft
+    frequencies (cycles per motor rad) labelled as the ``silo4-joint3`` preset labels its lines.
+    The paper uses one Stribeck velocity per direction (28.18 / 26.58 rpm)."""
     dirs = {}
     for d in ("positive", "negative"):
         P = {k: v[d] for k, v in PAPER_TABLE2.items()}
-        harmonics = []
-        for k in (1, 2, 3):
-            b = 0.0 if k == 1 else P[f"b{k}"]
-            harmonics.append({"frequency": _FREQS[k], "amplitude": P[f"A{k}"] * 1e-3, "decay": b / RPM,
-                              "phase": P[f"phi{k}"], "label": _LABELS[k]})
+        harmonics = [{"frequency": _FREQS[k], "amplitude": P[f"A{k}"] * 1e-3, "decay": P.get(f"b{k}", 0.0) / RPM,
+                      "phase": P[f"phi{k}"], "label": _LABELS[k]} for k in (1, 2, 3)]
         dirs[d] = {"tau_c": P["tau_C"] * 1e-3, "tau_s": P["tau_E"] * 1e-3, "v_s": P["theta_s"] * RPM,
                    "viscous": P["B"] * 1e-3 / RPM, "harmonics": harmonics}
     return FrictionModel("silo4", dirs["positive"], dirs["negative"], name="SILO4 Table 2",
@@ -194,24 +160,11 @@ def default_hold(speed: float) -> float:
 # ---------------------------------------------------------------------- truth record
 @dataclass
 class TwinTruth:
-    """What a twin knows and a recording does not.
-
-    Attributes
-    ----------
-    twin : str
-    model : FrictionModel
-        The friction that was simulated (effects applied).
-    gear : GearTrain
-        The spec to read the recording with (torque constant, inertia as the twin's).
-    effects : list of dict
-        Ground truth of the injected effects (:func:`~gearspec.simulate.effects.effects_truth`).
-    runs : DataFrame
-        One row per run (see the twin's docstring).
-    settings : dict
-        Every setting of the bench (plant, controller, sensors, seed).
-    points : DataFrame or None
-        Operating points (the Lola testbed).
-    """
+    """What a twin knows and a recording does not: the twin's name, the friction ``model`` simulated
+    (effects applied), the ``gear`` spec to read the recording with (the twin's torque constant and
+    inertia), the ground truth of the injected ``effects`` (:func:`~.effects.effects_truth`), one row
+    per run (``runs``, see the twin's docstring), every setting of the bench (plant, controller,
+    sensors, seed) and the operating ``points`` (or None)."""
 
     twin: str
     model: FrictionModel
@@ -245,46 +198,28 @@ def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
     return Ad, Bd[:, 0], Cd[0], float(Dd[0, 0])
 
 
-def _channel_values(spec, name, t, run, n_rep):
-    """A channel from a scalar, a sequence (one value per repetition, cycled) or callable(t, run)."""
-    if spec is None:
-        return None
-    if callable(spec):
-        return np.asarray(spec(t, run), dtype=float) * np.ones(np.shape(t))
-    if np.ndim(spec) == 0:
-        return np.full(np.shape(t), float(spec))
-    vals = np.asarray(spec, dtype=float)
-    return vals[np.asarray(n_rep) % len(vals)] * np.ones(np.shape(t))
-
-
 def _auto_starts(model: FrictionModel, w_cmd, holds, acc, step: float = 0.05) -> np.ndarray:
     """Start positions that centre each run's held travel where the model's position ripple
     (friction minus its position average, at the run's speed) averages to about zero over the
     travel; searched over one output revolution, the nearest to 0 among the best."""
     out = np.zeros(len(w_cmd))
     period = 2 * _PI * RATIO
-    cache: dict = {}
-    for r, (w, hold) in enumerate(zip(w_cmd, holds)):
-        key = (float(w), float(hold))
-        if key not in cache:
-            d = 1.0 if w > 0 else -1.0
-            travel = abs(w) * hold
-            ramp = w * w / (2 * acc)
-            if travel >= period:
-                cache[key] = 0.0
-            else:
-                n_w = max(1, int(round(travel / step)))
-                grid = np.arange(-n_w, int(period / step) + n_w + 1) * step
-                ripple = d * model.friction(grid, np.full(len(grid), w)) - model.mean_level(abs(w), d)[0]
-                c = np.concatenate(([0.0], np.cumsum(ripple)))
-                avg = (c[n_w:] - c[:-n_w]) / n_w  # mean over windows of n_w samples
-                centres = grid[:len(avg)] + 0.5 * n_w * step
-                ok = (centres >= 0) & (centres < period)
-                best = np.min(np.abs(avg[ok]))
-                cand = centres[ok][np.abs(avg[ok]) <= best + 1e-3 * np.std(ripple) + 1e-15]
-                centre = float(cand[np.argmin(np.abs(cand))])
-                cache[key] = centre - d * (ramp + 0.5 * travel)
-        out[r] = cache[key]
+    for w, hold in dict.fromkeys(zip(w_cmd.tolist(), holds.tolist())):  # each (speed, hold) once, in order
+        d = 1.0 if w > 0 else -1.0
+        travel = abs(w) * hold
+        if travel >= period:
+            continue
+        n_w = max(1, int(round(travel / step)))
+        grid = np.arange(-n_w, int(period / step) + n_w + 1) * step
+        ripple = d * model.friction(grid, np.full(len(grid), w)) - model.mean_level(abs(w), d)[0]
+        c = np.concatenate(([0.0], np.cumsum(ripple)))
+        avg = (c[n_w:] - c[:-n_w]) / n_w  # mean over windows of n_w samples
+        centres = grid[:len(avg)] + 0.5 * n_w * step
+        ok = (centres >= 0) & (centres < period)
+        best = np.min(np.abs(avg[ok]))
+        cand = centres[ok][np.abs(avg[ok]) <= best + 1e-3 * np.std(ripple) + 1e-15]
+        centre = float(cand[np.argmin(np.abs(cand))])
+        out[(w_cmd == w) & (holds == hold)] = centre - d * (w * w / (2 * acc) + 0.5 * travel)
     return out
 
 
@@ -306,27 +241,23 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     truth : FrictionModel, optional
         The friction (default :func:`table2_model`); theta at the motor, SI.
     effects : sequence of Effect
-        Injected into ``truth`` (:func:`~gearspec.simulate.effects.apply_effects`); channels they
-        supply (temperature, load) are fed to the model and recorded.
+        Injected into ``truth``; the channels they supply (temperature, load) are fed to the model
+        and recorded.
     duration : float, sequence (one per speed) or callable(speed rad/s) -> s, optional
         Seconds held at speed (default :func:`default_hold`).
     seed : int or None
         Noise and repetition-to-repetition variation.
     load : float, sequence (per repetition, cycled) or callable(t, run), optional
-        Output load torque (Nm, the torque the drive delivers to the load, as in the ``load``
-        channel); the drive supplies ``load / 287`` more at the motor.  SILO4 was measured without
-        load; an effect may supply one (``load_meshing(loads=...)``).
+        Output load torque (Nm); the drive supplies ``load / 287`` more at the motor.  SILO4 was
+        measured without load; an effect may supply one (``load_meshing(loads=...)``).
     theta0 : float or "auto"
-        Motor position at the start of every run (rad), the same for every repetition (the bench
-        returns home between repetitions, so that they scatter only by noise and friction
-        variation).  "auto" (default): per speed, the start that centres the held travel where the
-        position ripple of ``truth`` (without effects) averages out over it -- at low speed a
-        10 s plateau covers a fraction of a worm-shaft cycle (88 rad), and its average would
-        otherwise carry the ripple at one position (up to +-0.9 mNm, 10 %), which the Stribeck
-        curve of Fig. 4 does not.
+        Motor position at the start of every run (rad), the same for every repetition.  "auto"
+        (default): per speed, the start that centres the held travel where the position ripple of
+        ``truth`` (without effects) averages out -- at low speed a 10 s plateau covers a fraction of
+        a worm-shaft cycle (88 rad) and would otherwise carry the ripple at one position (up to
+        +-0.9 mNm, 10 %), which the Stribeck curve of Fig. 4 does not.
     record_velocity : bool
-        Add a ``velocity`` column: the true motor velocity at each sample (the bench did not
-        measure it; for plots and checks).
+        Add a ``velocity`` column: the true motor velocity (the bench did not measure it).
     sample_interval, current_noise, repeatability : float, optional
         Override :data:`PLANT`'s 4 ms, 4 mA and 1 %.
     plant : dict, optional
@@ -335,27 +266,21 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     Returns
     -------
     recording : Recording
-        Columns ``t`` (s on the experiment clock: runs follow each other with a pause), ``theta``
-        (motor rad, encoder-quantised to 2 pi / 2000), ``current`` (A, Bessel-filtered, sampled,
-        noisy), ``run``, and ``load`` / ``temperature`` / ``velocity`` where present.  Read it
-        with :func:`twin_gear` (torque constant and inertia).
+        ``t`` (s on the experiment clock, a pause between runs), ``theta`` (motor rad, encoder-
+        quantised), ``current`` (A, filtered, sampled, noisy), ``run``, and ``load`` /
+        ``temperature`` / ``velocity`` where present; read it with :func:`twin_gear`.
     truth : TwinTruth
         ``runs``: one row per run with ``run, speed_rpm, velocity`` (commanded, rad/s),
-        ``direction, repetition, t_start, t_stop, t0, t1`` (the held part, settled, on the
-        clock), ``scale`` (this repetition's friction factor), ``level`` (the truth model's
-        position-averaged friction at the speed, :meth:`FrictionModel.mean_level`, times
-        ``scale``), ``friction_mean`` (mean of the true friction magnitude over the held samples:
-        what a plateau average measures, position ripple included), ``velocity_mean`` (true
-        mean velocity over the held part), ``stuck_fraction`` (of held samples at rest).
+        ``direction, repetition, t_start, t_stop, t0, t1`` (the settled held part, on the clock),
+        ``scale`` (the repetition's friction factor), ``level`` (``scale`` times the truth's
+        :meth:`~FrictionModel.mean_level` at the speed), ``friction_mean`` (mean true friction
+        magnitude over the held samples, ripple included), ``velocity_mean``, ``stuck_fraction``.
     """
-    P = dict(PLANT)
-    P.update(plant or {})
-    if sample_interval is not None:
-        P["sample_interval"] = float(sample_interval)
-    if current_noise is not None:
-        P["current_noise"] = float(current_noise)
-    if repeatability is not None:
-        P["repeatability"] = float(repeatability)
+    P = {**PLANT, **(plant or {})}
+    for k, v in (("sample_interval", sample_interval), ("current_noise", current_noise),
+                 ("repeatability", repeatability)):
+        if v is not None:
+            P[k] = float(v)
     rng = np.random.default_rng(seed)
     if speeds_rpm is None:
         speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
@@ -372,21 +297,20 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     runs = _schedule(speeds_rpm, repetitions, duration, P, rng)
     bench = _Bench(P, lf.extra_inertia, runs.dt)
     channels = _Channels(effects, load, runs.t_start, runs.rep)
-    _, ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
+    ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
     missing = {n for e in effects for n in e.needs} - set(ch0)
     if missing:
         raise InputError(f"silo4_twin: an effect needs the {', '.join(sorted(missing))} channel, which this twin "
                          "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
     if model.law_spec.needs_load and "load" not in ch0:
         raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
-    channels.dynamic = callable(load) or any(e.name == "warming" for e in effects)
     if isinstance(theta0, str):
         if theta0 != "auto":
             raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
         starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc)
     else:
         starts = np.full(runs.n, float(theta0))
-    out = _ClosedLoop(runs, bench, lf, channels, ch0, starts).run()
+    out = _closed_loop(runs, bench, lf, channels, ch0, starts)
     cols, rows = _twin_columns(runs, out, model, P, rng, speeds_rpm, repetitions, starts)
     data = {k: cols[k] for k in ("t", "theta", "current", "run")}
     data.update({k: cols[k] for k in out.out_ch if k in recorded})
@@ -402,36 +326,12 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     return rec, truth_info
 
 
-@dataclass
-class _Runs:
-    """The runs of a twin, one per (speed, repetition): commanded velocity (rad/s), held seconds,
-    the profile's times (s from the run's start: end of the ramp up, of the hold, of the ramp
-    down, of the record), samples and the start on the experiment clock, the friction factor of
-    the repetition; and the clock's steps (control ``dt``, ``n_sub`` of them per sample ``dt_s``)."""
-
-    w_cmd: np.ndarray
-    rep: np.ndarray
-    holds: np.ndarray
-    acc: float
-    t_acc: np.ndarray
-    t_hold_end: np.ndarray
-    t_end: np.ndarray
-    t_stop: np.ndarray
-    rate: float
-    dt: float
-    n_sub: int
-    dt_s: float
-    n_samp: np.ndarray
-    t_start: np.ndarray
-    scale: np.ndarray
-
-    @property
-    def n(self) -> int:
-        return len(self.w_cmd)
-
-
-def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Generator) -> _Runs:
-    """The runs (speed, repetition) in order, their acceleration-limited profiles and clock."""
+def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Generator) -> SimpleNamespace:
+    """The runs of a twin, one per (speed, repetition), in order: commanded velocity ``w_cmd``
+    (rad/s), ``rep``, held seconds ``holds``, the profile's times (s from the run's start: end of the
+    ramp up ``t_acc``, of the hold, of the ramp down, of the record ``t_stop``), ``n_samp`` samples,
+    ``t_start`` on the experiment clock, the friction factor ``scale`` of the repetition; and the
+    clock: control step ``dt``, ``n_sub`` of them per sample interval ``dt_s``."""
     n_sp = len(speeds_rpm)
     w_cmd = np.repeat(np.asarray(speeds_rpm) * RPM, repetitions)
     rep = np.tile(np.arange(repetitions), n_sp)
@@ -461,8 +361,9 @@ def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Ge
     n_samp = np.floor(t_stop / dt_s).astype(int) + 1
     t_start = np.concatenate(([0.0], np.cumsum(n_samp * dt_s + float(P["pause"]))[:-1]))
     scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(w_cmd))
-    return _Runs(w_cmd, rep, holds, acc, t_acc, t_hold_end, t_end, t_stop, rate, dt, n_sub, dt_s, n_samp, t_start,
-                 scale)
+    return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
+                           t_end=t_end, t_stop=t_stop, rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp,
+                           t_start=t_start, scale=scale)
 
 
 class _Bench:
@@ -487,193 +388,163 @@ class _Bench:
 
 class _Channels:
     """The channels (load, temperature) of the runs: constant per run or functions of the
-    experiment clock; ``dynamic`` when they change within a run."""
+    experiment clock (``dynamic``: they change within a run, warming or a callable load)."""
 
     def __init__(self, effects, load, t_start: np.ndarray, rep: np.ndarray):
         self.effects, self.load, self.t_start, self.rep = effects, load, t_start, rep
-        self.dynamic = False
+        self.dynamic = callable(load) or any(e.name == "warming" for e in effects)
 
     def at(self, tl, idx):
-        """``(clock, channels, names recorded)`` at run times ``tl`` of the runs ``idx``."""
+        """``(channels, names recorded)`` at run times ``tl`` of the runs ``idx``; the ``load``
+        argument: a scalar, a sequence (one value per repetition, cycled) or callable(t, run)."""
         clock = self.t_start[idx] + tl
         ch, rec_names = effect_channels(self.effects, clock, idx)
         if self.load is not None:
             if "load" in ch:
                 raise InputError("silo4_twin: both the load argument and an effect supply the load")
-            ch["load"] = _channel_values(self.load, "load", clock, idx, self.rep[idx])
+            if callable(self.load):
+                ch["load"] = np.asarray(self.load(clock, idx), dtype=float) * np.ones(np.shape(clock))
+            elif np.ndim(self.load) == 0:
+                ch["load"] = np.full(np.shape(clock), float(self.load))
+            else:
+                vals = np.asarray(self.load, dtype=float)
+                ch["load"] = vals[np.asarray(self.rep[idx]) % len(vals)] * np.ones(np.shape(clock))
             rec_names = rec_names | {"load"}
-        return clock, ch, rec_names
+        return ch, rec_names
 
 
-class _ClosedLoop:
-    """Every run of a twin integrated together: one numpy step per control period over the vector of
-    runs, ordered by stop time (longest first) so that the runs still active are a prefix; what is
-    recorded at each sample kept per run slot (``inv`` maps a run to its slot)."""
-
-    _CHUNK = 1024  # control steps whose reference trajectory is computed at once
-
-    def __init__(self, runs: _Runs, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
-                 starts: np.ndarray):
-        self.runs, self.bench, self.lf, self.channels = runs, bench, lf, channels
-        R_ = runs.n
-        order = np.argsort(-runs.t_stop, kind="stable")
-        self.inv = np.empty(R_, int)
-        self.inv[order] = np.arange(R_)
-        self.W = runs.w_cmd[order]
-        self.TA, self.TH, self.TE, self.TS = (runs.t_acc[order], runs.t_hold_end[order], runs.t_end[order],
-                                              runs.t_stop[order])
-        self.SC = runs.scale[order]
-        self.NS = runs.n_samp[order]
-        self.run_idx = order.copy()  # run id of each state slot
-        self.T0 = runs.t_start[order]
-        self.TH0 = starts[order]
-        self.const_ch = {k: v[order] for k, v in ch0.items()}
-        ns_max = int(runs.n_samp.max())
-        self.out_th = np.full((ns_max, R_), np.nan)
-        self.out_i = np.full((ns_max, R_), np.nan)
-        self.out_f = np.full((ns_max, R_), np.nan)
-        self.out_v = np.full((ns_max, R_), np.nan)
-        self.out_ch = {k: np.full((ns_max, R_), np.nan) for k in ch0}
-        terms = lf.model.terms
-        self.needs_t = any("t" in TERMS[t["kind"]].needs for t in terms)
-        self.needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in terms)
-
-    def run(self) -> "_ClosedLoop":
-        """Integrate every run to its stop; the recorded samples are in ``out_*``."""
-        runs, bench, lf, channels = self.runs, self.bench, self.lf, self.channels
-        R_, dt, n_sub, rate = runs.n, runs.dt, runs.n_sub, runs.rate
-        kM, Rw, Vmax, q, m_der = bench.kM, bench.Rw, bench.Vmax, bench.q, bench.m_der
-        Bd, Cd, Dd = bench.Bd, bench.Cd, bench.Dd
-        TA, TH, TE, TS, SC, NS, T0, TH0 = self.TA, self.TH, self.TE, self.TS, self.SC, self.NS, self.T0, self.TH0
-        run_idx, const_ch, dynamic_ch = self.run_idx, self.const_ch, channels.dynamic
-        out_th, out_i, out_f, out_v, out_ch = self.out_th, self.out_i, self.out_f, self.out_v, self.out_ch
-        sw, Wa = np.sign(self.W), np.abs(self.W)
-        half_a = 0.5 * runs.acc
-        theta = TH0.copy()
-        vel = np.zeros(R_)
-        integ = np.zeros(R_)
-        ebuf = np.zeros((m_der, R_))
-        X = np.zeros((R_, len(Bd)))
-        AdT = np.ascontiguousarray(bench.Ad.T)
-        turn_theta = np.full(R_, np.nan)
-        last_sign = np.zeros(R_)
-        f_acc = np.zeros(R_)  # friction summed over the current sample interval
-        n_steps = int(round(TS.max() * rate)) + 1
-        kp_v, ki_v, kd_v = bench.volt * bench.Kp, bench.volt * bench.Ki, bench.volt * bench.Kd / (m_der * dt)
-        dt_J = dt / bench.J
-        n_act = R_
-        chunk = self._CHUNK
-        for k0 in range(0, n_steps, chunk):
-            # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
-            while n_act > 0 and k0 * dt > TS[n_act - 1] + 1e-9:
+def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
+                 starts: np.ndarray) -> SimpleNamespace:
+    """Every run of a twin integrated together to its stop: one numpy step per control period over
+    the vector of runs, ordered by stop time (longest first) so that the runs still active are a
+    prefix.  Returns what is recorded at each sample (``out_*``, per run slot; ``inv`` maps a run
+    to its slot)."""
+    R_, dt, n_sub, rate = runs.n, runs.dt, runs.n_sub, runs.rate
+    kM, Rw, Vmax, q, m_der = bench.kM, bench.Rw, bench.Vmax, bench.q, bench.m_der
+    Bd, Cd, Dd = bench.Bd, bench.Cd, bench.Dd
+    run_idx = np.argsort(-runs.t_stop, kind="stable")  # run id of each state slot
+    TA, TH, TE, TS, SC, NS, T0, W = (getattr(runs, k)[run_idx] for k in (
+        "t_acc", "t_hold_end", "t_end", "t_stop", "scale", "n_samp", "t_start", "w_cmd"))
+    TH0, const_ch, dynamic_ch = starts[run_idx], {k: v[run_idx] for k, v in ch0.items()}, channels.dynamic
+    shape = (int(runs.n_samp.max()), R_)
+    out_th, out_i, out_f, out_v = (np.full(shape, np.nan) for _ in range(4))
+    out_ch = {k: np.full(shape, np.nan) for k in ch0}
+    needs_t = any("t" in TERMS[t["kind"]].needs for t in lf.model.terms)
+    needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in lf.model.terms)
+    sw, Wa = np.sign(W), np.abs(W)
+    half_a = 0.5 * runs.acc
+    # state per slot; f_acc: the friction summed over the current sample interval
+    theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
+    vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
+    ebuf = np.zeros((m_der, R_))
+    X = np.zeros((R_, len(Bd)))
+    AdT = np.ascontiguousarray(bench.Ad.T)
+    n_steps = int(round(TS.max() * rate)) + 1
+    kp_v, ki_v, kd_v = bench.volt * bench.Kp, bench.volt * bench.Ki, bench.volt * bench.Kd / (m_der * dt)
+    dt_J = dt / bench.J
+    n_act = R_
+    chunk = 1024  # control steps whose reference trajectory is computed at once
+    for k0 in range(0, n_steps, chunk):
+        # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
+        tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
+        a = slice(0, n_act)
+        t1 = np.minimum(tl_c, TA[a])
+        t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
+        t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
+        ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+        for kk_ in range(len(tl_c)):
+            k = k0 + kk_
+            tl = k * dt
+            while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
                 n_act -= 1
             if n_act == 0:
                 break
-            tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
             a = slice(0, n_act)
-            t1 = np.minimum(tl_c, TA[a])
-            t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
-            t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
-            ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
-            for kk_ in range(len(tl_c)):
-                k = k0 + kk_
-                tl = k * dt
-                if tl > TS[n_act - 1] + 1e-9:
-                    while n_act > 0 and tl > TS[n_act - 1] + 1e-9:
-                        n_act -= 1
-                    if n_act == 0:
-                        break
-                    a = slice(0, n_act)
-                th = theta[a]
-                v = vel[a]
-                # PID on the encoder count (voltage out, anti-windup: no integration while the
-                # voltage saturates in the direction of the error)
-                e = ref_c[kk_, :n_act] - np.floor(th / q) * q
-                j = k % m_der
-                u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
-                ebuf[j, a] = e
-                U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
-                integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
-                current = (U - kM * v) * (1.0 / Rw)
-                # channels, external torques, friction (at rest: the static friction, the model at
-                # 0+ in the direction the drive pushes)
-                kw = {}
-                if const_ch or dynamic_ch:
-                    ch = channels.at(np.full(n_act, tl), run_idx[a])[1] if dynamic_ch else \
-                        {kk: vv[a] for kk, vv in const_ch.items()}
-                    kw = {kk: ch.get(kk) for kk in ("load", "temperature")}
-                else:
-                    ch = {}
-                if self.needs_t:
-                    kw["t"] = T0[a] + tl
-                if self.needs_run:
-                    kw["run"] = run_idx[a]
-                drive = kM * current
-                if kw.get("load") is not None:
-                    drive = drive - kw["load"] / RATIO
-                if lf.signed:
-                    drive = drive - lf.external(th, v, **kw)
-                moving = v != 0
-                v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
-                F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
-                # record the state at the start of the step (filter output up to the previous step)
-                if k % n_sub == 0:
-                    i = k // n_sub
-                    cols_ = np.flatnonzero(i < NS[a])
-                    out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
-                    out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
-                    out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
-                    out_v[i, cols_] = v[cols_]
-                    for kk, vv in ch.items():
-                        out_ch[kk][i, cols_] = vv[cols_]
-                    f_acc[a] = 0.0
-                # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
-                # that would change sign within the step stops instead
-                v_new = v + (drive - F) * dt_J
-                v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
-                f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
-                if lf.history:
-                    s_new = np.sign(v_new)
-                    ls = last_sign[a]
-                    rev = (s_new != 0) & (ls != 0) & (s_new != ls)
-                    turn_theta[a] = np.where(rev, th, turn_theta[a])
-                    last_sign[a] = np.where(s_new != 0, s_new, ls)
-                theta[a] = th + v_new * dt
-                vel[a] = v_new
-                X[a] = X[a] @ AdT + current[:, None] * Bd
-        return self
+            th = theta[a]
+            v = vel[a]
+            # PID on the encoder count (voltage out, anti-windup: no integration while the
+            # voltage saturates in the direction of the error)
+            e = ref_c[kk_, :n_act] - np.floor(th / q) * q
+            j = k % m_der
+            u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
+            ebuf[j, a] = e
+            U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
+            integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
+            current = (U - kM * v) * (1.0 / Rw)
+            # channels, external torques, friction (at rest: the static friction, the model at
+            # 0+ in the direction the drive pushes)
+            ch = channels.at(np.full(n_act, tl), run_idx[a])[0] if dynamic_ch else \
+                {kk: vv[a] for kk, vv in const_ch.items()}
+            kw = {kk: ch.get(kk) for kk in ("load", "temperature")} if ch else {}
+            if needs_t:
+                kw["t"] = T0[a] + tl
+            if needs_run:
+                kw["run"] = run_idx[a]
+            drive = kM * current
+            if kw.get("load") is not None:
+                drive = drive - kw["load"] / RATIO
+            if lf.signed:
+                drive = drive - lf.external(th, v, **kw)
+            moving = v != 0
+            v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
+            F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
+            # record the state at the start of the step (filter output up to the previous step)
+            if k % n_sub == 0:
+                i = k // n_sub
+                cols_ = np.flatnonzero(i < NS[a])
+                out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
+                out_i[i, cols_] = (X[a] @ Cd)[cols_] + Dd * current[cols_]
+                out_f[i, cols_] = (f_acc[a] / n_sub)[cols_] if k else 0.0
+                out_v[i, cols_] = v[cols_]
+                for kk, vv in ch.items():
+                    out_ch[kk][i, cols_] = vv[cols_]
+                f_acc[a] = 0.0
+            # mechanics with stick-slip: at rest while |drive| <= static friction; a velocity
+            # that would change sign within the step stops instead
+            v_new = v + (drive - F) * dt_J
+            v_new[(moving & (v_new * v <= 0)) | (~moving & (np.abs(drive) <= np.abs(F)))] = 0.0
+            f_acc[a] += drive - (v_new - v) / dt_J  # the friction that acted (momentum balance)
+            if lf.history:
+                s_new = np.sign(v_new)
+                ls = last_sign[a]
+                rev = (s_new != 0) & (ls != 0) & (s_new != ls)
+                turn_theta[a] = np.where(rev, th, turn_theta[a])
+                last_sign[a] = np.where(s_new != 0, s_new, ls)
+            theta[a] = th + v_new * dt
+            vel[a] = v_new
+            X[a] = X[a] @ AdT + current[:, None] * Bd
+    inv = np.empty(R_, int)
+    inv[run_idx] = np.arange(R_)
+    return SimpleNamespace(inv=inv, out_th=out_th, out_i=out_i, out_f=out_f, out_v=out_v, out_ch=out_ch)
 
 
-def _twin_columns(runs: _Runs, out: _ClosedLoop, model: FrictionModel, P: dict, rng: np.random.Generator,
+def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionModel, P: dict, rng: np.random.Generator,
                   speeds_rpm, repetitions: int, starts: np.ndarray) -> tuple[dict, list[dict]]:
     """The columns of the recording (runs in their own order, the current with its measurement
     noise) and one row of truth per run (the held part, its true friction and velocity)."""
     noise = float(P["current_noise"])
     out_ch, dt_s = out.out_ch, runs.dt_s
-    cols = {k: [] for k in ("t", "theta", "current", "run", "velocity", *out_ch)}
+    per_run = [(int(runs.n_samp[r]), out.inv[r]) for r in range(runs.n)]  # samples, state slot
+
+    def column(a):
+        return np.concatenate([a[:n, s] for n, s in per_run])
+
+    total = int(runs.n_samp.sum())
+    cols = {"t": np.concatenate([runs.t_start[r] + np.arange(n) * dt_s for r, (n, _) in enumerate(per_run)]),
+            "theta": column(out.out_th),
+            "current": column(out.out_i) + (noise * rng.standard_normal(total) if noise else 0.0),
+            "run": np.repeat(np.arange(runs.n, dtype=np.int64), runs.n_samp), "velocity": column(out.out_v),
+            **{k: column(v) for k, v in out_ch.items()}}
     rows = []
-    for r in range(runs.n):
-        s = out.inv[r]
-        n = int(runs.n_samp[r])
+    for r, (n, s) in enumerate(per_run):
         tl = np.arange(n) * dt_s
-        cur = out.out_i[:n, s] + (noise * rng.standard_normal(n) if noise else 0.0)
-        cols["t"].append(runs.t_start[r] + tl)
-        cols["theta"].append(out.out_th[:n, s])
-        cols["current"].append(cur)
-        cols["run"].append(np.full(n, r, np.int64))
-        cols["velocity"].append(out.out_v[:n, s])
-        for kk in out_ch:
-            cols[kk].append(out_ch[kk][:n, s])
         held = (tl >= runs.t_acc[r] + 0.25 * min(1.0, runs.holds[r])) & (tl <= runs.t_hold_end[r])
         if not held.any():
             held = (tl >= runs.t_acc[r]) & (tl <= runs.t_hold_end[r])
         d = 1 if runs.w_cmd[r] > 0 else -1
         f_mag = d * out.out_f[:n, s][held]
         v_held = out.out_v[:n, s][held]
-        stuck = v_held == 0
-        kw_lvl = {}
-        if "load" in out_ch:
-            kw_lvl["load"] = np.array([np.nanmean(out_ch["load"][:n, s][held])])
+        kw_lvl = {"load": np.array([np.nanmean(out_ch["load"][:n, s][held])])} if "load" in out_ch else {}
         try:
             lvl = float(model.mean_level(abs(runs.w_cmd[r]), d, **kw_lvl)[0]) * runs.scale[r]
         except InputError:
@@ -684,9 +555,9 @@ def _twin_columns(runs: _Runs, out: _ClosedLoop, model: FrictionModel, P: dict, 
                      "t_stop": t0 + (n - 1) * dt_s, "t0": t0 + tl[held][0], "t1": t0 + tl[held][-1],
                      "hold": runs.holds[r], "scale": runs.scale[r], "level": lvl,
                      "friction_mean": float(np.mean(f_mag)),
-                     "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(stuck)),
+                     "velocity_mean": float(np.mean(v_held)), "stuck_fraction": float(np.mean(v_held == 0)),
                      "n_held": int(held.sum())})
-    return {k: np.concatenate(v) for k, v in cols.items()}, rows
+    return cols, rows
 
 
 def stick_slip_run(joint_speed: float = FIG3_JOINT_SPEED, duration: float = 30.0, *, seed: int | None = 0,

@@ -1,13 +1,7 @@
-"""Synthetic constant-speed recordings with position-locked ripple of known amplitude and phase.
-
-The signal is built the way SILO4 eq. 11 describes friction: at velocity v the drive torque is
-
-    tau = sign(v) * ( level(|v|, dir) + sum_k A_k(|v|, dir) sin(2 pi f_k theta + phi_k) ) + noise
-
-with ``A_k = amplitude_k * exp(-decay_k |v|)`` (per direction if given as a pair).  The velocity
-profile holds a list of plateaus, joined by linear ramps, with a closed-loop-like speed ripple
-(relative amplitude ``speed_ripple``, locked to position at ``speed_ripple_frequency``) on every
-plateau.  Everything is returned as a :class:`~gearspec.recording.Recording` plus the truth.
+"""Synthetic recordings with known truth: constant-speed plateaus with position-locked ripple of
+known amplitude and phase (:func:`plateau_recording`, SILO4 eq. 11's shape), plateaus whose friction
+is any :class:`~gearspec.model.FrictionModel` (:func:`model_recording`), quasi-static stepped maps
+and excitation trajectories.
 """
 
 from __future__ import annotations
@@ -52,34 +46,31 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
                       one_run_per_plateau=False, quantum=0.0, gear=None, unit="rad", seed=None):
     """A recording that visits constant-velocity plateaus, with known ripple.
 
+    The drive torque is ``sign(v) * (level(|v|, dir) + sum_k A_k(|v|, dir) sin(2 pi f_k theta +
+    phi_k)) + noise`` (SILO4 eq. 11's shape), ``A_k = amplitude_k exp(-decay_k |v|)`` from ``ripples``.
+
     Parameters
     ----------
     speeds : sequence of float
         Signed plateau velocities (unit/s), visited in order, starting from standstill.
     ripples : sequence of Ripple
     level : float or callable
-        Friction magnitude without ripple: a number, or ``level(speed, direction)`` (vectorised
-        over an array of speeds).
+        Friction magnitude without ripple: a number, or ``level(speed, direction)`` (vectorised).
     duration : float or sequence
         Seconds held on each plateau.
-    fs : float
-        Sample rate, Hz.
-    ramp : float
-        Seconds of each linear velocity ramp between plateaus (and from/to standstill).
-    speed_ripple : float
-        Relative speed ripple on plateaus, ``v (1 + r sin(2 pi f_r theta))``.
-    speed_ripple_frequency : float, optional
-        Its frequency over position (default: that of the first ripple, as a friction-driven
-        closed loop would show).
+    fs, ramp : float
+        Sample rate (Hz); seconds of each linear velocity ramp between plateaus and from/to rest.
+    speed_ripple, speed_ripple_frequency : float
+        Relative speed ripple on plateaus, ``v (1 + r sin(2 pi f_r theta))``, and its frequency over
+        position (default: that of the first ripple, as a friction-driven closed loop would show).
     noise : float
         Standard deviation of white torque noise.
     one_run_per_plateau : bool
         Give every plateau (with its ramps) its own ``run`` id and restart time at 0.
     quantum : float
         Encoder resolution: theta is rounded to multiples of it (0: exact).
-    gear, unit
-        Passed to the recording.
-    seed : int, optional
+    gear, unit, seed
+        Passed to the recording; the noise's seed.
 
     Returns
     -------
@@ -92,14 +83,13 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
     speeds = list(speeds)
     lvl = level if callable(level) else (lambda s, d, _c=float(level): _c)
     f_r = speed_ripple_frequency if speed_ripple_frequency is not None else (ripples[0].frequency if ripples else 1.0)
-    t, theta, v_actual, hold, idx, run, durations = _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0,
-                                                             one_run_per_plateau)
+    t, theta, v_actual, hold, idx, run = _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0,
+                                                  one_run_per_plateau)
     n = len(t)
-    # friction magnitude
     direction = np.sign(v_actual)
     torque = np.zeros(n)
     truth = []
-    for j, (v, dur) in enumerate(zip(speeds, durations)):
+    for j, v in enumerate(speeds):
         d = 1 if v > 0 else -1
         sel = idx == j
         spd = np.abs(v_actual[sel])
@@ -123,42 +113,30 @@ def plateau_recording(speeds, *, ripples=(), level=0.01, duration=2.0, fs=1000.0
 
 def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_plateau):
     """Velocity profile of plateaus joined by linear ramps, with a position-locked speed ripple on
-    the plateaus; returns ``t, theta, v, hold, plateau_index, run, durations``."""
+    the plateaus; returns ``t, theta, v, hold, plateau_index, run``."""
     durations = list(duration) if np.ndim(duration) else [float(duration)] * len(speeds)
     if len(durations) != len(speeds):
         raise ValueError(f"{len(durations)} durations for {len(speeds)} plateaus")
     dt = 1.0 / fs
-    # velocity command profile: ramp -> hold -> (next) ..., back to 0 at the end
-    pieces_v, pieces_hold = [], []
+    # velocity command profile: ramp -> hold -> (next) ..., back to 0 at the end; pieces (command, held)
+    pieces = []
     prev = 0.0
     n_r = max(1, int(round(ramp * fs)))
     for v, dur in zip(speeds, durations):
-        start = 0.0 if one_run_per_plateau else prev
-        pieces_v.append(np.linspace(start, v, n_r, endpoint=False))
-        pieces_hold.append(np.zeros(n_r, bool))
-        n_h = int(round(dur * fs))
-        pieces_v.append(np.full(n_h, float(v)))
-        pieces_hold.append(np.ones(n_h, bool))
+        pieces.append((np.linspace(0.0 if one_run_per_plateau else prev, v, n_r, endpoint=False), False))
+        pieces.append((np.full(int(round(dur * fs)), float(v)), True))
         if one_run_per_plateau:
-            pieces_v.append(np.linspace(v, 0.0, n_r))
-            pieces_hold.append(np.zeros(n_r, bool))
+            pieces.append((np.linspace(v, 0.0, n_r), False))
         prev = v
     if not one_run_per_plateau:
-        pieces_v.append(np.linspace(prev, 0.0, n_r))
-        pieces_hold.append(np.zeros(n_r, bool))
-    vcmd = np.concatenate(pieces_v)
-    hold = np.concatenate(pieces_hold)
+        pieces.append((np.linspace(prev, 0.0, n_r), False))
+    vcmd = np.concatenate([p for p, _ in pieces])
+    hold = np.concatenate([np.full(len(p), h) for p, h in pieces])
     # plateau index per sample (which plateau's hold/ramp-in it belongs to)
     per = 3 if one_run_per_plateau else 2
-    idx = np.concatenate([np.full(len(pieces_v[j]), min(j // per, len(speeds) - 1)) for j in range(len(pieces_v))])
+    idx = np.concatenate([np.full(len(p), min(j // per, len(speeds) - 1)) for j, (p, _) in enumerate(pieces)])
     n = len(vcmd)
-
-    # integrate position with the position-locked speed ripple on plateaus: a few fixed-point
-    # passes of theta = theta0 + cumsum(v(theta) dt) (the ripple is small, so this converges fast)
-    def integrate(v):
-        return float(theta0) + np.concatenate(([0.0], np.cumsum(v[:-1]) * dt))
-
-    theta = integrate(vcmd)
+    theta = float(theta0) + np.concatenate(([0.0], np.cumsum(vcmd[:-1]) * dt))
     v_actual = vcmd
     if speed_ripple:
         # theta' = v_cmd (1 + r sin(2 pi f theta)) on the plateaus, stepped exactly as sampled
@@ -168,10 +146,9 @@ def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_
         th = np.empty(n)
         v_actual = np.empty(n)
         x = float(theta0)
-        sin = math.sin
         for i, (vc, g) in enumerate(zip(vcmd.tolist(), gain.tolist())):
             th[i] = x
-            vi = vc + g * sin(k * x)
+            vi = vc + g * math.sin(k * x)
             v_actual[i] = vi
             x += vi * dt
         theta = th
@@ -181,7 +158,7 @@ def _profile(speeds, duration, fs, ramp, speed_ripple, f_r, theta0, one_run_per_
     else:
         run = np.zeros(n, np.int64)
         t = np.arange(n) * dt
-    return t, theta, v_actual, hold, idx, run, durations
+    return t, theta, v_actual, hold, idx, run
 
 
 def _per_plateau(value, idx, t, name, n_plateaus):
@@ -201,37 +178,23 @@ def _per_plateau(value, idx, t, name, n_plateaus):
 def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_ripple=0.0,
                     speed_ripple_frequency=1.0, noise=0.0, load=None, temperature=None, inertia=0.0,
                     one_run_per_plateau=True, quantum=0.0, gear=None, unit="rad", theta0=0.0, seed=None):
-    """A recording of plateaus whose friction is ``model`` (a FrictionModel), with known truth.
+    """A recording of plateaus whose friction is ``model`` (a FrictionModel, evaluated at every
+    sample), with known truth.
 
-    Parameters
-    ----------
-    model : FrictionModel
-        The true friction; evaluated at every sample (position, actual velocity, load,
-        temperature, time, acceleration, run).
-    speeds, duration, fs, ramp, speed_ripple, one_run_per_plateau, quantum, gear, unit, theta0, seed
-        As in :func:`plateau_recording`.
-    speed_ripple_frequency : float
-        Frequency over position of the speed ripple, cycles per unit.
-    noise : float
-        Standard deviation of white torque noise (Nm).
-    load, temperature : float, sequence (one per plateau) or callable of t, optional
-        Load torque (Nm) and temperature (degC) channels; recorded and passed to the model.
-        A callable gets the time of each sample (restarting at 0 in each run when
-        ``one_run_per_plateau``).
-    inertia : float
-        Rotor inertia J: the drive torque is ``friction + J thetadd``.
+    ``speeds, duration, fs, ramp, speed_ripple, one_run_per_plateau, quantum, gear, unit, theta0,
+    seed`` as in :func:`plateau_recording`; ``speed_ripple_frequency`` in cycles per unit; ``noise``:
+    sd of white torque noise (Nm); ``load`` (Nm), ``temperature`` (degC): a number, one per plateau
+    or a callable of the time of each sample (restarting at 0 in each run when
+    ``one_run_per_plateau``), recorded and passed to the model; ``inertia``: rotor inertia J, the
+    drive torque is ``friction + J thetadd``.
 
-    Returns
-    -------
-    recording : Recording
-    truth : list of dict
-        Per plateau: ``direction``, ``speed``, ``run``, ``t0``, ``t1`` and ``level`` (the model's
-        position-averaged friction magnitude at the plateau speed).
+    Returns the recording and, per plateau, ``direction``, ``speed``, ``run``, ``t0``, ``t1`` and
+    ``level`` (the model's position-averaged friction magnitude at the plateau speed).
     """
     rng = np.random.default_rng(seed)
     speeds = list(speeds)
-    t, theta, v, hold, idx, run, durations = _profile(speeds, duration, fs, ramp, speed_ripple,
-                                                      speed_ripple_frequency, theta0, one_run_per_plateau)
+    t, theta, v, hold, idx, run = _profile(speeds, duration, fs, ramp, speed_ripple, speed_ripple_frequency, theta0,
+                                           one_run_per_plateau)
     ld = _per_plateau(load, idx, t, "load", len(speeds))
     temp = _per_plateau(temperature, idx, t, "temperature", len(speeds))
     acc = np.gradient(v, 1.0 / fs)
@@ -251,7 +214,6 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
     return rec, truth
 
 
-
 # ---------------------------------------------------------------------- quasi-static maps
 def quasi_static_recording(*, step=0.002, revolutions=1.0, levels=(0.05, 0.04), ripples=(), noise=0.0,
                            median_dt=0.013, dt_spread=0.35, gap_probability=0.01, max_gap=1.0,
@@ -264,20 +226,13 @@ def quasi_static_recording(*, step=0.002, revolutions=1.0, levels=(0.05, 0.04), 
     (log-sd ``dt_spread``), now and then (``gap_probability``) a pause uniform up to ``max_gap`` s,
     and with ``repeat_probability`` a further row at the same position (the loop stored twice).
 
-    The friction magnitude at rest is that of the direction of the last step,
+    The friction magnitude at rest is that of the direction d of the last step: torque = d * y + noise,
+    ``y = level_d + sum_k A_k,d sin(2 pi f_k theta + phi_k,d)`` (``level = (forward, backward)``;
+    ``ripples``: :class:`Ripple` with per-direction amplitude and phase, decay ignored).
 
-        y = level_d + sum_k A_k,d sin(2 pi f_k theta + phi_k,d),    torque = d * y + noise
-
-    (``level = (forward, backward)``; ``ripples`` are :class:`Ripple` with per-direction amplitude
-    and phase; their decay is ignored: there is no speed).
-
-    Returns
-    -------
-    recording : Recording
-    truth : dict
-        ``directions``: for +1 and -1, ``level`` and ``ripples`` (``frequency``, ``amplitude``,
-        ``phase``) in the friction-magnitude frame; ``sweeps``: (start, stop, direction) rows;
-        ``n``: rows.
+    Returns the recording and the truth: ``directions`` (for +1 and -1, ``level`` and ``ripples``:
+    ``frequency``, ``amplitude``, ``phase`` in the friction-magnitude frame), ``sweeps`` ((start,
+    stop, direction) rows) and ``n`` (rows).
     """
     rng = np.random.default_rng(seed)
     n_steps = int(round(revolutions * 2 * np.pi / step))
@@ -333,12 +288,8 @@ def excitation_recording(*, fs=250.0, move=10.0, amplitude=2.0, cruise_speed=1.5
     rest over ``creep_time`` s (a position loop settling against friction), in the direction of the
     last motion.  Torque: ``sign(v) (level + viscous |v|) + inertia * acc`` plus white noise.
 
-    Returns
-    -------
-    recording : Recording
-    truth : dict
-        ``velocity`` (true velocity at every row), ``acceleration``, ``cruise``: list of
-        (t0, t1, speed) of the genuine constant-speed stretches, ``tails``: list of (t0, t1).
+    Returns the recording and the truth: ``velocity`` (true, every row), ``acceleration``,
+    ``cruise`` ((t0, t1, speed) of the genuine constant-speed stretches), ``tails`` ((t0, t1)).
     """
     rng = np.random.default_rng(seed)
     dt = 1.0 / fs
