@@ -12,8 +12,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
-import tempfile
+import shlex
 import sys
+import tempfile
 import traceback
 import warnings
 from pathlib import Path
@@ -21,7 +22,7 @@ from pathlib import Path
 from .. import __version__
 from ..errors import GearspecWarning, InputError
 
-__all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs"]
+__all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs", "analysis_parser"]
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
 COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo")
@@ -135,6 +136,16 @@ def stages(args):
 
 
 # ---------------------------------------------------------------------- shared options
+def analysis_parser(sub, name: str, run, **kwargs) -> argparse.ArgumentParser:
+    """The parser of an analysing command ``name`` (``kwargs``: help, description) with the recording
+    and segment options; the command adds its own groups, then :func:`add_output_options`."""
+    p = sub.add_parser(name, **kwargs)
+    add_recording_options(p)
+    add_segment_options(p)
+    p.set_defaults(func=run)
+    return p
+
+
 def add_recording_options(p: argparse.ArgumentParser) -> None:
     """RECORDING... --gear and the column options of CONTRACTS.md section 1."""
     g = p.add_argument_group("recording (CONTRACTS.md section 1)")
@@ -179,9 +190,8 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
 
 def load_from_args(args, paths=None):
     """The recording named by the recording options (``paths``: other files read with the same options)."""
-    from ..recording import load_recording
-
     from ..lag import lag_option
+    from ..recording import load_recording
 
     paths = args.recordings if paths is None else paths
     st = stages(args)
@@ -215,6 +225,27 @@ def segments_from_args(rec, args):
                         quasi_static=getattr(args, "quasi_static", None))
     st.done(f"{len(seg)} segment(s) found, {sum(s.n for s in seg):,} of {rec.n_read:,} rows in them")
     return seg
+
+
+def command_line() -> str:
+    """This run's command line, as the reports quote it."""
+    return "gearspec " + shlex.join(sys.argv[1:])
+
+
+def write_json(path, out: dict, rec, dumps) -> None:
+    """``--json``: ``out`` plus the lag ``--lag`` applied (s; with its standard error when estimated)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
+    Path(path).write_text(dumps(out, indent=1))
+
+
+def print_outputs(args, as_path: bool = False) -> None:
+    """The files written: the report with --out (``as_path``: its path as pathlib prints it), the JSON
+    with --json."""
+    if args.out:
+        print(f"report: {Path(args.out) / 'report.md' if as_path else args.out + '/report.md'}")
+    if args.json:
+        print(f"json: {args.json}")
 
 
 # ---------------------------------------------------------------------- parser

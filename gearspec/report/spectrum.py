@@ -10,7 +10,7 @@ from .. import plots
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import _rpm, markdown_table
+from . import _rpm, bullets, header, markdown_table, report_dir, write_report
 
 __all__ = ["write_spectrum_report"]
 
@@ -30,23 +30,18 @@ def _ranges(idx: list[int]) -> str:
 def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentation, out: str | Path,
                           command: str = "") -> Path:
     """Write ``report.md``, the figures and ``peaks.csv`` of a spectrum analysis into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = report_dir(out)
     unit = result.unit
     tu = "Nm" if unit == "rad" else "N"
-    figs = {}
-    figs["segments"] = plots.plot_segments(rec, seg, out / "segments.png")
-    figs["spectra"] = plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png"))
-    figs["amplitude"] = plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png")
-    figs["relative"] = plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png", relative=True)
-    figs["unexplained"] = plots.plot_unexplained(result, out / "unexplained_peaks.png")
+    figs = {"segments": plots.plot_segments(rec, seg, out / "segments.png"),
+            "spectra": plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png")),
+            "amplitude": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png"),
+            "relative": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png", relative=True),
+            "unexplained": plots.plot_unexplained(result, out / "unexplained_peaks.png")}
     table = result.peaks_table()
     table.to_csv(out / "peaks.csv", index=False)
 
-    md = ["# gearspec spectrum report", ""]
-    if command:
-        md += [f"Command: `{command}`", ""]
-    md += ["## Recording", "", "```", rec.summary(), "```", ""]
+    md = header("gearspec spectrum report", command, rec.summary())
     n_seg = sum(s.segment.n for s in result.segments)
     md += [f"Rows read: {result.n_rows}; in segments: {n_seg}; excluded: "
            + (", ".join(f"{k} {v}" for k, v in sorted(result.excluded.items())) or "none")
@@ -132,8 +127,4 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
            "the local noise level of the Lomb-Scargle periodogram; false-alarm probabilities against the local "
            "noise level (one frequency for declared lines, all searched frequencies for found peaks). "
            f"Frequencies in cycles/{unit}; amplitudes in {tu}; phases in rad of A sin(2 pi f theta + phi).", ""]
-    if result.notes:
-        md += ["Notes:", ""] + [f"- {n}" for n in result.notes] + [""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md + bullets(result.notes, "Notes:"))
