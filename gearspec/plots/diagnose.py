@@ -1,7 +1,6 @@
-"""Figures of ``gearspec diagnose``: the residual spectra with every candidate line marked, one
-figure per effect showing the structure it explains (the residual before it was added against the
-variable of its kind, with what the term predicts), and the held-out error per segment before and
-after."""
+"""Figures of ``gearspec diagnose``: the residual spectra with the candidate lines, one figure per
+effect (the residual it explains against the variable of its kind, and what the term predicts), and
+the held-out error per segment before and after."""
 
 from __future__ import annotations
 
@@ -24,14 +23,12 @@ def _speed_label(dd):
 
 def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torque_unit: str = "Nm",
                  title: str = "Residual spectra over position (baseline model)") -> Path:
-    """The pooled residual periodograms of each direction, with their local noise level, every
-    candidate line marked (accepted: green, rejected: grey).
+    """The pooled residual periodograms of each direction with their local noise level, every
+    candidate line marked (accepted: green, rejected: grey; dashed: beyond every spectrum drawn).
 
-    One panel per direction: the all-speed pool (the one with most segments), and, thinner, the
-    pools of slower speeds whose spectra reach higher frequencies (the all-speed pool stops below
-    the position Nyquist frequency of its fastest segment: a line found at slow speed lies beyond
-    it).  The frequency axis extends past every candidate line; a candidate beyond every spectrum
-    drawn is marked dashed."""
+    Per direction the all-speed pool and, thinner, up to two pools of slower speeds that reach
+    higher frequencies (the all-speed pool stops below its fastest segment's position Nyquist
+    frequency, and a line found at slow speed may lie beyond it)."""
     pooled = [s for s in spectra if s.pooled and len(s.frequency)]
     per_dir, extra = {}, {}
     for s in pooled:  # the all-speed pool of each direction: the one with most segments
@@ -57,12 +54,8 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
             ax.semilogy(x.frequency, np.maximum(x.amplitude, 1e-300), color=color, lw=0.5, alpha=0.35 - 0.1 * k,
                         label=f"residual: {x.label}")
             ax.semilogy(x.frequency, np.maximum(x.noise, 1e-300), color="k", lw=0.6, ls=":", alpha=0.6)
-        f_lo = min(x.frequency[0] for x in drawn)
-        f_hi = max(x.frequency[-1] for x in drawn)
-        if marks:
-            f_lo = min(f_lo, min(e.frequency for e in marks) / 1.5)
-            f_hi = max(f_hi, max(e.frequency for e in marks) * 1.5)
-        ax.set_xlim(f_lo, f_hi)
+        ax.set_xlim(min([x.frequency[0] for x in drawn] + [e.frequency / 1.5 for e in marks]),
+                    max([x.frequency[-1] for x in drawn] + [e.frequency * 1.5 for e in marks]))
         ax.set_xscale("log")
         # markers, labels staggered in height (axes fraction) so that neighbours do not overlap
         for k, e in enumerate(sorted(marks, key=lambda e: e.frequency)):
@@ -87,7 +80,7 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
     return save(fig, path)
 
 
-def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
+def effect_curve(dd, residual, contribution, kind: str) -> dict:
     """What the figure of an effect shows: the x variable of its kind and, per direction, the
     binned (or per-segment) means of the residual before the term was added and of the term's
     contribution (both in the friction magnitude, except inertia: drive torque)."""
@@ -110,22 +103,17 @@ def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
     else:
         return {}
     out = {"xlabel": xl, "series": []}
-    for direction, name, color in _DIRS:
-        sel = d == direction
-        if kind == "inertia":
-            sel = np.ones(len(d), bool) if direction == 1 else np.zeros(len(d), bool)
+    groups = ([(0, "both directions", "k", np.ones(len(d), bool))] if kind == "inertia"
+              else [(k, name, color, d == k) for k, name, color in _DIRS])
+    for direction, name, color, sel in groups:
         if not sel.any():
             continue
-        if per_group:
-            rows = []
-            for a, z in zip(dd.starts, dd.stops):
-                if sel[a:z].mean() < 0.5:
-                    continue
-                rows.append((float(np.mean(x[a:z])), float(np.mean(m_res[a:z])), float(np.mean(m_con[a:z])),
-                             float(np.std(m_res[a:z]) / math.sqrt(max(z - a, 1)))))
+        if per_group:  # the groups at least half in this direction
+            rows = sorted((np.mean(x[a:z]), np.mean(m_res[a:z]), np.mean(m_con[a:z]),
+                           np.std(m_res[a:z]) / math.sqrt(max(z - a, 1)))
+                          for a, z in zip(dd.starts, dd.stops) if not sel[a:z].mean() < 0.5)
             if not rows:
                 continue
-            xs, rs, cs, se = map(np.array, zip(*sorted(rows)))
         else:
             xx = x[sel]
             fin = np.isfinite(xx)
@@ -136,19 +124,11 @@ def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
             else:
                 edges = np.quantile(xx[fin], np.linspace(0, 1, 16))
             which = np.clip(np.searchsorted(edges, xx, side="right") - 1, 0, len(edges) - 2)
-            xs, rs, cs, se = [], [], [], []
             rr, cc = m_res[sel], m_con[sel]
-            for k in range(len(edges) - 1):
-                b = fin & (which == k)
-                if b.sum() < 3:
-                    continue
-                xs.append(float(np.mean(xx[b])))
-                rs.append(float(np.mean(rr[b])))
-                cs.append(float(np.mean(cc[b])))
-                se.append(float(np.std(rr[b]) / math.sqrt(b.sum())))
-            xs, rs, cs, se = map(np.array, (xs, rs, cs, se))
-        out["series"].append({"direction": direction if kind != "inertia" else 0, "name": name if kind != "inertia"
-                              else "both directions", "color": color if kind != "inertia" else "k",
+            bins = [b for b in (fin & (which == k) for k in range(len(edges) - 1)) if b.sum() >= 3]
+            rows = [(np.mean(xx[b]), np.mean(rr[b]), np.mean(cc[b]), np.std(rr[b]) / math.sqrt(b.sum())) for b in bins]
+        xs, rs, cs, se = np.array(rows, float).reshape(-1, 4).T
+        out["series"].append({"direction": direction, "name": name, "color": color,
                               "x": xs, "residual": rs, "contribution": cs, "se": se})
     return out
 
@@ -165,14 +145,11 @@ def _line_amplitudes(dd, residual, contribution, frequency):
         if np.ptp(th) * frequency < 1.0:
             continue
         X = np.column_stack([np.ones(z - a), np.sin(2 * np.pi * frequency * th), np.cos(2 * np.pi * frequency * th)])
-        out = []
-        for y in (d[a:z] * residual[a:z], d[a:z] * contribution[a:z]):
-            beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-            out.append(math.hypot(beta[1], beta[2]))
-        r = d[a:z] * residual[a:z] - X @ np.linalg.lstsq(X, d[a:z] * residual[a:z], rcond=None)[0]
-        se = float(np.std(r) * math.sqrt(2.0 / (z - a)))
-        rows.append({"direction": int(d[a]), "speed": float(np.mean(s[a:z])), "amplitude": out[0],
-                     "model": out[1], "se": se})
+        y = d[a:z] * residual[a:z]
+        br = np.linalg.lstsq(X, y, rcond=None)[0]
+        bc = np.linalg.lstsq(X, d[a:z] * contribution[a:z], rcond=None)[0]
+        rows.append({"direction": int(d[a]), "speed": float(np.mean(s[a:z])), "amplitude": math.hypot(br[1], br[2]),
+                     "model": math.hypot(bc[1], bc[2]), "se": float(np.std(y - X @ br) * math.sqrt(2.0 / (z - a)))})
     return pd.DataFrame(rows)
 
 
@@ -221,7 +198,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
         fig.suptitle(f"{effect.name} ({lab}): {'accepted' if effect.accepted else 'rejected'}", fontsize=10)
         fig.tight_layout()
         return save(fig, path)
-    cur = effect_curve(dd, residual, contribution, effect.kind, effect)
+    cur = effect_curve(dd, residual, contribution, effect.kind)
     if not cur or not cur["series"]:
         return None
     fig, ax = plt.subplots(figsize=(8, 4.2))
@@ -273,15 +250,13 @@ def plot_time_series(t, y, before, after, path, *, torque_unit: str = "N", title
     axes[0].plot(t[sel], y[sel], "k", lw=1.0, label=labels[0])
     axes[0].plot(t[sel], before[sel], color="0.55", lw=1.0, ls="--", label=labels[1])
     axes[0].plot(t[sel], after[sel], color="tab:green", lw=1.0, label=labels[2])
-    axes[0].set_ylabel(f"force / torque ({torque_unit})")
-    axes[0].legend(fontsize=8)
-    axes[0].grid(alpha=0.3)
     axes[1].plot(t[sel], (y - before)[sel], color="0.55", lw=0.8, label=f"error, {labels[1]}")
     axes[1].plot(t[sel], (y - after)[sel], color="tab:green", lw=0.8, label=f"error, {labels[2]}")
     axes[1].set_xlabel("time (s)")
-    axes[1].set_ylabel(f"error ({torque_unit})")
-    axes[1].legend(fontsize=8)
-    axes[1].grid(alpha=0.3)
+    for ax, what in zip(axes, ("force / torque", "error")):
+        ax.set_ylabel(f"{what} ({torque_unit})")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return save(fig, path)

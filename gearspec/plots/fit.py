@@ -62,12 +62,8 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
     """Amplitude of each fitted line against speed per direction (per-segment fits, 95 % bars;
     :func:`gearspec.identify.line_amplitudes`) with each model's amplitude law ``A g(|v|)``
     (SILO4 Fig. 7 with eq. 8)."""
-    labels = []
-    for m in models.values():
-        for p in m.directions.values():
-            for h in p["harmonics"]:
-                if h.get("label") and h["label"] not in labels:
-                    labels.append(h["label"])
+    labels = list(dict.fromkeys(h["label"] for m in models.values() for d in (1, -1) for h in m.harmonics(d)
+                                if h.get("label")))
     if not labels:
         return None
     xl, xs = _speed_axis(unit)
@@ -77,15 +73,12 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
         df = amplitudes[amplitudes["label"] == lab]
         smax = 0.0
         for d, name, color, mk in _DIRS:
-            if not df.empty:
-                sub = df[df["direction"] == d].sort_values("speed")
-                if len(sub):
-                    smax = max(smax, sub["speed"].max())
-                    ax.errorbar(sub["speed"] * xs, sub["amplitude"], yerr=1.96 * sub["amplitude_se"], fmt=mk,
-                                color=color, ms=4, mfc="none", label=f"{name}: per segment")
-        if smax == 0:
-            smax = 1.0
-        grid = np.linspace(0, smax * 1.1, 200)
+            sub = df[df["direction"] == d].sort_values("speed")
+            if len(sub):
+                smax = max(smax, sub["speed"].max())
+                ax.errorbar(sub["speed"] * xs, sub["amplitude"], yerr=1.96 * sub["amplitude_se"], fmt=mk,
+                            color=color, ms=4, mfc="none", label=f"{name}: per segment")
+        grid = np.linspace(0, (smax or 1.0) * 1.1, 200)
         for (mlabel, m), ls in zip(models.items(), _STYLES):
             for d, name, color, _ in _DIRS:
                 h = next((h for h in m.harmonics(name) if h.get("label") == lab), None)
@@ -106,10 +99,9 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
     return save(fig, path)
 
 
-def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int], path, cycles: float = 3.0,
-                       frequency: float | None = None) -> Path:
+def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int], path, cycles: float = 3.0) -> Path:
     """Friction over position for a few segments: data and model (SILO4 Fig. 9).  Each panel shows
-    ``cycles`` periods of ``frequency`` (default: the slowest fitted line) from the segment start."""
+    ``cycles`` periods of the slowest fitted line from the segment start."""
     n = len(segments)
     unit = data.unit
     tu = "Nm" if unit == "rad" else "N"
@@ -118,10 +110,7 @@ def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int],
         sub = data.subset(data.segment == sid)
         d = int(sub.direction[0])
         th = sub.theta
-        f = frequency
-        if f is None:
-            fs = [h["frequency"] for h in model.harmonics(d) if h.get("amplitude")]
-            f = min(fs) if fs else None
+        f = min((h["frequency"] for h in model.harmonics(d) if h.get("amplitude")), default=None)
         order = np.argsort(th * d)
         th, y = th[order], sub.y[order]
         x = d * (th - th[0])
@@ -152,10 +141,9 @@ def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> 
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue
-            axes[0].plot(sub["speed"] * xs, sub["e"], ls, marker=mk, color=color, ms=4, mfc="none",
-                         label=f"{label}, {name}")
-            axes[1].plot(sub["speed"] * xs, sub["rmse"], ls, marker=mk, color=color, ms=4, mfc="none",
-                         label=f"{label}, {name}")
+            for ax, col in zip(axes, ("e", "rmse")):
+                ax.plot(sub["speed"] * xs, sub[col], ls, marker=mk, color=color, ms=4, mfc="none",
+                        label=f"{label}, {name}")
     axes[0].axhline(0, color="0.6", lw=0.6)
     axes[0].set_ylabel(f"mean error e = model - data ({tu})")
     axes[1].set_ylabel(f"rmse per segment ({tu})")

@@ -106,11 +106,7 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
 
 def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False) -> Path | None:
     """Amplitude of every declared line against speed, both directions (the SILO4 Fig. 7 view)."""
-    labels = []
-    for s in result.segments:
-        for p in s.peaks:
-            if p.declared and p.label not in labels:
-                labels.append(p.label)
+    labels = list(dict.fromkeys(p.label for s in result.segments for p in s.peaks if p.declared))
     if not labels:
         return None
     unit = result.unit
@@ -126,8 +122,8 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue
-            y = sub["amplitude"] / (sub["level"].abs() if relative else 1.0)
-            e = sub["amplitude_se"] / (sub["level"].abs() if relative else 1.0)
+            scale = sub["level"].abs() if relative else 1.0
+            y, e = sub["amplitude"] / scale, sub["amplitude_se"] / scale
             ax.errorbar(sub["speed"], y * (100 if relative else 1), yerr=1.96 * e * (100 if relative else 1),
                         fmt=mk + "-", color=color, ms=4, lw=0.8, capsize=2, mfc=color if d > 0 else "none",
                         label=f"{name} direction")
