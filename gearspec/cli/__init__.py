@@ -1,11 +1,6 @@
-"""The ``gearspec`` command line (``CONTRACTS.md`` section 4).  A leaf: nothing imports it.
-
-One module per command (``spectrum``, ``fit``, ...), each with ``register(subparsers)``; this
-module holds the options every analysing command shares, the checks of option values (at parse
-time, one sentence each), and :func:`main`.
-
-Exit status: 0 on success, 2 on bad input (one line on stderr), 1 on an internal failure.
-"""
+"""The ``gearspec`` command line (``CONTRACTS.md`` section 4; a leaf: nothing imports it): one module per
+command with ``register(subparsers)``; here the shared options, the checks of option values at parse
+time (one sentence each) and :func:`main`."""
 
 from __future__ import annotations
 

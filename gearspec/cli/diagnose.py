@@ -65,7 +65,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from .. import diagnose as dg
     from ..errors import InputError
+    from ..model import FrictionModel
 
     t0 = time.perf_counter()
     kinds = None
@@ -75,31 +77,23 @@ def run(args) -> int:
         if bad:
             raise InputError(f"--kinds: unknown kind(s) {', '.join(bad)} (known: {', '.join(KINDS)})")
     harmonics = parse_lines(args.lines)
-    from .. import diagnose as dg
-    from ..model import FrictionModel
+
+    def prepare(r):  # the whole trajectory, or the constant-speed segments of a recording
+        if args.trajectory:
+            return dg.trajectory_data(r, cutoff=args.cutoff, decimate_by=args.decimate)
+        return dg.DiagnoseData.from_recording(r, segments_from_args(r, args), by=args.holdout,
+                                              inertia=not args.no_inertia)
 
     rec = load_from_args(args)
-    validation = None
-    if args.trajectory:
-        data = dg.trajectory_data(rec, cutoff=args.cutoff, decimate_by=args.decimate)
-        if args.validate:
-            validation = dg.trajectory_data(load_from_args(args, args.validate), cutoff=args.cutoff,
-                                            decimate_by=args.decimate)
-    else:
-        seg = segments_from_args(rec, args)
-        data = dg.DiagnoseData.from_recording(rec, seg, by=args.holdout, inertia=not args.no_inertia)
-        if args.validate:
-            other = load_from_args(args, args.validate)
-            validation = dg.DiagnoseData.from_recording(other, segments_from_args(other, args), by=args.holdout,
-                                                        inertia=not args.no_inertia)
+    data = prepare(rec)
+    validation = prepare(load_from_args(args, args.validate)) if args.validate else None
     model = None
     if args.model:
         model = FrictionModel.from_json(args.model)
         if model.unit != data.unit:
             raise InputError(f"{args.model}: the model is for theta in {model.unit}, the recording has {data.unit}")
     elif args.trajectory:
-        if args.law not in ("coulomb_viscous",):
-            args.law = "coulomb_viscous"
+        args.law = "coulomb_viscous"
         terms = [{"kind": "inertia", "inertia": 0.0}] + ([{"kind": "offset", "offset": 0.0}] if args.offset else [])
         model = dg.baseline_model(data, "coulomb_viscous", symmetric=args.symmetric, terms=terms)
     # a model read from a file keeps its own symmetry unless --symmetric; otherwise per direction

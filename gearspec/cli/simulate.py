@@ -1,18 +1,7 @@
-"""``gearspec simulate``: twin recordings in the recording format (``CONTRACTS.md`` sections 1, 4).
-
-``gearspec simulate silo4 --out DIR`` runs the SILO4 joint-3 twin, ``gearspec simulate lola
---module A --out DIR`` the Lola/CROPS testbed twin.  Each writes into DIR:
-
-* the recording (``<name>.csv`` or ``.parquet``/``.npz`` by ``--format``; one file, a ``run``
-  column per experiment),
-* the gear spec to read it with (``<name>_gear.toml``: the preset's stages plus the twin's
-  torque constant and inertia),
-* the truth (``<name>_truth.json``: the friction model simulated, the injected effects with their
-  kind and frequency, one row per run or operating point, every setting),
-* for the testbed, the operating points (``<name>_points.csv``: eqs. 12-13 per point).
-
-so that ``gearspec spectrum DIR/<name>.csv --gear DIR/<name>_gear.toml`` reads it back.
-"""
+"""``gearspec simulate silo4|lola --out DIR``: a twin's recording (``<name>.csv``, or by ``--format``),
+the gear spec to read it with (``<name>_gear.toml``), the truth (``<name>_truth.json``: the model
+simulated, the effects injected, every setting) and, for the testbed, its operating points
+(``<name>_points.csv``, eqs. 12-13), so that ``gearspec spectrum`` reads them back."""
 
 from __future__ import annotations
 
@@ -86,15 +75,12 @@ def _floats(text: str | None, option: str):
 def _write(args, name: str, rec, truth, extra=None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"recording": rec.save(out / f"{name}.{args.format}")}
-    gear_path = out / f"{name}_gear.toml"
-    truth.gear.to_toml(gear_path)
-    paths["gear"] = gear_path
+    paths = {"recording": rec.save(out / f"{name}.{args.format}"), "gear": out / f"{name}_gear.toml"}
+    truth.gear.to_toml(paths["gear"])
     paths["truth"] = truth.to_json(out / f"{name}_truth.json")
     for k, (suffix, frame) in (extra or {}).items():
-        p = out / f"{name}_{suffix}"
-        frame.to_csv(p, index=False, float_format="%.10g")
-        paths[k] = p
+        paths[k] = out / f"{name}_{suffix}"
+        frame.to_csv(paths[k], index=False, float_format="%.10g")
     return paths
 
 
@@ -141,8 +127,7 @@ def run_silo4(args) -> int:
         rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
                                 seed=args.seed)
     elapsed = time.perf_counter() - t0
-    paths = _write(args, args.name, rec, truth)
-    _report(args, paths, rec, truth, elapsed)
+    _report(args, _write(args, args.name, rec, truth), rec, truth, elapsed)
     return 0
 
 
@@ -158,6 +143,5 @@ def run_lola(args) -> int:
                             hold=args.hold, effects=effects, seed=args.seed)
     elapsed = time.perf_counter() - t0
     truth = points.attrs["truth"]
-    paths = _write(args, name, rec, truth, {"points": ("points.csv", points)})
-    _report(args, paths, rec, truth, elapsed)
+    _report(args, _write(args, name, rec, truth, {"points": ("points.csv", points)}), rec, truth, elapsed)
     return 0

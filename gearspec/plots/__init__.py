@@ -1,9 +1,5 @@
-"""Figures (matplotlib, Agg), one module per command.  A leaf package: nothing in the analysis
-imports it.
-
-Every function takes results and an output path, draws one figure, saves it as PNG and returns
-the path.  Units are on every axis.
-"""
+"""Figures (matplotlib, Agg), one module per command; a leaf package: nothing in the analysis
+imports it.  Every function draws one figure from results, saves it as PNG and returns its path."""
 
 from __future__ import annotations
 

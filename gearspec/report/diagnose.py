@@ -30,6 +30,13 @@ def effect_table(diag: Diagnosis) -> pd.DataFrame:
                           "round": e.round} for e in diag.effects])
 
 
+#: what an effect of these kinds means, before its fitted parameters
+_MEANING = {"speed_law": "The speed dependence of the friction (or of a line's amplitude) has another shape than the "
+                         "model's law: ",
+            "load": "Friction depends on the output load: ",
+            "hysteresis": "Friction near reversals differs from the steady law (presliding / backlash): "}
+
+
 def interpretation(diag: Diagnosis, e) -> list[str]:
     """Plain sentences on what an effect is physically (labels, integer relations, amplitude law,
     lead of a screw)."""
@@ -62,19 +69,12 @@ def interpretation(diag: Diagnosis, e) -> list[str]:
                 if law == "const":
                     laws.append(f"{t['direction']}: constant amplitude {h['amplitude']:.3g}")
                 else:
-                    grow = h.get("decay", 0) < 0
                     laws.append(f"{t['direction']}: amplitude {h['amplitude']:.3g} x {law} law, decay "
-                                f"{h.get('decay', 0):.3g} ({'grows' if grow else 'falls'} with speed)")
+                                f"{h.get('decay', 0):.3g} ({'grows' if h.get('decay', 0) < 0 else 'falls'} with speed)")
         if laws:
             out.append("Amplitude against speed (chosen by the data): " + "; ".join(laws) + ".")
-    if e.kind == "speed_law":
-        out.append("The speed dependence of the friction (or of a line's amplitude) has another shape than the "
-                   "model's law: " + (e.parameters or e.name) + ".")
-    if e.kind == "load":
-        out.append("Friction depends on the output load: " + (e.parameters or e.name) + ".")
-    if e.kind == "hysteresis":
-        out.append("Friction near reversals differs from the steady law (presliding / backlash): "
-                   + (e.parameters or e.name) + ".")
+    if e.kind in _MEANING:
+        out.append(_MEANING[e.kind] + (e.parameters or e.name) + ".")
     if e.kind == "lag" and e.value is not None:
         out.append(f"The torque channel is logged {1e3 * e.value:.4g} ms behind the position channel (the lines' "
                    "phases drift with speed); every line is fitted at theta - v lag. Re-run with `--lag "
@@ -152,9 +152,8 @@ def _summary_section(diag: Diagnosis) -> list[str]:
     else:
         md += [f"Nothing was accepted: no candidate lowered the held-out error by more than noise would "
                f"({len(diag.effects)} candidate(s) tested).", ""]
-    st = diag.summary_table()
     md += ["Before and after (rmse in-sample, and on held-out groups: each fold predicted by a model fitted "
-           f"without it), in {tu}:", "", markdown_table(st), ""]
+           f"without it), in {tu}:", "", markdown_table(diag.summary_table()), ""]
     md += bullets(diag.notes)
     if diag.validation:
         v = diag.validation
@@ -184,12 +183,10 @@ def _baseline_section(diag: Diagnosis, fig_spec: Path) -> list[str]:
     if segs:
         rows = []
         for sp in segs:
-            top = sp.peaks.iloc[0] if len(sp.peaks) else None
-            rows.append({"segment": sp.segments[0], "direction": sp.direction, "speed": sp.speed_min,
-                         "n": sp.n, "strongest peak": None if top is None else top["frequency"],
-                         "amplitude": None if top is None else top["amplitude"],
-                         "FAP": None if top is None else top["fap"],
-                         "noise level (median)": float(np.median(sp.noise))})
+            top = sp.peaks.iloc[0] if len(sp.peaks) else {}
+            rows.append({"segment": sp.segments[0], "direction": sp.direction, "speed": sp.speed_min, "n": sp.n,
+                         "strongest peak": top.get("frequency"), "amplitude": top.get("amplitude"),
+                         "FAP": top.get("fap"), "noise level (median)": float(np.median(sp.noise))})
         md += ["Per segment: the strongest residual peak with false-alarm probability below 1 % (every "
                "independent frequency of the segment searched; empty: none).", "",
                markdown_table(pd.DataFrame(rows)), ""]
@@ -206,8 +203,7 @@ def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
         if not e.accepted:
             continue
         fig = _figure_for(diag, e, out, i)
-        md += [f"### {e.kind}: {e.name}", ""]
-        md += [f"- evidence: {e.evidence}", f"- held-out test: {e.decision}",
+        md += [f"### {e.kind}: {e.name}", "", f"- evidence: {e.evidence}", f"- held-out test: {e.decision}",
                f"- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu} "
                f"({-100 * e.gain:+.2f} %), {e.n_params} parameter(s) added", f"- fitted: {e.parameters}"]
         if e.validation:
@@ -217,9 +213,8 @@ def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
                       f"(Z {v['z']:.2f}, needs {v['z_crit']:.2f}): confirmed")
         md.append("")
         md += interpretation(diag, e) + [""] if interpretation(diag, e) else []
-        if e.terms:
-            md += ["Terms added (SI, with standard errors):", ""]
-            md += [f"- {_term_text(t.get('term') or t.get('harmonic'), t.get('direction'))}" for t in e.terms] + [""]
+        md += bullets([_term_text(t.get("term") or t.get("harmonic"), t.get("direction")) for t in e.terms],
+                      "Terms added (SI, with standard errors):")
         if fig is not None:
             md += [f"![{e.name}]({fig.name})", ""]
     return md
@@ -318,9 +313,9 @@ def analysis_table(analyses: dict) -> pd.DataFrame:
                      "statistic": f"length {rv[1].get('length', float('nan')):.3g}, t {rv[1]['t']:.2f}",
                      "p": rv[1]["p"]})
     pooled = analyses.get("spectra", {}).get("pooled", [])
-    n_peaks = sum(len(s.peaks) for s in pooled)
     rows.append({"analysis": "over position (pooled periodograms)",
-                 "statistic": f"{n_peaks} peak(s) with FAP < 1 % in {len(pooled)} pools", "p": None})
+                 "statistic": f"{sum(len(s.peaks) for s in pooled)} peak(s) with FAP < 1 % in {len(pooled)} pools",
+                 "p": None})
     return pd.DataFrame(rows)
 
 
