@@ -17,10 +17,6 @@ __all__ = ["plot_spectra", "plot_effect", "plot_segment_errors", "plot_time_seri
 _DIRS = ((1, "positive", POS), (-1, "negative", NEG))
 
 
-def _speed_label(dd):
-    return f"speed ({dd.unit}/s)"
-
-
 def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torque_unit: str = "Nm",
                  title: str = "Residual spectra over position (baseline model)") -> Path:
     """The pooled residual periodograms of each direction with their local noise level, every
@@ -89,7 +85,7 @@ def effect_curve(dd, residual, contribution, kind: str) -> dict:
     m_res = residual if signed else d * residual
     m_con = contribution if signed else d * contribution
     if kind in ("speed_law", "asymmetry"):
-        x, xl, per_group = np.abs(dd.at("v")), _speed_label(dd), dd.kind == "plateaus"
+        x, xl, per_group = np.abs(dd.at("v")), f"speed ({dd.unit}/s)", dd.kind == "plateaus"
     elif kind == "load":
         x, xl, per_group = np.abs(dd.at("load")), f"|load| (N{'m' if dd.unit == 'rad' else ''})", True
     elif kind == "temperature":
@@ -171,8 +167,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
             ax.semilogy(spectrum.frequency, np.maximum(spectrum.noise, 1e-300), "k--", lw=0.8, label="local noise")
             ax.axvline(f, color="tab:green" if effect.accepted else "0.5", lw=1.2, zorder=0,
                        label=f"{f:.6g} cycles/{dd.unit}")
-            lo, hi = max(spectrum.frequency[0], f / 4), min(spectrum.frequency[-1], f * 4)
-            ax.set_xlim(lo, hi)
+            ax.set_xlim(max(spectrum.frequency[0], f / 4), min(spectrum.frequency[-1], f * 4))
             ax.set_xscale("log")
             ax.set_title(f"residual spectrum of the baseline: {spectrum.label}", fontsize=9)
         ax.set_xlabel(f"frequency (cycles/{dd.unit})")
@@ -181,15 +176,14 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
         ax.legend(fontsize=7)
         ax = axes[1]
         amp = _line_amplitudes(dd, residual, contribution, f)
-        for direction, name, color in _DIRS:
-            a = amp[amp["direction"] == direction] if len(amp) else amp
-            if a is None or not len(a):
+        for direction, name, color in _DIRS if len(amp) else ():
+            a = amp[amp["direction"] == direction].sort_values("speed")
+            if not len(a):
                 continue
-            a = a.sort_values("speed")
             ax.errorbar(a["speed"], a["amplitude"], yerr=2 * a["se"], fmt="o", color=color, mfc="none", ms=4,
                         label=f"{name}: {what}")
             ax.plot(a["speed"], a["model"], "-", color=color, lw=1.2, label=f"{name}: the term")
-        ax.set_xlabel(_speed_label(dd))
+        ax.set_xlabel(f"speed ({dd.unit}/s)")
         ax.set_ylabel(f"amplitude of the line ({tu})")
         ax.set_title("amplitude against speed, per segment (95 % bars)", fontsize=9)
         ax.grid(alpha=0.3)

@@ -19,15 +19,15 @@ _DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
 _STYLES = ("-", "--", ":", "-.")
 
 
-def _speed_axis(unit):
-    return ("speed (rpm)", 1 / RPM) if unit == "rad" else (f"speed ({unit}/s)", 1.0)
+def _units(unit):
+    """Speed axis label, its scale from unit/s, and the torque unit."""
+    return ("speed (rpm)", 1 / RPM, "Nm") if unit == "rad" else (f"speed ({unit}/s)", 1.0, "N")
 
 
 def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path, unit: str = "rad") -> Path:
     """Plateau friction against speed per direction (error bars: 2 se) with each model's
     position-averaged friction (SILO4 Fig. 4)."""
-    xl, xs = _speed_axis(unit)
-    tu = "Nm" if unit == "rad" else "N"
+    xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
     has_load = "load" in plateaus and plateaus["load"].nunique() > 1
     for ax, (d, name, color, mk) in zip(axes, _DIRS):
@@ -66,8 +66,7 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
                                 if h.get("label")))
     if not labels:
         return None
-    xl, xs = _speed_axis(unit)
-    tu = "Nm" if unit == "rad" else "N"
+    xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, len(labels), figsize=(5.2 * len(labels), 4.0), squeeze=False)
     for ax, lab in zip(axes[0], labels):
         df = amplitudes[amplitudes["label"] == lab]
@@ -131,8 +130,7 @@ def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int],
 
 def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> Path:
     """Per segment: mean error e and rmse of model - data against speed, per model and direction."""
-    xl, xs = _speed_axis(unit)
-    tu = "Nm" if unit == "rad" else "N"
+    xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.0))
     for (label, df), ls in zip(errors.items(), _STYLES):
         if df.empty:

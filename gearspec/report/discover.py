@@ -22,10 +22,9 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
     unit = result.unit
     figs = {"pareto": plot_pareto(result, out / "pareto.png"), "levels": plot_levels(result, out / "levels.png"),
             "inclusion": plot_inclusion(result, out / "inclusion.png")}
-    front = result.front_candidates()
     cand = pd.DataFrame([{"selected": "->" if i == result.selected else "", "complexity": c.complexity,
                           f"held-out RMSE ({tu})": c.rmse_holdout, f"RMSE ({tu})": c.rmse, "AIC": c.aic,
-                          "BIC": c.bic, "law": c.equation} for i, c in zip(result.front, front)])
+                          "BIC": c.bic, "law": c.equation} for i, c in zip(result.front, result.front_candidates())])
     cand.to_csv(out / "candidates.csv", index=False)
     comp = result.comparison()
     comp.to_csv(out / "comparison.csv", index=False)

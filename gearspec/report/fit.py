@@ -58,22 +58,19 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
     md += [f"## Model: {m.name}", "", f"Law: {m.law_spec.description}.", "",
            "Parameters per direction in SI units with standard errors, and in the SILO4 paper's units "
            "(mNm, rpm of the motor) where the axis is rotary. `model.json` holds the same in the "
-           "`gearspec fit --json` form.", ""]
-    md += [markdown_table(model_table(m, paper=True)), ""]
+           "`gearspec fit --json` form.", "", markdown_table(model_table(m, paper=True)), ""]
     md += bullets([f"`{k}`: {why}" for k, why in m.not_identified.items()],
                   "**Not identified** (left out, not invented):")
     md += bullets(m.notes)
     md += ["## How well the models predict", "",
            f"rmse over all samples in segments, and held-out rmse from {m.meta.get('fit', {}).get('folds', 5)}-fold "
-           "cross-validation over whole segments (each fold predicted by a model fitted without it), "
-           f"in {tu}.", ""]
-    md += [markdown_table(result.comparison.drop(columns=["rmse_holdout_reason"], errors="ignore")), ""]
+           f"cross-validation over whole segments (each fold predicted by a model fitted without it), in {tu}.", "",
+           markdown_table(result.comparison.drop(columns=["rmse_holdout_reason"], errors="ignore")), ""]
     for _, r in result.comparison.iterrows():
         why = r.get("rmse_holdout_reason")
         if isinstance(why, str) and why:
             md += [f"- Held-out rmse of {r['model']}: "
-                   f"{'not computed' if pd.isna(r['rmse_holdout']) else 'partial'}"
-                   f" ({why})."]
+                   f"{'not computed' if pd.isna(r['rmse_holdout']) else 'partial'} ({why})."]
     md += [""] + bullets(result.notes)
     md += ["## Stribeck curve", "", "Mean friction of every plateau (error bars: 2 standard errors from block "
            "means) and each model's friction averaged over position.", "", f"![stribeck]({figs['stribeck'].name})", ""]
