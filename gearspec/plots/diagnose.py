@@ -26,16 +26,13 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
     higher frequencies (the all-speed pool stops below its fastest segment's position Nyquist
     frequency, and a line found at slow speed may lie beyond it)."""
     pooled = [s for s in spectra if s.pooled and len(s.frequency)]
-    per_dir, extra = {}, {}
-    for s in pooled:  # the all-speed pool of each direction: the one with most segments
-        if s.direction not in per_dir or len(s.segments) > len(per_dir[s.direction].segments):
-            per_dir[s.direction] = s
-    for s in pooled:  # the pools that reach further up, highest reach first, at most two
-        main = per_dir[s.direction]
-        if s is not main and s.frequency[-1] > 1.05 * main.frequency[-1]:
-            extra.setdefault(s.direction, []).append(s)
-    for d in extra:
-        extra[d] = sorted(extra[d], key=lambda x: -x.frequency[-1])[:2]
+    # the all-speed pool of each direction (the one with most segments), and the pools that reach
+    # further up, highest reach first
+    per_dir = {d: max((s for s in pooled if s.direction == d), key=lambda s: len(s.segments))
+               for d in dict.fromkeys(s.direction for s in pooled)}
+    extra = {d: sorted((s for s in pooled if s.direction == d and s is not m
+                        and s.frequency[-1] > 1.05 * m.frequency[-1]), key=lambda x: -x.frequency[-1])[:2]
+             for d, m in per_dir.items()}
     rows = [d for d in (1, -1) if d in per_dir]
     marks = [e for e in effects if getattr(e, "frequency", None) is not None and np.isfinite(e.frequency)
              and e.frequency > 0]

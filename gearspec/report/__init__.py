@@ -26,8 +26,7 @@ def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
         return str(v).replace("|", "\\|")  # escaped: |v| stays |v| in the rendered table
 
     lines = ["| " + " | ".join(str(c) for c in cols) + " |", "|" + "---|" * len(cols)]
-    for row in df.itertuples(index=False):
-        lines.append("| " + " | ".join(fmt(v) for v in row) + " |")
+    lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in df.itertuples(index=False)]
     return "\n".join(lines) + "\n"
 
 
