@@ -26,11 +26,8 @@ MAX_MESSAGE = 600
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    stream = sys.stderr if file is None else file
-    if issubclass(category, GearspecWarning):
-        print(f"gearspec: warning: {_one_line(message)}", file=stream)
-    else:
-        print(f"warning: {category.__name__}: {_one_line(message)}", file=stream)
+    prefix = "gearspec: warning" if issubclass(category, GearspecWarning) else f"warning: {category.__name__}"
+    print(f"{prefix}: {_one_line(message)}", file=sys.stderr if file is None else file)
 
 
 def _one_line(message) -> str:
