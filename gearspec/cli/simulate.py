@@ -72,7 +72,8 @@ def _floats(text: str | None, option: str):
     return vals
 
 
-def _write(args, name: str, rec, truth, extra=None) -> dict:
+def _write(args, name: str, rec, truth, elapsed: float, extra=None) -> None:
+    """Write the recording, its gear spec, the truth and ``extra`` CSVs into --out, and say what."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"recording": rec.save(out / f"{name}.{args.format}"), "gear": out / f"{name}_gear.toml"}
@@ -81,27 +82,22 @@ def _write(args, name: str, rec, truth, extra=None) -> dict:
     for k, (suffix, frame) in (extra or {}).items():
         paths[k] = out / f"{name}_{suffix}"
         frame.to_csv(paths[k], index=False, float_format="%.10g")
-    return paths
-
-
-def _effects(args):
-    from ..simulate.effects import parse_effect
-
-    return [parse_effect(e) for e in args.effect]
-
-
-def _report(args, paths, rec, truth, elapsed) -> None:
     if args.quiet:
         return
-    n_runs = rec.data["run"].nunique()
-    print(f"{truth.twin} twin: {len(rec)} rows, {n_runs} runs, {rec.data['t'].iloc[-1]:.1f} s of experiment "
-          f"({elapsed:.1f} s to simulate)")
+    print(f"{truth.twin} twin: {len(rec)} rows, {rec.data['run'].nunique()} runs, {rec.data['t'].iloc[-1]:.1f} s of "
+          f"experiment ({elapsed:.1f} s to simulate)")
     for e in truth.effects:
         f = "" if e["frequency"] is None else f" at {e['frequency']:.6g} cycles/rad"
         print(f"  effect: {e['kind']}{f}: {e['description']}")
     for k, p in paths.items():
         print(f"{k}: {p}")
     print(f"read it with: gearspec spectrum {paths['recording']} --gear {paths['gear']}")
+
+
+def _effects(args):
+    from ..simulate.effects import parse_effect
+
+    return [parse_effect(e) for e in args.effect]
 
 
 def run_silo4(args) -> int:
@@ -126,8 +122,7 @@ def run_silo4(args) -> int:
     else:
         rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
                                 seed=args.seed)
-    elapsed = time.perf_counter() - t0
-    _report(args, _write(args, args.name, rec, truth), rec, truth, elapsed)
+    _write(args, args.name, rec, truth, time.perf_counter() - t0)
     return 0
 
 
@@ -141,7 +136,5 @@ def run_lola(args) -> int:
     t0 = time.perf_counter()
     rec, points = lola_twin(args.module, _floats(args.speeds, "--speeds"), _floats(args.loads, "--loads"),
                             hold=args.hold, effects=effects, seed=args.seed)
-    elapsed = time.perf_counter() - t0
-    truth = points.attrs["truth"]
-    _report(args, _write(args, name, rec, truth, {"points": ("points.csv", points)}), rec, truth, elapsed)
+    _write(args, name, rec, points.attrs["truth"], time.perf_counter() - t0, {"points": ("points.csv", points)})
     return 0
