@@ -81,20 +81,17 @@ def effect_curve(dd, residual, contribution, kind: str) -> dict:
     signed = kind == "inertia"
     m_res = residual if signed else d * residual
     m_con = contribution if signed else d * contribution
-    if kind in ("speed_law", "asymmetry"):
-        x, xl, per_group = np.abs(dd.at("v")), f"speed ({dd.unit}/s)", dd.kind == "plateaus"
-    elif kind == "load":
-        x, xl, per_group = np.abs(dd.at("load")), f"|load| (N{'m' if dd.unit == 'rad' else ''})", True
-    elif kind == "temperature":
-        x, xl, per_group = dd.at("temperature"), "temperature (degC)", True
-    elif kind == "drift":
-        x, xl, per_group = dd.at("t"), "time (s)", True
-    elif kind == "inertia":
-        x, xl, per_group = dd.at("acc"), f"acceleration ({dd.unit}/s^2)", False
-    elif kind == "hysteresis":
-        x, xl, per_group = dd.at("travel"), f"travel since the last reversal ({dd.unit})", False
-    else:
+    # per kind: the column, whether its absolute value, the axis label, one point per group
+    speed = ("v", True, f"speed ({dd.unit}/s)", dd.kind == "plateaus")
+    axes = {"speed_law": speed, "asymmetry": speed,
+            "load": ("load", True, f"|load| (N{'m' if dd.unit == 'rad' else ''})", True),
+            "temperature": ("temperature", False, "temperature (degC)", True), "drift": ("t", False, "time (s)", True),
+            "inertia": ("acc", False, f"acceleration ({dd.unit}/s^2)", False),
+            "hysteresis": ("travel", False, f"travel since the last reversal ({dd.unit})", False)}
+    if kind not in axes:
         return {}
+    column, absolute, xl, per_group = axes[kind]
+    x = np.abs(dd.at(column)) if absolute else dd.at(column)
     out = {"xlabel": xl, "series": []}
     groups = ([(0, "both directions", "k", np.ones(len(d), bool))] if kind == "inertia"
               else [(k, name, color, d == k) for k, name, color in _DIRS])
