@@ -11,10 +11,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained", "save", "plt",
-           "POS", "NEG"]
+           "POS", "NEG", "DIRS"]
 
 #: colours of the positive and negative direction in every figure
 POS, NEG = "#1f77b4", "#d62728"
+#: direction, its name, colour and marker in every figure
+DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
 
 
 def save(fig, path) -> Path:

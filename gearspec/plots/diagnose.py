@@ -10,11 +10,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import NEG, POS, plt, save
+from . import DIRS, NEG, POS, plt, save
 
 __all__ = ["plot_spectra", "plot_effect", "plot_segment_errors", "plot_time_series", "effect_curve"]
-
-_DIRS = ((1, "positive", POS), (-1, "negative", NEG))
 
 
 def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torque_unit: str = "Nm",
@@ -94,7 +92,7 @@ def effect_curve(dd, residual, contribution, kind: str) -> dict:
     x = np.abs(dd.at(column)) if absolute else dd.at(column)
     out = {"xlabel": xl, "series": []}
     groups = ([(0, "both directions", "k", np.ones(len(d), bool))] if kind == "inertia"
-              else [(k, name, color, d == k) for k, name, color in _DIRS])
+              else [(k, name, color, d == k) for k, name, color, _ in DIRS])
     for direction, name, color, sel in groups:
         if not sel.any():
             continue
@@ -170,7 +168,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
         ax.legend(fontsize=7)
         ax = axes[1]
         amp = _line_amplitudes(dd, residual, contribution, f)
-        for direction, name, color in _DIRS if len(amp) else ():
+        for direction, name, color, _ in DIRS if len(amp) else ():
             a = amp[amp["direction"] == direction].sort_values("speed")
             if not len(a):
                 continue
@@ -209,7 +207,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
 def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", unit: str = "rad") -> Path:
     """Held-out rmse of every group before and after (and in-sample), against speed per direction."""
     fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
-    for ax, (direction, name, color) in zip(axes, _DIRS):
+    for ax, (direction, name, color, _) in zip(axes, DIRS):
         t = table[table["direction"] == direction].sort_values("speed")
         if t.empty:
             ax.text(0.5, 0.5, f"no {name} segment", ha="center", transform=ax.transAxes)

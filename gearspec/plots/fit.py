@@ -11,11 +11,10 @@ import pandas as pd
 from ..fitdata import FitData
 from ..model import RPM, FrictionModel
 from ..terms import amplitude_law, clamp_speed
-from . import NEG, POS, plt, save
+from . import DIRS, NEG, POS, plt, save
 
 __all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
 
-_DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
 _STYLES = ("-", "--", ":", "-.")
 
 
@@ -30,7 +29,7 @@ def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path
     xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
     has_load = "load" in plateaus and plateaus["load"].nunique() > 1
-    for ax, (d, name, color, mk) in zip(axes, _DIRS):
+    for ax, (d, name, color, mk) in zip(axes, DIRS):
         pl = plateaus[plateaus["direction"] == d]
         if pl.empty:
             ax.text(0.5, 0.5, f"no {name} segment", transform=ax.transAxes, ha="center")
@@ -71,7 +70,7 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
     for ax, lab in zip(axes[0], labels):
         df = amplitudes[amplitudes["label"] == lab]
         smax = 0.0
-        for d, name, color, mk in _DIRS:
+        for d, name, color, mk in DIRS:
             sub = df[df["direction"] == d].sort_values("speed")
             if len(sub):
                 smax = max(smax, sub["speed"].max())
@@ -79,7 +78,7 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
                             color=color, ms=4, mfc="none", label=f"{name}: per segment")
         grid = np.linspace(0, (smax or 1.0) * 1.1, 200)
         for (mlabel, m), ls in zip(models.items(), _STYLES):
-            for d, name, color, _ in _DIRS:
+            for d, name, color, _ in DIRS:
                 h = next((h for h in m.harmonics(name) if h.get("label") == lab), None)
                 if h is None:
                     continue
@@ -135,7 +134,7 @@ def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> 
     for (label, df), ls in zip(errors.items(), _STYLES):
         if df.empty:
             continue
-        for d, name, color, mk in _DIRS:
+        for d, name, color, mk in DIRS:
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue

@@ -10,7 +10,7 @@ import numpy as np
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import NEG as _NEG, POS as _POS, plt, save as _save
+from . import DIRS, NEG as _NEG, POS as _POS, plt, save as _save
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained"]
 
@@ -115,7 +115,7 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
     for ax, lab in zip(axes.ravel(), labels):
         df = result.amplitude_vs_speed(lab)
         df = df[df["frequency"].notna()]
-        for d, color, mk, name in ((1, _POS, "o", "positive"), (-1, _NEG, "s", "negative")):
+        for d, name, color, mk in DIRS:
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue
