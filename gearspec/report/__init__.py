@@ -16,8 +16,6 @@ def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     """A pandas DataFrame as a GitHub Markdown table (no extra dependency)."""
     if df.empty:
         return "_(none)_\n"
-    cols = list(df.columns)
-
     def fmt(v):
         if v is None or (isinstance(v, float) and math.isnan(v)):
             return ""
@@ -25,7 +23,7 @@ def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
             return format(float(v), floatfmt)
         return str(v).replace("|", "\\|")  # escaped: |v| stays |v| in the rendered table
 
-    lines = ["| " + " | ".join(str(c) for c in cols) + " |", "|" + "---|" * len(cols)]
+    lines = ["| " + " | ".join(str(c) for c in df.columns) + " |", "|" + "---|" * len(df.columns)]
     lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in df.itertuples(index=False)]
     return "\n".join(lines) + "\n"
 
