@@ -42,7 +42,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"gearspec: error: {self.prog}: {_one_line(message)} (see {self.prog} --help)\n")
 
 
-# ---------------------------------------------------------------------- option value types
 def number(low: float | None = None, high: float | None = None, *, integer: bool = False,
            low_open: bool = False, high_open: bool = False, what: str = ""):
     """An argparse ``type`` for a number within bounds, refused at parse time with one sentence.
@@ -127,7 +126,6 @@ def stages(args):
     return args._stages
 
 
-# ---------------------------------------------------------------------- shared options
 def analysis_parser(sub, name: str, run, **kwargs) -> argparse.ArgumentParser:
     """The parser of an analysing command ``name`` (``kwargs``: help, description) with the recording
     and segment options; the command adds its own groups, then :func:`add_output_options`."""
@@ -240,7 +238,6 @@ def print_outputs(args, as_path: bool = False) -> None:
         print(f"json: {args.json}")
 
 
-# ---------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="gearspec", description="Spectral analysis and modelling of friction in robot gear drives.")
     p.add_argument("--version", action="version", version=f"gearspec {__version__}")

@@ -93,7 +93,5 @@ def comparison_text(comp) -> str:
     for _, r in comp.iterrows():
         why = r.get("rmse_holdout_reason")
         if isinstance(why, str) and why:
-            what = "held-out rmse n/a" if r["rmse_holdout"] is None or r["rmse_holdout"] != r["rmse_holdout"] \
-                else "held-out rmse partial"
-            lines.append(f"{what} for {r['model']}: {why}")
+            lines.append(f"held-out rmse {'n/a' if pd.isna(r['rmse_holdout']) else 'partial'} for {r['model']}: {why}")
     return "\n".join(lines)

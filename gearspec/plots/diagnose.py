@@ -19,10 +19,8 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
                  title: str = "Residual spectra over position (baseline model)") -> Path:
     """The pooled residual periodograms of each direction with their local noise level, every
     candidate line marked (accepted: green, rejected: grey; dashed: beyond every spectrum drawn).
-
-    Per direction the all-speed pool and, thinner, up to two pools of slower speeds that reach
-    higher frequencies (the all-speed pool stops below its fastest segment's position Nyquist
-    frequency, and a line found at slow speed may lie beyond it)."""
+    Beside the all-speed pool, thinner, up to two pools of slower speeds that reach higher
+    frequencies, where a line found at slow speed may lie."""
     pooled = [s for s in spectra if s.pooled and len(s.frequency)]
     # the all-speed pool of each direction (the one with most segments), and the pools that reach
     # further up, highest reach first
