@@ -22,8 +22,6 @@ def _example_segments(data, per_direction: int = 3) -> list[int]:
     seg = data.segments
     for d in (1, -1):
         s = seg[seg["direction"] == d].sort_values("speed")
-        if s.empty:
-            continue
         idx = np.unique(np.linspace(0, len(s) - 1, min(per_direction, len(s))).round().astype(int))
         out += [int(s.iloc[i]["segment"]) for i in idx]
     return out
