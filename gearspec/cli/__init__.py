@@ -230,8 +230,7 @@ def write_json(path, out: dict, rec, dumps) -> None:
 
 
 def print_outputs(args, as_path: bool = False) -> None:
-    """The files written: the report with --out (``as_path``: its path as pathlib prints it), the JSON
-    with --json."""
+    """Say which files were written (``as_path``: the report's path as pathlib prints it)."""
     if args.out:
         print(f"report: {Path(args.out) / 'report.md' if as_path else args.out + '/report.md'}")
     if args.json:
