@@ -1,19 +1,15 @@
-"""The ``gearspec`` command line (``CONTRACTS.md`` section 4).  A leaf: nothing imports it.
-
-One module per command (``spectrum``, ``fit``, ...), each with ``register(subparsers)``; this
-module holds the options every analysing command shares, the checks of option values (at parse
-time, one sentence each), and :func:`main`.
-
-Exit status: 0 on success, 2 on bad input (one line on stderr), 1 on an internal failure.
-"""
+"""The ``gearspec`` command line (``CONTRACTS.md`` section 4; a leaf: nothing imports it): one module per
+command with ``register(subparsers)``; here the shared options, the checks of option values at parse
+time (one sentence each) and :func:`main`."""
 
 from __future__ import annotations
 
 import argparse
 import importlib
 import math
-import tempfile
+import shlex
 import sys
+import tempfile
 import traceback
 import warnings
 from pathlib import Path
@@ -21,7 +17,7 @@ from pathlib import Path
 from .. import __version__
 from ..errors import GearspecWarning, InputError
 
-__all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs"]
+__all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs", "analysis_parser"]
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
 COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo")
@@ -30,11 +26,8 @@ MAX_MESSAGE = 600
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    stream = sys.stderr if file is None else file
-    if issubclass(category, GearspecWarning):
-        print(f"gearspec: warning: {_one_line(message)}", file=stream)
-    else:
-        print(f"warning: {category.__name__}: {_one_line(message)}", file=stream)
+    prefix = "gearspec: warning" if issubclass(category, GearspecWarning) else f"warning: {category.__name__}"
+    print(f"{prefix}: {_one_line(message)}", file=sys.stderr if file is None else file)
 
 
 def _one_line(message) -> str:
@@ -49,7 +42,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"gearspec: error: {self.prog}: {_one_line(message)} (see {self.prog} --help)\n")
 
 
-# ---------------------------------------------------------------------- option value types
 def number(low: float | None = None, high: float | None = None, *, integer: bool = False,
            low_open: bool = False, high_open: bool = False, what: str = ""):
     """An argparse ``type`` for a number within bounds, refused at parse time with one sentence.
@@ -134,7 +126,16 @@ def stages(args):
     return args._stages
 
 
-# ---------------------------------------------------------------------- shared options
+def analysis_parser(sub, name: str, run, **kwargs) -> argparse.ArgumentParser:
+    """The parser of an analysing command ``name`` (``kwargs``: help, description) with the recording
+    and segment options; the command adds its own groups, then :func:`add_output_options`."""
+    p = sub.add_parser(name, **kwargs)
+    add_recording_options(p)
+    add_segment_options(p)
+    p.set_defaults(func=run)
+    return p
+
+
 def add_recording_options(p: argparse.ArgumentParser) -> None:
     """RECORDING... --gear and the column options of CONTRACTS.md section 1."""
     g = p.add_argument_group("recording (CONTRACTS.md section 1)")
@@ -179,9 +180,8 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
 
 def load_from_args(args, paths=None):
     """The recording named by the recording options (``paths``: other files read with the same options)."""
-    from ..recording import load_recording
-
     from ..lag import lag_option
+    from ..recording import load_recording
 
     paths = args.recordings if paths is None else paths
     st = stages(args)
@@ -217,7 +217,26 @@ def segments_from_args(rec, args):
     return seg
 
 
-# ---------------------------------------------------------------------- parser
+def command_line() -> str:
+    """This run's command line, as the reports quote it."""
+    return "gearspec " + shlex.join(sys.argv[1:])
+
+
+def write_json(path, out: dict, rec, dumps) -> None:
+    """``--json``: ``out`` plus the lag ``--lag`` applied (s; with its standard error when estimated)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
+    Path(path).write_text(dumps(out, indent=1))
+
+
+def print_outputs(args, as_path: bool = False) -> None:
+    """Say which files were written (``as_path``: the report's path as pathlib prints it)."""
+    if args.out:
+        print(f"report: {Path(args.out) / 'report.md' if as_path else args.out + '/report.md'}")
+    if args.json:
+        print(f"json: {args.json}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="gearspec", description="Spectral analysis and modelling of friction in robot gear drives.")
     p.add_argument("--version", action="version", version=f"gearspec {__version__}")

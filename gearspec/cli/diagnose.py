@@ -3,8 +3,6 @@ error before and after on held-out data (CONTRACTS.md section 4)."""
 
 from __future__ import annotations
 
-import shlex
-import sys
 import time
 
 from ..jsonsafe import dumps
@@ -12,13 +10,15 @@ from . import (
     POSITIVE,
     PROBABILITY,
     add_output_options,
-    add_recording_options,
-    add_segment_options,
+    analysis_parser,
+    command_line,
     load_from_args,
     number,
     parse_lines,
+    print_outputs,
     segments_from_args,
     stages,
+    write_json,
 )
 from .fit import law_choices
 
@@ -26,13 +26,12 @@ KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "
 
 
 def register(sub) -> None:
-    p = sub.add_parser("diagnose", help="find what the model misses: residual -> effect -> new term -> held-out error",
-                       description="Fit the model you believe in, look for structure in its residual (over position, "
-                                   "against speed, load, temperature, time, acceleration and near reversals), add a "
-                                   "term for an effect only when it lowers the error on held-out data (whole segments "
-                                   "or runs) by more than noise would, and repeat until nothing more is accepted.")
-    add_recording_options(p)
-    add_segment_options(p)
+    p = analysis_parser(sub, "diagnose", run,
+                        help="find what the model misses: residual -> effect -> new term -> held-out error",
+                        description="Fit the model you believe in, look for structure in its residual (over position, "
+                                    "against speed, load, temperature, time, acceleration and near reversals), add a "
+                                    "term for an effect only when it lowers the error on held-out data (whole segments "
+                                    "or runs) by more than noise would, and repeat until nothing more is accepted.")
     g = p.add_argument_group("model")
     g.add_argument("--law", default="silo4", choices=law_choices("silo4", "stribeck"),
                    help="base law of the baseline model (default silo4: eq. 11 with the gear's declared lines)")
@@ -63,11 +62,12 @@ def register(sub) -> None:
                    help="independent recording(s), read with the same column options: every accepted term must also "
                         "lower the error there, or it is removed again")
     add_output_options(p)
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from .. import diagnose as dg
     from ..errors import InputError
+    from ..model import FrictionModel
 
     t0 = time.perf_counter()
     kinds = None
@@ -77,31 +77,23 @@ def run(args) -> int:
         if bad:
             raise InputError(f"--kinds: unknown kind(s) {', '.join(bad)} (known: {', '.join(KINDS)})")
     harmonics = parse_lines(args.lines)
-    from .. import diagnose as dg
-    from ..model import FrictionModel
+
+    def prepare(r):  # the whole trajectory, or the constant-speed segments of a recording
+        if args.trajectory:
+            return dg.trajectory_data(r, cutoff=args.cutoff, decimate_by=args.decimate)
+        return dg.DiagnoseData.from_recording(r, segments_from_args(r, args), by=args.holdout,
+                                              inertia=not args.no_inertia)
 
     rec = load_from_args(args)
-    validation = None
-    if args.trajectory:
-        data = dg.trajectory_data(rec, cutoff=args.cutoff, decimate_by=args.decimate)
-        if args.validate:
-            validation = dg.trajectory_data(load_from_args(args, args.validate), cutoff=args.cutoff,
-                                            decimate_by=args.decimate)
-    else:
-        seg = segments_from_args(rec, args)
-        data = dg.DiagnoseData.from_recording(rec, seg, by=args.holdout, inertia=not args.no_inertia)
-        if args.validate:
-            other = load_from_args(args, args.validate)
-            validation = dg.DiagnoseData.from_recording(other, segments_from_args(other, args), by=args.holdout,
-                                                        inertia=not args.no_inertia)
+    data = prepare(rec)
+    validation = prepare(load_from_args(args, args.validate)) if args.validate else None
     model = None
     if args.model:
         model = FrictionModel.from_json(args.model)
         if model.unit != data.unit:
             raise InputError(f"{args.model}: the model is for theta in {model.unit}, the recording has {data.unit}")
     elif args.trajectory:
-        if args.law not in ("coulomb_viscous",):
-            args.law = "coulomb_viscous"
+        args.law = "coulomb_viscous"
         terms = [{"kind": "inertia", "inertia": 0.0}] + ([{"kind": "offset", "offset": 0.0}] if args.offset else [])
         model = dg.baseline_model(data, "coulomb_viscous", symmetric=args.symmetric, terms=terms)
     # a model read from a file keeps its own symmetry unless --symmetric; otherwise per direction
@@ -112,18 +104,11 @@ def run(args) -> int:
                        progress=None if args.quiet else (lambda s: print(s, flush=True)))
     stages(args).done(f"diagnosis: {sum(e.accepted for e in diag.effects)} effect(s) accepted")
     if args.json:
-        from pathlib import Path
-
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        out = diag.to_dict()
-        if "lag" in rec.meta:  # --lag: the lag applied before the loop (s)
-            out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
-        Path(args.json).write_text(dumps(out, indent=1))
+        write_json(args.json, diag.to_dict(), rec, dumps)
     if args.out:
         from ..report.diagnose import write_diagnose_report
 
-        write_diagnose_report(diag, args.out, command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])),
-                              recording_summary=rec.summary())
+        write_diagnose_report(diag, args.out, command=command_line(), recording_summary=rec.summary())
     if not args.quiet:
         print()
         print(diag.summary_table().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
@@ -139,8 +124,5 @@ def run(args) -> int:
         for n in diag.notes:
             print(f"note: {n}")
         print(f"({time.perf_counter() - t0:.1f} s)")
-        if args.out:
-            print(f"report: {args.out}/report.md")
-        if args.json:
-            print(f"json: {args.json}")
+        print_outputs(args)
     return 0

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
 import time
-from pathlib import Path
 
 from . import (
     PROBABILITY,
     add_output_options,
-    add_recording_options,
-    add_segment_options,
+    analysis_parser,
+    command_line,
     load_from_args,
     number,
+    print_outputs,
     segments_from_args,
     stages,
 )
@@ -21,16 +19,14 @@ from .fit import law_choices
 
 
 def register(sub) -> None:
-    sp = sub.add_parser(
-        "discover", help="search a library of friction terms for the laws the data support",
+    sp = analysis_parser(
+        sub, "discover", run, help="search a library of friction terms for the laws the data support",
         description="Search a library of physically meaningful friction terms (Coulomb, viscous, power laws, "
                     "Stribeck of three shapes on a grid of velocities, load- and temperature-coupled terms, "
                     "position ripple at the declared and found lines with constant or decaying amplitude, each "
                     "symmetric and direction-dependent) with sparse regression, refine the candidates' nonlinear "
                     "parameters, and rank them by their error on held-out segments against their complexity. "
                     "Compares them with the papers' laws fitted on the same folds.")
-    add_recording_options(sp)
-    add_segment_options(sp)
     g = sp.add_argument_group("library")
     g.add_argument("--frequencies", metavar="F1,F2,...",
                    help="extra ripple lines, cycles per unit of theta (besides the gear's declared lines)")
@@ -66,7 +62,6 @@ def register(sub) -> None:
     s.add_argument("--seed", type=int, default=0, help="of the bootstrap")
     add_output_options(sp)
     sp.add_argument("--top", type=number(1, integer=True), default=8, help="laws shown on stdout (default 8)")
-    sp.set_defaults(func=run)
 
 
 def _floats(text: str | None, option: str) -> list[float]:
@@ -119,8 +114,7 @@ def run(args) -> int:
     if args.json:
         result.to_json(args.json)
     if args.out:
-        write_discover_report(result, rec, args.out,
-                              command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])))
+        write_discover_report(result, rec, args.out, command=command_line())
     if not args.quiet:
         _print_summary(result, time.perf_counter() - t0, args)
     return 0
@@ -136,7 +130,4 @@ def _print_summary(result, elapsed, args) -> None:
         keep = sorted(set(range(len(front) - args.top, len(front))) | {result.front.index(result.selected)})
         front = [front[i] for i in keep]
     print("\n".join([lines[0]] + front + lines[1 + len(result.front):]))
-    if args.out:
-        print(f"report: {Path(args.out) / 'report.md'}")
-    if args.json:
-        print(f"json: {args.json}")
+    print_outputs(args, as_path=True)

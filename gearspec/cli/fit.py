@@ -3,22 +3,21 @@
 from __future__ import annotations
 
 import json
-import shlex
-import sys
 import time
 
 from . import (
     POSITIVE,
     add_output_options,
-    add_recording_options,
-    add_segment_options,
+    analysis_parser,
+    command_line,
     load_from_args,
     number,
     parse_lines,
+    print_outputs,
     segments_from_args,
     stages,
+    write_json,
 )
-
 
 
 def law_choices(*first: str) -> tuple[str, ...]:
@@ -32,12 +31,10 @@ def law_choices(*first: str) -> tuple[str, ...]:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("fit", help="identify a friction law (SILO4 eq. 11, eq. 3, Lola laws 8 and 11)",
-                       description="Identify a friction law per direction from the constant-speed segments of a "
-                                   "recording: the joint weighted least-squares fit beside the published procedure "
-                                   "and simpler laws, with standard errors and held-out errors.")
-    add_recording_options(p)
-    add_segment_options(p)
+    p = analysis_parser(sub, "fit", run, help="identify a friction law (SILO4 eq. 11, eq. 3, Lola laws 8 and 11)",
+                        description="Identify a friction law per direction from the constant-speed segments of a "
+                                    "recording: the joint weighted least-squares fit beside the published procedure "
+                                    "and simpler laws, with standard errors and held-out errors.")
     g = p.add_argument_group("fit")
     g.add_argument("--law", default="silo4", choices=law_choices("silo4", "stribeck", "lola8", "lola11"),
                    help="silo4: the full model (11) with direction-dependent parameters (default); stribeck: eq. 3; "
@@ -53,7 +50,6 @@ def register(sub) -> None:
     g.add_argument("--load-ratio", type=POSITIVE, metavar="N",
                    help="subtract |load|/N from the torque (default for lola laws: the gear's total ratio)")
     add_output_options(p)
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:
@@ -68,18 +64,11 @@ def run(args) -> int:
                                 folds=args.folds, se=args.se, load_ratio=args.load_ratio)
     stages(args).done(f"fitted {args.law}")
     if args.json:
-        from pathlib import Path
-
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        out = result.to_dict()
-        if "lag" in rec.meta:  # --lag: the lag applied (s), with its standard error when estimated
-            out.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
-        Path(args.json).write_text(json.dumps(out, indent=1))
+        write_json(args.json, result.to_dict(), rec, json.dumps)
     if args.out:
         from ..report.fit import write_fit_report
 
-        write_fit_report(result, args.out, command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])),
-                         recording_summary=rec.summary())
+        write_fit_report(result, args.out, command=command_line(), recording_summary=rec.summary())
     if not args.quiet:
         print(result.model.describe())
         print()
@@ -87,10 +76,7 @@ def run(args) -> int:
         for n in result.notes or []:
             print(f"note: {n}")
         print(f"({time.perf_counter() - t0:.1f} s)")
-        if args.out:
-            print(f"report: {args.out}/report.md")
-        if args.json:
-            print(f"json: {args.json}")
+        print_outputs(args)
     return 0
 
 
@@ -107,7 +93,5 @@ def comparison_text(comp) -> str:
     for _, r in comp.iterrows():
         why = r.get("rmse_holdout_reason")
         if isinstance(why, str) and why:
-            what = "held-out rmse n/a" if r["rmse_holdout"] is None or r["rmse_holdout"] != r["rmse_holdout"] \
-                else "held-out rmse partial"
-            lines.append(f"{what} for {r['model']}: {why}")
+            lines.append(f"held-out rmse {'n/a' if pd.isna(r['rmse_holdout']) else 'partial'} for {r['model']}: {why}")
     return "\n".join(lines)

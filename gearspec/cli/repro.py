@@ -1,8 +1,5 @@
-"""``gearspec repro NAME --out DIR``: reproduce a paper's figures and tables (paper_repro/).
-
-The reproductions are scripts over the public API that ship beside the library, not in it: only
-this leaf of the command line (and ``gearspec demo``) imports them, through :func:`reproductions`.
-"""
+"""``gearspec repro NAME --out DIR``: a paper's figures and tables (paper_repro/: scripts over the
+public API beside the library, not in it, imported only here and by ``gearspec demo``)."""
 
 from __future__ import annotations
 

@@ -1,18 +1,7 @@
-"""``gearspec simulate``: twin recordings in the recording format (``CONTRACTS.md`` sections 1, 4).
-
-``gearspec simulate silo4 --out DIR`` runs the SILO4 joint-3 twin, ``gearspec simulate lola
---module A --out DIR`` the Lola/CROPS testbed twin.  Each writes into DIR:
-
-* the recording (``<name>.csv`` or ``.parquet``/``.npz`` by ``--format``; one file, a ``run``
-  column per experiment),
-* the gear spec to read it with (``<name>_gear.toml``: the preset's stages plus the twin's
-  torque constant and inertia),
-* the truth (``<name>_truth.json``: the friction model simulated, the injected effects with their
-  kind and frequency, one row per run or operating point, every setting),
-* for the testbed, the operating points (``<name>_points.csv``: eqs. 12-13 per point).
-
-so that ``gearspec spectrum DIR/<name>.csv --gear DIR/<name>_gear.toml`` reads it back.
-"""
+"""``gearspec simulate silo4|lola --out DIR``: a twin's recording (``<name>.csv``, or by ``--format``),
+the gear spec to read it with (``<name>_gear.toml``), the truth (``<name>_truth.json``: the model
+simulated, the effects injected, every setting) and, for the testbed, its operating points
+(``<name>_points.csv``, eqs. 12-13), so that ``gearspec spectrum`` reads them back."""
 
 from __future__ import annotations
 
@@ -83,39 +72,32 @@ def _floats(text: str | None, option: str):
     return vals
 
 
-def _write(args, name: str, rec, truth, extra=None) -> dict:
+def _write(args, name: str, rec, truth, elapsed: float, extra=None) -> None:
+    """Write the recording, its gear spec, the truth and ``extra`` CSVs into --out, and say what."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"recording": rec.save(out / f"{name}.{args.format}")}
-    gear_path = out / f"{name}_gear.toml"
-    truth.gear.to_toml(gear_path)
-    paths["gear"] = gear_path
+    paths = {"recording": rec.save(out / f"{name}.{args.format}"), "gear": out / f"{name}_gear.toml"}
+    truth.gear.to_toml(paths["gear"])
     paths["truth"] = truth.to_json(out / f"{name}_truth.json")
     for k, (suffix, frame) in (extra or {}).items():
-        p = out / f"{name}_{suffix}"
-        frame.to_csv(p, index=False, float_format="%.10g")
-        paths[k] = p
-    return paths
-
-
-def _effects(args):
-    from ..simulate.effects import parse_effect
-
-    return [parse_effect(e) for e in args.effect]
-
-
-def _report(args, paths, rec, truth, elapsed) -> None:
+        paths[k] = out / f"{name}_{suffix}"
+        frame.to_csv(paths[k], index=False, float_format="%.10g")
     if args.quiet:
         return
-    n_runs = rec.data["run"].nunique()
-    print(f"{truth.twin} twin: {len(rec)} rows, {n_runs} runs, {rec.data['t'].iloc[-1]:.1f} s of experiment "
-          f"({elapsed:.1f} s to simulate)")
+    print(f"{truth.twin} twin: {len(rec)} rows, {rec.data['run'].nunique()} runs, {rec.data['t'].iloc[-1]:.1f} s of "
+          f"experiment ({elapsed:.1f} s to simulate)")
     for e in truth.effects:
         f = "" if e["frequency"] is None else f" at {e['frequency']:.6g} cycles/rad"
         print(f"  effect: {e['kind']}{f}: {e['description']}")
     for k, p in paths.items():
         print(f"{k}: {p}")
     print(f"read it with: gearspec spectrum {paths['recording']} --gear {paths['gear']}")
+
+
+def _effects(args):
+    from ..simulate.effects import parse_effect
+
+    return [parse_effect(e) for e in args.effect]
 
 
 def run_silo4(args) -> int:
@@ -140,9 +122,7 @@ def run_silo4(args) -> int:
     else:
         rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
                                 seed=args.seed)
-    elapsed = time.perf_counter() - t0
-    paths = _write(args, args.name, rec, truth)
-    _report(args, paths, rec, truth, elapsed)
+    _write(args, args.name, rec, truth, time.perf_counter() - t0)
     return 0
 
 
@@ -156,8 +136,5 @@ def run_lola(args) -> int:
     t0 = time.perf_counter()
     rec, points = lola_twin(args.module, _floats(args.speeds, "--speeds"), _floats(args.loads, "--loads"),
                             hold=args.hold, effects=effects, seed=args.seed)
-    elapsed = time.perf_counter() - t0
-    truth = points.attrs["truth"]
-    paths = _write(args, name, rec, truth, {"points": ("points.csv", points)})
-    _report(args, paths, rec, truth, elapsed)
+    _write(args, name, rec, points.attrs["truth"], time.perf_counter() - t0, {"points": ("points.csv", points)})
     return 0

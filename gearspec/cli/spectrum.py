@@ -2,19 +2,17 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
 import time
-from pathlib import Path
 
 from . import (
     POSITIVE,
     PROBABILITY,
     add_output_options,
-    add_recording_options,
-    add_segment_options,
+    analysis_parser,
+    command_line,
     load_from_args,
     number,
+    print_outputs,
     segments_from_args,
     stages,
 )
@@ -27,12 +25,10 @@ MAX_PEAKS = 64
 
 
 def register(sub) -> None:
-    sp = sub.add_parser("spectrum", help="constant-speed segments and their order spectra",
-                        description="Find constant-speed segments per direction and analyse the torque ripple over "
-                                    "position in each: amplitude, phase and standard error at every declared gear "
-                                    "line, and peaks no declared line explains.")
-    add_recording_options(sp)
-    add_segment_options(sp)
+    sp = analysis_parser(sub, "spectrum", run, help="constant-speed segments and their order spectra",
+                         description="Find constant-speed segments per direction and analyse the torque ripple over "
+                                     "position in each: amplitude, phase and standard error at every declared gear "
+                                     "line, and peaks no declared line explains.")
     g = sp.add_argument_group("spectra")
     g.add_argument("--max-frequency", type=POSITIVE, help="highest frequency searched, cycles per unit of theta")
     g.add_argument("--min-cycles", type=POSITIVE, default=1.0, help="cycles a declared line must complete in a segment")
@@ -45,7 +41,6 @@ def register(sub) -> None:
     g.add_argument("--method", default="auto", choices=("auto", "nifty", "astropy", "scipy"),
                    help="Lomb-Scargle implementation")
     add_output_options(sp)
-    sp.set_defaults(func=run)
 
 
 def run(args) -> int:
@@ -63,7 +58,7 @@ def run(args) -> int:
     if args.json:
         result.to_json(args.json)
     if args.out:
-        write_spectrum_report(result, rec, seg, args.out, command="gearspec " + " ".join(map(shlex.quote, sys.argv[1:])))
+        write_spectrum_report(result, rec, seg, args.out, command=command_line())
     if not args.quiet:
         _print_summary(result, time.perf_counter() - t0, args)
     return 0
@@ -86,7 +81,4 @@ def _print_summary(result, elapsed, args) -> None:
     if len(un):
         print(f"{len(un)} significant peak(s) no declared line explains; see the report"
               + ("" if args.out else " (--out DIR)"))
-    if args.out:
-        print(f"report: {Path(args.out) / 'report.md'}")
-    if args.json:
-        print(f"json: {args.json}")
+    print_outputs(args, as_path=True)

@@ -1,9 +1,5 @@
-"""Figures (matplotlib, Agg), one module per command.  A leaf package: nothing in the analysis
-imports it.
-
-Every function takes results and an output path, draws one figure, saves it as PNG and returns
-the path.  Units are on every axis.
-"""
+"""Figures (matplotlib, Agg), one module per command; a leaf package: nothing in the analysis
+imports it.  Every function draws one figure from results, saves it as PNG and returns its path."""
 
 from __future__ import annotations
 
@@ -15,10 +11,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained", "save", "plt",
-           "POS", "NEG"]
+           "POS", "NEG", "DIRS"]
 
 #: colours of the positive and negative direction in every figure
 POS, NEG = "#1f77b4", "#d62728"
+#: direction, its name, colour and marker in every figure
+DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
 
 
 def save(fig, path) -> Path:

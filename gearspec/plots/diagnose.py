@@ -1,7 +1,6 @@
-"""Figures of ``gearspec diagnose``: the residual spectra with every candidate line marked, one
-figure per effect showing the structure it explains (the residual before it was added against the
-variable of its kind, with what the term predicts), and the held-out error per segment before and
-after."""
+"""Figures of ``gearspec diagnose``: the residual spectra with the candidate lines, one figure per
+effect (the residual it explains against the variable of its kind, and what the term predicts), and
+the held-out error per segment before and after."""
 
 from __future__ import annotations
 
@@ -11,38 +10,25 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import NEG, POS, plt, save
+from . import DIRS, NEG, POS, plt, save
 
 __all__ = ["plot_spectra", "plot_effect", "plot_segment_errors", "plot_time_series", "effect_curve"]
-
-_DIRS = ((1, "positive", POS), (-1, "negative", NEG))
-
-
-def _speed_label(dd):
-    return f"speed ({dd.unit}/s)"
 
 
 def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torque_unit: str = "Nm",
                  title: str = "Residual spectra over position (baseline model)") -> Path:
-    """The pooled residual periodograms of each direction, with their local noise level, every
-    candidate line marked (accepted: green, rejected: grey).
-
-    One panel per direction: the all-speed pool (the one with most segments), and, thinner, the
-    pools of slower speeds whose spectra reach higher frequencies (the all-speed pool stops below
-    the position Nyquist frequency of its fastest segment: a line found at slow speed lies beyond
-    it).  The frequency axis extends past every candidate line; a candidate beyond every spectrum
-    drawn is marked dashed."""
+    """The pooled residual periodograms of each direction with their local noise level, every
+    candidate line marked (accepted: green, rejected: grey; dashed: beyond every spectrum drawn).
+    Beside the all-speed pool, thinner, up to two pools of slower speeds that reach higher
+    frequencies, where a line found at slow speed may lie."""
     pooled = [s for s in spectra if s.pooled and len(s.frequency)]
-    per_dir, extra = {}, {}
-    for s in pooled:  # the all-speed pool of each direction: the one with most segments
-        if s.direction not in per_dir or len(s.segments) > len(per_dir[s.direction].segments):
-            per_dir[s.direction] = s
-    for s in pooled:  # the pools that reach further up, highest reach first, at most two
-        main = per_dir[s.direction]
-        if s is not main and s.frequency[-1] > 1.05 * main.frequency[-1]:
-            extra.setdefault(s.direction, []).append(s)
-    for d in extra:
-        extra[d] = sorted(extra[d], key=lambda x: -x.frequency[-1])[:2]
+    # the all-speed pool of each direction (the one with most segments), and the pools that reach
+    # further up, highest reach first
+    per_dir = {d: max((s for s in pooled if s.direction == d), key=lambda s: len(s.segments))
+               for d in dict.fromkeys(s.direction for s in pooled)}
+    extra = {d: sorted((s for s in pooled if s.direction == d and s is not m
+                        and s.frequency[-1] > 1.05 * m.frequency[-1]), key=lambda x: -x.frequency[-1])[:2]
+             for d, m in per_dir.items()}
     rows = [d for d in (1, -1) if d in per_dir]
     marks = [e for e in effects if getattr(e, "frequency", None) is not None and np.isfinite(e.frequency)
              and e.frequency > 0]
@@ -57,12 +43,8 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
             ax.semilogy(x.frequency, np.maximum(x.amplitude, 1e-300), color=color, lw=0.5, alpha=0.35 - 0.1 * k,
                         label=f"residual: {x.label}")
             ax.semilogy(x.frequency, np.maximum(x.noise, 1e-300), color="k", lw=0.6, ls=":", alpha=0.6)
-        f_lo = min(x.frequency[0] for x in drawn)
-        f_hi = max(x.frequency[-1] for x in drawn)
-        if marks:
-            f_lo = min(f_lo, min(e.frequency for e in marks) / 1.5)
-            f_hi = max(f_hi, max(e.frequency for e in marks) * 1.5)
-        ax.set_xlim(f_lo, f_hi)
+        ax.set_xlim(min([x.frequency[0] for x in drawn] + [e.frequency / 1.5 for e in marks]),
+                    max([x.frequency[-1] for x in drawn] + [e.frequency * 1.5 for e in marks]))
         ax.set_xscale("log")
         # markers, labels staggered in height (axes fraction) so that neighbours do not overlap
         for k, e in enumerate(sorted(marks, key=lambda e: e.frequency)):
@@ -87,7 +69,7 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
     return save(fig, path)
 
 
-def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
+def effect_curve(dd, residual, contribution, kind: str) -> dict:
     """What the figure of an effect shows: the x variable of its kind and, per direction, the
     binned (or per-segment) means of the residual before the term was added and of the term's
     contribution (both in the friction magnitude, except inertia: drive torque)."""
@@ -95,37 +77,29 @@ def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
     signed = kind == "inertia"
     m_res = residual if signed else d * residual
     m_con = contribution if signed else d * contribution
-    if kind in ("speed_law", "asymmetry"):
-        x, xl, per_group = np.abs(dd.at("v")), _speed_label(dd), dd.kind == "plateaus"
-    elif kind == "load":
-        x, xl, per_group = np.abs(dd.at("load")), f"|load| (N{'m' if dd.unit == 'rad' else ''})", True
-    elif kind == "temperature":
-        x, xl, per_group = dd.at("temperature"), "temperature (degC)", True
-    elif kind == "drift":
-        x, xl, per_group = dd.at("t"), "time (s)", True
-    elif kind == "inertia":
-        x, xl, per_group = dd.at("acc"), f"acceleration ({dd.unit}/s^2)", False
-    elif kind == "hysteresis":
-        x, xl, per_group = dd.at("travel"), f"travel since the last reversal ({dd.unit})", False
-    else:
+    # per kind: the column, whether its absolute value, the axis label, one point per group
+    speed = ("v", True, f"speed ({dd.unit}/s)", dd.kind == "plateaus")
+    axes = {"speed_law": speed, "asymmetry": speed,
+            "load": ("load", True, f"|load| (N{'m' if dd.unit == 'rad' else ''})", True),
+            "temperature": ("temperature", False, "temperature (degC)", True), "drift": ("t", False, "time (s)", True),
+            "inertia": ("acc", False, f"acceleration ({dd.unit}/s^2)", False),
+            "hysteresis": ("travel", False, f"travel since the last reversal ({dd.unit})", False)}
+    if kind not in axes:
         return {}
+    column, absolute, xl, per_group = axes[kind]
+    x = np.abs(dd.at(column)) if absolute else dd.at(column)
     out = {"xlabel": xl, "series": []}
-    for direction, name, color in _DIRS:
-        sel = d == direction
-        if kind == "inertia":
-            sel = np.ones(len(d), bool) if direction == 1 else np.zeros(len(d), bool)
+    groups = ([(0, "both directions", "k", np.ones(len(d), bool))] if kind == "inertia"
+              else [(k, name, color, d == k) for k, name, color, _ in DIRS])
+    for direction, name, color, sel in groups:
         if not sel.any():
             continue
-        if per_group:
-            rows = []
-            for a, z in zip(dd.starts, dd.stops):
-                if sel[a:z].mean() < 0.5:
-                    continue
-                rows.append((float(np.mean(x[a:z])), float(np.mean(m_res[a:z])), float(np.mean(m_con[a:z])),
-                             float(np.std(m_res[a:z]) / math.sqrt(max(z - a, 1)))))
+        if per_group:  # the groups at least half in this direction
+            rows = sorted((np.mean(x[a:z]), np.mean(m_res[a:z]), np.mean(m_con[a:z]),
+                           np.std(m_res[a:z]) / math.sqrt(max(z - a, 1)))
+                          for a, z in zip(dd.starts, dd.stops) if not sel[a:z].mean() < 0.5)
             if not rows:
                 continue
-            xs, rs, cs, se = map(np.array, zip(*sorted(rows)))
         else:
             xx = x[sel]
             fin = np.isfinite(xx)
@@ -136,19 +110,11 @@ def effect_curve(dd, residual, contribution, kind: str, effect=None) -> dict:
             else:
                 edges = np.quantile(xx[fin], np.linspace(0, 1, 16))
             which = np.clip(np.searchsorted(edges, xx, side="right") - 1, 0, len(edges) - 2)
-            xs, rs, cs, se = [], [], [], []
             rr, cc = m_res[sel], m_con[sel]
-            for k in range(len(edges) - 1):
-                b = fin & (which == k)
-                if b.sum() < 3:
-                    continue
-                xs.append(float(np.mean(xx[b])))
-                rs.append(float(np.mean(rr[b])))
-                cs.append(float(np.mean(cc[b])))
-                se.append(float(np.std(rr[b]) / math.sqrt(b.sum())))
-            xs, rs, cs, se = map(np.array, (xs, rs, cs, se))
-        out["series"].append({"direction": direction if kind != "inertia" else 0, "name": name if kind != "inertia"
-                              else "both directions", "color": color if kind != "inertia" else "k",
+            bins = [b for b in (fin & (which == k) for k in range(len(edges) - 1)) if b.sum() >= 3]
+            rows = [(np.mean(xx[b]), np.mean(rr[b]), np.mean(cc[b]), np.std(rr[b]) / math.sqrt(b.sum())) for b in bins]
+        xs, rs, cs, se = np.array(rows, float).reshape(-1, 4).T
+        out["series"].append({"direction": direction, "name": name, "color": color,
                               "x": xs, "residual": rs, "contribution": cs, "se": se})
     return out
 
@@ -165,14 +131,11 @@ def _line_amplitudes(dd, residual, contribution, frequency):
         if np.ptp(th) * frequency < 1.0:
             continue
         X = np.column_stack([np.ones(z - a), np.sin(2 * np.pi * frequency * th), np.cos(2 * np.pi * frequency * th)])
-        out = []
-        for y in (d[a:z] * residual[a:z], d[a:z] * contribution[a:z]):
-            beta, *_ = np.linalg.lstsq(X, y, rcond=None)
-            out.append(math.hypot(beta[1], beta[2]))
-        r = d[a:z] * residual[a:z] - X @ np.linalg.lstsq(X, d[a:z] * residual[a:z], rcond=None)[0]
-        se = float(np.std(r) * math.sqrt(2.0 / (z - a)))
-        rows.append({"direction": int(d[a]), "speed": float(np.mean(s[a:z])), "amplitude": out[0],
-                     "model": out[1], "se": se})
+        y = d[a:z] * residual[a:z]
+        br = np.linalg.lstsq(X, y, rcond=None)[0]
+        bc = np.linalg.lstsq(X, d[a:z] * contribution[a:z], rcond=None)[0]
+        rows.append({"direction": int(d[a]), "speed": float(np.mean(s[a:z])), "amplitude": math.hypot(br[1], br[2]),
+                     "model": math.hypot(bc[1], bc[2]), "se": float(np.std(y - X @ br) * math.sqrt(2.0 / (z - a)))})
     return pd.DataFrame(rows)
 
 
@@ -194,8 +157,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
             ax.semilogy(spectrum.frequency, np.maximum(spectrum.noise, 1e-300), "k--", lw=0.8, label="local noise")
             ax.axvline(f, color="tab:green" if effect.accepted else "0.5", lw=1.2, zorder=0,
                        label=f"{f:.6g} cycles/{dd.unit}")
-            lo, hi = max(spectrum.frequency[0], f / 4), min(spectrum.frequency[-1], f * 4)
-            ax.set_xlim(lo, hi)
+            ax.set_xlim(max(spectrum.frequency[0], f / 4), min(spectrum.frequency[-1], f * 4))
             ax.set_xscale("log")
             ax.set_title(f"residual spectrum of the baseline: {spectrum.label}", fontsize=9)
         ax.set_xlabel(f"frequency (cycles/{dd.unit})")
@@ -204,15 +166,14 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
         ax.legend(fontsize=7)
         ax = axes[1]
         amp = _line_amplitudes(dd, residual, contribution, f)
-        for direction, name, color in _DIRS:
-            a = amp[amp["direction"] == direction] if len(amp) else amp
-            if a is None or not len(a):
+        for direction, name, color, _ in DIRS if len(amp) else ():
+            a = amp[amp["direction"] == direction].sort_values("speed")
+            if not len(a):
                 continue
-            a = a.sort_values("speed")
             ax.errorbar(a["speed"], a["amplitude"], yerr=2 * a["se"], fmt="o", color=color, mfc="none", ms=4,
                         label=f"{name}: {what}")
             ax.plot(a["speed"], a["model"], "-", color=color, lw=1.2, label=f"{name}: the term")
-        ax.set_xlabel(_speed_label(dd))
+        ax.set_xlabel(f"speed ({dd.unit}/s)")
         ax.set_ylabel(f"amplitude of the line ({tu})")
         ax.set_title("amplitude against speed, per segment (95 % bars)", fontsize=9)
         ax.grid(alpha=0.3)
@@ -221,7 +182,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
         fig.suptitle(f"{effect.name} ({lab}): {'accepted' if effect.accepted else 'rejected'}", fontsize=10)
         fig.tight_layout()
         return save(fig, path)
-    cur = effect_curve(dd, residual, contribution, effect.kind, effect)
+    cur = effect_curve(dd, residual, contribution, effect.kind)
     if not cur or not cur["series"]:
         return None
     fig, ax = plt.subplots(figsize=(8, 4.2))
@@ -244,7 +205,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
 def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", unit: str = "rad") -> Path:
     """Held-out rmse of every group before and after (and in-sample), against speed per direction."""
     fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
-    for ax, (direction, name, color) in zip(axes, _DIRS):
+    for ax, (direction, name, color, _) in zip(axes, DIRS):
         t = table[table["direction"] == direction].sort_values("speed")
         if t.empty:
             ax.text(0.5, 0.5, f"no {name} segment", ha="center", transform=ax.transAxes)
@@ -273,15 +234,13 @@ def plot_time_series(t, y, before, after, path, *, torque_unit: str = "N", title
     axes[0].plot(t[sel], y[sel], "k", lw=1.0, label=labels[0])
     axes[0].plot(t[sel], before[sel], color="0.55", lw=1.0, ls="--", label=labels[1])
     axes[0].plot(t[sel], after[sel], color="tab:green", lw=1.0, label=labels[2])
-    axes[0].set_ylabel(f"force / torque ({torque_unit})")
-    axes[0].legend(fontsize=8)
-    axes[0].grid(alpha=0.3)
     axes[1].plot(t[sel], (y - before)[sel], color="0.55", lw=0.8, label=f"error, {labels[1]}")
     axes[1].plot(t[sel], (y - after)[sel], color="tab:green", lw=0.8, label=f"error, {labels[2]}")
     axes[1].set_xlabel("time (s)")
-    axes[1].set_ylabel(f"error ({torque_unit})")
-    axes[1].legend(fontsize=8)
-    axes[1].grid(alpha=0.3)
+    for ax, what in zip(axes, ("force / torque", "error")):
+        ax.set_ylabel(f"{what} ({torque_unit})")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return save(fig, path)

@@ -23,19 +23,16 @@ def plot_pareto(result, path) -> Path:
     cx = np.array([c.complexity for c in result.candidates])
     cy = np.array([c.rmse_holdout for c in result.candidates])
     ax.scatter(cx, cy, s=14, color="0.72", label=f"laws scored ({len(cx)})", zorder=2)
-    fx = cx[result.front]
     fy = cy[result.front]
-    ax.plot(fx, fy, "-o", color="#1f77b4", ms=5, lw=1.3, label="Pareto front", zorder=3)
+    ax.plot(cx[result.front], fy, "-o", color="#1f77b4", ms=5, lw=1.3, label="Pareto front", zorder=3)
     sel = result.best
     ax.plot([sel.complexity], [sel.rmse_holdout], "*", color="#d62728", ms=17, zorder=5, label="selected")
     refs = [r for r in result.references if r.rmse_holdout is not None and r.complexity is not None]
-    ys = list(cy)
     for i, r in enumerate(refs):
-        col = _REF_COLORS[i % len(_REF_COLORS)]
-        ax.plot([r.complexity], [r.rmse_holdout], "D" if r.kind == "paper law" else "s", color=col, ms=8,
-                mfc="none", mew=2, zorder=4, label=textwrap.shorten(f"{r.name}", 60))
-        ys.append(r.rmse_holdout)
-    ys = np.array([y for y in ys if np.isfinite(y) and y > 0])
+        ax.plot([r.complexity], [r.rmse_holdout], "D" if r.kind == "paper law" else "s",
+                color=_REF_COLORS[i % len(_REF_COLORS)], ms=8, mfc="none", mew=2, zorder=4,
+                label=textwrap.shorten(f"{r.name}", 60))
+    ys = np.array([y for y in list(cy) + [r.rmse_holdout for r in refs] if np.isfinite(y) and y > 0])
     if len(ys) and ys.max() / ys.min() > 8:
         ax.set_yscale("log")
     # a runaway fit (e.g. a fold extrapolating a decay) would flatten everything else: clip, and say so

@@ -11,26 +11,25 @@ import pandas as pd
 from ..fitdata import FitData
 from ..model import RPM, FrictionModel
 from ..terms import amplitude_law, clamp_speed
-from . import NEG, POS, plt, save
+from . import DIRS, NEG, POS, plt, save
 
 __all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
 
-_DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
 _STYLES = ("-", "--", ":", "-.")
 
 
-def _speed_axis(unit):
-    return ("speed (rpm)", 1 / RPM) if unit == "rad" else (f"speed ({unit}/s)", 1.0)
+def _units(unit):
+    """Speed axis label, its scale from unit/s, and the torque unit."""
+    return ("speed (rpm)", 1 / RPM, "Nm") if unit == "rad" else (f"speed ({unit}/s)", 1.0, "N")
 
 
 def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path, unit: str = "rad") -> Path:
     """Plateau friction against speed per direction (error bars: 2 se) with each model's
     position-averaged friction (SILO4 Fig. 4)."""
-    xl, xs = _speed_axis(unit)
-    tu = "Nm" if unit == "rad" else "N"
+    xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
     has_load = "load" in plateaus and plateaus["load"].nunique() > 1
-    for ax, (d, name, color, mk) in zip(axes, _DIRS):
+    for ax, (d, name, color, mk) in zip(axes, DIRS):
         pl = plateaus[plateaus["direction"] == d]
         if pl.empty:
             ax.text(0.5, 0.5, f"no {name} segment", transform=ax.transAxes, ha="center")
@@ -62,32 +61,24 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
     """Amplitude of each fitted line against speed per direction (per-segment fits, 95 % bars;
     :func:`gearspec.identify.line_amplitudes`) with each model's amplitude law ``A g(|v|)``
     (SILO4 Fig. 7 with eq. 8)."""
-    labels = []
-    for m in models.values():
-        for p in m.directions.values():
-            for h in p["harmonics"]:
-                if h.get("label") and h["label"] not in labels:
-                    labels.append(h["label"])
+    labels = list(dict.fromkeys(h["label"] for m in models.values() for d in (1, -1) for h in m.harmonics(d)
+                                if h.get("label")))
     if not labels:
         return None
-    xl, xs = _speed_axis(unit)
-    tu = "Nm" if unit == "rad" else "N"
+    xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, len(labels), figsize=(5.2 * len(labels), 4.0), squeeze=False)
     for ax, lab in zip(axes[0], labels):
         df = amplitudes[amplitudes["label"] == lab]
         smax = 0.0
-        for d, name, color, mk in _DIRS:
-            if not df.empty:
-                sub = df[df["direction"] == d].sort_values("speed")
-                if len(sub):
-                    smax = max(smax, sub["speed"].max())
-                    ax.errorbar(sub["speed"] * xs, sub["amplitude"], yerr=1.96 * sub["amplitude_se"], fmt=mk,
-                                color=color, ms=4, mfc="none", label=f"{name}: per segment")
-        if smax == 0:
-            smax = 1.0
-        grid = np.linspace(0, smax * 1.1, 200)
+        for d, name, color, mk in DIRS:
+            sub = df[df["direction"] == d].sort_values("speed")
+            if len(sub):
+                smax = max(smax, sub["speed"].max())
+                ax.errorbar(sub["speed"] * xs, sub["amplitude"], yerr=1.96 * sub["amplitude_se"], fmt=mk,
+                            color=color, ms=4, mfc="none", label=f"{name}: per segment")
+        grid = np.linspace(0, (smax or 1.0) * 1.1, 200)
         for (mlabel, m), ls in zip(models.items(), _STYLES):
-            for d, name, color, _ in _DIRS:
+            for d, name, color, _ in DIRS:
                 h = next((h for h in m.harmonics(name) if h.get("label") == lab), None)
                 if h is None:
                     continue
@@ -106,10 +97,9 @@ def plot_amplitude_fit(amplitudes: pd.DataFrame, models: dict[str, FrictionModel
     return save(fig, path)
 
 
-def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int], path, cycles: float = 3.0,
-                       frequency: float | None = None) -> Path:
+def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int], path, cycles: float = 3.0) -> Path:
     """Friction over position for a few segments: data and model (SILO4 Fig. 9).  Each panel shows
-    ``cycles`` periods of ``frequency`` (default: the slowest fitted line) from the segment start."""
+    ``cycles`` periods of the slowest fitted line from the segment start."""
     n = len(segments)
     unit = data.unit
     tu = "Nm" if unit == "rad" else "N"
@@ -118,10 +108,7 @@ def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int],
         sub = data.subset(data.segment == sid)
         d = int(sub.direction[0])
         th = sub.theta
-        f = frequency
-        if f is None:
-            fs = [h["frequency"] for h in model.harmonics(d) if h.get("amplitude")]
-            f = min(fs) if fs else None
+        f = min((h["frequency"] for h in model.harmonics(d) if h.get("amplitude")), default=None)
         order = np.argsort(th * d)
         th, y = th[order], sub.y[order]
         x = d * (th - th[0])
@@ -142,20 +129,18 @@ def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int],
 
 def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> Path:
     """Per segment: mean error e and rmse of model - data against speed, per model and direction."""
-    xl, xs = _speed_axis(unit)
-    tu = "Nm" if unit == "rad" else "N"
+    xl, xs, tu = _units(unit)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.0))
     for (label, df), ls in zip(errors.items(), _STYLES):
         if df.empty:
             continue
-        for d, name, color, mk in _DIRS:
+        for d, name, color, mk in DIRS:
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue
-            axes[0].plot(sub["speed"] * xs, sub["e"], ls, marker=mk, color=color, ms=4, mfc="none",
-                         label=f"{label}, {name}")
-            axes[1].plot(sub["speed"] * xs, sub["rmse"], ls, marker=mk, color=color, ms=4, mfc="none",
-                         label=f"{label}, {name}")
+            for ax, col in zip(axes, ("e", "rmse")):
+                ax.plot(sub["speed"] * xs, sub[col], ls, marker=mk, color=color, ms=4, mfc="none",
+                        label=f"{label}, {name}")
     axes[0].axhline(0, color="0.6", lw=0.6)
     axes[0].set_ylabel(f"mean error e = model - data ({tu})")
     axes[1].set_ylabel(f"rmse per segment ({tu})")

@@ -10,7 +10,7 @@ import numpy as np
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import NEG as _NEG, POS as _POS, plt, save as _save
+from . import DIRS, NEG as _NEG, POS as _POS, plt, save as _save
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained"]
 
@@ -19,9 +19,8 @@ def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 200
     """Position-derived speed over time for every run, with the segments shaded per direction."""
     pieces = rec.pieces()
     runs = sorted({r for r, _, _ in pieces})
-    n_runs = len(runs)
-    ncol = 1 if n_runs <= 4 else 2
-    nrow = min(math.ceil(n_runs / ncol), 12)
+    ncol = 1 if len(runs) <= 4 else 2
+    nrow = min(math.ceil(len(runs) / ncol), 12)
     runs = runs[: nrow * ncol]
     fig, axes = plt.subplots(nrow, ncol, figsize=(11 if ncol == 1 else 13, 1.9 * nrow + 0.8), squeeze=False)
     t, theta = rec.t, rec.theta
@@ -57,9 +56,8 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
     segs = [s for s in result.segments if s.fft_frequency is not None]
     for page in range(math.ceil(len(segs) / per_page)):
         chunk = segs[page * per_page:(page + 1) * per_page]
-        ncol = 2
-        nrow = math.ceil(len(chunk) / ncol)
-        fig, axes = plt.subplots(nrow, ncol, figsize=(13, 3.0 * nrow + 0.6), squeeze=False)
+        nrow = math.ceil(len(chunk) / 2)
+        fig, axes = plt.subplots(nrow, 2, figsize=(13, 3.0 * nrow + 0.6), squeeze=False)
         for ax, s in zip(axes.ravel(), chunk):
             i = result.segments.index(s)
             f, a = s.fft_frequency, s.fft_amplitude
@@ -99,18 +97,13 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
                     Line2D([], [], marker="o", ls="", color="0.3", mfc="none", label="hollow: fap >= 0.01")]
         fig.legend(handles=handles, loc="upper center", ncol=5, fontsize=8, frameon=False)
         fig.tight_layout(rect=(0, 0, 1, 0.95))
-        p = Path(path_pattern.format(page + 1))
-        paths.append(_save(fig, p))
+        paths.append(_save(fig, Path(path_pattern.format(page + 1))))
     return paths
 
 
 def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False) -> Path | None:
     """Amplitude of every declared line against speed, both directions (the SILO4 Fig. 7 view)."""
-    labels = []
-    for s in result.segments:
-        for p in s.peaks:
-            if p.declared and p.label not in labels:
-                labels.append(p.label)
+    labels = list(dict.fromkeys(p.label for s in result.segments for p in s.peaks if p.declared))
     if not labels:
         return None
     unit = result.unit
@@ -122,12 +115,12 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
     for ax, lab in zip(axes.ravel(), labels):
         df = result.amplitude_vs_speed(lab)
         df = df[df["frequency"].notna()]
-        for d, color, mk, name in ((1, _POS, "o", "positive"), (-1, _NEG, "s", "negative")):
+        for d, name, color, mk in DIRS:
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue
-            y = sub["amplitude"] / (sub["level"].abs() if relative else 1.0)
-            e = sub["amplitude_se"] / (sub["level"].abs() if relative else 1.0)
+            scale = sub["level"].abs() if relative else 1.0
+            y, e = sub["amplitude"] / scale, sub["amplitude_se"] / scale
             ax.errorbar(sub["speed"], y * (100 if relative else 1), yerr=1.96 * e * (100 if relative else 1),
                         fmt=mk + "-", color=color, ms=4, lw=0.8, capsize=2, mfc=color if d > 0 else "none",
                         label=f"{name} direction")
@@ -148,9 +141,7 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
 def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Path | None:
     """Peaks found that no declared line explains: frequency against speed, size = amplitude."""
     t = result.peaks_table()
-    if t.empty:
-        return None
-    t = t[(~t["declared"]) & (t["fap"] <= max_fap)]
+    t = t if t.empty else t[(~t["declared"]) & (t["fap"] <= max_fap)]
     if t.empty:
         return None
     unit = result.unit
@@ -171,12 +162,8 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
         if any(abs(math.log(f / g)) < math.log(1.15) for g in done) or len(done) >= 10:
             continue
         done.append(f)
-        if isinstance(r["label"], str):
-            txt = r["label"].split(" = ")[0]
-        elif isinstance(r.get("hint"), str):
-            txt = r["hint"]
-        else:
-            txt = f"{f:.4g} cycles/{unit}"
+        txt = (r["label"].split(" = ")[0] if isinstance(r["label"], str) else
+               r["hint"] if isinstance(r.get("hint"), str) else f"{f:.4g} cycles/{unit}")
         ax.annotate(f"{txt} (up to {r['amplitude']:.2g} {tu})", (r["speed"] * np.sign(r["direction"]), f),
                     fontsize=7, xytext=(6, 3), textcoords="offset points")
     if result.gear is not None:

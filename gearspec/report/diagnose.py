@@ -1,7 +1,5 @@
-"""The report of ``gearspec diagnose``: the baseline model, one section per effect with the figure
-that shows it and the terms added (parameters and standard errors), every candidate that was not
-accepted with its evidence and the reason, and the error before and after -- in-sample, on held-out
-data and per segment (and on an independent recording when one was given)."""
+"""The report of ``gearspec diagnose``: the baseline model, each effect with its figure and terms,
+every candidate not accepted and why, and the error before and after."""
 
 from __future__ import annotations
 
@@ -13,7 +11,7 @@ import pandas as pd
 
 from ..diagnose import Diagnosis
 from ..plots import diagnose as dplots
-from . import markdown_table
+from . import bullets, header, markdown_table, model_table, report_dir, write_report
 
 __all__ = ["write_diagnose_report", "effect_table", "interpretation", "analysis_table"]
 
@@ -25,24 +23,27 @@ def _f(x, fmt=".4g"):
 def effect_table(diag: Diagnosis) -> pd.DataFrame:
     """One row per candidate: kind, name, frequency, label (or integer hint), accepted, Z and the
     threshold, held-out rmse before and after, and the decision."""
-    rows = []
-    for e in diag.effects:
-        rows.append({"kind": e.kind, "effect": e.name, "accepted": "yes" if e.accepted else "no", "status": e.status,
-                     "frequency": e.frequency, "label": e.label or (f"({e.hint})" if e.hint else ""),
-                     "Z": e.z, "Z needed": e.z_crit, "held-out before": e.rmse_holdout_before,
-                     "held-out after": e.rmse_holdout_after, "round": e.round})
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{"kind": e.kind, "effect": e.name, "accepted": "yes" if e.accepted else "no",
+                          "status": e.status, "frequency": e.frequency,
+                          "label": e.label or (f"({e.hint})" if e.hint else ""), "Z": e.z, "Z needed": e.z_crit,
+                          "held-out before": e.rmse_holdout_before, "held-out after": e.rmse_holdout_after,
+                          "round": e.round} for e in diag.effects])
+
+
+#: what an effect of these kinds means, before its fitted parameters
+_MEANING = {"speed_law": "The speed dependence of the friction (or of a line's amplitude) has another shape than the "
+                         "model's law: ",
+            "load": "Friction depends on the output load: ",
+            "hysteresis": "Friction near reversals differs from the steady law (presliding / backlash): "}
 
 
 def interpretation(diag: Diagnosis, e) -> list[str]:
     """Plain sentences on what an effect is physically (labels, integer relations, amplitude law,
     lead of a screw)."""
-    dd = diag.data
-    unit = dd.unit
+    unit = diag.data.unit
     out = []
     if e.kind == "periodic" and e.frequency:
-        f = e.frequency
-        period = 1.0 / f
+        period = 1.0 / e.frequency
         if e.label:
             out.append(f"The line is explained by the declared gear train: **{e.label}**"
                        + (f" (order {e.order:.4g} per output revolution)." if e.order else "."))
@@ -68,19 +69,12 @@ def interpretation(diag: Diagnosis, e) -> list[str]:
                 if law == "const":
                     laws.append(f"{t['direction']}: constant amplitude {h['amplitude']:.3g}")
                 else:
-                    grow = h.get("decay", 0) < 0
                     laws.append(f"{t['direction']}: amplitude {h['amplitude']:.3g} x {law} law, decay "
-                                f"{h.get('decay', 0):.3g} ({'grows' if grow else 'falls'} with speed)")
+                                f"{h.get('decay', 0):.3g} ({'grows' if h.get('decay', 0) < 0 else 'falls'} with speed)")
         if laws:
             out.append("Amplitude against speed (chosen by the data): " + "; ".join(laws) + ".")
-    if e.kind == "speed_law":
-        out.append("The speed dependence of the friction (or of a line's amplitude) has another shape than the "
-                   "model's law: " + (e.parameters or e.name) + ".")
-    if e.kind == "load":
-        out.append("Friction depends on the output load: " + (e.parameters or e.name) + ".")
-    if e.kind == "hysteresis":
-        out.append("Friction near reversals differs from the steady law (presliding / backlash): "
-                   + (e.parameters or e.name) + ".")
+    if e.kind in _MEANING:
+        out.append(_MEANING[e.kind] + (e.parameters or e.name) + ".")
     if e.kind == "lag" and e.value is not None:
         out.append(f"The torque channel is logged {1e3 * e.value:.4g} ms behind the position channel (the lines' "
                    "phases drift with speed); every line is fitted at theta - v lag. Re-run with `--lag "
@@ -112,11 +106,8 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
                           title: str = "gearspec diagnose report") -> Path:
     """Write ``report.md``, the figures, ``baseline_model.json``, ``final_model.json`` and
     ``effects.csv`` / ``segments.csv`` into ``out``; returns the path of the report."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    dd = diag.data
-    tu = dd.torque_unit
-    unit = dd.unit
+    out = report_dir(out)
+    tu, unit = diag.data.torque_unit, diag.data.unit
     diag.baseline_model.to_json(out / "baseline_model.json")
     diag.final_model.to_json(out / "final_model.json")
     effect_table(diag).to_csv(out / "effects.csv", index=False)
@@ -132,9 +123,7 @@ def write_diagnose_report(diag: Diagnosis, out: str | Path, command: str = "", r
     md = (_header_section(diag, title, command, recording_summary) + _summary_section(diag)
           + _baseline_section(diag, fig_spec) + _accepted_section(diag, out) + _rejected_section(diag, out)
           + _final_section(diag, seg, fig_final, fig_seg) + _method_section(diag))
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md)
 
 
 def _header_section(diag: Diagnosis, title: str, command: str, recording_summary: str) -> list[str]:
@@ -142,14 +131,9 @@ def _header_section(diag: Diagnosis, title: str, command: str, recording_summary
     dd = diag.data
     held = "moves" if dd.kind == "trajectory" else f"{dd.by}s"
     k = diag.settings.get("folds")
-    md = [f"# {title}", ""]
-    if command:
-        md += [f"Command: `{command}`", ""]
-    if recording_summary:
-        md += ["## Recording", "", "```", recording_summary, "```", ""]
-    md += [f"{len(dd)} observations in {dd.n_groups} held-out groups (whole {held}); {k}-fold cross-validation "
-           "over whole groups, never interleaved samples. " + " ".join(dd.notes), ""]
-    return md
+    return header(title, command, recording_summary) + [
+        f"{len(dd)} observations in {dd.n_groups} held-out groups (whole {held}); {k}-fold cross-validation "
+        "over whole groups, never interleaved samples. " + " ".join(dd.notes), ""]
 
 
 def _summary_section(diag: Diagnosis) -> list[str]:
@@ -168,10 +152,9 @@ def _summary_section(diag: Diagnosis) -> list[str]:
     else:
         md += [f"Nothing was accepted: no candidate lowered the held-out error by more than noise would "
                f"({len(diag.effects)} candidate(s) tested).", ""]
-    st = diag.summary_table()
     md += ["Before and after (rmse in-sample, and on held-out groups: each fold predicted by a model fitted "
-           f"without it), in {tu}:", "", markdown_table(st), ""]
-    md += [f"- {n}" for n in diag.notes] + ([""] if diag.notes else [])
+           f"without it), in {tu}:", "", markdown_table(diag.summary_table()), ""]
+    md += bullets(diag.notes)
     if diag.validation:
         v = diag.validation
         md += [f"On the independent recording `{v['name']}` ({v['groups']} groups; models fitted on the estimation "
@@ -187,7 +170,7 @@ def _baseline_section(diag: Diagnosis, fig_spec: Path) -> list[str]:
     bm = diag.baseline_model
     md = ["## Baseline model", "", f"`{bm.name}` -- law {bm.law} ({bm.law_spec.description}); nonlinear "
           "parameters (Stribeck velocity, decays) refined by least squares, linear ones refitted jointly by "
-          "ordinary least squares, as every model of the loop is.", "", markdown_table(_param_table(bm)), ""]
+          "ordinary least squares, as every model of the loop is.", "", markdown_table(model_table(bm)), ""]
     if bm.terms:
         md += ["Terms: " + "; ".join(_term_text(t) for t in bm.terms), ""]
     md += ["## Residual spectra", "", "Residual of the baseline model over position, pooled over the segments of each "
@@ -200,12 +183,10 @@ def _baseline_section(diag: Diagnosis, fig_spec: Path) -> list[str]:
     if segs:
         rows = []
         for sp in segs:
-            top = sp.peaks.iloc[0] if len(sp.peaks) else None
-            rows.append({"segment": sp.segments[0], "direction": sp.direction, "speed": sp.speed_min,
-                         "n": sp.n, "strongest peak": None if top is None else top["frequency"],
-                         "amplitude": None if top is None else top["amplitude"],
-                         "FAP": None if top is None else top["fap"],
-                         "noise level (median)": float(np.median(sp.noise))})
+            top = sp.peaks.iloc[0] if len(sp.peaks) else {}
+            rows.append({"segment": sp.segments[0], "direction": sp.direction, "speed": sp.speed_min, "n": sp.n,
+                         "strongest peak": top.get("frequency"), "amplitude": top.get("amplitude"),
+                         "FAP": top.get("fap"), "noise level (median)": float(np.median(sp.noise))})
         md += ["Per segment: the strongest residual peak with false-alarm probability below 1 % (every "
                "independent frequency of the segment searched; empty: none).", "",
                markdown_table(pd.DataFrame(rows)), ""]
@@ -222,8 +203,7 @@ def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
         if not e.accepted:
             continue
         fig = _figure_for(diag, e, out, i)
-        md += [f"### {e.kind}: {e.name}", ""]
-        md += [f"- evidence: {e.evidence}", f"- held-out test: {e.decision}",
+        md += [f"### {e.kind}: {e.name}", "", f"- evidence: {e.evidence}", f"- held-out test: {e.decision}",
                f"- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu} "
                f"({-100 * e.gain:+.2f} %), {e.n_params} parameter(s) added", f"- fitted: {e.parameters}"]
         if e.validation:
@@ -233,9 +213,8 @@ def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
                       f"(Z {v['z']:.2f}, needs {v['z_crit']:.2f}): confirmed")
         md.append("")
         md += interpretation(diag, e) + [""] if interpretation(diag, e) else []
-        if e.terms:
-            md += ["Terms added (SI, with standard errors):", ""]
-            md += [f"- {_term_text(t.get('term') or t.get('harmonic'), t.get('direction'))}" for t in e.terms] + [""]
+        md += bullets([_term_text(t.get("term") or t.get("harmonic"), t.get("direction")) for t in e.terms],
+                      "Terms added (SI, with standard errors):")
         if fig is not None:
             md += [f"![{e.name}]({fig.name})", ""]
     return md
@@ -272,7 +251,7 @@ def _rejected_section(diag: Diagnosis, out: Path) -> list[str]:
 def _final_section(diag: Diagnosis, seg: pd.DataFrame, fig_final, fig_seg: Path) -> list[str]:
     """The final model and the error per held-out group (Markdown lines)."""
     fm = diag.final_model
-    md = ["## Final model", "", f"`{fm.name}`", "", markdown_table(_param_table(fm)), ""]
+    md = ["## Final model", "", f"`{fm.name}`", "", markdown_table(model_table(fm)), ""]
     if fm.terms:
         md += ["Terms: " + "; ".join(_term_text(t) for t in fm.terms), ""]
     md += ["`final_model.json` holds it in the `gearspec fit --json` form (terms included); "
@@ -334,16 +313,10 @@ def analysis_table(analyses: dict) -> pd.DataFrame:
                      "statistic": f"length {rv[1].get('length', float('nan')):.3g}, t {rv[1]['t']:.2f}",
                      "p": rv[1]["p"]})
     pooled = analyses.get("spectra", {}).get("pooled", [])
-    n_peaks = sum(len(s.peaks) for s in pooled)
     rows.append({"analysis": "over position (pooled periodograms)",
-                 "statistic": f"{n_peaks} peak(s) with FAP < 1 % in {len(pooled)} pools", "p": None})
+                 "statistic": f"{sum(len(s.peaks) for s in pooled)} peak(s) with FAP < 1 % in {len(pooled)} pools",
+                 "p": None})
     return pd.DataFrame(rows)
-
-
-def _param_table(m) -> pd.DataFrame:
-    t = m.table()
-    cols = [c for c in ("parameter", "unit", "positive", "positive_se", "negative", "negative_se") if c in t]
-    return t[cols]
 
 
 def _term_text(t, direction=None) -> str:

@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..plots.discover import plot_inclusion, plot_levels, plot_pareto
-from . import markdown_table
+from . import bullets, header, markdown_table, report_dir, write_report
 
 __all__ = ["write_discover_report"]
 
@@ -16,28 +16,20 @@ __all__ = ["write_discover_report"]
 def write_discover_report(result, rec, out, command: str = "") -> Path:
     """Write ``report.md``, ``pareto.png``, ``levels.png``, ``inclusion.png``, ``candidates.csv`` and
     ``comparison.csv`` into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = report_dir(out)
     M = result.moments
     tu = result.torque_unit
     unit = result.unit
     figs = {"pareto": plot_pareto(result, out / "pareto.png"), "levels": plot_levels(result, out / "levels.png"),
             "inclusion": plot_inclusion(result, out / "inclusion.png")}
-    front = result.front_candidates()
-    rows = []
-    for i, c in zip(result.front, front):
-        rows.append({"selected": "->" if i == result.selected else "", "complexity": c.complexity,
-                     f"held-out RMSE ({tu})": c.rmse_holdout, f"RMSE ({tu})": c.rmse, "AIC": c.aic, "BIC": c.bic,
-                     "law": c.equation})
-    cand = pd.DataFrame(rows)
+    cand = pd.DataFrame([{"selected": "->" if i == result.selected else "", "complexity": c.complexity,
+                          f"held-out RMSE ({tu})": c.rmse_holdout, f"RMSE ({tu})": c.rmse, "AIC": c.aic,
+                          "BIC": c.bic, "law": c.equation} for i, c in zip(result.front, result.front_candidates())])
     cand.to_csv(out / "candidates.csv", index=False)
     comp = result.comparison()
     comp.to_csv(out / "comparison.csv", index=False)
 
-    md = ["# gearspec discover report", ""]
-    if command:
-        md += [f"Command: `{command}`", ""]
-    md += ["## Data", ""]
+    md = header("gearspec discover report", command) + ["## Data", ""]
     if rec is not None:
         md += ["```", rec.summary(), "```", ""]
     md += [f"{M.N} samples in {M.S} constant-speed segments ({', '.join(_dirs(M))}); speeds "
@@ -108,12 +100,8 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            "4. **Selection.** Held-out errors from refits on the other folds; the simplest law within the "
            "standard-error margin of the best is selected; AIC and BIC are shown beside (they assume independent "
            "samples).", ""]
-    if result.notes:
-        md += ["Notes:", ""] + [f"- {n}" for n in result.notes] + [""]
-    md += ["Timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()), ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    md += bullets(result.notes, "Notes:")
+    return write_report(out, md + ["Timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()), ""])
 
 
 def _dirs(M) -> list[str]:
@@ -122,18 +110,12 @@ def _dirs(M) -> list[str]:
 
 
 def _coefficients(c, freqs) -> pd.DataFrame:
-    rows = []
-    for v in c.fit.values():
-        p = c.parts[v["part"]]
-        rows.append({"term": p.label(freqs), "direction": {0: "both", 1: "positive", -1: "negative"}[v["slot"]],
-                     "parameter": v["name"] if v["kind"] == "nonlinear" else _lin_name(p, v["name"]),
-                     "value": v["value"], "s.e.": v["se"], "at bound": "at bound" if v["at_bound"] else ""})
-    return pd.DataFrame(rows)
+    return pd.DataFrame([{"term": c.parts[v["part"]].label(freqs),
+                          "direction": {0: "both", 1: "positive", -1: "negative"}[v["slot"]],
+                          "parameter": v["name"] if v["kind"] == "nonlinear" else _lin_name(v["name"]),
+                          "value": v["value"], "s.e.": v["se"], "at bound": "at bound" if v["at_bound"] else ""}
+                         for v in c.fit.values()])
 
 
-def _lin_name(p, basis: str) -> str:
-    if basis.startswith("sin"):
-        return "coefficient of sin"
-    if basis.startswith("cos"):
-        return "coefficient of cos"
-    return "coefficient"
+def _lin_name(basis: str) -> str:
+    return next((f"coefficient of {k}" for k in ("sin", "cos") if basis.startswith(k)), "coefficient")

@@ -11,7 +11,7 @@ import pandas as pd
 from ..identify import FitResult
 from ..model import RPM
 from ..plots import fit as fplots
-from . import markdown_table
+from . import bullets, header, markdown_table, model_table, report_dir, write_report
 
 __all__ = ["write_fit_report"]
 
@@ -22,8 +22,6 @@ def _example_segments(data, per_direction: int = 3) -> list[int]:
     seg = data.segments
     for d in (1, -1):
         s = seg[seg["direction"] == d].sort_values("speed")
-        if s.empty:
-            continue
         idx = np.unique(np.linspace(0, len(s) - 1, min(per_direction, len(s))).round().astype(int))
         out += [int(s.iloc[i]["segment"]) for i in idx]
     return out
@@ -31,8 +29,7 @@ def _example_segments(data, per_direction: int = 3) -> list[int]:
 
 def write_fit_report(result: FitResult, out: str | Path, command: str = "", recording_summary: str = "") -> Path:
     """Write ``report.md``, figures, ``model.json`` and per-segment CSVs into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = report_dir(out)
     m, data = result.model, result.data
     unit = data.unit
     tu = "Nm" if unit == "rad" else "N"
@@ -42,7 +39,7 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
         figs["amplitude"] = fplots.plot_amplitude_fit(result.amplitudes, result.models, out / "amplitude_fit.png",
                                                       unit=unit)
         result.amplitudes.to_csv(out / "line_amplitudes.csv", index=False)
-    if any(h.get("amplitude") for p in m.directions.values() for h in p["harmonics"]):
+    if any(h.get("amplitude") for d in (1, -1) for h in m.harmonics(d)):
         figs["position"] = fplots.plot_model_vs_data(data, m, _example_segments(data), out / "model_vs_data.png")
     figs["residuals"] = fplots.plot_residuals(result.errors, out / "residuals.png", unit=unit)
     m.to_json(out / "model.json")
@@ -50,11 +47,7 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
         df.to_csv(out / f"segment_errors_{_slug(name)}.csv", index=False)
     plate.to_csv(out / "plateaus.csv", index=False)
 
-    md = ["# gearspec fit report", ""]
-    if command:
-        md += [f"Command: `{command}`", ""]
-    if recording_summary:
-        md += ["## Recording", "", "```", recording_summary, "```", ""]
+    md = header("gearspec fit report", command, recording_summary)
     n_qs = int((data.segments["kind"] == "quasi_static").sum()) if "kind" in data.segments else 0
     md += [f"{len(data)} samples in {data.n_segments} " + (f"segments ({n_qs} quasi-static sweeps taken at rest) "
                                                             if n_qs else "constant-speed segments ")
@@ -63,27 +56,20 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
     md += [f"## Model: {m.name}", "", f"Law: {m.law_spec.description}.", "",
            "Parameters per direction in SI units with standard errors, and in the SILO4 paper's units "
            "(mNm, rpm of the motor) where the axis is rotary. `model.json` holds the same in the "
-           "`gearspec fit --json` form.", ""]
-    md += [markdown_table(_table(m)), ""]
-    if m.not_identified:
-        md += ["**Not identified** (left out, not invented):", ""]
-        md += [f"- `{k}`: {why}" for k, why in m.not_identified.items()] + [""]
-    if m.notes:
-        md += [f"- {n}" for n in m.notes] + [""]
+           "`gearspec fit --json` form.", "", markdown_table(model_table(m, paper=True)), ""]
+    md += bullets([f"`{k}`: {why}" for k, why in m.not_identified.items()],
+                  "**Not identified** (left out, not invented):")
+    md += bullets(m.notes)
     md += ["## How well the models predict", "",
            f"rmse over all samples in segments, and held-out rmse from {m.meta.get('fit', {}).get('folds', 5)}-fold "
-           "cross-validation over whole segments (each fold predicted by a model fitted without it), "
-           f"in {tu}.", ""]
-    md += [markdown_table(result.comparison.drop(columns=["rmse_holdout_reason"], errors="ignore")), ""]
+           f"cross-validation over whole segments (each fold predicted by a model fitted without it), in {tu}.", "",
+           markdown_table(result.comparison.drop(columns=["rmse_holdout_reason"], errors="ignore")), ""]
     for _, r in result.comparison.iterrows():
         why = r.get("rmse_holdout_reason")
         if isinstance(why, str) and why:
             md += [f"- Held-out rmse of {r['model']}: "
-                   f"{'not computed' if pd.isna(r['rmse_holdout']) else 'partial'}"
-                   f" ({why})."]
-    md += [""]
-    if result.notes:
-        md += [f"- {n}" for n in result.notes] + [""]
+                   f"{'not computed' if pd.isna(r['rmse_holdout']) else 'partial'} ({why})."]
+    md += [""] + bullets(result.notes)
     md += ["## Stribeck curve", "", "Mean friction of every plateau (error bars: 2 standard errors from block "
            "means) and each model's friction averaged over position.", "", f"![stribeck]({figs['stribeck'].name})", ""]
     if figs.get("amplitude") is not None:
@@ -110,17 +96,9 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
            "from the covariance of the fit. Published procedure (SILO4 sections 3-4): Coulomb and viscous from "
            "plateaus above 100 rpm, static friction and Stribeck velocity from eq. 4 below, amplitudes and decays "
            "from the log-linear fit of eq. 10 to the spectra.", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md)
 
 
 def _slug(name: str) -> str:
     return "".join(c if c.isalnum() else "_" for c in name).strip("_").lower()
 
-
-def _table(m) -> pd.DataFrame:
-    t = m.table()
-    cols = [c for c in ("parameter", "unit", "positive", "positive_se", "negative", "negative_se", "paper_unit",
-                        "positive_paper", "negative_paper") if c in t]
-    return t[cols]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from itertools import groupby
 from pathlib import Path
 
 import pandas as pd
@@ -10,54 +11,41 @@ from .. import plots
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import _rpm, markdown_table
+from . import _rpm, bullets, header, markdown_table, report_dir, write_report
 
 __all__ = ["write_spectrum_report"]
 
 
 def _ranges(idx: list[int]) -> str:
     """'0-3, 7' from [0, 1, 2, 3, 7]."""
-    out, start = [], None
-    for k, i in enumerate(idx):
-        if start is None:
-            start = i
-        if k == len(idx) - 1 or idx[k + 1] != i + 1:
-            out.append(f"{start}" if start == i else f"{start}-{i}")
-            start = None
-    return ", ".join(out)
+    runs = [[i for _, i in g] for _, g in groupby(enumerate(idx), lambda ki: ki[1] - ki[0])]
+    return ", ".join(f"{r[0]}" if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
 
 
 def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentation, out: str | Path,
                           command: str = "") -> Path:
     """Write ``report.md``, the figures and ``peaks.csv`` of a spectrum analysis into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = report_dir(out)
     unit = result.unit
     tu = "Nm" if unit == "rad" else "N"
-    figs = {}
-    figs["segments"] = plots.plot_segments(rec, seg, out / "segments.png")
-    figs["spectra"] = plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png"))
-    figs["amplitude"] = plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png")
-    figs["relative"] = plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png", relative=True)
-    figs["unexplained"] = plots.plot_unexplained(result, out / "unexplained_peaks.png")
+    figs = {"segments": plots.plot_segments(rec, seg, out / "segments.png"),
+            "spectra": plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png")),
+            "amplitude": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png"),
+            "relative": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png", relative=True),
+            "unexplained": plots.plot_unexplained(result, out / "unexplained_peaks.png")}
     table = result.peaks_table()
     table.to_csv(out / "peaks.csv", index=False)
 
-    md = ["# gearspec spectrum report", ""]
-    if command:
-        md += [f"Command: `{command}`", ""]
-    md += ["## Recording", "", "```", rec.summary(), "```", ""]
+    md = header("gearspec spectrum report", command, rec.summary())
     n_seg = sum(s.segment.n for s in result.segments)
     md += [f"Rows read: {result.n_rows}; in segments: {n_seg}; excluded: "
            + (", ".join(f"{k} {v}" for k, v in sorted(result.excluded.items())) or "none")
            + ". (Every row is in one segment or counted once.)", ""]
-    if result.gear is not None:
-        md += ["## Gear train", "", "```", result.gear.describe(), "```", ""]
-    else:
-        md += ["## Gear train", "", "No gear spec: no line is declared; every peak found is reported unlabelled.", ""]
+    md += ["## Gear train", ""] + (["```", result.gear.describe(), "```", ""] if result.gear is not None else
+                                  ["No gear spec: no line is declared; every peak found is reported unlabelled.", ""])
+    ws = seg.settings.get("windows_chosen")
     md += ["## Segments", "",
-           f"Found from position alone ("
-           + "".join(f"speed window(s) {', '.join(f'{w:g} s' for w in ws)}, " for ws in [seg.settings.get('windows_chosen')] if ws)
+           "Found from position alone (" + (f"speed window(s) {', '.join(f'{w:g} s' for w in ws)}, " if ws else "")
            + f"relative tolerance {seg.settings.get('rel_tol')})"
            + (f"; {seg.settings['quasi_static_segments']} quasi-static sweep(s) (rows taken at rest: torque against "
               "position, no time derivative, nominal speed = travel / duration)"
@@ -71,9 +59,7 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
                      **({"speed (rpm)": _rpm(g.speed, unit)} if unit == "rad" else {}),
                      "samples": g.n, f"travel ({unit})": s.span, f"mean friction ({tu})": s.level,
                      f"residual sd ({tu})": s.sigma, "speed ripple (rel. sd)": g.speed_ripple})
-    md += [markdown_table(pd.DataFrame(rows)), ""]
-    # declared lines
-    md += ["## Declared lines", ""]
+    md += [markdown_table(pd.DataFrame(rows)), "", "## Declared lines", ""]
     if result.gear is None or table.empty or not table["declared"].any():
         md += ["_No declared line fits in any segment._", ""]
     else:
@@ -92,14 +78,12 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     for i, s in enumerate(result.segments):
         for k in s.skipped:
             (above if k.get("kind") == "above_nyquist" else slow).setdefault(k["label"], []).append(i)
-    if slow:
-        md += ["Lines not fitted in some segments because they complete less than a cycle there: "
-               + "; ".join(f"{k} (segments {_ranges(v)})" for k, v in slow.items()) + ".", ""]
-    if above:
-        md += ["Lines above the position Nyquist frequency of some segments -- **not measured there** (never "
-               "fitted; a peak found at the frequency where such a line aliases is labelled `alias of <label>`): "
-               + "; ".join(f"{k} (segments {_ranges(v)})" for k, v in above.items()) + ".", ""]
-    # found peaks
+    for lines, text in ((slow, "Lines not fitted in some segments because they complete less than a cycle there: "),
+                        (above, "Lines above the position Nyquist frequency of some segments -- **not measured there** "
+                                "(never fitted; a peak found at the frequency where such a line aliases is labelled "
+                                "`alias of <label>`): ")):
+        if lines:
+            md += [text + "; ".join(f"{k} (segments {_ranges(v)})" for k, v in lines.items()) + ".", ""]
     md += ["## Peaks no declared line explains", ""]
     found = table[~table["declared"]] if not table.empty else table
     if found.empty:
@@ -107,9 +91,8 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     else:
         if figs["unexplained"] is not None:
             md += [f"![unexplained peaks]({figs['unexplained'].name})", ""]
-        cols = ["segment", "direction", "speed", "frequency", "order", "amplitude", "amplitude_se", "fap", "label", "hint",
-                "order_exact"]
-        cols = [c for c in cols if c in found.columns]
+        cols = [c for c in ("segment", "direction", "speed", "frequency", "order", "amplitude", "amplitude_se", "fap",
+                            "label", "hint", "order_exact") if c in found.columns]
         md += [markdown_table(found.sort_values(["frequency"])[cols].rename(
             columns={"speed": f"speed ({unit}/s)", "frequency": f"frequency (cycles/{unit})",
                      "amplitude": f"amplitude ({tu})", "amplitude_se": "s.e."})), ""]
@@ -128,12 +111,8 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
            "Friction magnitude y = direction x (torque - J thetadd) over position; joint least-squares fit of all "
            "declared lines and significant peaks with a Legendre nuisance polynomial, peaks searched again in the "
            "residual of every line found until none is left (a dense comb of lines raises the noise level around "
-           "each); standard errors scaled by "
-           "the local noise level of the Lomb-Scargle periodogram; false-alarm probabilities against the local "
-           "noise level (one frequency for declared lines, all searched frequencies for found peaks). "
+           "each); standard errors scaled by the local noise level of the Lomb-Scargle periodogram; false-alarm "
+           "probabilities against the local noise level (one frequency for declared lines, all searched frequencies "
+           "for found peaks). "
            f"Frequencies in cycles/{unit}; amplitudes in {tu}; phases in rad of A sin(2 pi f theta + phi).", ""]
-    if result.notes:
-        md += ["Notes:", ""] + [f"- {n}" for n in result.notes] + [""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md + bullets(result.notes, "Notes:"))
