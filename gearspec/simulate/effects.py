@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..jsonsafe import plain
-from ..model import DIRECTIONS, FrictionModel
+from ..model import DIRECTIONS, FrictionModel, Harmonic
 from ..terms import AMPLITUDE_LAWS
 
 __all__ = ["Effect", "EFFECTS", "Cogging", "ExtraOrder", "Sideband", "LoadMeshing", "Warming", "Drift",
@@ -72,13 +72,13 @@ def _with_direction(term: dict, direction) -> dict:
     return {**term, "direction": d} if d else term
 
 
-def _matches(h: Mapping, target, rel: float = 1e-6) -> bool:
+def _matches(h: Harmonic, target, rel: float = 1e-6) -> bool:
     """Does harmonic ``h`` match ``target`` (a label, one of a ' = '-joined label, or a frequency)?"""
     if isinstance(target, str):
-        lab = h.get("label") or ""
+        lab = h.label or ""
         return target == lab or target in lab.split(" = ")
     f = float(target)
-    return abs(float(h["frequency"]) - f) <= rel * max(abs(f), 1e-300)
+    return abs(float(h.frequency) - f) <= rel * max(abs(f), 1e-300)
 
 
 @dataclass(frozen=True)
@@ -289,7 +289,7 @@ class LoadMeshing(_Targeted):
             m.rmse = m.rmse_holdout = None
             return m
         if isinstance(self.target, str):
-            labels = sorted({h.get("label") or f"{h['frequency']:.6g}" for p in m.directions.values() for h in p["harmonics"]})
+            labels = sorted({h.label or f"{h.frequency:.6g}" for p in m.directions.values() for h in p.harmonics})
             raise InputError(f"load_meshing: the model has no harmonic labelled '{self.target}' "
                              f"(it has: {', '.join(labels) or 'none'}); give a label or a frequency")
         return m.with_terms({"kind": "periodic", "frequency": float(self.target), "amplitude": 0.0,

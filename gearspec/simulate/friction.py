@@ -26,20 +26,20 @@ class _Pointwise:
         params, fast, self.slow = [], [], []
         for name in ("positive", "negative"):
             p = model.directions[name]
-            missing = [k for k in self.law.params if p.get(k) is None]
+            missing = [k for k in self.law.params if p.values.get(k) is None]
             if missing:
                 raise InputError(f"the truth model has no {name}-direction value for {', '.join(missing)}")
-            params.append([float(p[k]) for k in self.law.params])
-            hs = [h for h in p["harmonics"] if h.get("amplitude") is not None]
-            fast.append([h for h in hs if h.get("law", "exp") == "exp" and not h.get("load_coefficient")])
-            self.slow.append([h for h in hs if not (h.get("law", "exp") == "exp" and not h.get("load_coefficient"))])
+            params.append([float(p.values[k]) for k in self.law.params])
+            hs = [h for h in p.harmonics if h.amplitude is not None]
+            fast.append([h for h in hs if h.amplitude_law == "exp" and not h.load_coefficient])
+            self.slow.append([h for h in hs if not (h.amplitude_law == "exp" and not h.load_coefficient)])
         # parameters of both directions stacked along a first axis of length 2
         self.params = [np.array(col)[:, None] for col in zip(*params)] if params[0] else []
         n_h = max(len(f) for f in fast)
         self.harm = None
         if n_h:
             # (direction, harmonic, 1) arrays; padding harmonics have zero amplitude
-            self.harm = tuple(np.array([[[h.get(key, 0.0)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast],
+            self.harm = tuple(np.array([[[getattr(h, key)] for h in f] + [[0.0]] * (n_h - len(f)) for f in fast],
                                        dtype=float) for key in ("amplitude", "decay", "frequency", "phase"))
         self.terms = list(model.terms)
 
@@ -53,7 +53,7 @@ class _Pointwise:
         mag = np.where(sign > 0, m[0], m[-1]) if m.ndim == 2 else np.broadcast_to(m, speed.shape)
         for d, hs in ((1.0, self.slow[0]), (-1.0, self.slow[1])):
             for h in hs:
-                mag = mag + (sign == d) * evaluate_term({"kind": "periodic", **h}, theta=theta, v=v, load=load)[0]
+                mag = mag + (sign == d) * evaluate_term(h.term(), theta=theta, v=v, load=load)[0]
         for term in self.terms:
             mag = mag + evaluate_term(term, theta=theta, v=v, load=load, temperature=temperature, t=t, acc=None,
                                       run=run)[0]
