@@ -1,39 +1,15 @@
 """Channel lag: a torque (or current) channel logged later than the position channel.
 
-When the torque sample stored with time ``t`` was measured at ``t - L`` (``L > 0``: torque
-behind position; loggers that read the drive's torque one or more cycles after the encoder),
-a position-locked line ``A sin(2 pi f theta + phi)`` is seen at constant velocity ``v`` (signed)
-as
-
-    A sin(2 pi f theta(t - L) + phi) = A sin(2 pi f theta(t) + phi - 2 pi f v L),
-
-so its phase falls linearly with the velocity: ``phi_measured(v) = phi - 2 pi f L v``.  Across
-segments at several speeds the line then looks like noise (its phase wanders), although every
-segment sees it clearly.  This module is the one place for that fact:
-
-* :func:`lag_from_phases` -- the lag from per-segment phases of lines at known frequencies:
-  every (line, direction) has its own phase ``phi``; the lag is common.  Phases wrap: the lag is
-  first found by a grid search of the weighted circular misfit (no unwrapping that could slip a
-  cycle between two speeds; when speeds share a common step the misfit repeats every
-  ``1/(f step)`` and the smallest of the equally good lags is taken), then refined by weighted least squares on the phases unwrapped
-  around that solution (weights: inverse phase variances), which gives its standard error
-  (scaled up by the misfit when the phases scatter more than their errors say).
-* :func:`estimate_lag` -- the same from a recording: the declared lines of the gear spec,
-  fitted per constant-speed segment (:func:`gearspec.spectrum.analyze`), those seen strongly
-  (amplitude at least ``min_snr`` standard errors) in at least three segments at different
-  speeds of one direction.
-* :func:`apply_lag` -- the recording with the torque (and current) shifted earlier by ``L``
-  (interpolated in time within each contiguous piece; the rows at a piece's edge that lose
-  their partner are excluded under ``lag_edge``).
+A torque sample stored at ``t`` but measured at ``t - L`` (``L > 0``: torque behind position)
+shows a position-locked line ``A sin(2 pi f theta + phi)`` at signed velocity ``v`` as
+``A sin(2 pi f theta + phi - 2 pi f v L)``: its phase falls linearly with velocity.
+:func:`lag_from_phases` fits that slope to per-segment phases, :func:`estimate_lag` takes them
+from the declared lines of a recording's segments, :func:`apply_lag` shifts the torque back.
 
 Why phases and not a cross-correlation: torque is not a delayed copy of position (friction is a
 nonlinear function of position and velocity), so a correlation of the two channels has no peak
 at the lag; the phases of position-locked lines are exactly what a lag moves, with errors the
-harmonic fit gives.  The method needs strong lines at three speeds or more in one direction;
-without them :func:`estimate_lag` refuses with the reason.
-
-Sign convention: ``lag > 0`` means the torque is behind the position (logged later);
-``apply_lag(rec, lag)`` undoes it.
+harmonic fit gives.
 """
 
 from __future__ import annotations

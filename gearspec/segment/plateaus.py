@@ -1,6 +1,5 @@
-"""Constant-speed plateaus: block speeds over a window, the steady-block test, and the choice of the
-window per piece (steps 1-6 of the module docstring of :mod:`gearspec.segment`); quasi-static sweeps
-first (:mod:`.quasistatic`)."""
+"""Constant-speed plateaus: block speeds, the steady-block test and the window per piece
+(:mod:`gearspec.segment`)."""
 
 from __future__ import annotations
 

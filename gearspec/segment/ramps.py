@@ -1,7 +1,5 @@
-"""Candidate plateaus refined: fragments of one plateau joined, slow drifts split (CUSUM), ramp tails
-trimmed by speed and by position, and runs whose speed follows a smooth curve (a ramp, a bell's top,
-a creeping tail) split until only parts shown flat remain (steps 4 and 5 of the module docstring of
-:mod:`gearspec.segment`)."""
+"""Candidate plateaus refined: fragments joined, drifts split, ramp tails trimmed, smooth speed
+curves split until only parts shown flat remain (:mod:`gearspec.segment`)."""
 
 from __future__ import annotations
 

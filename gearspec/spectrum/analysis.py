@@ -1,44 +1,14 @@
 """The per-segment spectral analysis of a recording: what ``gearspec spectrum`` runs.
 
-For every constant-speed segment, on ``y = direction * (torque - J thetadd)`` (the friction
-magnitude, so that levels and phases mean the same in both directions, as in SILO4 eq. 11):
-
-1. Joint least-squares fit, on the raw samples, of a sinusoid at every declared line that fits
-   in the segment (at least ``min_cycles`` cycles, below the position Nyquist), plus a Legendre
-   nuisance polynomial whose degree grows with the slowest declared line that does *not*
-   complete ``min_cycles`` (so that it cannot bias the others).  One pass over the samples.
-2. Periodogram of the residual: Lomb-Scargle on the raw samples for segments up to
-   ``LS_MAX_SAMPLES`` samples; beyond, the Hann spectrum of the signal resampled over position
-   (anti-aliased), with the fitted nuisance and lines taken out in closed form -- one FFT.  Its
-   local noise level (constant relative bandwidth at low frequency) calibrates everything after.
-3. Search for peaks that no declared line explains: local maxima whose false-alarm probability
-   (local noise, F-distributed for an estimated level, all independent frequencies searched) is
-   below ``fap_threshold``, strongest first, none within 1.5 resolution steps (1.5/span) of a
-   declared line or within three of a stronger peak, none so slow that the nuisance polynomial
-   could mimic it (at least 2 cycles, and (degree+1)/pi).
-4. Joint fit of declared and found lines, the found frequencies refined by Gauss-Newton (a phase
-   at theta = 0 needs the frequency far more precisely than a periodogram bin gives it; each
-   iteration one pass that computes only the found lines' rows of the equations); a found
-   peak whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is
-   dropped.  Standard errors are rescaled by the local noise level (honest for coloured noise).
-   Without found peaks the whole analysis is one pass over the samples plus one spectrum.
-5. Steps 3-4 repeat on the residual of every line found so far (the noise level re-estimated
-   from it: a dense comb of lines no longer raises the level around its weaker members), until a
-   round finds nothing; the later rounds search the Hann spectrum of the resampled signal with
-   every fitted line taken out in closed form (no new transform, no new periodogram).
-
-Nothing above the segment's position Nyquist frequency (:func:`position_nyquist`) is searched,
-fitted or reported as measured: such declared lines are listed (``above_nyquist``) with the
-frequency where they alias, and a peak found there is labelled ``alias of <label>``
-(:func:`gearspec.gears.alias_of`; across segments, :func:`relabel_aliases`).  An unlabelled
-peak gets an integer-order ``hint`` (with ``order_exact``) only when its frequency uncertainty
-tells neighbouring multiples of the shaft apart (:func:`gearspec.gears.integer_order`).
-
-Every declared line that fits is reported as a peak whether it is strong or not (its ``fap`` is
-the chance that noise alone gives that much fitted power at that one frequency); a found peak's
-``fap`` counts every independent frequency searched.  Lines that do not fit are listed with the
-reason.  Peaks found in step 3 carry the label of the harmonic or sideband of declared lines
-that explains them, or ``None`` (and perhaps an integer-multiple ``hint``).
+On ``y = direction * (torque - J thetadd)`` of every segment (the friction magnitude, so that
+levels and phases mean the same in both directions, SILO4 eq. 11): a joint fit of the declared
+lines plus a Legendre nuisance (:mod:`.harmonic`), a periodogram of its residual, a search for
+peaks no declared line explains (:mod:`.search`) and their joint fit, repeated on the residual of
+every line found; steps in :func:`analyze_segment`.  Nothing above the segment's position Nyquist
+frequency (:func:`position_nyquist`) is searched, fitted or reported as measured: such declared
+lines are listed (``above_nyquist``) with where they alias, and a peak found there is labelled
+``alias of <label>``.  A declared line's ``fap`` is for that one frequency; a found peak's counts
+every independent frequency searched.
 """
 
 from __future__ import annotations

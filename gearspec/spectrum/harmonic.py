@@ -4,29 +4,18 @@ Model, for positions ``theta`` in ``[lo, hi]``::
 
     y = sum_j c_j P_j(x) + sum_k A_k sin(2 pi f_k theta + phi_k) + noise,   x = 2 (theta - lo)/(hi - lo) - 1
 
-with Legendre polynomials ``P_j`` up to ``degree`` as *nuisance* terms (the mean level, a slow
-trend, and any component too slow to complete a cycle in the stretch, which a sinusoid of its own
-could not separate from the mean), and one cosine/sine pair per frequency.  All terms are fitted
-together, so close frequencies do not leak into each other the way peaks of a spectrum do, and a
-slow component absorbed by the polynomial does not bias the others.
-
-One pass over the samples accumulates the normal equations (:class:`NormalEquations`) in chunks
-(memory O(chunk x terms), never a full design matrix), in single precision within a sub-block
-of a few thousand samples (phases reduced to one cycle in double precision at every sub-block's
-start) and double precision across them; any subset of the frequencies can then be solved
-without another pass.  Frequencies read off a periodogram are refined by Gauss-Newton
-(:func:`refine_frequencies`), one pass per iteration, the last of which is also the joint fit;
-given the equations of the fixed lines (:meth:`NormalEquations.extend`), a pass computes only
-the rows of the lines being refined.
+with Legendre polynomials ``P_j`` as nuisance terms (the level, a slow trend, and any component
+too slow to complete a cycle).  All terms are fitted together, so close frequencies do not leak
+into each other.  One pass accumulates the normal equations (:class:`NormalEquations`) in chunks,
+in single precision within sub-blocks of a few thousand samples (phases reduced to one cycle in
+double precision at each sub-block's start) and double precision across them; any subset of the
+frequencies is then solved without another pass.
 
 Standard errors are ``sigma^2 (X'X)^-1`` for white noise; :meth:`HarmonicFit.scaled` rescales
-them per frequency by the ratio of the local noise level (from a periodogram of the residual) to
-``sigma^2``, which is what makes them honest for coloured noise.  Amplitude and phase errors
-follow by the delta method (fine at SNR >~ 3; at lower SNR the amplitude is biased upwards,
-Rice-distributed).
-
-Phase convention: ``A sin(2 pi f theta + phi)`` (the SILO4 paper's ``A sin(omega theta + phi)``,
-with ``omega = 2 pi f``), theta measured from the recording's zero, not from the segment's start.
+them per frequency by the local noise level, which makes them honest for coloured noise.
+Amplitude and phase errors follow by the delta method (biased upwards below SNR ~3, Rice).
+Phase convention: ``A sin(2 pi f theta + phi)`` (SILO4's ``A sin(omega theta + phi)``), theta
+from the recording's zero.
 """
 
 from __future__ import annotations

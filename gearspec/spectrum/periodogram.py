@@ -1,26 +1,15 @@
 """Lomb-Scargle periodogram of a signal over position, on the raw (non-uniform) samples.
 
-One small class, :class:`LombScargle`, in front of interchangeable implementations chosen with
-``method`` (as in ``astropy.timeseries.LombScargle``):
-
-``"nifty"``    nifty-ls (finufft, a non-uniform FFT): O(N log N), for long segments; uniform
-               frequency grids only.
-``"astropy"``  astropy's exact ``"cython"`` method: O(N M), any frequencies.
-``"scipy"``    ``scipy.signal.lombscargle`` with a floating mean: O(N M), any frequencies.
-``"auto"``     nifty on uniform grids, astropy otherwise.
-
-All return the same *power*: the floating-mean ("generalised") periodogram in PSD normalisation,
-which equals ``N A^2 / 4`` at the frequency of a sinusoid of amplitude ``A`` and has mean
-``sigma^2`` over white noise of variance ``sigma^2``.  :meth:`LombScargle.amplitude` turns it into
-the amplitude spectrum ``sqrt(4 P / N)``.
+:class:`LombScargle` fronts interchangeable implementations (``method``, as in astropy):
+``"nifty"`` (nifty-ls, a non-uniform FFT, O(N log N), uniform frequency grids only), ``"astropy"``
+(exact ``"cython"``, any frequencies), ``"scipy"`` (``scipy.signal.lombscargle``, floating mean),
+``"auto"`` (nifty on uniform grids, astropy otherwise).  All return the floating-mean periodogram
+in PSD normalisation: ``N A^2 / 4`` at a sinusoid of amplitude ``A``, mean ``sigma^2`` over white
+noise of variance ``sigma^2``.
 
 Significance uses the noise level *around* each frequency (:func:`local_noise`), not a global
-one: friction residuals are far from white (slow drifts, control-loop ripple), and a global level
-would flag every low-frequency bump.  Under Gaussian noise of local level S the power at one
-frequency is exponential with mean S, so the chance that noise alone reaches ``z = P/S`` at one
-given frequency is ``exp(-z)`` (F-distributed instead when S is itself estimated from a few
-bins), and somewhere among ``M`` independent frequencies ``1 - (1 - p1)**M``
-(:func:`false_alarm_probability`; Scargle 1982, with a local S).
+one: friction residuals are far from white, and a global level would flag every low-frequency
+bump (:func:`false_alarm_probability`; Scargle 1982, with a local level).
 """
 
 from __future__ import annotations
