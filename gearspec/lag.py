@@ -74,7 +74,11 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
 
     Model: ``phase_i = c_group(i) - 2 pi f_i v_i lag + noise_i``.  Only groups with at least
     ``min_speeds`` distinct speeds take part (a group at one speed says nothing about a slope).
-    Returns None when no group qualifies."""
+    Phases wrap: a grid search of the weighted circular misfit comes first (no unwrapping that
+    could slip a cycle; when speeds share a common step the misfit repeats every ``1/(f step)``
+    and the smallest equally good lag is taken), then weighted least squares on the phases
+    unwrapped about it gives the standard error (scaled up when the phases scatter more than
+    their errors say).  Returns None when no group qualifies."""
     f = np.asarray(frequency, float)
     v = np.asarray(velocity, float)
     ph = np.asarray(phase, float)
@@ -121,24 +125,21 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
                          & (cost <= np.concatenate(([np.inf], cost[:-1])))
                          & (cost <= np.concatenate((cost[1:], [np.inf]))))
     lag = float(grid[loc[np.argmin(np.abs(grid[loc]))]]) if len(loc) else float(grid[int(np.argmin(cost))])
-    # weighted least squares on the phases unwrapped about the grid solution (two passes)
-    for _ in range(3):
+    def residual(lag):  # about each group's mean phase, unwrapped near 0
         psi = ph + k * lag
         c = np.angle(np.bincount(gi, weights=w * np.cos(psi), minlength=ng)
                      + 1j * np.bincount(gi, weights=w * np.sin(psi), minlength=ng))
-        r = (psi - c[gi] + math.pi) % _TWO_PI - math.pi     # residual, unwrapped near 0
-        # r_i(lag + d) = r_i + k_i d - delta c_g: solve for d and the group phases jointly
-        X = np.zeros((len(r), 1 + ng))
-        X[:, 0] = k
-        X[np.arange(len(r)), 1 + gi] = -1.0
-        G = X.T @ (w[:, None] * X)
-        b = X.T @ (w * -r)
-        sol = np.linalg.lstsq(G, b, rcond=None)[0]
-        lag += float(sol[0])
-    psi = ph + k * lag
-    c = np.angle(np.bincount(gi, weights=w * np.cos(psi), minlength=ng)
-                 + 1j * np.bincount(gi, weights=w * np.sin(psi), minlength=ng))
-    r = (psi - c[gi] + math.pi) % _TWO_PI - math.pi
+        return (psi - c[gi] + math.pi) % _TWO_PI - math.pi
+
+    # weighted least squares on the phases unwrapped about the grid solution:
+    # r_i(lag + d) = r_i + k_i d - delta c_g, solved for d and the group phases jointly
+    X = np.zeros((len(ph), 1 + ng))
+    X[:, 0] = k
+    X[np.arange(len(ph)), 1 + gi] = -1.0
+    G = X.T @ (w[:, None] * X)
+    for _ in range(3):
+        lag += float(np.linalg.lstsq(G, X.T @ (w * -residual(lag)), rcond=None)[0][0])
+    r = residual(lag)
     chi2 = float(np.sum(w * r ** 2))
     dof = len(r) - 1 - ng
     cov = np.linalg.pinv(G)

@@ -28,36 +28,17 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
                   min_speed: float | None = None, min_duration: float | None = None,
                   min_samples: int = 32, workers: int | str = "auto",
                   quasi_static: bool | None = None) -> Segmentation:
-    """Find constant-speed segments per direction, and quasi-static sweeps (see the module docstring).
+    """Find constant-speed segments per direction, and quasi-static sweeps (:mod:`gearspec.segment`).
 
-    Parameters
-    ----------
-    rec : Recording
-    window : float or "auto"
-        Speed-averaging window in seconds (four blocks); "auto" picks it per piece.
-    rel_tol : float
-        Allowed relative change of the window speed across a block, and half the allowed drift
-        of speed within a segment.
-    min_speed : float, optional
-        Speeds below this (unit/s) count as standstill.  Default: ten times the speed noise that
-        the position noise of the piece produces over one window.
-    min_duration : float, optional
-        Shortest segment kept, seconds.  Default: two windows, and at least 0.1 s.
-    min_samples : int
-        Shortest segment kept, samples.
-    workers : int or "auto"
-        Windows of the ``"auto"`` ladder tried at once, in threads (numpy releases the GIL for
-        the bulk of the work; the result is the same whatever the number).  ``"auto"``: two on a
-        machine with two or more CPUs for pieces of at least ``PARALLEL_MIN_SAMPLES`` samples.
-    quasi_static : bool or None
-        ``None`` (default): recognise quasi-static sweeps (rows stored at rest, position rather
-        than time setting the motion; see :func:`quasi_static_sweeps`) and look for plateaus in
-        the rest.  ``True`` (``--quasi-static``): every monotonic sweep of each run is a
-        quasi-static segment.  ``False``: plateaus only.
-
-    Returns
-    -------
-    Segmentation
+    ``window``: speed-averaging window in s (four blocks), or "auto" per piece.  ``rel_tol``:
+    allowed relative change of the window speed across a block, and half the allowed drift within
+    a segment.  ``min_speed`` (unit/s): standstill below (default ten times the speed noise the
+    position noise gives over one window).  ``min_duration`` (s, default two windows and at least
+    0.1 s) and ``min_samples``: shortest segment kept.  ``workers``: windows of the "auto" ladder
+    tried at once, in threads, with the same result ("auto": two with two CPUs or more for pieces
+    of at least ``PARALLEL_MIN_SAMPLES`` samples).  ``quasi_static``: None recognises quasi-static
+    sweeps (:func:`quasi_static_sweeps`) and looks for plateaus in the rest; True makes every
+    monotonic sweep one; False: plateaus only.  Returns a :class:`Segmentation`.
     """
     if not 0 < rel_tol < 1:
         raise InputError(f"rel_tol must be between 0 and 1, got {rel_tol}")
@@ -222,12 +203,10 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
         v_floor = 10 * v_noise
     else:
         v_floor = float(min_speed)
-    valid = np.ones(m, bool)
-    moving = valid & (np.abs(across) > v_floor)
+    moving = np.abs(across) > v_floor
     same_sign = moving & (np.sign(before) == np.sign(across)) & (np.sign(after) == np.sign(across))
     steady = same_sign & (np.abs(after - before) <= rel_tol * np.abs(across))
     min_dur = max(2 * window, 0.1) if min_duration is None else float(min_duration)
-    block_label = np.where(valid & ~moving, 1, 0)  # 1 standstill, 0 transient; steady handled below
     # runs of steady blocks, split where the speed drifts, then fragments of one plateau (broken
     # by a ripple excursion shorter than a window) merged again
     edges = np.diff(np.concatenate(([0], steady.astype(np.int8), [0])))
@@ -255,19 +234,16 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
         vs = across[s2:e2]
         ripple = float(np.std(vs) / abs(np.mean(vs))) if len(vs) > 1 else 0.0
         segs.append((rows_s, rows_e, direction, float(speed), ripple))
-    labels = Counter()
     in_seg = np.zeros(m, bool)
     for rs, re_, *_ in segs:
         in_seg[rs // b: re_ // b] = True
     short = np.zeros(m, bool)
     for s2, e2 in short_blocks:
         short[s2:e2] = True
-    labels["short_plateau"] += int(short.sum()) * b
-    standstill = (block_label == 1) & ~in_seg & ~short
-    labels["standstill"] += int(standstill.sum()) * b
-    labels["transient"] += int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)
-    labels = Counter({k: v for k, v in labels.items() if v})
-    return segs, labels
+    standstill = ~moving & ~in_seg & ~short
+    labels = {"short_plateau": int(short.sum()) * b, "standstill": int(standstill.sum()) * b,
+              "transient": int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)}
+    return segs, Counter({k: v for k, v in labels.items() if v})
 
 
 def _before_after(v_win: np.ndarray, m: int):

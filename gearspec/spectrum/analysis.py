@@ -43,18 +43,17 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
                     fap_threshold: float = 0.01, max_peaks: int = 8, oversample: float = 2.0,
                     noise: str = "local", periodogram: str = "auto", method: str = "auto",
                     keep_spectra: bool = False) -> SegmentSpectrum:
-    """Analyse one stretch of friction ``y`` over position ``theta`` (see the module docstring).
+    """Analyse one stretch of friction magnitude ``y`` (direction times torque) over position
+    ``theta``; frequencies in cycles per unit of theta, amplitudes in the unit of ``y``.
 
-    ``y`` should already be the friction magnitude (direction times torque).  Frequencies are in
-    cycles per unit of theta; amplitudes in the unit of ``y``.
-
-    ``periodogram`` chooses the spectrum searched for undeclared peaks: ``"lombscargle"`` (of the
-    residual on the raw samples; exact for any sampling, O(N log N) with a large constant),
-    ``"fft"`` (Hann spectrum of the signal resampled over position, with the fitted declared
-    lines and nuisance taken out in closed form: one FFT), or ``"auto"`` (Lomb-Scargle up to
-    ``LS_MAX_SAMPLES`` samples).  Either way amplitudes, phases and errors come from the joint fit
-    on the raw samples.  ``keep_spectra`` keeps the order spectrum and the Lomb-Scargle of the
-    signal for figures.
+    Declared lines that complete ``min_cycles`` below the position Nyquist are fitted jointly with
+    a Legendre nuisance whose degree grows with the slowest one that does not (so it biases none).
+    ``periodogram`` chooses the spectrum searched for undeclared peaks: ``"lombscargle"`` (the
+    residual on the raw samples), ``"fft"`` (Hann spectrum of the signal resampled over position,
+    fitted lines taken out in closed form: one FFT) or ``"auto"`` (Lomb-Scargle up to
+    ``LS_MAX_SAMPLES`` samples); amplitudes, phases and errors always come from the joint fit on
+    the raw samples, errors rescaled by the local noise (``noise="local"``).  ``keep_spectra``
+    keeps the order spectrum and the Lomb-Scargle of the signal for figures.
     """
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -104,10 +103,8 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
 
 def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int, nyquist: float,
                     min_cycles: float):
-    """The gear's declared lines split into those fitted in a segment of ``n`` samples over
-    ``span`` (rad or m), and those skipped (too slow: fewer than ``min_cycles`` cycles, absorbed by
-    the nuisance polynomial; or above ``MEASURABLE_FRACTION`` of the position Nyquist frequency),
-    with the reason.  Returns ``(fitted, skipped, cycles of the too-slow ones)``."""
+    """The gear's declared lines in a segment of ``n`` samples over ``span``: ``(fitted, skipped
+    with the reason, cycles of the too-slow ones)``."""
     fitted, skipped, slow_cycles = [], [], []
     for ln in (gear.declared_lines(max_harmonic=harmonics) if gear is not None else []):
         cycles = ln.frequency * span
@@ -116,8 +113,6 @@ def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int,
                             "reason": f"{cycles:.3g} cycles in the segment (< {min_cycles:g}); absorbed by the nuisance polynomial"})
             slow_cycles.append(cycles)
         elif ln.frequency >= MEASURABLE_FRACTION * nyquist:
-            # not measurable here: never fitted; where it shows up (its alias at the mean spacing)
-            # is said, and a peak found there is labelled 'alias of <label>'
             skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "above_nyquist",
                             "alias": alias_frequency(ln.frequency, span / (n - 1)) if ln.frequency > nyquist else None,
                             "reason": f"above {MEASURABLE_FRACTION:g} x the position Nyquist frequency ({nyquist:.4g}): "
@@ -144,10 +139,9 @@ class _Analysis:
         self.fit0 = self.eq.fit()
 
     def first_spectrum(self, use_ls: bool, keep_into) -> None:
-        """Step 2: the periodogram of the declared lines' residual, in units where a sinusoid of
-        amplitude A has power n A^2/4, on the uniform grid freq(i) = f_first + df i (kept as an
-        index map, not an array): Lomb-Scargle on the raw samples, or the Hann spectrum over
-        position (its figure spectrum into ``keep_into``)."""
+        """Step 2: the periodogram of the declared lines' residual (a sinusoid of amplitude A has
+        power n A^2/4) on a uniform grid: Lomb-Scargle, or the Hann spectrum over position (its
+        figure spectrum into ``keep_into``)."""
         self.fft_res = None
         if use_ls:
             ls = LombScargle(self.theta, self.y - self.fit0.predict(self.theta), method=self.method,
@@ -169,10 +163,8 @@ class _Analysis:
         """The power spectrum of the residual of every line in ``fit`` (a later round)."""
         theta, y = self.theta, self.y
         if self.fft_res is None and self.nbin >= 3:
-            # a Lomb-Scargle segment: the later rounds search the Hann spectrum of the signal
-            # resampled over position, every fitted line taken out in closed form -- one
-            # transform for all of them, a fraction of a periodogram's cost (the search's
-            # frequencies and their count m_eff stay those of the first round's range)
+            # the later rounds search the Hann spectrum, every fitted line taken out in closed
+            # form: one transform for all of them, a fraction of a periodogram's cost
             k_lo, _, df, p1, enbw1, self.fft_res = _fft_residual_power(
                 theta, y, self.fit0, self.oversample, self.f_search_max, lo=self.lo, hi=self.hi, keep_residual=True)
             if self.fft_res is not None:
@@ -186,14 +178,12 @@ class _Analysis:
             del ls
 
     def search_rounds(self) -> None:
-        """Steps 3-4: peaks no declared line explains (see :func:`_search`), found iteratively.
+        """Steps 3-4: peaks no declared line explains (:func:`_search`), found iteratively.
 
         A dense comb of lines raises the local noise level around each of them, so after every
         search the lines found so far are fitted jointly (frequencies refined), the ones no longer
-        significant dropped, and the residual of all of them searched again -- its noise level
-        re-estimated without their power and sidelobes -- until a round finds nothing (at most
-        ``_MAX_ROUNDS`` rounds).  Every round searches the same frequencies: ``m_eff`` stays the
-        count in every false-alarm probability."""
+        significant dropped, and the residual of all of them searched again, until a round finds
+        nothing (at most ``_MAX_ROUNDS``); ``m_eff`` stays the count of frequencies searched."""
         span, n_dec, oversample = self.span, self.n_dec, self.oversample
         guard = _GUARD / span
         self.f_found_min = max(2.0, self.min_cycles, (self.deg + 1) / math.pi) / span
@@ -222,11 +212,9 @@ class _Analysis:
                    if room > 0 and self.nbin >= 3 else [])
             if not new:
                 break
-            # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass that
-            # computes only the rows of the found lines -- the declared lines' equations are reused --
-            # the last one also the joint fit); a found peak stays only while its fitted amplitude is
-            # significant (a sidelobe of a stronger line is not, once that line is fitted): dropping
-            # one is a smaller solve of the same normal equations, not another pass
+            # 4. joint fit, found frequencies refined by Gauss-Newton (the declared lines' equations
+            # reused); a found peak stays while its amplitude is significant (a sidelobe is not,
+            # once its line is fitted)
             f_all, se_eq, eq = refine_frequencies(self.theta, self.y, self.declared_f + found + new,
                                                   range(n_dec, n_dec + len(found) + len(new)), degree=self.deg,
                                                   iterations=3, base=eq_dec)
@@ -252,9 +240,8 @@ class _Analysis:
             fit = fit.scaled(factor)
             f_se = f_se * np.sqrt(factor)
         amp, amp_se, ph, ph_se = fit.amplitude, fit.amplitude_se, fit.phase, fit.phase_se
-        # a found line's phase is given at theta = 0, away from the segment's centre where the
-        # Gauss-Newton step decouples it from the frequency: its frequency error adds
-        # 2 pi (centre - 0) f_se to the phase's (0 for declared lines, whose frequency is fixed)
+        # a found line's phase at theta = 0, away from the segment's centre, carries its frequency
+        # error: 2 pi centre f_se (0 for declared lines)
         ph_se = np.hypot(ph_se, 2 * np.pi * 0.5 * (self.lo + self.hi) * f_se) if len(f_se) else ph_se
         gear, span, nyquist = self.gear, self.span, self.nyquist
         spacing = span / (self.n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
@@ -273,10 +260,8 @@ class _Analysis:
                 if line is not None and line.kind == "alias":
                     aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
                 elif label is None and gear is not None:
-                    # an integer order: the frequency's uncertainty (three standard errors, and no less
-                    # than 0.05 resolution steps, so that the resolution bound of integer_order asks a
-                    # shaft to turn at least once in the segment -- the Rayleigh criterion) must tell
-                    # neighbouring multiples apart
+                    # an integer order when the frequency's uncertainty (3 se, at least 0.05 resolution
+                    # steps: a shaft turns once in the segment, Rayleigh) tells neighbouring multiples apart
                     exact = integer_order(gear, f, max(3 * f_se[k], 0.05 / span, 1e-6 * f))
             peaks.append(Peak(frequency=float(f), amplitude=float(amp[k]), amplitude_se=float(amp_se[k]),
                               phase=float(ph[k]), phase_se=float(ph_se[k]), fap=float(fap_fit[k]),
@@ -315,20 +300,15 @@ def _ls_threads() -> int | None:
     return 1 if getattr(_local, "in_pool", False) else None
 
 
-#: a line is measurable in a segment when it lies below this fraction of the segment's position
-#: Nyquist frequency (:func:`position_nyquist`): the one margin of the spectrum, the joint fit
-#: (``identify``) and the closed loop (``diagnose``), so that a line is "measured" in one place
-#: exactly where its amplitude law may be fitted in the others
+#: a line is measurable below this fraction of a segment's position Nyquist frequency: the one
+#: margin of spectrum, identify and diagnose
 MEASURABLE_FRACTION = 0.8
 
 
 def position_nyquist(theta: np.ndarray) -> float:
-    """The position Nyquist frequency of samples at positions ``theta`` (cycles per unit of theta):
-    the one source of this fact for every stage (spectrum, identification, the closed loop).
-
-    Half the inverse of the 95th percentile of the nonzero sample spacings (linear
-    interpolation, as ``np.percentile``), from a selection in single precision: the spacing is
-    rounded to 1e-7 of itself, and the selection takes a third of the time."""
+    """The position Nyquist frequency of samples at ``theta`` (cycles per unit of theta), for every
+    stage: half the inverse of the 95th percentile of the nonzero spacings (as ``np.percentile``),
+    selected in single precision (rounded to 1e-7, a third of the time)."""
     sp = np.empty(len(theta) - 1, np.float32)
     np.subtract(theta[1:], theta[:-1], out=sp, casting="unsafe")
     np.abs(sp, out=sp)

@@ -12,32 +12,14 @@ __all__ = ["order_spectrum", "hann_spectrum", "hann_spectrum32", "hann_sinusoid_
 
 def order_spectrum(values: np.ndarray, spacing: float, window: str = "hann", detrend: bool = True,
                    pad: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Single-sided amplitude spectrum over position.
+    """Single-sided amplitude spectrum over position: ``(frequency, amplitude)`` in cycles per unit
+    of theta and the unit of ``values``.
 
-    A sinusoid ``A sin(2 pi f theta + phi)`` whose frequency falls on a bin shows as a peak of
-    height ``A`` (the window's coherent gain is divided out).  Between bins the Hann window reads
-    up to 15 % low (scalloping); use ``window="flattop"`` for amplitudes read off the plot, or the
-    harmonic fit for exact ones.  The transform length is padded to a fast FFT size.
-
-    Parameters
-    ----------
-    values : ndarray
-        Signal on a uniform grid (see :func:`resample_over_position`).
-    spacing : float
-        Grid spacing, rad or m.
-    window : str
-        Any window name of ``scipy.signal.get_window``.
-    detrend : bool
-        Remove the least-squares line first, so that the mean and a slow trend do not leak.
-    pad : int
-        Zero-padding factor (>= 1) for a finer frequency grid.
-
-    Returns
-    -------
-    frequency : ndarray
-        Cycles per unit of theta.
-    amplitude : ndarray
-        In the unit of ``values``.
+    ``values`` on a uniform grid of ``spacing`` (rad or m; :func:`resample_over_position`);
+    ``window`` any name of ``scipy.signal.get_window``; ``detrend`` removes the least-squares line
+    first (the mean and a slow trend do not leak); ``pad`` (>= 1) zero-pads for a finer grid.  A
+    sinusoid of amplitude ``A`` on a bin peaks at ``A``; between bins Hann reads up to 15 % low
+    (use ``window="flattop"``, or the harmonic fit for exact amplitudes).
     """
     v = np.asarray(values, dtype=float)
     n = len(v)
@@ -73,16 +55,10 @@ def hann_spectrum(values: np.ndarray, spacing: float, pad: float = 2.0):
 
 
 def hann_spectrum32(values: np.ndarray, spacing: float, pad: float = 2.0, legendre=None):
-    """:func:`hann_spectrum` in single precision, with an optional Legendre series subtracted first.
-
-    ``legendre = (coef, a, b)`` subtracts ``sum_j coef_j P_j(a + b m)`` at grid index m (a fitted
-    nuisance polynomial); the constant term is subtracted in double precision, before anything is
-    rounded to single precision, so that a large mean level costs no precision.  The window, the
-    polynomial and the transform then run in float32: their rounding (~1e-7 of the signal's
-    amplitude) is far below any noise floor, and time and memory are about halved.  The window's
-    sums are exact (closed forms of the symmetric Hann window).
-
-    Returns ``(spectrum, df, window_sum, enbw)`` as :func:`hann_spectrum` (complex64 spectrum).
+    """:func:`hann_spectrum` in single precision (complex64), ``legendre = (coef, a, b)`` (a fitted
+    nuisance, ``sum_j coef_j P_j(a + b m)`` at grid index m) subtracted first, its constant term in
+    double precision so that a large mean level costs no precision.  The float32 rounding (~1e-7
+    of the signal) is far below any noise floor, and time and memory are about halved.
     """
     v = np.asarray(values, dtype=float)
     n = len(v)
@@ -118,11 +94,9 @@ def legendre_constant(coef, a: float) -> float:
 
 def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: float = 0.0, b: float = 0.0,
                            nfft: int | None = None):
-    """The work of :func:`hann_spectrum32` on a float32 buffer whose first n values hold the
-    signal with ``legendre_constant(coef, a)`` already subtracted; the buffer is used up.  Its
-    length is the transform length, or ``nfft`` is given (the transform pads it: the buffer then
-    needs only the n values).  For callers that fill the buffer themselves (no double-precision
-    copy of the signal)."""
+    """The work of :func:`hann_spectrum32` on a float32 buffer (used up) whose first n values hold
+    the signal minus ``legendre_constant(coef, a)``; its length is the transform length unless
+    ``nfft`` is given.  The window's sums are the closed forms of the symmetric Hann window."""
     coef = np.asarray(coef, dtype=float)
     nfft = len(buf) if nfft is None else int(nfft)
     x = buf[:n]

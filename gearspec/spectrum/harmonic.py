@@ -82,11 +82,6 @@ class HarmonicFit:
         var = (b * b * v[:, 0, 0] + a * a * v[:, 1, 1] - 2 * a * b * v[:, 0, 1]) / amp2**2
         return np.sqrt(np.maximum(var, 0))
 
-    @property
-    def offset(self) -> float:
-        """Mean of the nuisance polynomial over the span (the average level of y)."""
-        return float(self.nuisance[0]) if len(self.nuisance) else 0.0
-
     def _blocks(self) -> np.ndarray:
         k = len(self.frequency)
         idx = np.arange(k) * 2
@@ -127,57 +122,30 @@ class HarmonicFit:
             out[i:i + len(th)] = a.reshape(-1)[: len(th)]
         return out
 
-    def components(self, theta, chunk: int = _CHUNK) -> np.ndarray:
-        """Each sinusoid evaluated at ``theta`` (double precision): shape (K, N)."""
-        theta = np.asarray(theta, dtype=float)
-        out = np.empty((len(self.frequency), len(theta)))
-        for i in range(0, len(theta), chunk):
-            c, s = _trig(theta[i:i + chunk], self.frequency)
-            out[:, i:i + chunk] = (c * self.coef_cos + s * self.coef_sin).T
-        return out
-
-
-def _trig(theta: np.ndarray, freq: np.ndarray):
-    """cos and sin of 2 pi f theta for every f (double precision, phase reduced to one cycle
-    first, exact for large theta), shape (n, K)."""
-    ph = np.multiply.outer(theta, freq)
-    ph -= np.floor(ph)
-    ph *= _TWO_PI
-    return np.cos(ph), np.sin(ph)
-
 
 _SUB_ELEMS = 1 << 18  # rows x rows-of-X'X x columns of one sub-block product (see _sub_rows)
 
 
 def _sub_rows(q_rows: int, q: int, n: int) -> int:
-    """Rows per sub-block product: a power of two, so that rows x q_rows x q stays within 2^18.
-    The products are then small for the BLAS: OpenBLAS runs them on one thread (beyond, it
-    splits such tall, narrow products across threads, which costs more than it gains, and a
-    great deal on a busy machine), with its small-matrix kernels where the CPU has them
-    (several times faster than its general path for these shapes).  Between 128 and 8192 rows,
-    and no more than the samples."""
+    """Rows per sub-block product: a power of two (128 to 8192, at most ``n``) keeping rows x
+    q_rows x q within 2^18, so that OpenBLAS runs each product on one thread with its
+    small-matrix kernels (splitting such tall, narrow products across threads costs more than it
+    gains, a great deal on a busy machine)."""
     r = 1 << max(0, int(np.floor(np.log2(max(_SUB_ELEMS / max(q_rows * q, 1), 1.0)))))
     r = int(np.clip(r, 128, 8192))
     return max(1, min(r, n))
 
 
 class _Design:
-    """The single-precision design matrix of one chunk of samples, column by column, with the
-    centred data as one more column.
+    """The single-precision design matrix of one chunk of samples, with ``y - y0`` as column ``q``.
 
-    Columns (``q`` in all, then ``y - y0`` as column ``q``): Legendre 0..degree, then for every
-    group of lines its cosines and its sines (``groups``: (frequencies, first cosine column,
-    first sine column)), then Gauss-Newton derivative columns ``2 pi (theta - centre) * (cos,
-    sin)`` (``deriv``: (cosine source column, sine source column) per free line).
-
-    Layout: ``D[b, j, :]`` is column j of sub-block b (``rows`` samples, contiguous), so that
-    every column operation is one contiguous ufunc call per chunk, and one batched product
-    ``D[:, a:q] @ D[:].T`` gives rows ``a:`` of both ``X'X`` and ``X'y``.
-
-    Phases are taken relative to each sub-block's first position, whose own phase is reduced to
-    one cycle in double precision: the float32 argument then stays below the sub-block's cycle
-    count (< 4096 cycles even at the position Nyquist), and its rounding costs < 1e-5 of
-    amplitude, while float32 trigonometric functions run many times faster than float64 ones.
+    Columns: Legendre 0..degree, per group of lines (``groups``: frequencies, first cosine column,
+    first sine column) its cosines and sines, then derivative columns ``2 pi (theta - centre) *
+    (cos, sin)`` (``deriv``: source columns per free line).  ``D[b, j, :]`` is column j of
+    sub-block b, so one batched product ``D[:, a:q] @ D[:].T`` gives rows ``a:`` of ``X'X`` and
+    ``X'y``.  Phases are taken from each sub-block's first position (reduced to one cycle in
+    double precision): the float32 argument stays below 4096 cycles, rounding < 1e-5 of amplitude,
+    and float32 trigonometry runs many times faster.
     """
 
     def __init__(self, degree, lo, hi, groups, deriv, q, rows, blocks):
@@ -205,15 +173,13 @@ class _Design:
         U = self.U[:nb]
         if full == m:  # a whole number of sub-blocks: straight from theta
             T = theta.reshape(nb, r)
-            ref = T[:, 0].copy()
-            np.subtract(T, ref[:, None], out=U, casting="same_kind")
         else:  # the last, partial chunk: padded with its last position
             T = self.T64[:nb]
             flat = T.reshape(-1)
             flat[:m] = theta
             flat[m:] = theta[-1]
-            ref = T[:, 0].copy()
-            np.subtract(T, ref[:, None], out=U, casting="same_kind")
+        ref = T[:, 0].copy()
+        np.subtract(T, ref[:, None], out=U, casting="same_kind")
         D = self.D[:nb]
         d = self.degree
         # Legendre polynomials of x = 2 (theta - lo) / (hi - lo) - 1, Bonnet recurrence
@@ -425,25 +391,10 @@ class NormalEquations:
 
 
 def harmonic_fit(theta, y, frequency, degree: int = 1, chunk: int = _CHUNK, residual: bool = False):
-    """Fit sinusoids at ``frequency`` (cycles per unit of theta) plus a Legendre nuisance.
-
-    Parameters
-    ----------
-    theta, y : ndarray
-        Raw samples, any order.
-    frequency : array_like
-        Known frequencies, cycles/rad or cycles/m (may be empty).
-    degree : int
-        Degree of the Legendre nuisance polynomial (0: a mean only).
-    chunk : int
-        Rows per block of the normal equations.
-    residual : bool
-        Also return ``y - model`` at every sample (a second pass).
-
-    Returns
-    -------
-    HarmonicFit, or (HarmonicFit, residual) when ``residual`` is True.
-    """
+    """Fit sinusoids at ``frequency`` (cycles/rad or cycles/m, may be empty) plus a Legendre
+    nuisance of ``degree`` (0: a mean only) to raw samples ``theta, y`` (any order); ``chunk``
+    rows per block of the normal equations.  Returns the :class:`HarmonicFit`, and with
+    ``residual`` also ``y - model`` at every sample (a second pass)."""
     ne = NormalEquations.accumulate(theta, y, frequency, degree, chunk=chunk)
     fit = ne.fit()
     if not residual:
@@ -456,25 +407,16 @@ def refine_frequencies(theta, y, frequency, free, degree: int = 1, iterations: i
                        chunk: int = _CHUNK, base: NormalEquations | None = None):
     """Refine the frequencies listed in ``free`` (indices) by Gauss-Newton on the joint model.
 
-    A frequency read off a periodogram is good to a fraction of a resolution step 1/span, but the
-    phase at theta = 0 of a line found far from the origin needs it far better.  Each iteration is
-    one pass over the samples: the joint fit plus, for every free line, the derivative columns
-    ``2 pi (theta - centre) (cos, sin)``, whose coefficients give the frequency correction; a step
-    is limited to half a resolution step.  Iterations stop when the corrections fall below 1e-3
-    of half a resolution step, or after ``iterations`` passes.
+    A periodogram's frequency is good to a fraction of 1/span, but the phase at theta = 0 of a
+    line far from the origin needs it far better.  Each iteration is one pass: the joint fit plus
+    derivative columns ``2 pi (theta - centre) (cos, sin)`` per free line, whose coefficients give
+    the correction (at most half a resolution step); it stops below 1e-3 of that, or after
+    ``iterations`` passes.  ``base``, the equations of the fixed lines (the first ones of
+    ``frequency``, the same degree), makes every pass compute only the free lines' rows.
 
-    ``base``, the equations of the fixed lines (the first ones of ``frequency``, all the others
-    free, the same degree), makes every pass compute only the rows of the free lines
-    (:meth:`NormalEquations.extend`): the same equations, at a fraction of the cost.
-
-    Returns
-    -------
-    frequency : ndarray
-        All frequencies, the free ones refined.
-    frequency_se : ndarray
-        Standard errors (white noise) of the free ones, 0 for the others.
-    equations : NormalEquations
-        Of the last pass; ``equations.fit()`` is the joint fit at the frequencies returned.
+    Returns ``(frequency, frequency_se, equations)``: all frequencies (the free ones refined),
+    white-noise standard errors of the free ones (0 for the others), and the last pass's
+    :class:`NormalEquations`, whose ``fit()`` is the joint fit at those frequencies.
     """
     theta = np.asarray(theta, dtype=float)
     freq = np.array(frequency, dtype=float)

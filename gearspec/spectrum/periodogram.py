@@ -25,19 +25,9 @@ METHODS = ("auto", "nifty", "astropy", "scipy")
 
 
 class LombScargle:
-    """Lomb-Scargle periodogram of ``y`` sampled at positions ``theta``.
-
-    Parameters
-    ----------
-    theta : ndarray
-        Positions (rad or m); any order.
-    y : ndarray
-        Values, shape (N,) or (B, N) for a batch of signals sampled at the same positions.
-    method : {"auto", "nifty", "astropy", "scipy"}
-    nthreads : int, optional
-        Threads of the nifty (finufft) back end; default: all (OpenMP's choice).  One when
-        periodograms are computed in several threads at once.
-    """
+    """Lomb-Scargle periodogram of ``y`` (shape (N,), or (B, N) for a batch) sampled at positions
+    ``theta`` (rad or m, any order); ``method`` one of ``METHODS``; ``nthreads``: threads of the
+    nifty (finufft) back end (default OpenMP's choice; one when periodograms run in threads)."""
 
     def __init__(self, theta, y, method: str = "auto", nthreads: int | None = None):
         if method not in METHODS:
@@ -121,15 +111,12 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
                 relative: float = 0.3, return_bins: bool = False):
     """Local mean noise power around every bin.
 
-    Bins are grouped in consecutive blocks whose width grows with frequency (``relative`` times
-    the block's starting bin, between ``min_width`` and ``width`` bins): a constant relative
-    bandwidth where the noise spectrum is steep (coloured noise at low frequency), a fixed width
-    higher up.  In each block the noise level is the mean power of the bins below ten times the
-    block's median level (so a line does not raise it); block levels are interpolated between
-    block centres, so the cost is O(n), not O(n width).  Bins in ``mask`` are left out.
-
-    With ``return_bins`` also returns, per bin, how many bins its block averaged (for the
-    estimation error of the level; see :func:`false_alarm_probability`).
+    Bins are grouped in blocks whose width grows with frequency (``relative`` times the block's
+    starting bin, between ``min_width`` and ``width``): a constant relative bandwidth where
+    coloured noise is steep, a fixed width higher up.  A block's level is the mean power of its
+    bins below ten times its median level (a line does not raise it), interpolated between block
+    centres (O(n)).  Bins in ``mask`` are left out.  ``return_bins`` also returns how many bins
+    each bin's level averaged (:func:`false_alarm_probability`).
     """
     n = len(power)
     centres, levels, counts = noise_blocks(power, width=width, mask=mask, min_width=min_width, relative=relative)
@@ -145,10 +132,8 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
 
 def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = None, min_width: int = 40,
                  relative: float = 0.3):
-    """The blocks of :func:`local_noise`: ``(centres, levels, counts)`` of every block with a
-    finite level (bin index of its centre, mean noise power, bins averaged).  ``local_noise`` is
-    their linear interpolation at every bin; evaluating it only where needed saves the work.
-    A single-precision spectrum is worked on in single precision."""
+    """The blocks of :func:`local_noise`: ``(centres, levels, counts)`` (bin index, mean noise power,
+    bins averaged) of every block with a finite level; float32 spectra in single precision."""
     p = np.asarray(power)
     if p.dtype != np.float32:
         p = p.astype(float, copy=False)
@@ -199,33 +184,27 @@ def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN (masked) blocks
         n_grow = int(np.searchsorted(edges, start))
-        for k in range(n_grow):
+        for k in [*range(n_grow), *range(n_grow + n_full, len(edges) - 1)]:  # the growing blocks, a last short one
             lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
             levels[k], counts[k] = lev[0], cnt[0]
         if n_full:
             stop = start + n_full * width
             rows = p[start:stop].reshape(n_full, width)
-            dirty = (mask[start:stop].reshape(n_full, width).any(axis=1) if mask is not None
-                     else np.zeros(n_full, bool))
+            mrows_all = mask[start:stop].reshape(n_full, width) if mask is not None else None
+            dirty = mrows_all.any(axis=1) if mask is not None else np.zeros(n_full, bool)
             lev = np.empty(n_full)
             cnt = np.empty(n_full)
-            mrows_all = mask[start:stop].reshape(n_full, width) if mask is not None else None
             # in groups of rows: the sorted copy and the temporaries stay small
             step = max(1, (1 << 18) // width)
             for i in range(0, n_full, step):
                 r_, d_ = rows[i:i + step], dirty[i:i + step]
                 lv, ct = lev[i:i + step], cnt[i:i + step]
-                if not d_.any():
-                    lv[:], ct[:] = block_levels(r_, masked=False)
-                    continue
                 c_ = ~d_
                 if c_.any():
                     lv[c_], ct[c_] = block_levels(r_[c_], masked=False)
-                lv[d_], ct[d_] = block_levels(np.where(mrows_all[i:i + step][d_], np.nan, r_[d_]))
+                if d_.any():
+                    lv[d_], ct[d_] = block_levels(np.where(mrows_all[i:i + step][d_], np.nan, r_[d_]))
             levels[n_grow:n_grow + n_full], counts[n_grow:n_grow + n_full] = lev, cnt
-        for k in range(n_grow + n_full, len(edges) - 1):
-            lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
-            levels[k], counts[k] = lev[0], cnt[0]
     good = np.isfinite(levels)
     return centres[good], levels[good], counts[good]
 

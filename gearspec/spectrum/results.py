@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,11 +41,7 @@ class Peak:
     aliased_from: dict | None = None  # a peak labelled 'alias of X': X's label, frequency and order
 
     def to_dict(self) -> dict:
-        return {"frequency": self.frequency, "amplitude": self.amplitude, "amplitude_se": self.amplitude_se,
-                "phase": self.phase, "phase_se": self.phase_se, "fap": self.fap, "order": self.order,
-                "label": self.label, "declared": self.declared, "snr": self.snr, "hint": self.hint,
-                "frequency_se": self.frequency_se, "frequency_exact": self.frequency_exact,
-                "order_exact": self.order_exact, "aliased_from": self.aliased_from}
+        return asdict(self)
 
 
 @dataclass

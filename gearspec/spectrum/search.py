@@ -1,8 +1,5 @@
-"""The search for peaks no declared line explains, in the residual power spectrum of one segment:
-its uniform frequency grid (:class:`_Grid`), its local noise level (:class:`_LocalNoise`), the
-residual's Hann spectrum over position with fitted lines taken out in closed form
-(:func:`_fft_residual_power`, :class:`_FFTResidual`), the candidates (:func:`_search`) and the joint
-fit's significance test (:func:`_significant`).  Internal to :func:`~gearspec.spectrum.analyze_segment`."""
+"""The search for peaks no declared line explains in the residual power spectrum of one segment
+(internal to :func:`~gearspec.spectrum.analyze_segment`)."""
 
 from __future__ import annotations
 
@@ -105,10 +102,7 @@ class _Grid:
         self.base, self.df, self.k0, self.n = float(base), float(df), int(k0), int(n)
 
     def at(self, i):
-        i = np.asarray(i)
-        if self.base == 0.0:
-            return self.df * (self.k0 + i)
-        return self.base + self.df * (self.k0 + i)
+        return self.base + self.df * (self.k0 + np.asarray(i))
 
     def frequencies(self) -> np.ndarray:
         return self.at(np.arange(self.n))
@@ -146,10 +140,9 @@ class _Grid:
 
 
 class _LocalNoise:
-    """:func:`~gearspec.spectrum.periodogram.local_noise` of a power spectrum, evaluated only at
-    the bins asked for (the same values: linear interpolation between block levels, and the
-    median power wherever the level is missing or not positive); ``bins`` is the number of
-    bins averaged, over the window's equivalent noise bandwidth."""
+    """:func:`~gearspec.spectrum.periodogram.local_noise` evaluated only at the bins asked for (the
+    median power where the level is missing or not positive); ``bins``: bins averaged over the
+    window's equivalent noise bandwidth."""
 
     def __init__(self, power, width, min_width, mask, enbw):
         self.power = power
@@ -189,23 +182,12 @@ class _LocalNoise:
 
 def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None,
                         lo: float | None = None, hi: float | None = None, keep_residual: bool = False):
-    """Power of the residual of ``fit0`` from one Hann-windowed FFT of the signal resampled over
-    position: the nuisance polynomial is subtracted on the grid, the fitted lines in closed form
-    near their bins (:func:`~gearspec.spectrum.fft.hann_sinusoid_dft`; beyond +-40 bins the
-    window's leakage is below 1e-7).  Scaled so that a sinusoid of amplitude A has power
-    n A^2 / 4; white noise then has power ``enbw * sigma^2``.
-
-    The resampled signal, once the nuisance is off, is windowed and transformed in single
-    precision (:func:`~gearspec.spectrum.fft.hann_spectrum32`): its rounding (~1e-7 of the
-    signal) is far below any noise floor the search could use, and it halves the FFT's time and
-    memory.
-
-    With ``keep_into`` (a SegmentSpectrum) the calibrated amplitude spectrum of the signal (line
-    included, nuisance removed) is stored there for the figures.
-
-    Returns ``(k_lo, k_hi, df, power, enbw, residual)``: ``residual`` (with ``keep_residual``,
-    else None) is a :class:`_FFTResidual` that gives the power of the residual of another fit
-    (more lines) without another transform.
+    """Power of the residual of ``fit0`` from one single-precision Hann FFT of the signal resampled
+    over position: the nuisance subtracted on the grid, the fitted lines in closed form within +-40
+    bins (leakage beyond below 1e-7).  A sinusoid of amplitude A has power n A^2 / 4, white noise
+    ``enbw * sigma^2``.  ``keep_into`` (a SegmentSpectrum) gets the signal's amplitude spectrum for
+    the figures.  Returns ``(k_lo, k_hi, df, power, enbw, residual)``, ``residual`` (with
+    ``keep_residual``) a :class:`_FFTResidual` for the power of another fit's residual.
     """
     n = len(theta)
     if lo is None:
@@ -222,9 +204,9 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
         _, _, vals = resample_uniform(theta, y, lo=lo, hi=hi)
         spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
     else:
-        # resampled straight into the transform's float32 buffer, the nuisance's constant part
-        # taken off first in double precision: no double-precision copy of the grid
-        buf = np.empty(m, np.float32)  # the transform pads it (in its own work buffer)
+        # resampled straight into the float32 buffer (the transform pads it), the nuisance's
+        # constant part taken off first in double precision
+        buf = np.empty(m, np.float32)
         resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
         spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b,
                                                       nfft=hann_fft_length(m, oversample))
@@ -249,11 +231,9 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
 
 
 class _FFTResidual:
-    """The complex residual spectrum of :func:`_fft_residual_power` (a view of its bins k_lo..k_hi),
-    kept to give the power of the residual of a fit with more lines: the bins within +-40 of
-    every line of either fit are recomputed in closed form (the first fit's lines put back, the
-    new fit's taken out, as the first were), the rest copied.  The change of the nuisance
-    polynomial between the two fits is left in (it is slow: it touches the lowest bins only)."""
+    """The complex residual spectrum of :func:`_fft_residual_power` (bins k_lo..k_hi), for the power
+    of the residual of a fit with more lines: bins within +-40 of any line of either fit are
+    recomputed in closed form, the rest copied; the nuisance's change is left in (lowest bins)."""
 
     _HALF = 40  # bins either side of a line (the Hann window's leakage beyond is below 1e-7)
 
