@@ -32,11 +32,9 @@ MIN_SPEEDS = 3
 
 @dataclass
 class LagEstimate:
-    """A channel lag (s, ``> 0``: torque behind position) with its standard error.
-
-    ``groups``: the (line, direction) series used, with their number of segments; ``chi2`` the
-    weighted misfit of the phases at the estimate over ``dof`` degrees of freedom (about 1 per
-    dof when the phase errors are honest); ``z = lag / se``."""
+    """A channel lag (s, ``> 0``: torque behind position) with its standard error; ``groups``: the
+    (line, direction) series used; ``chi2``: the weighted phase misfit over ``dof`` (about 1 per
+    dof when the phase errors are honest)."""
 
     lag: float
     se: float
@@ -148,24 +146,15 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
     return LagEstimate(lag, se_lag, len(r), used, chi2, max(dof, 0), float(max_lag))
 
 
-def _median_dt(rec) -> float:
-    dts = [np.diff(rec.t[a:b]) for _, a, b in rec.pieces() if b - a > 1]
-    dt = np.concatenate(dts) if dts else np.zeros(0)
-    dt = dt[dt > 0]
-    return float(np.median(dt)) if len(dt) else float("nan")
-
-
 def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max_lag: float | None = None,
                  min_speeds: int = MIN_SPEEDS, spectrum=None, **segment_options) -> LagEstimate:
-    """The lag of the torque channel behind position, from the phases of the gear's declared
-    lines across constant-speed segments (module docstring).
-
-    ``min_snr``: a segment's line takes part when its amplitude is at least this many standard
-    errors (its phase error is then below ``1/min_snr`` rad).  ``max_lag``: the search range
-    (default: 20 median sample intervals, at least 50 ms).  ``spectrum``: a
+    """The lag of the torque channel behind position, from the phases of the gear's declared lines
+    across constant-speed segments.  ``min_snr``: a segment's line takes part when its amplitude is
+    at least this many standard errors (phase error below ``1/min_snr`` rad).  ``max_lag``: the
+    search range (default 20 median sample intervals, at least 50 ms).  ``spectrum``: a
     :class:`~gearspec.spectrum.SpectrumResult` already computed (else :func:`~gearspec.spectrum.analyze`
-    runs with ``segmentation`` or ``segment_options``).  Refuses with :class:`InputError` when the
-    data cannot show a lag."""
+    runs with ``segmentation`` or ``segment_options``).  :class:`InputError` when the data cannot
+    show a lag."""
     from .gears import load_gear
     from .spectrum import analyze
 
@@ -177,8 +166,10 @@ def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max
     if spectrum is None:
         spectrum = analyze(rec, g, segmentation=segmentation, max_peaks=0, **segment_options)
     if max_lag is None:
-        dt = _median_dt(rec)
-        max_lag = max(20 * dt, 0.05) if np.isfinite(dt) else 0.05
+        dts = [np.diff(rec.t[a:b]) for _, a, b in rec.pieces() if b - a > 1]
+        dt = np.concatenate(dts) if dts else np.zeros(0)
+        med = float(np.median(dt[dt > 0])) if np.any(dt > 0) else math.nan
+        max_lag = max(20 * med, 0.05) if math.isfinite(med) else 0.05
     rows = []
     for s in spectrum.segments:
         for p in s.peaks:
@@ -197,12 +188,10 @@ def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max
 
 
 def apply_lag(rec, seconds: float, *, channels=("torque", "current")):
-    """A copy of ``rec`` with its torque (and current) channel shifted *earlier* by ``seconds``
-    (``> 0`` undoes a torque logged behind position): the value at ``t`` becomes the logged
-    value at ``t + seconds``, linearly interpolated in time within each contiguous piece (run,
-    split at gaps: :meth:`Recording.pieces`).  Rows whose partner time falls outside their
-    piece are excluded and counted under ``lag_edge``; the recording gets a note and
-    ``meta["lag"]``."""
+    """A copy of ``rec`` with its torque (and current) shifted *earlier* by ``seconds`` (``> 0`` undoes
+    a torque logged behind position), interpolated in time within each piece
+    (:meth:`Recording.pieces`); rows whose partner falls outside their piece are excluded under
+    ``lag_edge``; the recording gets a note and ``meta["lag"]``."""
     L = float(seconds)
     if not math.isfinite(L):
         raise InputError(f"the lag must be a finite number of seconds, got {seconds!r}")
@@ -242,9 +231,8 @@ def apply_lag(rec, seconds: float, *, channels=("torque", "current")):
 
 
 def lag_option(rec, value, *, say=print, **segment_options):
-    """The ``--lag SECONDS|auto`` option: ``auto`` estimates the lag (:func:`estimate_lag`),
-    reports it with ``say`` and applies it; a number is applied as given; None leaves ``rec``
-    as it is."""
+    """The ``--lag SECONDS|auto`` option: ``auto`` estimates the lag, reports it with ``say`` and
+    applies it; a number is applied as given; None leaves ``rec`` as it is."""
     if value is None:
         return rec
     text = str(value).strip().lower()

@@ -7,13 +7,7 @@ import math
 
 import numpy as np
 
-from .fft import (
-    hann_fft_length,
-    hann_sinusoid_dft,
-    hann_spectrum32,
-    hann_spectrum32_buffer,
-    legendre_constant,
-)
+from .fft import hann_fft_length, hann_sinusoid_dft, hann_spectrum32, hann_spectrum32_buffer, legendre_constant
 from .harmonic import HarmonicFit, NormalEquations
 from .periodogram import false_alarm_probability, noise_blocks
 from .resample import grid_size, resample_uniform
