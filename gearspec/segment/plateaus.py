@@ -119,10 +119,8 @@ def _outside(pieces, taken):
 
 
 def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
-    """Least-squares slope of thb against tb over every window of k consecutive blocks.
-
-    Written as k shifted slices (in-place operations on arrays of the number of windows) rather
-    than reductions over a sliding-window view, whose rows of k elements numpy reduces slowly."""
+    """Least-squares slope of thb against tb over every window of k consecutive blocks (k shifted
+    slices: numpy reduces the short rows of a sliding-window view slowly)."""
     m = len(tb) - k + 1
     if m <= 0:
         return np.empty(0)

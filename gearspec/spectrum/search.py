@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from .fft import hann_fft_length, hann_sinusoid_dft, hann_spectrum32, hann_spectrum32_buffer, legendre_constant
+from .fft import hann_fft_length, hann_sinusoid_dft, hann_spectrum32_buffer, legendre_constant
 from .harmonic import HarmonicFit, NormalEquations
 from .periodogram import false_alarm_probability, noise_blocks
 from .resample import grid_size, resample_uniform
@@ -188,23 +188,15 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
         lo, hi = float(np.min(theta)), float(np.max(theta))
     h, m = grid_size(n, lo, hi)
     g0 = lo
-    # x of the nuisance's Legendre series on the grid: x_k = a + b k
-    if fit0.hi > fit0.lo:
-        b = 2.0 * h / (fit0.hi - fit0.lo)
-        a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
-    else:
-        a = b = 0.0
-    if m < 4:  # degenerate: the general function
-        _, _, vals = resample_uniform(theta, y, lo=lo, hi=hi)
-        spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
-    else:
-        # resampled straight into the float32 buffer (the transform pads it), the nuisance's
-        # constant part taken off first in double precision
-        buf = np.empty(m, np.float32)
-        resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
-        spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b,
-                                                      nfft=hann_fft_length(m, oversample))
-        del buf
+    # x of the nuisance's Legendre series on the grid: x_k = a + b k (fit0 spans theta: hi > lo)
+    b = 2.0 * h / (fit0.hi - fit0.lo)
+    a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
+    # resampled straight into the float32 buffer (the transform pads it), the nuisance's constant
+    # part taken off first in double precision (a segment has 16 samples or more: m >= 15)
+    buf = np.empty(m, np.float32)
+    resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
+    spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b, nfft=hann_fft_length(m, oversample))
+    del buf
     nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
     if keep_into is not None:
         keep_into.fft_frequency = (df * np.arange(len(spec))).astype(np.float32)
