@@ -42,9 +42,8 @@ def _savgol(tt, th, dt, w, uniform, deriv):
 
 
 def _filter_params(tt: np.ndarray, deriv_window: int | None):
-    """``(dt, window, uniform)`` of the Savitzky-Golay filter on one piece with sample times
-    ``tt``, or None when the piece is too short for it: fewer samples than the window, or (for a
-    jittered piece, resampled to a uniform grid of the median step first) fewer grid points."""
+    """``(dt, window, uniform)`` of the Savitzky-Golay filter on one piece with sample times ``tt``,
+    or None when it has fewer samples (or, jittered, fewer grid points) than the window."""
     n = len(tt)
     if n < 5:
         return None

@@ -23,7 +23,6 @@ _COVER_FRACTION = 0.8
 PARALLEL_MIN_SAMPLES = 1_000_000
 
 
-# ---------------------------------------------------------------------- segmentation
 def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: float = 0.15,
                   min_speed: float | None = None, min_duration: float | None = None,
                   min_samples: int = 32, workers: int | str = "auto",
@@ -91,12 +90,11 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         for reason, count in labels.items():
             excluded[reason] += count
     segments.sort(key=lambda x: x.start)
-    seg = Segmentation(segments, excluded, len(rec), {"window": window, "rel_tol": rel_tol,
-                                                      "min_speed": min_speed, "min_duration": min_duration,
-                                                      "windows_chosen": sorted(set(chosen.values())),
-                                                      "quasi_static": ("auto" if quasi_static is None
-                                                                       else bool(quasi_static)),
-                                                      "quasi_static_segments": len(qs_segments)})
+    settings = {"window": window, "rel_tol": rel_tol, "min_speed": min_speed, "min_duration": min_duration,
+                "windows_chosen": sorted(set(chosen.values())),
+                "quasi_static": "auto" if quasi_static is None else bool(quasi_static),
+                "quasi_static_segments": len(qs_segments)}
+    seg = Segmentation(segments, excluded, len(rec), settings)
     seg.check_ledger()
     return seg
 

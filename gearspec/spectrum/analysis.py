@@ -273,8 +273,7 @@ class _Analysis:
         return peaks, fit
 
     def spectra_for_figures(self, out: SegmentSpectrum, grid0: _Grid, nbin0: int, enbw0: float, power_first) -> None:
-        """Step 5: the spectra of the figures into ``out``, on the first round's grid; the noise level
-        of the last round when it searched that grid."""
+        """Step 5: the spectra of the figures into ``out``, on the first round's grid."""
         theta, y, n = self.theta, self.y, self.n
         noise_fig = self.noise_model if self.grid is grid0 else self.noise0
         grid, nbin, enbw = grid0, nbin0, enbw0
@@ -295,8 +294,7 @@ _local = threading.local()  # .in_pool: this thread analyses one segment of seve
 
 
 def _ls_threads() -> int | None:
-    """finufft's threads for a periodogram: one inside analyze's worker threads (the workers
-    already share the CPUs; OpenMP teams on top would oversubscribe them), else its default."""
+    """finufft's threads: one inside analyze's worker threads (no oversubscription), else its default."""
     return 1 if getattr(_local, "in_pool", False) else None
 
 

@@ -36,18 +36,15 @@ def order_spectrum(values: np.ndarray, spacing: float, window: str = "hann", det
 
 
 def hann_spectrum(values: np.ndarray, spacing: float, pad: float = 2.0):
-    """Hann-windowed complex spectrum of ``values`` (already free of its mean), padded to a fast
-    length of at least ``pad`` times the samples.
-
-    Returns ``(spectrum, df, window_sum, enbw)``: bin k is at ``k * df`` cycles per unit; a
-    sinusoid of amplitude A on a bin has ``|spectrum| = A window_sum / 2``; white noise of
-    variance s^2 has ``E|spectrum|^2 = s^2 sum(w^2)``, i.e. ``enbw = n sum(w^2) / sum(w)^2`` (1.5
-    for Hann) times what a rectangular window gives.
+    """Hann-windowed complex spectrum of ``values`` (free of its mean), padded to a fast length of
+    at least ``pad`` times the samples: ``(spectrum, df, window_sum, enbw)``.  Bin k is at ``k df``;
+    a sinusoid of amplitude A on a bin has ``|spectrum| = A window_sum / 2``; white noise has
+    ``enbw = n sum(w^2) / sum(w)^2`` (1.5 for Hann) times a rectangular window's power.
     """
     v = np.asarray(values, dtype=float)
     n = len(v)
     w = get_window("hann", n, fftbins=False)
-    nfft = scipy.fft.next_fast_len(int(np.ceil(n * max(1.0, pad))), real=True)
+    nfft = hann_fft_length(n, pad)
     spec = scipy.fft.rfft(v * w, nfft)
     wsum = float(w.sum())
     enbw = n * float(w @ w) / wsum**2
@@ -75,15 +72,13 @@ def hann_spectrum32(values: np.ndarray, spacing: float, pad: float = 2.0, legend
 
 
 def hann_fft_length(n: int, pad: float = 2.0) -> int:
-    """The transform length of :func:`hann_spectrum` for n values: a fast length of at least
-    ``pad`` times n."""
+    """The transform length of :func:`hann_spectrum`: a fast length of at least ``pad`` times n."""
     return int(scipy.fft.next_fast_len(int(np.ceil(n * max(1.0, pad))), real=True))
 
 
 def legendre_constant(coef, a: float) -> float:
-    """The part of ``sum_j coef_j P_j(a + b m)`` that :func:`hann_spectrum32_buffer` expects to be
-    subtracted already, in double precision: the constant term, and for a straight line (two
-    terms) also its value at m = 0."""
+    """The part of ``sum_j coef_j P_j(a + b m)`` that :func:`hann_spectrum32_buffer` expects
+    subtracted in double precision: the constant term (a straight line: its value at m = 0)."""
     coef = np.asarray(coef, dtype=float)
     if len(coef) == 0:
         return 0.0
@@ -134,13 +129,9 @@ def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: 
 
 def hann_sinusoid_dft(k: np.ndarray, nfft: int, n: int, x0: float, spacing: float, frequency: float,
                       coef_cos: float, coef_sin: float) -> np.ndarray:
-    """Exact bins ``k`` of the Hann-windowed, ``nfft``-point DFT of
-    ``coef_cos cos(2 pi f x) + coef_sin sin(2 pi f x)`` sampled at ``x = x0 + m spacing``,
-    ``m = 0 .. n-1`` (closed-form geometric sums; the symmetric Hann window of scipy).
-
-    Subtracting it from :func:`hann_spectrum` removes a fitted line from the spectrum without
-    evaluating it at every grid point.
-    """
+    """Exact bins ``k`` of the Hann-windowed ``nfft``-point DFT of ``coef_cos cos(2 pi f x) +
+    coef_sin sin(2 pi f x)`` at ``x = x0 + m spacing``, ``m < n`` (closed-form geometric sums):
+    subtracted from :func:`hann_spectrum`, it removes a fitted line without evaluating it."""
     k = np.asarray(k, dtype=float)
     alpha = 2 * np.pi / (n - 1)
 

@@ -70,26 +70,21 @@ class HarmonicFit:
     def amplitude_se(self) -> np.ndarray:
         a, b = self.coef_cos, self.coef_sin
         amp = np.maximum(self.amplitude, 1e-300)
-        v = self._blocks()
-        var = (a * a * v[:, 0, 0] + b * b * v[:, 1, 1] + 2 * a * b * v[:, 0, 1]) / amp**2
+        vcc, vss, vcs = self._blocks()
+        var = (a * a * vcc + b * b * vss + 2 * a * b * vcs) / amp**2
         return np.sqrt(np.maximum(var, 0))
 
     @property
     def phase_se(self) -> np.ndarray:
         a, b = self.coef_cos, self.coef_sin
         amp2 = np.maximum(a * a + b * b, 1e-300)
-        v = self._blocks()
-        var = (b * b * v[:, 0, 0] + a * a * v[:, 1, 1] - 2 * a * b * v[:, 0, 1]) / amp2**2
+        vcc, vss, vcs = self._blocks()
+        var = (b * b * vcc + a * a * vss - 2 * a * b * vcs) / amp2**2
         return np.sqrt(np.maximum(var, 0))
 
-    def _blocks(self) -> np.ndarray:
-        k = len(self.frequency)
-        idx = np.arange(k) * 2
-        out = np.empty((k, 2, 2))
-        out[:, 0, 0] = self.cov[idx, idx]
-        out[:, 1, 1] = self.cov[idx + 1, idx + 1]
-        out[:, 0, 1] = out[:, 1, 0] = self.cov[idx, idx + 1]
-        return out
+    def _blocks(self):
+        """Per frequency: var(cos), var(sin), cov(cos, sin)."""
+        return np.diagonal(self.cov)[0::2], np.diagonal(self.cov)[1::2], np.diagonal(self.cov, 1)[0::2]
 
     def scaled(self, factor) -> HarmonicFit:
         """The same fit with the variance of frequency k scaled by ``factor[k]`` (local noise)."""
@@ -227,11 +222,8 @@ class _Design:
 
 
 def _pass(theta, y, y0, design: _Design, first_row: int, chunk_rows: int, want_yy: bool):
-    """One pass over the samples: rows ``first_row:`` of X'X (float64, summed over chunks of
-    float32 products), the same rows of X'(y - y0), and (y - y0)'(y - y0) (float64) when asked.
-
-    No BLAS call but the batched matrix product, and that one in sub-blocks small enough to run
-    on one thread (see :func:`_sub_rows`)."""
+    """One pass over the samples: rows ``first_row:`` of X'X and X'(y - y0) (float64 sums of
+    float32 sub-block products, :func:`_sub_rows`), and (y - y0)'(y - y0) when asked."""
     q = design.q
     GH = np.zeros((q - first_row, q + 1))
     yy = 0.0
@@ -252,14 +244,6 @@ def _make_design(n, degree, lo, hi, groups, deriv, q, first_row, chunk):
     r = _sub_rows(q - first_row, q + 1, n)
     blocks = max(1, min(max(chunk, r) // r, -(-n // r)))
     return _Design(degree, lo, hi, groups, deriv, q, r, blocks), r * blocks
-
-
-def _cos_col(degree, k, j):
-    return degree + 1 + j
-
-
-def _sin_col(degree, k, j):
-    return degree + 1 + k + j
 
 
 @dataclass
@@ -294,16 +278,14 @@ class NormalEquations:
             raise ValueError(f"{n} samples cannot fit {q} terms")
         lo, hi = float(theta.min()), float(theta.max())
         y0 = float(np.mean(y))
-        deriv = [(_cos_col(d, k, j), _sin_col(d, k, j)) for j in free]
+        deriv = [(d + 1 + j, d + 1 + k + j) for j in free]
         design, rows = _make_design(n, d, lo, hi, [(freq, d + 1, d + 1 + k)], deriv, q, 0, chunk)
         G, h, yy = _pass(theta, y, y0, design, 0, rows, True)
         return cls(0.5 * (G + G.T), h, yy, y0, n, freq, d, lo, hi, free)
 
     def extend(self, theta, y, frequency, chunk: int = _CHUNK) -> NormalEquations:
-        """The equations with the lines ``frequency`` added, free (with derivative columns), from
-        one pass that computes only the new rows of ``X'X``: the columns of these equations (which
-        must have no free lines) are reused, not recomputed.  ``theta`` and ``y`` must be the
-        samples these equations came from."""
+        """The equations with the lines ``frequency`` added, free, from one pass over the samples
+        these (no free lines) came from, computing only the new rows of ``X'X``."""
         if self.free:
             raise ValueError("extend() needs equations without free lines")
         theta = np.asarray(theta, dtype=float)
@@ -357,8 +339,7 @@ class NormalEquations:
         """The joint fit of the frequencies ``keep`` (indices; default all), no new pass."""
         d, k = self.degree, len(self.frequency)
         keep = list(range(k)) if keep is None else [int(j) for j in keep]
-        cols = np.array(list(range(d + 1)) + [c for j in keep for c in (_cos_col(d, k, j), _sin_col(d, k, j))],
-                        dtype=int)
+        cols = np.array(list(range(d + 1)) + [c for j in keep for c in (d + 1 + j, d + 1 + k + j)], dtype=int)
         beta, Ginv, rss = self._solve(cols)
         dof = self.n - len(cols)
         sigma = float(np.sqrt(rss / dof))
@@ -379,7 +360,7 @@ class NormalEquations:
         sigma2 = rss / max(self.n - len(cols), 1)
         steps, ses = [], []
         for m, j in enumerate(self.free):
-            a, b = beta[_cos_col(d, k, j)], beta[_sin_col(d, k, j)]
+            a, b = beta[d + 1 + j], beta[d + 1 + k + j]
             c1, c2 = beta[p + 2 * m], beta[p + 2 * m + 1]
             amp2 = max(a * a + b * b, 1e-300)
             delta = (c1 * b - c2 * a) / amp2  # the 2 pi is inside the derivative columns

@@ -46,17 +46,10 @@ class LombScargle:
         self.nthreads = nthreads
         self.n = theta.shape[0]
 
-    # ------------------------------------------------------------------ grids
-    def span(self) -> float:
-        return float(self.theta[-1] - self.theta[0])
-
     def autogrid(self, oversample: float = 2.0, fmax: float | None = None, fmin: float | None = None):
-        """A uniform grid from one cycle per span to ``fmax`` (default: the position Nyquist of the
-        median sample spacing), ``oversample`` points per resolution step 1/span.
-
-        Returns ``(fmin, df, nf)``.
-        """
-        span = self.span()
+        """``(fmin, df, nf)`` of a uniform grid from one cycle per span to ``fmax`` (default: the
+        Nyquist of the mean sample spacing), ``oversample`` points per resolution step 1/span."""
+        span = float(self.theta[-1] - self.theta[0])
         df = 1.0 / (span * oversample)
         f_lo = 1.0 / span if fmin is None else max(fmin, df)
         if fmax is None:
@@ -64,7 +57,6 @@ class LombScargle:
         nf = max(1, int(np.floor((fmax - f_lo) / df)) + 1)
         return f_lo, df, nf
 
-    # ------------------------------------------------------------------ power
     def power_grid(self, fmin: float, df: float, nf: int) -> np.ndarray:
         """Power on the uniform grid ``fmin + df * arange(nf)``; shape (nf,) or (B, nf)."""
         method = "nifty" if self.method == "auto" else self.method

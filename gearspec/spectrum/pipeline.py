@@ -38,8 +38,7 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     gear = load_gear(gear) if gear is not None else rec.gear
     if gear is not None and gear.unit != rec.unit:
         raise InputError(f"gear spec '{gear.name}' is for theta in {gear.unit}, the recording's theta is in {rec.unit}")
-    # `is None`, not `or`: an empty Segmentation is falsy, and the user's segmentation (with its
-    # options) must be honoured -- refused below when it holds no segment -- never replaced
+    # `is None`, not `or`: an empty Segmentation is falsy, and is refused below, never replaced
     seg = segmentation if segmentation is not None else find_segments(
         rec, window=window, rel_tol=rel_tol, min_speed=min_speed, min_duration=min_duration)
     if len(seg) == 0:
@@ -84,11 +83,9 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
 
 
 def relabel_aliases(segments: list[SegmentSpectrum], gear: GearTrain | None = None, unit: str = "rad") -> int:
-    """Label ``alias of <line>`` the unexplained peaks of a segment that sit where a line found
-    in *another* segment (measured there, below its position Nyquist frequency) aliases in this
-    one -- the same ripple seen at a slow speed and, above the Nyquist frequency, at a fast one
-    (:func:`gearspec.gears.alias_of`, the rule the per-segment labels use).  Changes the peaks in
-    place; returns how many were relabelled."""
+    """Label ``alias of <line>`` the unexplained peaks of a segment that sit where a line measured
+    in *another* segment aliases in this one (:func:`gearspec.gears.alias_of`).  Changes the peaks
+    in place; returns how many were relabelled."""
     known: list[tuple[float, str]] = []
     for s in segments:
         for p in s.peaks:

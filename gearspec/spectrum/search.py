@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
@@ -15,12 +16,10 @@ from .resample import grid_size, resample_uniform
 
 def _search(power, grid: "_Grid", noise_model: "_LocalNoise", declared_f, taken, span, guard, f_found_min,
             fap_threshold, m_eff, oversample, room) -> list[float]:
-    """Peaks of a residual power spectrum that nothing fitted explains, strongest first: local
-    maxima whose false-alarm probability (local noise, F-distributed for an estimated level,
-    ``m_eff`` independent frequencies searched) is below ``fap_threshold``; none within 1.5
-    resolution steps of a declared line (the two could not be told apart), within ``guard`` of a
-    line in ``taken`` (found or rejected before) or of a stronger new one, or below
-    ``f_found_min`` (where the nuisance polynomial could mimic it).  At most ``room``."""
+    """At most ``room`` peaks nothing fitted explains, strongest first: local maxima whose
+    false-alarm probability (``m_eff`` frequencies searched) is below ``fap_threshold``; none within
+    1.5 resolution steps of a declared line (not told apart), within ``guard`` of a line in
+    ``taken`` or of a stronger new one, or below ``f_found_min`` (the nuisance could mimic it)."""
     nbin = len(power)
     is_max = np.zeros(nbin, bool)
     np.greater(power[1:-1], power[:-2], out=is_max[1:-1])
@@ -32,9 +31,8 @@ def _search(power, grid: "_Grid", noise_model: "_LocalNoise", declared_f, taken,
     is_max[:grid.first_at_least(f_found_min)] = False
     cand = np.flatnonzero(is_max)
     del is_max
-    # a candidate needs at least the power that a known noise level (the lightest tail) would
-    # call significant; only those get the exact (F-distributed) false-alarm probability.  The
-    # lowest noise level anywhere screens out most of them without evaluating the level.
+    # screened first by the power a known noise level (the lightest tail) would call significant,
+    # against the lowest level anywhere; only those left get the exact (F) false-alarm probability
     z_floor = _z_floor(fap_threshold, m_eff)
     floor = noise_model.lowest()
     if floor > 0:
@@ -78,9 +76,8 @@ def _significant(eq: NormalEquations, keep, noise_model: "_LocalNoise", grid: "_
 
 
 def _z_floor(fap_threshold: float, m_eff: float) -> float:
-    """The least power ratio z whose false-alarm probability can be below ``fap_threshold``:
-    that of an exactly known noise level (``exp(-z)`` per frequency), whose tail is the lightest
-    of the F-family; a little below, for rounding."""
+    """The least power ratio z whose false-alarm probability can be below ``fap_threshold`` (a known
+    noise level, ``exp(-z)``, has the lightest tail of the F-family), a little below for rounding."""
     single = -math.expm1(math.log1p(-min(max(fap_threshold, 1e-300), 1.0)) / max(1.0, m_eff))
     if single <= 0:
         return math.inf
@@ -88,8 +85,7 @@ def _z_floor(fap_threshold: float, m_eff: float) -> float:
 
 
 class _Grid:
-    """The frequencies of a uniform periodogram grid, ``f(i) = base + df (k0 + i)``, computed
-    exactly as the array ``base + df * arange(k0, k0 + n)`` would hold them, but only where
+    """The frequencies ``base + df (k0 + i)`` of a uniform periodogram grid, computed only where
     needed."""
 
     def __init__(self, base: float, df: float, k0: int, n: int):
@@ -142,13 +138,11 @@ class _LocalNoise:
         self.power = power
         self.centres, self.levels, self.counts = noise_blocks(power, width=width, min_width=min_width, mask=mask)
         self.enbw = enbw
-        self._fallback = None
 
+    @cached_property
     def fallback(self) -> float:
-        if self._fallback is None:
-            p = self.power
-            self._fallback = float(np.nanmedian(p)) if np.any(np.isfinite(p)) else 1.0
-        return self._fallback
+        p = self.power
+        return float(np.nanmedian(p)) if np.any(np.isfinite(p)) else 1.0
 
     def level(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
@@ -158,7 +152,7 @@ class _LocalNoise:
             v = np.full(idx.shape, np.nan)
         bad = ~(np.isfinite(v) & (v > 0))
         if bad.any():
-            v[bad] = self.fallback()
+            v[bad] = self.fallback
         return v
 
     def lowest(self) -> float:
