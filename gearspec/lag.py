@@ -209,8 +209,7 @@ def apply_lag(rec, seconds: float, *, channels=("torque", "current")):
             dt = np.diff(tp)
             tol = 1e-9 * (float(np.median(dt)) if len(dt) else 1.0)
             tq = tp + L
-            inside = (tq >= tp[0] - tol) & (tq <= tp[-1] + tol)
-            keep[a:b] = inside
+            keep[a:b] = (tq >= tp[0] - tol) & (tq <= tp[-1] + tol)
             tq = np.clip(tq, tp[0], tp[-1])
             for c in cols:
                 new[c][a:b] = np.interp(tq, tp, data[c].to_numpy(dtype=float)[a:b])

@@ -168,13 +168,11 @@ def _position_noise(theta: np.ndarray, chunks: int = 20, size: int = 5000) -> fl
     return max(float(sigma), q / math.sqrt(12))
 
 
-def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise=None, dt=None):
+def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise, dt):
+    """The plateaus of one piece for one window, ``(segments, excluded rows by reason)``, or None when
+    the piece is too short for the window; ``noise``: its position noise, ``dt``: its median step."""
     n = len(t)
-    if n < 2:
-        return None
-    if dt is None:
-        dt = float(np.median(np.diff(t[: min(n, 100_000)])))
-    if dt <= 0:
+    if n < 2 or dt <= 0:
         return None
     b = int(round(window / _K / dt))
     if b < 2 or n < b * (2 * _K + 1):
@@ -192,10 +190,9 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     before, after = _before_after(v_win, m)
     across = 0.5 * (before + after)
     # speed noise of a window from position noise (second differences), for the default min_speed
-    sigma = noise if noise is not None else _position_noise(theta)
     if min_speed is None:
         nw = _K * b
-        v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
+        v_noise = noise * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
         v_floor = 10 * v_noise
     else:
         v_floor = float(min_speed)
@@ -214,7 +211,7 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     # block-to-block speeds (the finest the blocks resolve): a ramp is smooth at this scale, ripple is not
     tmid = 0.5 * (tb[1:] + tb[:-1])
     vblock = np.diff(thb) / np.maximum(np.diff(tb), 1e-300)
-    vnoise2 = 2.0 * sigma * sigma / b / (b * dt) ** 2  # variance of a block speed from position noise
+    vnoise2 = 2.0 * noise * noise / b / (b * dt) ** 2  # variance of a block speed from position noise
     runs_ = [r for s, e in runs_ for r in _split_smooth(tmid, vblock, s, e, rel_tol, vnoise2)]
     segs = []
     short_blocks = []

@@ -48,7 +48,7 @@ def _at_rest_statistics(t: np.ndarray, theta: np.ndarray) -> dict:
 
 def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000) -> dict:
     """:func:`_at_rest_statistics` of a whole run, from up to ``chunks`` contiguous stretches of
-    ``size`` rows (row-to-row statistics: a stride would sum steps and average time steps)."""
+    ``size`` rows (not a stride, which would sum steps)."""
     n = len(t)
     if n <= chunks * size:
         return _at_rest_statistics(t, theta)

@@ -97,11 +97,10 @@ def _split_drift(v: np.ndarray, s: int, e: int, rel_tol: float, depth: int = 0):
     return _split_drift(v, s, s + k, rel_tol, depth + 1) + _split_drift(v, s + k, e, rel_tol, depth + 1)
 
 
-#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` over
-#: its length is a ramp, not a plateau (the rest of the tolerance is left to ripple) ...
+#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` is a
+#: ramp (the rest of the tolerance is left to ripple) ...
 _SMOOTH_SPREAD = 1.0 / 3.0
-#: ... when that curve stands out of the position noise (its sum of squares, 3 degrees of freedom
-#: beyond the mean, exceeds this many noise variances: chi-square tail below 1e-4) ...
+#: ... when that curve's sum of squares (3 dof) exceeds this many noise variances (tail < 1e-4) ...
 _SMOOTH_CHI2 = 20.0
 #: degree of the smooth curve (a cubic in time: a ramp, a bell's top, one swing of a sine)
 _SMOOTH_DEGREE = 3

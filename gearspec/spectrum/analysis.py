@@ -123,8 +123,7 @@ def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int,
 
 
 class _Analysis:
-    """The steps of :func:`analyze_segment` on one segment once its declared lines are chosen: the
-    state they share (the samples, the normal equations, the spectrum searched, the lines found)."""
+    """The steps of :func:`analyze_segment` on one segment, and the state they share."""
 
     def __init__(self, theta, y, gear, fitted, deg, lo, hi, nyquist, f_search_max, *, min_cycles, fap_threshold,
                  max_peaks, oversample, method):
@@ -150,7 +149,6 @@ class _Analysis:
             self.power = np.atleast_1d(ls.power_grid(fmin, df, nf))
             self.grid = _Grid(fmin, df, 0, len(self.power))
             self.enbw = 1.0
-            del ls
         else:
             k_lo, _, df, self.power, self.enbw, self.fft_res = _fft_residual_power(
                 self.theta, self.y, self.fit0, self.oversample, self.f_search_max, keep_into, lo=self.lo, hi=self.hi,
@@ -175,7 +173,6 @@ class _Analysis:
         else:
             ls = LombScargle(theta, y - fit.predict(theta), method=self.method, nthreads=_ls_threads())
             self.power = np.atleast_1d(ls.power_grid(self.grid.base, self.grid.df, self.nbin))
-            del ls
 
     def search_rounds(self) -> None:
         """Steps 3-4: peaks no declared line explains (:func:`_search`), found iteratively.
