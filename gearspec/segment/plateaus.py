@@ -50,13 +50,10 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
     if quasi_static not in (None, True, False):
         raise InputError(f"quasi_static must be None (recognise), True or False, got {quasi_static!r}")
     t, theta = rec.t, rec.theta
-    segments: list[Segment] = []
-    excluded: Counter = Counter()
     chosen = {}
-    qs_segments, qs_excluded, taken = ([], Counter(), []) if quasi_static is False else \
+    segments, excluded, taken = ([], Counter(), []) if quasi_static is False else \
         _quasi_static_segments(rec, force=bool(quasi_static), min_samples=min_samples)
-    segments += qs_segments
-    excluded += qs_excluded
+    n_quasi_static = len(segments)
     for run, a, b in _outside(rec.pieces(), taken):
         ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
         noise = _position_noise(theta[a:b]) if b - a >= 3 else None
@@ -93,7 +90,7 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
     settings = {"window": window, "rel_tol": rel_tol, "min_speed": min_speed, "min_duration": min_duration,
                 "windows_chosen": sorted(set(chosen.values())),
                 "quasi_static": "auto" if quasi_static is None else bool(quasi_static),
-                "quasi_static_segments": len(qs_segments)}
+                "quasi_static_segments": n_quasi_static}
     seg = Segmentation(segments, excluded, len(rec), settings)
     seg.check_ledger()
     return seg

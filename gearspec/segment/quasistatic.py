@@ -117,8 +117,6 @@ def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
     whole do not pass is not searched."""
     t, theta, run = rec.t, rec.theta, rec.run
     out = []
-    if len(t) == 0:
-        return out
     cuts = np.flatnonzero(np.diff(run) != 0) + 1
     bounds = np.concatenate(([0], cuts, [len(run)]))
     for a, b in zip(bounds[:-1], bounds[1:]):

@@ -101,15 +101,12 @@ def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: 
     if len(coef) > 2:
         t = m * np.float32(b)
         t += np.float32(a)
-        p0, p1 = None, t
+        p0, p1 = np.float32(1.0), t
         x -= np.float32(coef[1]) * p1
         for j in range(2, len(coef)):
             p2 = t * p1
             p2 *= np.float32((2 * j - 1) / j)
-            if p0 is None:
-                p2 -= np.float32((j - 1) / j)
-            else:
-                p2 -= np.float32((j - 1) / j) * p0
+            p2 -= np.float32((j - 1) / j) * p0
             p0, p1 = p1, p2
             x -= np.float32(coef[j]) * p2
         del t, p0, p1

@@ -146,10 +146,7 @@ class _LocalNoise:
 
     def level(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
-        if len(self.centres):
-            v = np.interp(idx, self.centres, self.levels)
-        else:
-            v = np.full(idx.shape, np.nan)
+        v = np.interp(idx, self.centres, self.levels) if len(self.centres) else np.full(idx.shape, np.nan)
         bad = ~(np.isfinite(v) & (v > 0))
         if bad.any():
             v[bad] = self.fallback
@@ -163,9 +160,7 @@ class _LocalNoise:
 
     def bins(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
-        if len(self.centres):
-            return np.interp(idx, self.centres, self.counts) / self.enbw
-        return np.zeros(idx.shape) / self.enbw
+        return (np.interp(idx, self.centres, self.counts) if len(self.centres) else np.zeros(idx.shape)) / self.enbw
 
 
 def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None,
