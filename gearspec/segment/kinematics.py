@@ -5,6 +5,7 @@ and the friction torque ``tau - J thetadd`` (SILO4 eq. 2), whole or one segment 
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -90,25 +91,20 @@ class FrictionTorque:
         self.J = _inertia(rec, inertia)
         self.deriv_window = deriv_window
         self.tau = rec.tau
-        self._pieces = None
         self._whole = {}
 
+    @cached_property
     def _piece_params(self):
-        if self._pieces is None:
-            t = self.rec.t
-            out = []
-            for _, a, b in self.rec.pieces():
-                params = _filter_params(t[a:b], self.deriv_window)
-                out.append((a, b, None, None, None) if params is None else (a, b, *params))
-            self._pieces = out
-        return self._pieces
+        """``(a, b, dt, window, uniform)`` of every piece (None for the last three when too short)."""
+        t = self.rec.t
+        return [(a, b, *(_filter_params(t[a:b], self.deriv_window) or (None, None, None))) for _, a, b in self.rec.pieces()]
 
     def __getitem__(self, rows: slice) -> np.ndarray:
         start, stop, _ = rows.indices(len(self.tau))
         tau = self.tau[start:stop]
         if not self.J:
             return tau
-        piece = next((p for p in self._piece_params() if p[0] <= start and stop <= p[1]), None)
+        piece = next((p for p in self._piece_params if p[0] <= start and stop <= p[1]), None)
         if piece is None:  # rows across pieces: the whole-recording computation
             return friction_torque(self.rec, self.J, self.deriv_window)[start:stop]
         a, b, dt, w, uniform = piece

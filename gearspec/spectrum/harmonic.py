@@ -407,7 +407,6 @@ def refine_frequencies(theta, y, frequency, free, degree: int = 1, iterations: i
     k0 = len(base.frequency) if base is not None else 0
     use_base = (base is not None and free and not base.free and base.degree == int(degree)
                 and sorted(free) == list(range(k0, len(freq))) and np.array_equal(base.frequency, freq[:k0]))
-    ne = None
     for it in range(max(1, iterations)):
         if use_base:
             ne = base.extend(theta, y, freq[k0:], chunk=chunk)
