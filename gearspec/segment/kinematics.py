@@ -96,8 +96,8 @@ class FrictionTorque:
     @cached_property
     def _piece_params(self):
         """``(a, b, dt, window, uniform)`` of every piece (None for the last three when too short)."""
-        t = self.rec.t
-        return [(a, b, *(_filter_params(t[a:b], self.deriv_window) or (None, None, None))) for _, a, b in self.rec.pieces()]
+        t, w = self.rec.t, self.deriv_window
+        return [(a, b, *(_filter_params(t[a:b], w) or (None, None, None))) for _, a, b in self.rec.pieces()]
 
     def __getitem__(self, rows: slice) -> np.ndarray:
         start, stop, _ = rows.indices(len(self.tau))
