@@ -77,10 +77,7 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
     and the smallest equally good lag is taken), then weighted least squares on the phases
     unwrapped about it gives the standard error (scaled up when the phases scatter more than
     their errors say).  Returns None when no group qualifies."""
-    f = np.asarray(frequency, float)
-    v = np.asarray(velocity, float)
-    ph = np.asarray(phase, float)
-    se = np.asarray(phase_se, float)
+    f, v, ph, se = (np.asarray(x, float) for x in (frequency, velocity, phase, phase_se))
     grp = np.asarray(group, object)
     ok = np.isfinite(f) & np.isfinite(v) & np.isfinite(ph) & np.isfinite(se) & (se > 0)
     keep = np.zeros(len(f), bool)

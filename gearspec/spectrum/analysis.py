@@ -269,11 +269,10 @@ class _Analysis:
                               order_exact=None if exact is None else exact.order, aliased_from=aliased))
         return peaks, fit
 
-    def spectra_for_figures(self, out: SegmentSpectrum, grid0: _Grid, nbin0: int, enbw0: float, power_first) -> None:
-        """Step 5: the spectra of the figures into ``out``, on the first round's grid."""
+    def spectra_for_figures(self, out: SegmentSpectrum, grid: _Grid, nbin: int, enbw: float, power_first) -> None:
+        """Step 5: the spectra of the figures into ``out``, on the first round's ``grid``."""
         theta, y, n = self.theta, self.y, self.n
-        noise_fig = self.noise_model if self.grid is grid0 else self.noise0
-        grid, nbin, enbw = grid0, nbin0, enbw0
+        noise_fig = self.noise_model if self.grid is grid else self.noise0
         freqs = grid.frequencies()
         if out.fft_frequency is None:
             _fft_residual_power(theta, y, self.fit0, self.oversample, self.f_search_max, out, lo=self.lo, hi=self.hi)

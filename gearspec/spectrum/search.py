@@ -104,8 +104,6 @@ class _Grid:
         """Bins with ``|f - f0| < width`` (a contiguous range)."""
         a = max(0, self._index_near(f0 - width) - 2)
         b = min(self.n, self._index_near(f0 + width) + 3)
-        if b <= a:
-            return slice(0, 0)
         idx = np.arange(a, b)
         hit = idx[np.abs(self.at(idx) - f0) < width]
         return slice(int(hit[0]), int(hit[-1]) + 1) if len(hit) else slice(0, 0)
