@@ -67,10 +67,8 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
         # the common case of steady motion: one sample per cell, in order (every sample within
         # 0.49 cells of its grid point); the cell averages are then the samples themselves, and
         # the bincounts below would return them unchanged
-        inc = theta[-1] >= theta[0]
-        th, yy = (theta, y) if inc else (theta[::-1], y[::-1])
+        th, yy = (theta, y) if theta[-1] >= theta[0] else (theta[::-1], y[::-1])
         dev = np.empty(min(n, chunk))
-        ok = True
         for i in range(0, n, chunk):
             j = min(n, i + chunk)
             d = dev[: j - i]
@@ -78,13 +76,11 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
             d += lo
             np.subtract(th[i:j], d, out=d)
             if not np.all(np.abs(d, out=d) < 0.49 * h):
-                ok = False
                 break
-        if ok:
+        else:
             # grid point k lies between samples k - 1 and k + 1: each chunk of the grid needs only
-            # its own stretch of samples (np.interp copies its inputs when they are read-only, as
-            # a recording's columns are: whole arrays per chunk would cost far more than the
-            # interpolation)
+            # its own stretch of samples (np.interp copies read-only inputs, as a recording's
+            # columns are: whole arrays per chunk would cost far more than the interpolation)
             for i in range(0, m, chunk):
                 j = min(m, i + chunk)
                 a, b = max(0, i - 1), min(n, j + 1)
