@@ -167,12 +167,9 @@ def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max
         dt = np.concatenate(dts) if dts else np.zeros(0)
         med = float(np.median(dt[dt > 0])) if np.any(dt > 0) else math.nan
         max_lag = max(20 * med, 0.05) if math.isfinite(med) else 0.05
-    rows = []
-    for s in spectrum.segments:
-        for p in s.peaks:
-            if not p.declared or not (p.amplitude_se > 0) or p.amplitude < min_snr * p.amplitude_se:
-                continue
-            rows.append((p.frequency, s.direction * s.speed, p.phase, p.phase_se, f"{p.label} ({'+' if s.direction > 0 else '-'})"))
+    rows = [(p.frequency, s.direction * s.speed, p.phase, p.phase_se, f"{p.label} ({'+' if s.direction > 0 else '-'})")
+            for s in spectrum.segments for p in s.peaks
+            if p.declared and p.amplitude_se > 0 and not p.amplitude < min_snr * p.amplitude_se]
     est = None
     if rows:
         f, v, ph, se, grp = map(list, zip(*rows))

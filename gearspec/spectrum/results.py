@@ -75,10 +75,8 @@ class SegmentSpectrum:
 
     def peak(self, label: str) -> Peak | None:
         """The peak labelled ``label`` (or with ``label`` among its ' = '-joined names), or None."""
-        for p in self.peaks:
-            if p.label is not None and (p.label == label or label in p.label.split(" = ")):
-                return p
-        return None
+        return next((p for p in self.peaks
+                     if p.label is not None and (p.label == label or label in p.label.split(" = "))), None)
 
     def to_dict(self) -> dict:
         s = self.segment
@@ -118,23 +116,15 @@ class SpectrumResult:
 
     def peaks_table(self) -> pd.DataFrame:
         """One row per (segment, peak)."""
-        rows = []
-        for i, s in enumerate(self.segments):
-            for p in s.peaks:
-                rows.append({"segment": i, "run": s.segment.run, "direction": s.direction, "speed": s.speed,
-                             "level": s.level, **p.to_dict()})
-        return pd.DataFrame(rows)
+        return pd.DataFrame([{"segment": i, "run": s.segment.run, "direction": s.direction, "speed": s.speed,
+                              "level": s.level, **p.to_dict()} for i, s in enumerate(self.segments) for p in s.peaks])
 
     def amplitude_vs_speed(self, label: str) -> pd.DataFrame:
         """Amplitude of the peak labelled ``label`` in every segment where it was fitted."""
-        rows = []
-        for i, s in enumerate(self.segments):
-            p = s.peak(label)
-            if p is not None:
-                rows.append({"segment": i, "direction": s.direction, "speed": s.speed, "level": s.level,
-                             "amplitude": p.amplitude, "amplitude_se": p.amplitude_se, "phase": p.phase,
-                             "frequency": p.frequency})
-        return pd.DataFrame(rows)
+        return pd.DataFrame([{"segment": i, "direction": s.direction, "speed": s.speed, "level": s.level,
+                              "amplitude": p.amplitude, "amplitude_se": p.amplitude_se, "phase": p.phase,
+                              "frequency": p.frequency}
+                             for i, s in enumerate(self.segments) if (p := s.peak(label)) is not None])
 
     def unexplained(self, max_fap: float = 0.01) -> pd.DataFrame:
         """Peaks found that no declared line, harmonic or sideband explains."""
