@@ -112,13 +112,10 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
     """
     n = len(power)
     centres, levels, counts = noise_blocks(power, width=width, mask=mask, min_width=min_width, relative=relative)
-    if not len(centres):
-        out = np.full(n, np.nan)
-        return (out, np.zeros(n)) if return_bins else out
     idx = np.arange(n)
-    out = np.interp(idx, centres, levels)
+    out = np.interp(idx, centres, levels) if len(centres) else np.full(n, np.nan)
     if return_bins:
-        return out, np.interp(idx, centres, counts)
+        return out, (np.interp(idx, centres, counts) if len(centres) else np.zeros(n))
     return out
 
 
