@@ -84,8 +84,7 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
     used = []
     for g in dict.fromkeys(grp[ok].tolist()):
         sel = ok & (grp == g)
-        speeds = np.unique(np.round(v[sel], 6))
-        if len(speeds) >= min_speeds:
+        if len(np.unique(np.round(v[sel], 6))) >= min_speeds:
             keep |= sel
             used.append({"series": str(g), "segments": int(sel.sum()), "frequency": float(f[sel][0])})
     if not used or not max_lag > 0:

@@ -52,8 +52,7 @@ def _filter_params(tt: np.ndarray, deriv_window: int | None):
     dt = float(np.median(d))
     if not dt > 0:
         return None
-    w = deriv_window or max(7, int(round(0.02 / dt)) | 1)
-    w = int(w) | 1
+    w = int(deriv_window or max(7, int(round(0.02 / dt)) | 1)) | 1
     if w > n:
         return None
     np.subtract(d, dt, out=d)

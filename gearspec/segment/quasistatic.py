@@ -99,14 +99,8 @@ def _sweeps(theta: np.ndarray, tol: float) -> list[tuple[int, int, int]]:
             elif x - th[lo] >= tol:
                 turns.append(lo)
                 d, hi = 1, i
-    bounds = [0] + [k + 1 for k in turns] + [n]
-    out = []
-    direction = first
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        if b > a:
-            out.append((a, b, direction))
-        direction = -direction
-    return out
+    bounds = [0] + [k + 1 for k in turns] + [n]  # the direction alternates from the first
+    return [(a, b, first * (-1) ** i) for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])) if b > a]
 
 
 def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
