@@ -1,39 +1,15 @@
 """Channel lag: a torque (or current) channel logged later than the position channel.
 
-When the torque sample stored with time ``t`` was measured at ``t - L`` (``L > 0``: torque
-behind position; loggers that read the drive's torque one or more cycles after the encoder),
-a position-locked line ``A sin(2 pi f theta + phi)`` is seen at constant velocity ``v`` (signed)
-as
-
-    A sin(2 pi f theta(t - L) + phi) = A sin(2 pi f theta(t) + phi - 2 pi f v L),
-
-so its phase falls linearly with the velocity: ``phi_measured(v) = phi - 2 pi f L v``.  Across
-segments at several speeds the line then looks like noise (its phase wanders), although every
-segment sees it clearly.  This module is the one place for that fact:
-
-* :func:`lag_from_phases` -- the lag from per-segment phases of lines at known frequencies:
-  every (line, direction) has its own phase ``phi``; the lag is common.  Phases wrap: the lag is
-  first found by a grid search of the weighted circular misfit (no unwrapping that could slip a
-  cycle between two speeds; when speeds share a common step the misfit repeats every
-  ``1/(f step)`` and the smallest of the equally good lags is taken), then refined by weighted least squares on the phases unwrapped
-  around that solution (weights: inverse phase variances), which gives its standard error
-  (scaled up by the misfit when the phases scatter more than their errors say).
-* :func:`estimate_lag` -- the same from a recording: the declared lines of the gear spec,
-  fitted per constant-speed segment (:func:`gearspec.spectrum.analyze`), those seen strongly
-  (amplitude at least ``min_snr`` standard errors) in at least three segments at different
-  speeds of one direction.
-* :func:`apply_lag` -- the recording with the torque (and current) shifted earlier by ``L``
-  (interpolated in time within each contiguous piece; the rows at a piece's edge that lose
-  their partner are excluded under ``lag_edge``).
+A torque sample stored at ``t`` but measured at ``t - L`` (``L > 0``: torque behind position)
+shows a position-locked line ``A sin(2 pi f theta + phi)`` at signed velocity ``v`` as
+``A sin(2 pi f theta + phi - 2 pi f v L)``: its phase falls linearly with velocity.
+:func:`lag_from_phases` fits that slope to per-segment phases, :func:`estimate_lag` takes them
+from the declared lines of a recording's segments, :func:`apply_lag` shifts the torque back.
 
 Why phases and not a cross-correlation: torque is not a delayed copy of position (friction is a
 nonlinear function of position and velocity), so a correlation of the two channels has no peak
 at the lag; the phases of position-locked lines are exactly what a lag moves, with errors the
-harmonic fit gives.  The method needs strong lines at three speeds or more in one direction;
-without them :func:`estimate_lag` refuses with the reason.
-
-Sign convention: ``lag > 0`` means the torque is behind the position (logged later);
-``apply_lag(rec, lag)`` undoes it.
+harmonic fit gives.
 """
 
 from __future__ import annotations
@@ -56,11 +32,9 @@ MIN_SPEEDS = 3
 
 @dataclass
 class LagEstimate:
-    """A channel lag (s, ``> 0``: torque behind position) with its standard error.
-
-    ``groups``: the (line, direction) series used, with their number of segments; ``chi2`` the
-    weighted misfit of the phases at the estimate over ``dof`` degrees of freedom (about 1 per
-    dof when the phase errors are honest); ``z = lag / se``."""
+    """A channel lag (s, ``> 0``: torque behind position) with its standard error; ``groups``: the
+    (line, direction) series used; ``chi2``: the weighted phase misfit over ``dof`` (about 1 per
+    dof when the phase errors are honest)."""
 
     lag: float
     se: float
@@ -98,19 +72,19 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
 
     Model: ``phase_i = c_group(i) - 2 pi f_i v_i lag + noise_i``.  Only groups with at least
     ``min_speeds`` distinct speeds take part (a group at one speed says nothing about a slope).
-    Returns None when no group qualifies."""
-    f = np.asarray(frequency, float)
-    v = np.asarray(velocity, float)
-    ph = np.asarray(phase, float)
-    se = np.asarray(phase_se, float)
+    Phases wrap: a grid search of the weighted circular misfit comes first (no unwrapping that
+    could slip a cycle; when speeds share a common step the misfit repeats every ``1/(f step)``
+    and the smallest equally good lag is taken), then weighted least squares on the phases
+    unwrapped about it gives the standard error (scaled up when the phases scatter more than
+    their errors say).  Returns None when no group qualifies."""
+    f, v, ph, se = (np.asarray(x, float) for x in (frequency, velocity, phase, phase_se))
     grp = np.asarray(group, object)
     ok = np.isfinite(f) & np.isfinite(v) & np.isfinite(ph) & np.isfinite(se) & (se > 0)
     keep = np.zeros(len(f), bool)
     used = []
     for g in dict.fromkeys(grp[ok].tolist()):
         sel = ok & (grp == g)
-        speeds = np.unique(np.round(v[sel], 6))
-        if len(speeds) >= min_speeds:
+        if len(np.unique(np.round(v[sel], 6))) >= min_speeds:
             keep |= sel
             used.append({"series": str(g), "segments": int(sel.sum()), "frequency": float(f[sel][0])})
     if not used or not max_lag > 0:
@@ -145,24 +119,21 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
                          & (cost <= np.concatenate(([np.inf], cost[:-1])))
                          & (cost <= np.concatenate((cost[1:], [np.inf]))))
     lag = float(grid[loc[np.argmin(np.abs(grid[loc]))]]) if len(loc) else float(grid[int(np.argmin(cost))])
-    # weighted least squares on the phases unwrapped about the grid solution (two passes)
-    for _ in range(3):
+    def residual(lag):  # about each group's mean phase, unwrapped near 0
         psi = ph + k * lag
         c = np.angle(np.bincount(gi, weights=w * np.cos(psi), minlength=ng)
                      + 1j * np.bincount(gi, weights=w * np.sin(psi), minlength=ng))
-        r = (psi - c[gi] + math.pi) % _TWO_PI - math.pi     # residual, unwrapped near 0
-        # r_i(lag + d) = r_i + k_i d - delta c_g: solve for d and the group phases jointly
-        X = np.zeros((len(r), 1 + ng))
-        X[:, 0] = k
-        X[np.arange(len(r)), 1 + gi] = -1.0
-        G = X.T @ (w[:, None] * X)
-        b = X.T @ (w * -r)
-        sol = np.linalg.lstsq(G, b, rcond=None)[0]
-        lag += float(sol[0])
-    psi = ph + k * lag
-    c = np.angle(np.bincount(gi, weights=w * np.cos(psi), minlength=ng)
-                 + 1j * np.bincount(gi, weights=w * np.sin(psi), minlength=ng))
-    r = (psi - c[gi] + math.pi) % _TWO_PI - math.pi
+        return (psi - c[gi] + math.pi) % _TWO_PI - math.pi
+
+    # weighted least squares on the phases unwrapped about the grid solution:
+    # r_i(lag + d) = r_i + k_i d - delta c_g, solved for d and the group phases jointly
+    X = np.zeros((len(ph), 1 + ng))
+    X[:, 0] = k
+    X[np.arange(len(ph)), 1 + gi] = -1.0
+    G = X.T @ (w[:, None] * X)
+    for _ in range(3):
+        lag += float(np.linalg.lstsq(G, X.T @ (w * -residual(lag)), rcond=None)[0][0])
+    r = residual(lag)
     chi2 = float(np.sum(w * r ** 2))
     dof = len(r) - 1 - ng
     cov = np.linalg.pinv(G)
@@ -171,24 +142,15 @@ def lag_from_phases(frequency, velocity, phase, phase_se, group, *, max_lag: flo
     return LagEstimate(lag, se_lag, len(r), used, chi2, max(dof, 0), float(max_lag))
 
 
-def _median_dt(rec) -> float:
-    dts = [np.diff(rec.t[a:b]) for _, a, b in rec.pieces() if b - a > 1]
-    dt = np.concatenate(dts) if dts else np.zeros(0)
-    dt = dt[dt > 0]
-    return float(np.median(dt)) if len(dt) else float("nan")
-
-
 def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max_lag: float | None = None,
                  min_speeds: int = MIN_SPEEDS, spectrum=None, **segment_options) -> LagEstimate:
-    """The lag of the torque channel behind position, from the phases of the gear's declared
-    lines across constant-speed segments (module docstring).
-
-    ``min_snr``: a segment's line takes part when its amplitude is at least this many standard
-    errors (its phase error is then below ``1/min_snr`` rad).  ``max_lag``: the search range
-    (default: 20 median sample intervals, at least 50 ms).  ``spectrum``: a
+    """The lag of the torque channel behind position, from the phases of the gear's declared lines
+    across constant-speed segments.  ``min_snr``: a segment's line takes part when its amplitude is
+    at least this many standard errors (phase error below ``1/min_snr`` rad).  ``max_lag``: the
+    search range (default 20 median sample intervals, at least 50 ms).  ``spectrum``: a
     :class:`~gearspec.spectrum.SpectrumResult` already computed (else :func:`~gearspec.spectrum.analyze`
-    runs with ``segmentation`` or ``segment_options``).  Refuses with :class:`InputError` when the
-    data cannot show a lag."""
+    runs with ``segmentation`` or ``segment_options``).  :class:`InputError` when the data cannot
+    show a lag."""
     from .gears import load_gear
     from .spectrum import analyze
 
@@ -200,14 +162,13 @@ def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max
     if spectrum is None:
         spectrum = analyze(rec, g, segmentation=segmentation, max_peaks=0, **segment_options)
     if max_lag is None:
-        dt = _median_dt(rec)
-        max_lag = max(20 * dt, 0.05) if np.isfinite(dt) else 0.05
-    rows = []
-    for s in spectrum.segments:
-        for p in s.peaks:
-            if not p.declared or not (p.amplitude_se > 0) or p.amplitude < min_snr * p.amplitude_se:
-                continue
-            rows.append((p.frequency, s.direction * s.speed, p.phase, p.phase_se, f"{p.label} ({'+' if s.direction > 0 else '-'})"))
+        dts = [np.diff(rec.t[a:b]) for _, a, b in rec.pieces() if b - a > 1]
+        dt = np.concatenate(dts) if dts else np.zeros(0)
+        med = float(np.median(dt[dt > 0])) if np.any(dt > 0) else math.nan
+        max_lag = max(20 * med, 0.05) if math.isfinite(med) else 0.05
+    rows = [(p.frequency, s.direction * s.speed, p.phase, p.phase_se, f"{p.label} ({'+' if s.direction > 0 else '-'})")
+            for s in spectrum.segments for p in s.peaks
+            if p.declared and p.amplitude_se > 0 and not p.amplitude < min_snr * p.amplitude_se]
     est = None
     if rows:
         f, v, ph, se, grp = map(list, zip(*rows))
@@ -220,12 +181,10 @@ def estimate_lag(rec, gear=None, *, segmentation=None, min_snr: float = 5.0, max
 
 
 def apply_lag(rec, seconds: float, *, channels=("torque", "current")):
-    """A copy of ``rec`` with its torque (and current) channel shifted *earlier* by ``seconds``
-    (``> 0`` undoes a torque logged behind position): the value at ``t`` becomes the logged
-    value at ``t + seconds``, linearly interpolated in time within each contiguous piece (run,
-    split at gaps: :meth:`Recording.pieces`).  Rows whose partner time falls outside their
-    piece are excluded and counted under ``lag_edge``; the recording gets a note and
-    ``meta["lag"]``."""
+    """A copy of ``rec`` with its torque (and current) shifted *earlier* by ``seconds`` (``> 0`` undoes
+    a torque logged behind position), interpolated in time within each piece
+    (:meth:`Recording.pieces`); rows whose partner falls outside their piece are excluded under
+    ``lag_edge``; the recording gets a note and ``meta["lag"]``."""
     L = float(seconds)
     if not math.isfinite(L):
         raise InputError(f"the lag must be a finite number of seconds, got {seconds!r}")
@@ -243,8 +202,7 @@ def apply_lag(rec, seconds: float, *, channels=("torque", "current")):
             dt = np.diff(tp)
             tol = 1e-9 * (float(np.median(dt)) if len(dt) else 1.0)
             tq = tp + L
-            inside = (tq >= tp[0] - tol) & (tq <= tp[-1] + tol)
-            keep[a:b] = inside
+            keep[a:b] = (tq >= tp[0] - tol) & (tq <= tp[-1] + tol)
             tq = np.clip(tq, tp[0], tp[-1])
             for c in cols:
                 new[c][a:b] = np.interp(tq, tp, data[c].to_numpy(dtype=float)[a:b])
@@ -265,9 +223,8 @@ def apply_lag(rec, seconds: float, *, channels=("torque", "current")):
 
 
 def lag_option(rec, value, *, say=print, **segment_options):
-    """The ``--lag SECONDS|auto`` option: ``auto`` estimates the lag (:func:`estimate_lag`),
-    reports it with ``say`` and applies it; a number is applied as given; None leaves ``rec``
-    as it is."""
+    """The ``--lag SECONDS|auto`` option: ``auto`` estimates the lag, reports it with ``say`` and
+    applies it; a number is applied as given; None leaves ``rec`` as it is."""
     if value is None:
         return rec
     text = str(value).strip().lower()

@@ -5,6 +5,7 @@ and the friction torque ``tau - J thetadd`` (SILO4 eq. 2), whole or one segment 
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -15,20 +16,10 @@ __all__ = ["derivatives", "friction_torque", "FrictionTorque"]
 
 
 def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Velocity and acceleration of ``theta`` by a Savitzky-Golay filter, piece by piece.
-
-    Parameters
-    ----------
-    rec : Recording
-    deriv_window : int, optional
-        Filter length in samples (odd, >= 5).  Default: about 20 ms, at least 7 samples.
-
-    Returns
-    -------
-    velocity, acceleration : ndarray
-        In unit/s and unit/s^2, one value per row; pieces shorter than the window (in samples,
-        or on the uniform grid a jittered piece is resampled to) get NaN: no derivative.
-    """
+    """Velocity and acceleration (unit/s, unit/s^2, one per row) of ``theta`` by a Savitzky-Golay
+    filter of ``deriv_window`` samples (odd, >= 5; default about 20 ms, at least 7), piece by
+    piece; pieces shorter than the window (in samples, or on the uniform grid a jittered piece is
+    resampled to) get NaN."""
     t, theta = rec.t, rec.theta
     vel = np.full(len(t), np.nan)
     acc = np.full(len(t), np.nan)
@@ -38,21 +29,22 @@ def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.nda
         if params is None:
             continue
         dt, w, uniform = params
-        if uniform:
-            vel[a:b] = savgol_filter(th, w, 2, deriv=1, delta=dt)
-            acc[a:b] = savgol_filter(th, w, 2, deriv=2, delta=dt)
-        else:
-            grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
-            thg = np.interp(grid, tt, th)
-            vel[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=1, delta=dt))
-            acc[a:b] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
+        vel[a:b] = _savgol(tt, th, dt, w, uniform, 1)
+        acc[a:b] = _savgol(tt, th, dt, w, uniform, 2)
     return vel, acc
 
 
+def _savgol(tt, th, dt, w, uniform, deriv):
+    """The Savitzky-Golay derivative of one piece; a jittered one on a uniform grid of ``dt``."""
+    if uniform:
+        return savgol_filter(th, w, 2, deriv=deriv, delta=dt)
+    grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
+    return np.interp(tt, grid, savgol_filter(np.interp(grid, tt, th), w, 2, deriv=deriv, delta=dt))
+
+
 def _filter_params(tt: np.ndarray, deriv_window: int | None):
-    """``(dt, window, uniform)`` of the Savitzky-Golay filter on one piece with sample times
-    ``tt``, or None when the piece is too short for it: fewer samples than the window, or (for a
-    jittered piece, resampled to a uniform grid of the median step first) fewer grid points."""
+    """``(dt, window, uniform)`` of the Savitzky-Golay filter on one piece with sample times ``tt``,
+    or None when it has fewer samples (or, jittered, fewer grid points) than the window."""
     n = len(tt)
     if n < 5:
         return None
@@ -60,8 +52,7 @@ def _filter_params(tt: np.ndarray, deriv_window: int | None):
     dt = float(np.median(d))
     if not dt > 0:
         return None
-    w = deriv_window or max(7, int(round(0.02 / dt)) | 1)
-    w = int(w) | 1
+    w = int(deriv_window or max(7, int(round(0.02 / dt)) | 1)) | 1
     if w > n:
         return None
     np.subtract(d, dt, out=d)
@@ -76,50 +67,43 @@ def friction_torque(rec: Recording, inertia: float | None = None, deriv_window: 
 
     ``inertia`` defaults to the gear spec's; without one the drive torque is returned unchanged.
     """
-    J = inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
+    J = _inertia(rec, inertia)
     if not J:
         return rec.tau
     _, acc = derivatives(rec, deriv_window)
-    out = rec.tau - J * np.nan_to_num(acc)
-    return out
+    return rec.tau - J * np.nan_to_num(acc)
+
+
+def _inertia(rec: Recording, inertia: float | None):
+    return inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
 
 
 class FrictionTorque:
-    """``friction_torque(rec, inertia, deriv_window)[rows]`` on demand, for one stretch of rows at
-    a time (a segment), without the whole-recording arrays.
-
-    The Savitzky-Golay acceleration is computed only over the rows asked for plus one filter
-    length on each side (or up to the piece's edge, where the filter's own edge treatment then
-    applies exactly as on the whole piece): the values are the same as :func:`friction_torque`'s,
-    bit for bit, while the memory is that of the rows asked for, not three copies of the
-    recording.  Pieces whose sampling jitters (resampled to a uniform grid first) are computed
+    """``friction_torque(rec, inertia, deriv_window)[rows]`` on demand, one segment at a time, bit
+    for bit, without the whole-recording arrays: the acceleration is computed over the rows asked
+    for plus one filter length each side (or to the piece's edge).  Jittered pieces are computed
     whole, once.  Without an inertia the rows of the drive torque are returned (a view).
     """
 
     def __init__(self, rec: Recording, inertia: float | None = None, deriv_window: int | None = None):
         self.rec = rec
-        self.J = inertia if inertia is not None else (rec.gear.inertia if rec.gear is not None else None)
+        self.J = _inertia(rec, inertia)
         self.deriv_window = deriv_window
         self.tau = rec.tau
-        self._pieces = None
         self._whole = {}
 
+    @cached_property
     def _piece_params(self):
-        if self._pieces is None:
-            t = self.rec.t
-            out = []
-            for _, a, b in self.rec.pieces():
-                params = _filter_params(t[a:b], self.deriv_window)
-                out.append((a, b, None, None, None) if params is None else (a, b, *params))
-            self._pieces = out
-        return self._pieces
+        """``(a, b, dt, window, uniform)`` of every piece (None for the last three when too short)."""
+        t, w = self.rec.t, self.deriv_window
+        return [(a, b, *(_filter_params(t[a:b], w) or (None, None, None))) for _, a, b in self.rec.pieces()]
 
     def __getitem__(self, rows: slice) -> np.ndarray:
         start, stop, _ = rows.indices(len(self.tau))
         tau = self.tau[start:stop]
         if not self.J:
             return tau
-        piece = next((p for p in self._piece_params() if p[0] <= start and stop <= p[1]), None)
+        piece = next((p for p in self._piece_params if p[0] <= start and stop <= p[1]), None)
         if piece is None:  # rows across pieces: the whole-recording computation
             return friction_torque(self.rec, self.J, self.deriv_window)[start:stop]
         a, b, dt, w, uniform = piece
@@ -127,11 +111,7 @@ class FrictionTorque:
             return tau.copy()
         if not uniform:
             if a not in self._whole:
-                rec = self.rec
-                tt, th = rec.t[a:b], rec.theta[a:b]
-                grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
-                thg = np.interp(grid, tt, th)
-                self._whole[a] = np.interp(tt, grid, savgol_filter(thg, w, 2, deriv=2, delta=dt))
+                self._whole[a] = _savgol(self.rec.t[a:b], self.rec.theta[a:b], dt, w, False, 2)
             acc = self._whole[a][start - a:stop - a]
         else:
             lo, hi = max(a, start - w), min(b, stop + w)

@@ -1,6 +1,5 @@
-"""Constant-speed plateaus: block speeds over a window, the steady-block test, and the choice of the
-window per piece (steps 1-6 of the module docstring of :mod:`gearspec.segment`); quasi-static sweeps
-first (:mod:`.quasistatic`)."""
+"""Constant-speed plateaus: block speeds, the steady-block test and the window per piece
+(:mod:`gearspec.segment`)."""
 
 from __future__ import annotations
 
@@ -24,41 +23,21 @@ _COVER_FRACTION = 0.8
 PARALLEL_MIN_SAMPLES = 1_000_000
 
 
-# ---------------------------------------------------------------------- segmentation
 def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: float = 0.15,
                   min_speed: float | None = None, min_duration: float | None = None,
                   min_samples: int = 32, workers: int | str = "auto",
                   quasi_static: bool | None = None) -> Segmentation:
-    """Find constant-speed segments per direction, and quasi-static sweeps (see the module docstring).
+    """Find constant-speed segments per direction, and quasi-static sweeps (:mod:`gearspec.segment`).
 
-    Parameters
-    ----------
-    rec : Recording
-    window : float or "auto"
-        Speed-averaging window in seconds (four blocks); "auto" picks it per piece.
-    rel_tol : float
-        Allowed relative change of the window speed across a block, and half the allowed drift
-        of speed within a segment.
-    min_speed : float, optional
-        Speeds below this (unit/s) count as standstill.  Default: ten times the speed noise that
-        the position noise of the piece produces over one window.
-    min_duration : float, optional
-        Shortest segment kept, seconds.  Default: two windows, and at least 0.1 s.
-    min_samples : int
-        Shortest segment kept, samples.
-    workers : int or "auto"
-        Windows of the ``"auto"`` ladder tried at once, in threads (numpy releases the GIL for
-        the bulk of the work; the result is the same whatever the number).  ``"auto"``: two on a
-        machine with two or more CPUs for pieces of at least ``PARALLEL_MIN_SAMPLES`` samples.
-    quasi_static : bool or None
-        ``None`` (default): recognise quasi-static sweeps (rows stored at rest, position rather
-        than time setting the motion; see :func:`quasi_static_sweeps`) and look for plateaus in
-        the rest.  ``True`` (``--quasi-static``): every monotonic sweep of each run is a
-        quasi-static segment.  ``False``: plateaus only.
-
-    Returns
-    -------
-    Segmentation
+    ``window``: speed-averaging window in s (four blocks), or "auto" per piece.  ``rel_tol``:
+    allowed relative change of the window speed across a block, and half the allowed drift within
+    a segment.  ``min_speed`` (unit/s): standstill below (default ten times the speed noise the
+    position noise gives over one window).  ``min_duration`` (s, default two windows and at least
+    0.1 s) and ``min_samples``: shortest segment kept.  ``workers``: windows of the "auto" ladder
+    tried at once, in threads, with the same result ("auto": two with two CPUs or more for pieces
+    of at least ``PARALLEL_MIN_SAMPLES`` samples).  ``quasi_static``: None recognises quasi-static
+    sweeps (:func:`quasi_static_sweeps`) and looks for plateaus in the rest; True makes every
+    monotonic sweep one; False: plateaus only.  Returns a :class:`Segmentation`.
     """
     if not 0 < rel_tol < 1:
         raise InputError(f"rel_tol must be between 0 and 1, got {rel_tol}")
@@ -71,13 +50,10 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
     if quasi_static not in (None, True, False):
         raise InputError(f"quasi_static must be None (recognise), True or False, got {quasi_static!r}")
     t, theta = rec.t, rec.theta
-    segments: list[Segment] = []
-    excluded: Counter = Counter()
     chosen = {}
-    qs_segments, qs_excluded, taken = ([], Counter(), []) if quasi_static is False else \
+    segments, excluded, taken = ([], Counter(), []) if quasi_static is False else \
         _quasi_static_segments(rec, force=bool(quasi_static), min_samples=min_samples)
-    segments += qs_segments
-    excluded += qs_excluded
+    n_quasi_static = len(segments)
     for run, a, b in _outside(rec.pieces(), taken):
         ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
         noise = _position_noise(theta[a:b]) if b - a >= 3 else None
@@ -111,12 +87,11 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
         for reason, count in labels.items():
             excluded[reason] += count
     segments.sort(key=lambda x: x.start)
-    seg = Segmentation(segments, excluded, len(rec), {"window": window, "rel_tol": rel_tol,
-                                                      "min_speed": min_speed, "min_duration": min_duration,
-                                                      "windows_chosen": sorted(set(chosen.values())),
-                                                      "quasi_static": ("auto" if quasi_static is None
-                                                                       else bool(quasi_static)),
-                                                      "quasi_static_segments": len(qs_segments)})
+    settings = {"window": window, "rel_tol": rel_tol, "min_speed": min_speed, "min_duration": min_duration,
+                "windows_chosen": sorted(set(chosen.values())),
+                "quasi_static": "auto" if quasi_static is None else bool(quasi_static),
+                "quasi_static_segments": n_quasi_static}
+    seg = Segmentation(segments, excluded, len(rec), settings)
     seg.check_ledger()
     return seg
 
@@ -139,10 +114,8 @@ def _outside(pieces, taken):
 
 
 def _block_slopes(tb: np.ndarray, thb: np.ndarray, k: int) -> np.ndarray:
-    """Least-squares slope of thb against tb over every window of k consecutive blocks.
-
-    Written as k shifted slices (in-place operations on arrays of the number of windows) rather
-    than reductions over a sliding-window view, whose rows of k elements numpy reduces slowly."""
+    """Least-squares slope of thb against tb over every window of k consecutive blocks (k shifted
+    slices: numpy reduces the short rows of a sliding-window view slowly)."""
     m = len(tb) - k + 1
     if m <= 0:
         return np.empty(0)
@@ -192,13 +165,11 @@ def _position_noise(theta: np.ndarray, chunks: int = 20, size: int = 5000) -> fl
     return max(float(sigma), q / math.sqrt(12))
 
 
-def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise=None, dt=None):
+def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_samples, noise, dt):
+    """The plateaus of one piece for one window, ``(segments, excluded rows by reason)``, or None when
+    the piece is too short for the window; ``noise``: its position noise, ``dt``: its median step."""
     n = len(t)
-    if n < 2:
-        return None
-    if dt is None:
-        dt = float(np.median(np.diff(t[: min(n, 100_000)])))
-    if dt <= 0:
+    if n < 2 or dt <= 0:
         return None
     b = int(round(window / _K / dt))
     if b < 2 or n < b * (2 * _K + 1):
@@ -216,19 +187,16 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     before, after = _before_after(v_win, m)
     across = 0.5 * (before + after)
     # speed noise of a window from position noise (second differences), for the default min_speed
-    sigma = noise if noise is not None else _position_noise(theta)
     if min_speed is None:
         nw = _K * b
-        v_noise = sigma * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
+        v_noise = noise * math.sqrt(12.0 / (nw * (nw * nw - 1))) / dt
         v_floor = 10 * v_noise
     else:
         v_floor = float(min_speed)
-    valid = np.ones(m, bool)
-    moving = valid & (np.abs(across) > v_floor)
+    moving = np.abs(across) > v_floor
     same_sign = moving & (np.sign(before) == np.sign(across)) & (np.sign(after) == np.sign(across))
     steady = same_sign & (np.abs(after - before) <= rel_tol * np.abs(across))
     min_dur = max(2 * window, 0.1) if min_duration is None else float(min_duration)
-    block_label = np.where(valid & ~moving, 1, 0)  # 1 standstill, 0 transient; steady handled below
     # runs of steady blocks, split where the speed drifts, then fragments of one plateau (broken
     # by a ripple excursion shorter than a window) merged again
     edges = np.diff(np.concatenate(([0], steady.astype(np.int8), [0])))
@@ -240,7 +208,7 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     # block-to-block speeds (the finest the blocks resolve): a ramp is smooth at this scale, ripple is not
     tmid = 0.5 * (tb[1:] + tb[:-1])
     vblock = np.diff(thb) / np.maximum(np.diff(tb), 1e-300)
-    vnoise2 = 2.0 * sigma * sigma / b / (b * dt) ** 2  # variance of a block speed from position noise
+    vnoise2 = 2.0 * noise * noise / b / (b * dt) ** 2  # variance of a block speed from position noise
     runs_ = [r for s, e in runs_ for r in _split_smooth(tmid, vblock, s, e, rel_tol, vnoise2)]
     segs = []
     short_blocks = []
@@ -256,19 +224,16 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
         vs = across[s2:e2]
         ripple = float(np.std(vs) / abs(np.mean(vs))) if len(vs) > 1 else 0.0
         segs.append((rows_s, rows_e, direction, float(speed), ripple))
-    labels = Counter()
     in_seg = np.zeros(m, bool)
     for rs, re_, *_ in segs:
         in_seg[rs // b: re_ // b] = True
     short = np.zeros(m, bool)
     for s2, e2 in short_blocks:
         short[s2:e2] = True
-    labels["short_plateau"] += int(short.sum()) * b
-    standstill = (block_label == 1) & ~in_seg & ~short
-    labels["standstill"] += int(standstill.sum()) * b
-    labels["transient"] += int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)
-    labels = Counter({k: v for k, v in labels.items() if v})
-    return segs, labels
+    standstill = ~moving & ~in_seg & ~short
+    labels = {"short_plateau": int(short.sum()) * b, "standstill": int(standstill.sum()) * b,
+              "transient": int((~in_seg & ~short & ~standstill).sum()) * b + (n - used)}
+    return segs, Counter({k: v for k, v in labels.items() if v})
 
 
 def _before_after(v_win: np.ndarray, m: int):

@@ -14,17 +14,13 @@ from .segmentation import Segment
 __all__ = ["quasi_static_sweeps", "QS_MIN_STEPS", "QS_MIN_SPEED_SPREAD", "QS_SPREAD_RATIO", "QS_MAX_REPEATS",
            "QS_REVERSAL_STEPS"]
 
-#: a sweep is recognised as quasi-static when it has at least this many steps (moves between rows):
-#: enough distinct positions for the joint fit of a level and a few lines with dozens of degrees
-#: of freedom left, and for the spread statistics below to mean something
+#: a sweep is quasi-static with at least this many steps (moves between rows: enough for a level
+#: and a few lines with dozens of degrees of freedom left, and for the spreads below) ...
 QS_MIN_STEPS = 50
-#: ... when the speed between rows (step / time step) varies over at least a factor of 2 (10-90 %
-#: range) ...
+#: ... when the speed between rows varies over at least a factor of 2 (log, 10-90 % range) ...
 QS_MIN_SPEED_SPREAD = math.log(2.0)
-#: ... at least this many times more than the steps themselves do (in log, 10-90 % range): rows
-#: stored when the shaft came to rest after a step of the position loop have a steady step and
-#: an irregular time step, continuous motion sampled by a clock has steps that follow the time
-#: steps (or a regular clock)
+#: ... this many times more than the steps do: rows stored at rest after each step of a position
+#: loop have a steady step and an irregular time step; a clock gives steps that follow time steps
 QS_SPREAD_RATIO = 2.0
 #: ... and at most this fraction of its rows repeats the previous position
 QS_MAX_REPEATS = 0.5
@@ -52,7 +48,7 @@ def _at_rest_statistics(t: np.ndarray, theta: np.ndarray) -> dict:
 
 def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000) -> dict:
     """:func:`_at_rest_statistics` of a whole run, from up to ``chunks`` contiguous stretches of
-    ``size`` rows (row-to-row statistics: a stride would sum steps and average time steps)."""
+    ``size`` rows (not a stride, which would sum steps)."""
     n = len(t)
     if n <= chunks * size:
         return _at_rest_statistics(t, theta)
@@ -71,8 +67,8 @@ def _looks_at_rest(st: dict) -> bool:
 
 def _sweeps(theta: np.ndarray, tol: float) -> list[tuple[int, int, int]]:
     """Monotonic sweeps ``(start, stop, direction)`` of one run, split at reversals of more than
-    ``tol`` (hysteresis: smaller returns are jitter and stay in the sweep).  The row at a turning
-    point ends the sweep before it; every row is in one sweep; direction 0: no travel of ``tol``."""
+    ``tol`` (smaller returns are jitter); the turning row ends the sweep before it; direction 0:
+    no travel of ``tol``."""
     n = len(theta)
     if n == 0:
         return []
@@ -103,39 +99,18 @@ def _sweeps(theta: np.ndarray, tol: float) -> list[tuple[int, int, int]]:
             elif x - th[lo] >= tol:
                 turns.append(lo)
                 d, hi = 1, i
-    bounds = [0] + [k + 1 for k in turns] + [n]
-    out = []
-    direction = first
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        if b > a:
-            out.append((a, b, direction))
-        direction = -direction
-    return out
+    bounds = [0] + [k + 1 for k in turns] + [n]  # the direction alternates from the first
+    return [(a, b, first * (-1) ** i) for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])) if b > a]
 
 
 def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
-    """The monotonic sweeps of each run, with the statistics of the recognition rule.
-
-    Works over position, per run: time gaps do not split a sweep (at rest, time is irrelevant).
-    A sweep ends at a reversal of more than ``QS_REVERSAL_STEPS`` median steps.  It is
-    *quasi-static* (``"at_rest"``) when it has at least ``QS_MIN_STEPS`` steps, at most
-    ``QS_MAX_REPEATS`` of its rows repeat a position, and the speed between rows varies over a
-    factor of two or more and ``QS_SPREAD_RATIO`` times more than the steps do (log 10-90 %
-    ranges): rows stored by position (at rest after each step of a position loop), not by a
-    clock.  On a plateau the speed between rows is steady (or, on a regular clock, varies exactly
-    as the steps do: stick-slip, encoder noise), so no plateau recording passes.  Without
-    ``force`` a run whose rows as a whole do not pass is not searched (the cheap common case).
-
-    Returns
-    -------
-    list of dict
-        ``run, start, stop, direction`` (rows of the recording, stop exclusive) and ``at_rest``,
-        plus the statistics.
-    """
+    """The monotonic sweeps of each run (over position: time gaps do not split them; a sweep ends
+    at a reversal of more than ``QS_REVERSAL_STEPS`` median steps), each a dict of ``run, start,
+    stop, direction`` (rows, stop exclusive), ``at_rest`` (the recognition rule of the ``QS_``
+    constants; no plateau passes it) and its statistics.  Without ``force`` a run whose rows as a
+    whole do not pass is not searched."""
     t, theta, run = rec.t, rec.theta, rec.run
     out = []
-    if len(t) == 0:
-        return out
     cuts = np.flatnonzero(np.diff(run) != 0) + 1
     bounds = np.concatenate(([0], cuts, [len(run)]))
     for a, b in zip(bounds[:-1], bounds[1:]):

@@ -1,7 +1,5 @@
-"""Candidate plateaus refined: fragments of one plateau joined, slow drifts split (CUSUM), ramp tails
-trimmed by speed and by position, and runs whose speed follows a smooth curve (a ramp, a bell's top,
-a creeping tail) split until only parts shown flat remain (steps 4 and 5 of the module docstring of
-:mod:`gearspec.segment`)."""
+"""Candidate plateaus refined: fragments joined, drifts split, ramp tails trimmed, smooth speed
+curves split until only parts shown flat remain (:mod:`gearspec.segment`)."""
 
 from __future__ import annotations
 
@@ -27,10 +25,8 @@ def _trim_speed(v, s, e, rel_tol):
 
 
 def _trim_to_line(t, theta, a, z, b):
-    """Trim rows a..z at both ends (by whole blocks) where position leaves the straight-line band.
-
-    Works on every ``max(1, b // 4)``-th sample: the band and the trim are at block resolution.
-    """
+    """Trim rows a..z at both ends (by whole blocks) where position leaves the straight-line band,
+    from every ``max(1, b // 4)``-th sample."""
     n = z - a
     if n < 10 * b:
         return a, z
@@ -66,12 +62,8 @@ def _trim_to_line(t, theta, a, z, b):
 
 
 def _merge_fragments(runs_, t, theta, b, rel_tol):
-    """Join consecutive block runs of one plateau separated by a short excursion.
-
-    Two runs are joined when they move the same way at speeds within ``rel_tol``, the excursion
-    between them lasts no longer than two windows, and its mean speed (travel over time) is within
-    ``2 * rel_tol`` of theirs: the drive left the plateau briefly and came back.
-    """
+    """Join consecutive block runs moving the same way at speeds within ``rel_tol``, separated by an
+    excursion of at most two windows whose mean speed is within ``2 * rel_tol`` of theirs."""
     def mean_speed(s, e):
         a, z = s * b, e * b - 1
         return (theta[z] - theta[a]) / (t[z] - t[a])
@@ -105,11 +97,10 @@ def _split_drift(v: np.ndarray, s: int, e: int, rel_tol: float, depth: int = 0):
     return _split_drift(v, s, s + k, rel_tol, depth + 1) + _split_drift(v, s + k, e, rel_tol, depth + 1)
 
 
-#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` over
-#: its length is a ramp, not a plateau (the rest of the tolerance is left to ripple) ...
+#: a candidate whose smooth speed curve changes by more than this fraction of ``rel_tol`` is a
+#: ramp (the rest of the tolerance is left to ripple) ...
 _SMOOTH_SPREAD = 1.0 / 3.0
-#: ... when that curve stands out of the position noise (its sum of squares, 3 degrees of freedom
-#: beyond the mean, exceeds this many noise variances: chi-square tail below 1e-4) ...
+#: ... when that curve's sum of squares (3 dof) exceeds this many noise variances (tail < 1e-4) ...
 _SMOOTH_CHI2 = 20.0
 #: degree of the smooth curve (a cubic in time: a ramp, a bell's top, one swing of a sine)
 _SMOOTH_DEGREE = 3
@@ -119,21 +110,14 @@ def _split_smooth(tb: np.ndarray, v: np.ndarray, s: int, e: int, rel_tol: float,
                   prove_flat: bool = False, depth: int = 0):
     """Blocks s..e without a systematic speed change.
 
-    The before/after test bounds the speed change over one window only; along an acceleration
-    ramp, the top of a bell-shaped move, a creeping tail or a slow sine the speed changes little
-    per window but steadily, and a run of "steady" blocks results.  The smooth curve is a cubic in
-    time fitted to the block-to-block speeds ``v`` (variance ``vnoise2`` from position noise
-    alone).  A run is a ramp when that curve spans more than ``_SMOOTH_SPREAD * rel_tol`` of the
-    mean speed, stands out of the noise (``_SMOOTH_CHI2``) and explains more of the speed's
-    variation than what is left beside it beyond the noise.  Ripple (closed-loop, stick-slip,
-    position-locked) is not smooth in time over a plateau: the cubic explains little of it, and
-    the rule leaves such plateaus alone however large the ripple.
-
-    A ramp is split (CUSUM) recursively; a part of a ramp is kept only where it is shown flat
-    (``prove_flat``: its spread plus two standard errors within the limit), so that the plateau
-    beside a ramp stays and the ramp's own fragments go.  Runs never judged a ramp are kept, unless
-    the position noise alone is too large to show a change of the limit (a crawl near the noise
-    floor, such as the end of a creeping tail)."""
+    The before/after test bounds the speed change over one window only; along a ramp, a bell's
+    top or a creeping tail the speed changes little per window but steadily.  A run is a ramp when
+    a cubic in time fitted to the block speeds ``v`` (noise variance ``vnoise2``) spans more than
+    ``_SMOOTH_SPREAD * rel_tol`` of the mean speed, stands out of the noise (``_SMOOTH_CHI2``) and
+    explains more than the ripple beside it (ripple is not smooth in time: plateaus keep it).
+    A ramp is split (CUSUM) recursively and its parts kept only where shown flat (``prove_flat``:
+    spread plus two standard errors within the limit).  Runs where position noise alone could hide
+    a change of the limit (a crawl near the noise floor) are dropped."""
     n = e - s
     limit = _SMOOTH_SPREAD * rel_tol
     if n < 2 + _SMOOTH_DEGREE:

@@ -11,13 +11,10 @@ __all__ = ["Segment", "Segmentation"]
 
 @dataclass(frozen=True)
 class Segment:
-    """A constant-speed stretch of one run, in one direction, or a quasi-static sweep.
+    """A constant-speed stretch of one run in one direction, or a quasi-static sweep (``kind``).
 
-    ``start``/``stop`` index rows of ``Recording.data`` (stop exclusive).  ``speed`` is the mean
-    speed (travel over duration, always >= 0, unit/s); ``direction`` is +1 or -1.  ``kind`` is
-    ``"plateau"`` (constant speed) or ``"quasi_static"`` (a monotonic sweep whose rows were taken
-    at rest: there ``speed`` is nominal, travel over the sweep's duration, and nothing depends on
-    it; no time derivative is used).
+    ``start``/``stop`` index rows of ``Recording.data`` (stop exclusive); ``speed``: travel over
+    duration (>= 0, unit/s; nominal for a sweep at rest); ``direction``: +1 or -1.
     """
 
     run: int
@@ -46,10 +43,6 @@ class Segment:
         return {"run": self.run, "start": self.start, "stop": self.stop, "direction": self.direction,
                 "speed": self.speed, "n": self.n, "speed_ripple": self.speed_ripple, "window": self.window,
                 "kind": self.kind}
-
-    @property
-    def quasi_static(self) -> bool:
-        return self.kind == "quasi_static"
 
 
 @dataclass

@@ -1,8 +1,5 @@
-"""Spectra of friction over position: resampling, order spectrum, Lomb-Scargle, harmonic fit.
-
-``analyze`` runs the whole per-segment analysis of a recording; the building blocks are public
-so that they can be used on any signal over position.
-"""
+"""Spectra of friction over position: ``analyze`` runs the per-segment analysis of a recording;
+its building blocks (resampling, order spectrum, Lomb-Scargle, harmonic fit) work on any signal."""
 
 from .analysis import Peak, SegmentSpectrum, SpectrumResult, analyze, analyze_segment, position_nyquist, MEASURABLE_FRACTION
 from .fft import order_spectrum

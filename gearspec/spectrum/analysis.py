@@ -1,44 +1,14 @@
 """The per-segment spectral analysis of a recording: what ``gearspec spectrum`` runs.
 
-For every constant-speed segment, on ``y = direction * (torque - J thetadd)`` (the friction
-magnitude, so that levels and phases mean the same in both directions, as in SILO4 eq. 11):
-
-1. Joint least-squares fit, on the raw samples, of a sinusoid at every declared line that fits
-   in the segment (at least ``min_cycles`` cycles, below the position Nyquist), plus a Legendre
-   nuisance polynomial whose degree grows with the slowest declared line that does *not*
-   complete ``min_cycles`` (so that it cannot bias the others).  One pass over the samples.
-2. Periodogram of the residual: Lomb-Scargle on the raw samples for segments up to
-   ``LS_MAX_SAMPLES`` samples; beyond, the Hann spectrum of the signal resampled over position
-   (anti-aliased), with the fitted nuisance and lines taken out in closed form -- one FFT.  Its
-   local noise level (constant relative bandwidth at low frequency) calibrates everything after.
-3. Search for peaks that no declared line explains: local maxima whose false-alarm probability
-   (local noise, F-distributed for an estimated level, all independent frequencies searched) is
-   below ``fap_threshold``, strongest first, none within 1.5 resolution steps (1.5/span) of a
-   declared line or within three of a stronger peak, none so slow that the nuisance polynomial
-   could mimic it (at least 2 cycles, and (degree+1)/pi).
-4. Joint fit of declared and found lines, the found frequencies refined by Gauss-Newton (a phase
-   at theta = 0 needs the frequency far more precisely than a periodogram bin gives it; each
-   iteration one pass that computes only the found lines' rows of the equations); a found
-   peak whose fitted amplitude is no longer significant (a sidelobe of a stronger line) is
-   dropped.  Standard errors are rescaled by the local noise level (honest for coloured noise).
-   Without found peaks the whole analysis is one pass over the samples plus one spectrum.
-5. Steps 3-4 repeat on the residual of every line found so far (the noise level re-estimated
-   from it: a dense comb of lines no longer raises the level around its weaker members), until a
-   round finds nothing; the later rounds search the Hann spectrum of the resampled signal with
-   every fitted line taken out in closed form (no new transform, no new periodogram).
-
-Nothing above the segment's position Nyquist frequency (:func:`position_nyquist`) is searched,
-fitted or reported as measured: such declared lines are listed (``above_nyquist``) with the
-frequency where they alias, and a peak found there is labelled ``alias of <label>``
-(:func:`gearspec.gears.alias_of`; across segments, :func:`relabel_aliases`).  An unlabelled
-peak gets an integer-order ``hint`` (with ``order_exact``) only when its frequency uncertainty
-tells neighbouring multiples of the shaft apart (:func:`gearspec.gears.integer_order`).
-
-Every declared line that fits is reported as a peak whether it is strong or not (its ``fap`` is
-the chance that noise alone gives that much fitted power at that one frequency); a found peak's
-``fap`` counts every independent frequency searched.  Lines that do not fit are listed with the
-reason.  Peaks found in step 3 carry the label of the harmonic or sideband of declared lines
-that explains them, or ``None`` (and perhaps an integer-multiple ``hint``).
+On ``y = direction * (torque - J thetadd)`` of every segment (the friction magnitude, so that
+levels and phases mean the same in both directions, SILO4 eq. 11): a joint fit of the declared
+lines plus a Legendre nuisance (:mod:`.harmonic`), a periodogram of its residual, a search for
+peaks no declared line explains (:mod:`.search`) and their joint fit, repeated on the residual of
+every line found; steps in :func:`analyze_segment`.  Nothing above the segment's position Nyquist
+frequency (:func:`position_nyquist`) is searched, fitted or reported as measured: such declared
+lines are listed (``above_nyquist``) with where they alias, and a peak found there is labelled
+``alias of <label>``.  A declared line's ``fap`` is for that one frequency; a found peak's counts
+every independent frequency searched.
 """
 
 from __future__ import annotations
@@ -73,18 +43,17 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
                     fap_threshold: float = 0.01, max_peaks: int = 8, oversample: float = 2.0,
                     noise: str = "local", periodogram: str = "auto", method: str = "auto",
                     keep_spectra: bool = False) -> SegmentSpectrum:
-    """Analyse one stretch of friction ``y`` over position ``theta`` (see the module docstring).
+    """Analyse one stretch of friction magnitude ``y`` (direction times torque) over position
+    ``theta``; frequencies in cycles per unit of theta, amplitudes in the unit of ``y``.
 
-    ``y`` should already be the friction magnitude (direction times torque).  Frequencies are in
-    cycles per unit of theta; amplitudes in the unit of ``y``.
-
-    ``periodogram`` chooses the spectrum searched for undeclared peaks: ``"lombscargle"`` (of the
-    residual on the raw samples; exact for any sampling, O(N log N) with a large constant),
-    ``"fft"`` (Hann spectrum of the signal resampled over position, with the fitted declared
-    lines and nuisance taken out in closed form: one FFT), or ``"auto"`` (Lomb-Scargle up to
-    ``LS_MAX_SAMPLES`` samples).  Either way amplitudes, phases and errors come from the joint fit
-    on the raw samples.  ``keep_spectra`` keeps the order spectrum and the Lomb-Scargle of the
-    signal for figures.
+    Declared lines that complete ``min_cycles`` below the position Nyquist are fitted jointly with
+    a Legendre nuisance whose degree grows with the slowest one that does not (so it biases none).
+    ``periodogram`` chooses the spectrum searched for undeclared peaks: ``"lombscargle"`` (the
+    residual on the raw samples), ``"fft"`` (Hann spectrum of the signal resampled over position,
+    fitted lines taken out in closed form: one FFT) or ``"auto"`` (Lomb-Scargle up to
+    ``LS_MAX_SAMPLES`` samples); amplitudes, phases and errors always come from the joint fit on
+    the raw samples, errors rescaled by the local noise (``noise="local"``).  ``keep_spectra``
+    keeps the order spectrum and the Lomb-Scargle of the signal for figures.
     """
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -134,10 +103,8 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
 
 def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int, nyquist: float,
                     min_cycles: float):
-    """The gear's declared lines split into those fitted in a segment of ``n`` samples over
-    ``span`` (rad or m), and those skipped (too slow: fewer than ``min_cycles`` cycles, absorbed by
-    the nuisance polynomial; or above ``MEASURABLE_FRACTION`` of the position Nyquist frequency),
-    with the reason.  Returns ``(fitted, skipped, cycles of the too-slow ones)``."""
+    """The gear's declared lines in a segment of ``n`` samples over ``span``: ``(fitted, skipped
+    with the reason, cycles of the too-slow ones)``."""
     fitted, skipped, slow_cycles = [], [], []
     for ln in (gear.declared_lines(max_harmonic=harmonics) if gear is not None else []):
         cycles = ln.frequency * span
@@ -146,8 +113,6 @@ def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int,
                             "reason": f"{cycles:.3g} cycles in the segment (< {min_cycles:g}); absorbed by the nuisance polynomial"})
             slow_cycles.append(cycles)
         elif ln.frequency >= MEASURABLE_FRACTION * nyquist:
-            # not measurable here: never fitted; where it shows up (its alias at the mean spacing)
-            # is said, and a peak found there is labelled 'alias of <label>'
             skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "above_nyquist",
                             "alias": alias_frequency(ln.frequency, span / (n - 1)) if ln.frequency > nyquist else None,
                             "reason": f"above {MEASURABLE_FRACTION:g} x the position Nyquist frequency ({nyquist:.4g}): "
@@ -158,8 +123,7 @@ def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int,
 
 
 class _Analysis:
-    """The steps of :func:`analyze_segment` on one segment once its declared lines are chosen: the
-    state they share (the samples, the normal equations, the spectrum searched, the lines found)."""
+    """The steps of :func:`analyze_segment` on one segment, and the state they share."""
 
     def __init__(self, theta, y, gear, fitted, deg, lo, hi, nyquist, f_search_max, *, min_cycles, fap_threshold,
                  max_peaks, oversample, method):
@@ -174,10 +138,9 @@ class _Analysis:
         self.fit0 = self.eq.fit()
 
     def first_spectrum(self, use_ls: bool, keep_into) -> None:
-        """Step 2: the periodogram of the declared lines' residual, in units where a sinusoid of
-        amplitude A has power n A^2/4, on the uniform grid freq(i) = f_first + df i (kept as an
-        index map, not an array): Lomb-Scargle on the raw samples, or the Hann spectrum over
-        position (its figure spectrum into ``keep_into``)."""
+        """Step 2: the periodogram of the declared lines' residual (a sinusoid of amplitude A has
+        power n A^2/4) on a uniform grid: Lomb-Scargle, or the Hann spectrum over position (its
+        figure spectrum into ``keep_into``)."""
         self.fft_res = None
         if use_ls:
             ls = LombScargle(self.theta, self.y - self.fit0.predict(self.theta), method=self.method,
@@ -186,7 +149,6 @@ class _Analysis:
             self.power = np.atleast_1d(ls.power_grid(fmin, df, nf))
             self.grid = _Grid(fmin, df, 0, len(self.power))
             self.enbw = 1.0
-            del ls
         else:
             k_lo, _, df, self.power, self.enbw, self.fft_res = _fft_residual_power(
                 self.theta, self.y, self.fit0, self.oversample, self.f_search_max, keep_into, lo=self.lo, hi=self.hi,
@@ -199,10 +161,8 @@ class _Analysis:
         """The power spectrum of the residual of every line in ``fit`` (a later round)."""
         theta, y = self.theta, self.y
         if self.fft_res is None and self.nbin >= 3:
-            # a Lomb-Scargle segment: the later rounds search the Hann spectrum of the signal
-            # resampled over position, every fitted line taken out in closed form -- one
-            # transform for all of them, a fraction of a periodogram's cost (the search's
-            # frequencies and their count m_eff stay those of the first round's range)
+            # the later rounds search the Hann spectrum, every fitted line taken out in closed
+            # form: one transform for all of them, a fraction of a periodogram's cost
             k_lo, _, df, p1, enbw1, self.fft_res = _fft_residual_power(
                 theta, y, self.fit0, self.oversample, self.f_search_max, lo=self.lo, hi=self.hi, keep_residual=True)
             if self.fft_res is not None:
@@ -213,17 +173,14 @@ class _Analysis:
         else:
             ls = LombScargle(theta, y - fit.predict(theta), method=self.method, nthreads=_ls_threads())
             self.power = np.atleast_1d(ls.power_grid(self.grid.base, self.grid.df, self.nbin))
-            del ls
 
     def search_rounds(self) -> None:
-        """Steps 3-4: peaks no declared line explains (see :func:`_search`), found iteratively.
+        """Steps 3-4: peaks no declared line explains (:func:`_search`), found iteratively.
 
         A dense comb of lines raises the local noise level around each of them, so after every
         search the lines found so far are fitted jointly (frequencies refined), the ones no longer
-        significant dropped, and the residual of all of them searched again -- its noise level
-        re-estimated without their power and sidelobes -- until a round finds nothing (at most
-        ``_MAX_ROUNDS`` rounds).  Every round searches the same frequencies: ``m_eff`` stays the
-        count in every false-alarm probability."""
+        significant dropped, and the residual of all of them searched again, until a round finds
+        nothing (at most ``_MAX_ROUNDS``); ``m_eff`` stays the count of frequencies searched."""
         span, n_dec, oversample = self.span, self.n_dec, self.oversample
         guard = _GUARD / span
         self.f_found_min = max(2.0, self.min_cycles, (self.deg + 1) / math.pi) / span
@@ -252,11 +209,9 @@ class _Analysis:
                    if room > 0 and self.nbin >= 3 else [])
             if not new:
                 break
-            # 4. joint fit; the found frequencies refined by Gauss-Newton (each iteration one pass that
-            # computes only the rows of the found lines -- the declared lines' equations are reused --
-            # the last one also the joint fit); a found peak stays only while its fitted amplitude is
-            # significant (a sidelobe of a stronger line is not, once that line is fitted): dropping
-            # one is a smaller solve of the same normal equations, not another pass
+            # 4. joint fit, found frequencies refined by Gauss-Newton (the declared lines' equations
+            # reused); a found peak stays while its amplitude is significant (a sidelobe is not,
+            # once its line is fitted)
             f_all, se_eq, eq = refine_frequencies(self.theta, self.y, self.declared_f + found + new,
                                                   range(n_dec, n_dec + len(found) + len(new)), degree=self.deg,
                                                   iterations=3, base=eq_dec)
@@ -282,9 +237,8 @@ class _Analysis:
             fit = fit.scaled(factor)
             f_se = f_se * np.sqrt(factor)
         amp, amp_se, ph, ph_se = fit.amplitude, fit.amplitude_se, fit.phase, fit.phase_se
-        # a found line's phase is given at theta = 0, away from the segment's centre where the
-        # Gauss-Newton step decouples it from the frequency: its frequency error adds
-        # 2 pi (centre - 0) f_se to the phase's (0 for declared lines, whose frequency is fixed)
+        # a found line's phase at theta = 0, away from the segment's centre, carries its frequency
+        # error: 2 pi centre f_se (0 for declared lines)
         ph_se = np.hypot(ph_se, 2 * np.pi * 0.5 * (self.lo + self.hi) * f_se) if len(f_se) else ph_se
         gear, span, nyquist = self.gear, self.span, self.nyquist
         spacing = span / (self.n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
@@ -303,10 +257,8 @@ class _Analysis:
                 if line is not None and line.kind == "alias":
                     aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
                 elif label is None and gear is not None:
-                    # an integer order: the frequency's uncertainty (three standard errors, and no less
-                    # than 0.05 resolution steps, so that the resolution bound of integer_order asks a
-                    # shaft to turn at least once in the segment -- the Rayleigh criterion) must tell
-                    # neighbouring multiples apart
+                    # an integer order when the frequency's uncertainty (3 se, at least 0.05 resolution
+                    # steps: a shaft turns once in the segment, Rayleigh) tells neighbouring multiples apart
                     exact = integer_order(gear, f, max(3 * f_se[k], 0.05 / span, 1e-6 * f))
             peaks.append(Peak(frequency=float(f), amplitude=float(amp[k]), amplitude_se=float(amp_se[k]),
                               phase=float(ph[k]), phase_se=float(ph_se[k]), fap=float(fap_fit[k]),
@@ -317,12 +269,10 @@ class _Analysis:
                               order_exact=None if exact is None else exact.order, aliased_from=aliased))
         return peaks, fit
 
-    def spectra_for_figures(self, out: SegmentSpectrum, grid0: _Grid, nbin0: int, enbw0: float, power_first) -> None:
-        """Step 5: the spectra of the figures into ``out``, on the first round's grid; the noise level
-        of the last round when it searched that grid."""
+    def spectra_for_figures(self, out: SegmentSpectrum, grid: _Grid, nbin: int, enbw: float, power_first) -> None:
+        """Step 5: the spectra of the figures into ``out``, on the first round's ``grid``."""
         theta, y, n = self.theta, self.y, self.n
-        noise_fig = self.noise_model if self.grid is grid0 else self.noise0
-        grid, nbin, enbw = grid0, nbin0, enbw0
+        noise_fig = self.noise_model if self.grid is grid else self.noise0
         freqs = grid.frequencies()
         if out.fft_frequency is None:
             _fft_residual_power(theta, y, self.fit0, self.oversample, self.f_search_max, out, lo=self.lo, hi=self.hi)
@@ -340,25 +290,19 @@ _local = threading.local()  # .in_pool: this thread analyses one segment of seve
 
 
 def _ls_threads() -> int | None:
-    """finufft's threads for a periodogram: one inside analyze's worker threads (the workers
-    already share the CPUs; OpenMP teams on top would oversubscribe them), else its default."""
+    """finufft's threads: one inside analyze's worker threads (no oversubscription), else its default."""
     return 1 if getattr(_local, "in_pool", False) else None
 
 
-#: a line is measurable in a segment when it lies below this fraction of the segment's position
-#: Nyquist frequency (:func:`position_nyquist`): the one margin of the spectrum, the joint fit
-#: (``identify``) and the closed loop (``diagnose``), so that a line is "measured" in one place
-#: exactly where its amplitude law may be fitted in the others
+#: a line is measurable below this fraction of a segment's position Nyquist frequency: the one
+#: margin of spectrum, identify and diagnose
 MEASURABLE_FRACTION = 0.8
 
 
 def position_nyquist(theta: np.ndarray) -> float:
-    """The position Nyquist frequency of samples at positions ``theta`` (cycles per unit of theta):
-    the one source of this fact for every stage (spectrum, identification, the closed loop).
-
-    Half the inverse of the 95th percentile of the nonzero sample spacings (linear
-    interpolation, as ``np.percentile``), from a selection in single precision: the spacing is
-    rounded to 1e-7 of itself, and the selection takes a third of the time."""
+    """The position Nyquist frequency of samples at ``theta`` (cycles per unit of theta), for every
+    stage: half the inverse of the 95th percentile of the nonzero spacings (as ``np.percentile``),
+    selected in single precision (rounded to 1e-7, a third of the time)."""
     sp = np.empty(len(theta) - 1, np.float32)
     np.subtract(theta[1:], theta[:-1], out=sp, casting="unsafe")
     np.abs(sp, out=sp)

@@ -12,32 +12,14 @@ __all__ = ["order_spectrum", "hann_spectrum", "hann_spectrum32", "hann_sinusoid_
 
 def order_spectrum(values: np.ndarray, spacing: float, window: str = "hann", detrend: bool = True,
                    pad: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Single-sided amplitude spectrum over position.
+    """Single-sided amplitude spectrum over position: ``(frequency, amplitude)`` in cycles per unit
+    of theta and the unit of ``values``.
 
-    A sinusoid ``A sin(2 pi f theta + phi)`` whose frequency falls on a bin shows as a peak of
-    height ``A`` (the window's coherent gain is divided out).  Between bins the Hann window reads
-    up to 15 % low (scalloping); use ``window="flattop"`` for amplitudes read off the plot, or the
-    harmonic fit for exact ones.  The transform length is padded to a fast FFT size.
-
-    Parameters
-    ----------
-    values : ndarray
-        Signal on a uniform grid (see :func:`resample_over_position`).
-    spacing : float
-        Grid spacing, rad or m.
-    window : str
-        Any window name of ``scipy.signal.get_window``.
-    detrend : bool
-        Remove the least-squares line first, so that the mean and a slow trend do not leak.
-    pad : int
-        Zero-padding factor (>= 1) for a finer frequency grid.
-
-    Returns
-    -------
-    frequency : ndarray
-        Cycles per unit of theta.
-    amplitude : ndarray
-        In the unit of ``values``.
+    ``values`` on a uniform grid of ``spacing`` (rad or m; :func:`resample_over_position`);
+    ``window`` any name of ``scipy.signal.get_window``; ``detrend`` removes the least-squares line
+    first (the mean and a slow trend do not leak); ``pad`` (>= 1) zero-pads for a finer grid.  A
+    sinusoid of amplitude ``A`` on a bin peaks at ``A``; between bins Hann reads up to 15 % low
+    (use ``window="flattop"``, or the harmonic fit for exact amplitudes).
     """
     v = np.asarray(values, dtype=float)
     n = len(v)
@@ -54,18 +36,15 @@ def order_spectrum(values: np.ndarray, spacing: float, window: str = "hann", det
 
 
 def hann_spectrum(values: np.ndarray, spacing: float, pad: float = 2.0):
-    """Hann-windowed complex spectrum of ``values`` (already free of its mean), padded to a fast
-    length of at least ``pad`` times the samples.
-
-    Returns ``(spectrum, df, window_sum, enbw)``: bin k is at ``k * df`` cycles per unit; a
-    sinusoid of amplitude A on a bin has ``|spectrum| = A window_sum / 2``; white noise of
-    variance s^2 has ``E|spectrum|^2 = s^2 sum(w^2)``, i.e. ``enbw = n sum(w^2) / sum(w)^2`` (1.5
-    for Hann) times what a rectangular window gives.
+    """Hann-windowed complex spectrum of ``values`` (free of its mean), padded to a fast length of
+    at least ``pad`` times the samples: ``(spectrum, df, window_sum, enbw)``.  Bin k is at ``k df``;
+    a sinusoid of amplitude A on a bin has ``|spectrum| = A window_sum / 2``; white noise has
+    ``enbw = n sum(w^2) / sum(w)^2`` (1.5 for Hann) times a rectangular window's power.
     """
     v = np.asarray(values, dtype=float)
     n = len(v)
     w = get_window("hann", n, fftbins=False)
-    nfft = scipy.fft.next_fast_len(int(np.ceil(n * max(1.0, pad))), real=True)
+    nfft = hann_fft_length(n, pad)
     spec = scipy.fft.rfft(v * w, nfft)
     wsum = float(w.sum())
     enbw = n * float(w @ w) / wsum**2
@@ -73,16 +52,10 @@ def hann_spectrum(values: np.ndarray, spacing: float, pad: float = 2.0):
 
 
 def hann_spectrum32(values: np.ndarray, spacing: float, pad: float = 2.0, legendre=None):
-    """:func:`hann_spectrum` in single precision, with an optional Legendre series subtracted first.
-
-    ``legendre = (coef, a, b)`` subtracts ``sum_j coef_j P_j(a + b m)`` at grid index m (a fitted
-    nuisance polynomial); the constant term is subtracted in double precision, before anything is
-    rounded to single precision, so that a large mean level costs no precision.  The window, the
-    polynomial and the transform then run in float32: their rounding (~1e-7 of the signal's
-    amplitude) is far below any noise floor, and time and memory are about halved.  The window's
-    sums are exact (closed forms of the symmetric Hann window).
-
-    Returns ``(spectrum, df, window_sum, enbw)`` as :func:`hann_spectrum` (complex64 spectrum).
+    """:func:`hann_spectrum` in single precision (complex64), ``legendre = (coef, a, b)`` (a fitted
+    nuisance, ``sum_j coef_j P_j(a + b m)`` at grid index m) subtracted first, its constant term in
+    double precision so that a large mean level costs no precision.  The float32 rounding (~1e-7
+    of the signal) is far below any noise floor, and time and memory are about halved.
     """
     v = np.asarray(values, dtype=float)
     n = len(v)
@@ -99,15 +72,13 @@ def hann_spectrum32(values: np.ndarray, spacing: float, pad: float = 2.0, legend
 
 
 def hann_fft_length(n: int, pad: float = 2.0) -> int:
-    """The transform length of :func:`hann_spectrum` for n values: a fast length of at least
-    ``pad`` times n."""
+    """The transform length of :func:`hann_spectrum`: a fast length of at least ``pad`` times n."""
     return int(scipy.fft.next_fast_len(int(np.ceil(n * max(1.0, pad))), real=True))
 
 
 def legendre_constant(coef, a: float) -> float:
-    """The part of ``sum_j coef_j P_j(a + b m)`` that :func:`hann_spectrum32_buffer` expects to be
-    subtracted already, in double precision: the constant term, and for a straight line (two
-    terms) also its value at m = 0."""
+    """The part of ``sum_j coef_j P_j(a + b m)`` that :func:`hann_spectrum32_buffer` expects
+    subtracted in double precision: the constant term (a straight line: its value at m = 0)."""
     coef = np.asarray(coef, dtype=float)
     if len(coef) == 0:
         return 0.0
@@ -118,11 +89,9 @@ def legendre_constant(coef, a: float) -> float:
 
 def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: float = 0.0, b: float = 0.0,
                            nfft: int | None = None):
-    """The work of :func:`hann_spectrum32` on a float32 buffer whose first n values hold the
-    signal with ``legendre_constant(coef, a)`` already subtracted; the buffer is used up.  Its
-    length is the transform length, or ``nfft`` is given (the transform pads it: the buffer then
-    needs only the n values).  For callers that fill the buffer themselves (no double-precision
-    copy of the signal)."""
+    """The work of :func:`hann_spectrum32` on a float32 buffer (used up) whose first n values hold
+    the signal minus ``legendre_constant(coef, a)``; its length is the transform length unless
+    ``nfft`` is given.  The window's sums are the closed forms of the symmetric Hann window."""
     coef = np.asarray(coef, dtype=float)
     nfft = len(buf) if nfft is None else int(nfft)
     x = buf[:n]
@@ -132,15 +101,12 @@ def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: 
     if len(coef) > 2:
         t = m * np.float32(b)
         t += np.float32(a)
-        p0, p1 = None, t
+        p0, p1 = np.float32(1.0), t
         x -= np.float32(coef[1]) * p1
         for j in range(2, len(coef)):
             p2 = t * p1
             p2 *= np.float32((2 * j - 1) / j)
-            if p0 is None:
-                p2 -= np.float32((j - 1) / j)
-            else:
-                p2 -= np.float32((j - 1) / j) * p0
+            p2 -= np.float32((j - 1) / j) * p0
             p0, p1 = p1, p2
             x -= np.float32(coef[j]) * p2
         del t, p0, p1
@@ -160,13 +126,9 @@ def hann_spectrum32_buffer(buf: np.ndarray, n: int, spacing: float, coef=(), a: 
 
 def hann_sinusoid_dft(k: np.ndarray, nfft: int, n: int, x0: float, spacing: float, frequency: float,
                       coef_cos: float, coef_sin: float) -> np.ndarray:
-    """Exact bins ``k`` of the Hann-windowed, ``nfft``-point DFT of
-    ``coef_cos cos(2 pi f x) + coef_sin sin(2 pi f x)`` sampled at ``x = x0 + m spacing``,
-    ``m = 0 .. n-1`` (closed-form geometric sums; the symmetric Hann window of scipy).
-
-    Subtracting it from :func:`hann_spectrum` removes a fitted line from the spectrum without
-    evaluating it at every grid point.
-    """
+    """Exact bins ``k`` of the Hann-windowed ``nfft``-point DFT of ``coef_cos cos(2 pi f x) +
+    coef_sin sin(2 pi f x)`` at ``x = x0 + m spacing``, ``m < n`` (closed-form geometric sums):
+    subtracted from :func:`hann_spectrum`, it removes a fitted line without evaluating it."""
     k = np.asarray(k, dtype=float)
     alpha = 2 * np.pi / (n - 1)
 

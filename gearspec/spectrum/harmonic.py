@@ -4,29 +4,18 @@ Model, for positions ``theta`` in ``[lo, hi]``::
 
     y = sum_j c_j P_j(x) + sum_k A_k sin(2 pi f_k theta + phi_k) + noise,   x = 2 (theta - lo)/(hi - lo) - 1
 
-with Legendre polynomials ``P_j`` up to ``degree`` as *nuisance* terms (the mean level, a slow
-trend, and any component too slow to complete a cycle in the stretch, which a sinusoid of its own
-could not separate from the mean), and one cosine/sine pair per frequency.  All terms are fitted
-together, so close frequencies do not leak into each other the way peaks of a spectrum do, and a
-slow component absorbed by the polynomial does not bias the others.
-
-One pass over the samples accumulates the normal equations (:class:`NormalEquations`) in chunks
-(memory O(chunk x terms), never a full design matrix), in single precision within a sub-block
-of a few thousand samples (phases reduced to one cycle in double precision at every sub-block's
-start) and double precision across them; any subset of the frequencies can then be solved
-without another pass.  Frequencies read off a periodogram are refined by Gauss-Newton
-(:func:`refine_frequencies`), one pass per iteration, the last of which is also the joint fit;
-given the equations of the fixed lines (:meth:`NormalEquations.extend`), a pass computes only
-the rows of the lines being refined.
+with Legendre polynomials ``P_j`` as nuisance terms (the level, a slow trend, and any component
+too slow to complete a cycle).  All terms are fitted together, so close frequencies do not leak
+into each other.  One pass accumulates the normal equations (:class:`NormalEquations`) in chunks,
+in single precision within sub-blocks of a few thousand samples (phases reduced to one cycle in
+double precision at each sub-block's start) and double precision across them; any subset of the
+frequencies is then solved without another pass.
 
 Standard errors are ``sigma^2 (X'X)^-1`` for white noise; :meth:`HarmonicFit.scaled` rescales
-them per frequency by the ratio of the local noise level (from a periodogram of the residual) to
-``sigma^2``, which is what makes them honest for coloured noise.  Amplitude and phase errors
-follow by the delta method (fine at SNR >~ 3; at lower SNR the amplitude is biased upwards,
-Rice-distributed).
-
-Phase convention: ``A sin(2 pi f theta + phi)`` (the SILO4 paper's ``A sin(omega theta + phi)``,
-with ``omega = 2 pi f``), theta measured from the recording's zero, not from the segment's start.
+them per frequency by the local noise level, which makes them honest for coloured noise.
+Amplitude and phase errors follow by the delta method (biased upwards below SNR ~3, Rice).
+Phase convention: ``A sin(2 pi f theta + phi)`` (SILO4's ``A sin(omega theta + phi)``), theta
+from the recording's zero.
 """
 
 from __future__ import annotations
@@ -81,31 +70,21 @@ class HarmonicFit:
     def amplitude_se(self) -> np.ndarray:
         a, b = self.coef_cos, self.coef_sin
         amp = np.maximum(self.amplitude, 1e-300)
-        v = self._blocks()
-        var = (a * a * v[:, 0, 0] + b * b * v[:, 1, 1] + 2 * a * b * v[:, 0, 1]) / amp**2
+        vcc, vss, vcs = self._blocks()
+        var = (a * a * vcc + b * b * vss + 2 * a * b * vcs) / amp**2
         return np.sqrt(np.maximum(var, 0))
 
     @property
     def phase_se(self) -> np.ndarray:
         a, b = self.coef_cos, self.coef_sin
         amp2 = np.maximum(a * a + b * b, 1e-300)
-        v = self._blocks()
-        var = (b * b * v[:, 0, 0] + a * a * v[:, 1, 1] - 2 * a * b * v[:, 0, 1]) / amp2**2
+        vcc, vss, vcs = self._blocks()
+        var = (b * b * vcc + a * a * vss - 2 * a * b * vcs) / amp2**2
         return np.sqrt(np.maximum(var, 0))
 
-    @property
-    def offset(self) -> float:
-        """Mean of the nuisance polynomial over the span (the average level of y)."""
-        return float(self.nuisance[0]) if len(self.nuisance) else 0.0
-
-    def _blocks(self) -> np.ndarray:
-        k = len(self.frequency)
-        idx = np.arange(k) * 2
-        out = np.empty((k, 2, 2))
-        out[:, 0, 0] = self.cov[idx, idx]
-        out[:, 1, 1] = self.cov[idx + 1, idx + 1]
-        out[:, 0, 1] = out[:, 1, 0] = self.cov[idx, idx + 1]
-        return out
+    def _blocks(self):
+        """Per frequency: var(cos), var(sin), cov(cos, sin)."""
+        return np.diagonal(self.cov)[0::2], np.diagonal(self.cov)[1::2], np.diagonal(self.cov, 1)[0::2]
 
     def scaled(self, factor) -> HarmonicFit:
         """The same fit with the variance of frequency k scaled by ``factor[k]`` (local noise)."""
@@ -138,57 +117,30 @@ class HarmonicFit:
             out[i:i + len(th)] = a.reshape(-1)[: len(th)]
         return out
 
-    def components(self, theta, chunk: int = _CHUNK) -> np.ndarray:
-        """Each sinusoid evaluated at ``theta`` (double precision): shape (K, N)."""
-        theta = np.asarray(theta, dtype=float)
-        out = np.empty((len(self.frequency), len(theta)))
-        for i in range(0, len(theta), chunk):
-            c, s = _trig(theta[i:i + chunk], self.frequency)
-            out[:, i:i + chunk] = (c * self.coef_cos + s * self.coef_sin).T
-        return out
-
-
-def _trig(theta: np.ndarray, freq: np.ndarray):
-    """cos and sin of 2 pi f theta for every f (double precision, phase reduced to one cycle
-    first, exact for large theta), shape (n, K)."""
-    ph = np.multiply.outer(theta, freq)
-    ph -= np.floor(ph)
-    ph *= _TWO_PI
-    return np.cos(ph), np.sin(ph)
-
 
 _SUB_ELEMS = 1 << 18  # rows x rows-of-X'X x columns of one sub-block product (see _sub_rows)
 
 
 def _sub_rows(q_rows: int, q: int, n: int) -> int:
-    """Rows per sub-block product: a power of two, so that rows x q_rows x q stays within 2^18.
-    The products are then small for the BLAS: OpenBLAS runs them on one thread (beyond, it
-    splits such tall, narrow products across threads, which costs more than it gains, and a
-    great deal on a busy machine), with its small-matrix kernels where the CPU has them
-    (several times faster than its general path for these shapes).  Between 128 and 8192 rows,
-    and no more than the samples."""
+    """Rows per sub-block product: a power of two (128 to 8192, at most ``n``) keeping rows x
+    q_rows x q within 2^18, so that OpenBLAS runs each product on one thread with its
+    small-matrix kernels (splitting such tall, narrow products across threads costs more than it
+    gains, a great deal on a busy machine)."""
     r = 1 << max(0, int(np.floor(np.log2(max(_SUB_ELEMS / max(q_rows * q, 1), 1.0)))))
     r = int(np.clip(r, 128, 8192))
     return max(1, min(r, n))
 
 
 class _Design:
-    """The single-precision design matrix of one chunk of samples, column by column, with the
-    centred data as one more column.
+    """The single-precision design matrix of one chunk of samples, with ``y - y0`` as column ``q``.
 
-    Columns (``q`` in all, then ``y - y0`` as column ``q``): Legendre 0..degree, then for every
-    group of lines its cosines and its sines (``groups``: (frequencies, first cosine column,
-    first sine column)), then Gauss-Newton derivative columns ``2 pi (theta - centre) * (cos,
-    sin)`` (``deriv``: (cosine source column, sine source column) per free line).
-
-    Layout: ``D[b, j, :]`` is column j of sub-block b (``rows`` samples, contiguous), so that
-    every column operation is one contiguous ufunc call per chunk, and one batched product
-    ``D[:, a:q] @ D[:].T`` gives rows ``a:`` of both ``X'X`` and ``X'y``.
-
-    Phases are taken relative to each sub-block's first position, whose own phase is reduced to
-    one cycle in double precision: the float32 argument then stays below the sub-block's cycle
-    count (< 4096 cycles even at the position Nyquist), and its rounding costs < 1e-5 of
-    amplitude, while float32 trigonometric functions run many times faster than float64 ones.
+    Columns: Legendre 0..degree, per group of lines (``groups``: frequencies, first cosine column,
+    first sine column) its cosines and sines, then derivative columns ``2 pi (theta - centre) *
+    (cos, sin)`` (``deriv``: source columns per free line).  ``D[b, j, :]`` is column j of
+    sub-block b, so one batched product ``D[:, a:q] @ D[:].T`` gives rows ``a:`` of ``X'X`` and
+    ``X'y``.  Phases are taken from each sub-block's first position (reduced to one cycle in
+    double precision): the float32 argument stays below 4096 cycles, rounding < 1e-5 of amplitude,
+    and float32 trigonometry runs many times faster.
     """
 
     def __init__(self, degree, lo, hi, groups, deriv, q, rows, blocks):
@@ -216,15 +168,13 @@ class _Design:
         U = self.U[:nb]
         if full == m:  # a whole number of sub-blocks: straight from theta
             T = theta.reshape(nb, r)
-            ref = T[:, 0].copy()
-            np.subtract(T, ref[:, None], out=U, casting="same_kind")
         else:  # the last, partial chunk: padded with its last position
             T = self.T64[:nb]
             flat = T.reshape(-1)
             flat[:m] = theta
             flat[m:] = theta[-1]
-            ref = T[:, 0].copy()
-            np.subtract(T, ref[:, None], out=U, casting="same_kind")
+        ref = T[:, 0].copy()
+        np.subtract(T, ref[:, None], out=U, casting="same_kind")
         D = self.D[:nb]
         d = self.degree
         # Legendre polynomials of x = 2 (theta - lo) / (hi - lo) - 1, Bonnet recurrence
@@ -272,11 +222,8 @@ class _Design:
 
 
 def _pass(theta, y, y0, design: _Design, first_row: int, chunk_rows: int, want_yy: bool):
-    """One pass over the samples: rows ``first_row:`` of X'X (float64, summed over chunks of
-    float32 products), the same rows of X'(y - y0), and (y - y0)'(y - y0) (float64) when asked.
-
-    No BLAS call but the batched matrix product, and that one in sub-blocks small enough to run
-    on one thread (see :func:`_sub_rows`)."""
+    """One pass over the samples: rows ``first_row:`` of X'X and X'(y - y0) (float64 sums of
+    float32 sub-block products, :func:`_sub_rows`), and (y - y0)'(y - y0) when asked."""
     q = design.q
     GH = np.zeros((q - first_row, q + 1))
     yy = 0.0
@@ -297,14 +244,6 @@ def _make_design(n, degree, lo, hi, groups, deriv, q, first_row, chunk):
     r = _sub_rows(q - first_row, q + 1, n)
     blocks = max(1, min(max(chunk, r) // r, -(-n // r)))
     return _Design(degree, lo, hi, groups, deriv, q, r, blocks), r * blocks
-
-
-def _cos_col(degree, k, j):
-    return degree + 1 + j
-
-
-def _sin_col(degree, k, j):
-    return degree + 1 + k + j
 
 
 @dataclass
@@ -339,16 +278,14 @@ class NormalEquations:
             raise ValueError(f"{n} samples cannot fit {q} terms")
         lo, hi = float(theta.min()), float(theta.max())
         y0 = float(np.mean(y))
-        deriv = [(_cos_col(d, k, j), _sin_col(d, k, j)) for j in free]
+        deriv = [(d + 1 + j, d + 1 + k + j) for j in free]
         design, rows = _make_design(n, d, lo, hi, [(freq, d + 1, d + 1 + k)], deriv, q, 0, chunk)
         G, h, yy = _pass(theta, y, y0, design, 0, rows, True)
         return cls(0.5 * (G + G.T), h, yy, y0, n, freq, d, lo, hi, free)
 
     def extend(self, theta, y, frequency, chunk: int = _CHUNK) -> NormalEquations:
-        """The equations with the lines ``frequency`` added, free (with derivative columns), from
-        one pass that computes only the new rows of ``X'X``: the columns of these equations (which
-        must have no free lines) are reused, not recomputed.  ``theta`` and ``y`` must be the
-        samples these equations came from."""
+        """The equations with the lines ``frequency`` added, free, from one pass over the samples
+        these (no free lines) came from, computing only the new rows of ``X'X``."""
         if self.free:
             raise ValueError("extend() needs equations without free lines")
         theta = np.asarray(theta, dtype=float)
@@ -402,8 +339,7 @@ class NormalEquations:
         """The joint fit of the frequencies ``keep`` (indices; default all), no new pass."""
         d, k = self.degree, len(self.frequency)
         keep = list(range(k)) if keep is None else [int(j) for j in keep]
-        cols = np.array(list(range(d + 1)) + [c for j in keep for c in (_cos_col(d, k, j), _sin_col(d, k, j))],
-                        dtype=int)
+        cols = np.array(list(range(d + 1)) + [c for j in keep for c in (d + 1 + j, d + 1 + k + j)], dtype=int)
         beta, Ginv, rss = self._solve(cols)
         dof = self.n - len(cols)
         sigma = float(np.sqrt(rss / dof))
@@ -424,7 +360,7 @@ class NormalEquations:
         sigma2 = rss / max(self.n - len(cols), 1)
         steps, ses = [], []
         for m, j in enumerate(self.free):
-            a, b = beta[_cos_col(d, k, j)], beta[_sin_col(d, k, j)]
+            a, b = beta[d + 1 + j], beta[d + 1 + k + j]
             c1, c2 = beta[p + 2 * m], beta[p + 2 * m + 1]
             amp2 = max(a * a + b * b, 1e-300)
             delta = (c1 * b - c2 * a) / amp2  # the 2 pi is inside the derivative columns
@@ -436,25 +372,10 @@ class NormalEquations:
 
 
 def harmonic_fit(theta, y, frequency, degree: int = 1, chunk: int = _CHUNK, residual: bool = False):
-    """Fit sinusoids at ``frequency`` (cycles per unit of theta) plus a Legendre nuisance.
-
-    Parameters
-    ----------
-    theta, y : ndarray
-        Raw samples, any order.
-    frequency : array_like
-        Known frequencies, cycles/rad or cycles/m (may be empty).
-    degree : int
-        Degree of the Legendre nuisance polynomial (0: a mean only).
-    chunk : int
-        Rows per block of the normal equations.
-    residual : bool
-        Also return ``y - model`` at every sample (a second pass).
-
-    Returns
-    -------
-    HarmonicFit, or (HarmonicFit, residual) when ``residual`` is True.
-    """
+    """Fit sinusoids at ``frequency`` (cycles/rad or cycles/m, may be empty) plus a Legendre
+    nuisance of ``degree`` (0: a mean only) to raw samples ``theta, y`` (any order); ``chunk``
+    rows per block of the normal equations.  Returns the :class:`HarmonicFit`, and with
+    ``residual`` also ``y - model`` at every sample (a second pass)."""
     ne = NormalEquations.accumulate(theta, y, frequency, degree, chunk=chunk)
     fit = ne.fit()
     if not residual:
@@ -467,25 +388,16 @@ def refine_frequencies(theta, y, frequency, free, degree: int = 1, iterations: i
                        chunk: int = _CHUNK, base: NormalEquations | None = None):
     """Refine the frequencies listed in ``free`` (indices) by Gauss-Newton on the joint model.
 
-    A frequency read off a periodogram is good to a fraction of a resolution step 1/span, but the
-    phase at theta = 0 of a line found far from the origin needs it far better.  Each iteration is
-    one pass over the samples: the joint fit plus, for every free line, the derivative columns
-    ``2 pi (theta - centre) (cos, sin)``, whose coefficients give the frequency correction; a step
-    is limited to half a resolution step.  Iterations stop when the corrections fall below 1e-3
-    of half a resolution step, or after ``iterations`` passes.
+    A periodogram's frequency is good to a fraction of 1/span, but the phase at theta = 0 of a
+    line far from the origin needs it far better.  Each iteration is one pass: the joint fit plus
+    derivative columns ``2 pi (theta - centre) (cos, sin)`` per free line, whose coefficients give
+    the correction (at most half a resolution step); it stops below 1e-3 of that, or after
+    ``iterations`` passes.  ``base``, the equations of the fixed lines (the first ones of
+    ``frequency``, the same degree), makes every pass compute only the free lines' rows.
 
-    ``base``, the equations of the fixed lines (the first ones of ``frequency``, all the others
-    free, the same degree), makes every pass compute only the rows of the free lines
-    (:meth:`NormalEquations.extend`): the same equations, at a fraction of the cost.
-
-    Returns
-    -------
-    frequency : ndarray
-        All frequencies, the free ones refined.
-    frequency_se : ndarray
-        Standard errors (white noise) of the free ones, 0 for the others.
-    equations : NormalEquations
-        Of the last pass; ``equations.fit()`` is the joint fit at the frequencies returned.
+    Returns ``(frequency, frequency_se, equations)``: all frequencies (the free ones refined),
+    white-noise standard errors of the free ones (0 for the others), and the last pass's
+    :class:`NormalEquations`, whose ``fit()`` is the joint fit at those frequencies.
     """
     theta = np.asarray(theta, dtype=float)
     freq = np.array(frequency, dtype=float)
@@ -495,7 +407,6 @@ def refine_frequencies(theta, y, frequency, free, degree: int = 1, iterations: i
     k0 = len(base.frequency) if base is not None else 0
     use_base = (base is not None and free and not base.free and base.degree == int(degree)
                 and sorted(free) == list(range(k0, len(freq))) and np.array_equal(base.frequency, freq[:k0]))
-    ne = None
     for it in range(max(1, iterations)):
         if use_base:
             ne = base.extend(theta, y, freq[k0:], chunk=chunk)

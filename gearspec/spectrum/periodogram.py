@@ -1,26 +1,15 @@
 """Lomb-Scargle periodogram of a signal over position, on the raw (non-uniform) samples.
 
-One small class, :class:`LombScargle`, in front of interchangeable implementations chosen with
-``method`` (as in ``astropy.timeseries.LombScargle``):
-
-``"nifty"``    nifty-ls (finufft, a non-uniform FFT): O(N log N), for long segments; uniform
-               frequency grids only.
-``"astropy"``  astropy's exact ``"cython"`` method: O(N M), any frequencies.
-``"scipy"``    ``scipy.signal.lombscargle`` with a floating mean: O(N M), any frequencies.
-``"auto"``     nifty on uniform grids, astropy otherwise.
-
-All return the same *power*: the floating-mean ("generalised") periodogram in PSD normalisation,
-which equals ``N A^2 / 4`` at the frequency of a sinusoid of amplitude ``A`` and has mean
-``sigma^2`` over white noise of variance ``sigma^2``.  :meth:`LombScargle.amplitude` turns it into
-the amplitude spectrum ``sqrt(4 P / N)``.
+:class:`LombScargle` fronts interchangeable implementations (``method``, as in astropy):
+``"nifty"`` (nifty-ls, a non-uniform FFT, O(N log N), uniform frequency grids only), ``"astropy"``
+(exact ``"cython"``, any frequencies), ``"scipy"`` (``scipy.signal.lombscargle``, floating mean),
+``"auto"`` (nifty on uniform grids, astropy otherwise).  All return the floating-mean periodogram
+in PSD normalisation: ``N A^2 / 4`` at a sinusoid of amplitude ``A``, mean ``sigma^2`` over white
+noise of variance ``sigma^2``.
 
 Significance uses the noise level *around* each frequency (:func:`local_noise`), not a global
-one: friction residuals are far from white (slow drifts, control-loop ripple), and a global level
-would flag every low-frequency bump.  Under Gaussian noise of local level S the power at one
-frequency is exponential with mean S, so the chance that noise alone reaches ``z = P/S`` at one
-given frequency is ``exp(-z)`` (F-distributed instead when S is itself estimated from a few
-bins), and somewhere among ``M`` independent frequencies ``1 - (1 - p1)**M``
-(:func:`false_alarm_probability`; Scargle 1982, with a local S).
+one: friction residuals are far from white, and a global level would flag every low-frequency
+bump (:func:`false_alarm_probability`; Scargle 1982, with a local level).
 """
 
 from __future__ import annotations
@@ -36,19 +25,9 @@ METHODS = ("auto", "nifty", "astropy", "scipy")
 
 
 class LombScargle:
-    """Lomb-Scargle periodogram of ``y`` sampled at positions ``theta``.
-
-    Parameters
-    ----------
-    theta : ndarray
-        Positions (rad or m); any order.
-    y : ndarray
-        Values, shape (N,) or (B, N) for a batch of signals sampled at the same positions.
-    method : {"auto", "nifty", "astropy", "scipy"}
-    nthreads : int, optional
-        Threads of the nifty (finufft) back end; default: all (OpenMP's choice).  One when
-        periodograms are computed in several threads at once.
-    """
+    """Lomb-Scargle periodogram of ``y`` (shape (N,), or (B, N) for a batch) sampled at positions
+    ``theta`` (rad or m, any order); ``method`` one of ``METHODS``; ``nthreads``: threads of the
+    nifty (finufft) back end (default OpenMP's choice; one when periodograms run in threads)."""
 
     def __init__(self, theta, y, method: str = "auto", nthreads: int | None = None):
         if method not in METHODS:
@@ -67,17 +46,10 @@ class LombScargle:
         self.nthreads = nthreads
         self.n = theta.shape[0]
 
-    # ------------------------------------------------------------------ grids
-    def span(self) -> float:
-        return float(self.theta[-1] - self.theta[0])
-
     def autogrid(self, oversample: float = 2.0, fmax: float | None = None, fmin: float | None = None):
-        """A uniform grid from one cycle per span to ``fmax`` (default: the position Nyquist of the
-        median sample spacing), ``oversample`` points per resolution step 1/span.
-
-        Returns ``(fmin, df, nf)``.
-        """
-        span = self.span()
+        """``(fmin, df, nf)`` of a uniform grid from one cycle per span to ``fmax`` (default: the
+        Nyquist of the mean sample spacing), ``oversample`` points per resolution step 1/span."""
+        span = float(self.theta[-1] - self.theta[0])
         df = 1.0 / (span * oversample)
         f_lo = 1.0 / span if fmin is None else max(fmin, df)
         if fmax is None:
@@ -85,7 +57,6 @@ class LombScargle:
         nf = max(1, int(np.floor((fmax - f_lo) / df)) + 1)
         return f_lo, df, nf
 
-    # ------------------------------------------------------------------ power
     def power_grid(self, fmin: float, df: float, nf: int) -> np.ndarray:
         """Power on the uniform grid ``fmin + df * arange(nf)``; shape (nf,) or (B, nf)."""
         method = "nifty" if self.method == "auto" else self.method
@@ -132,34 +103,26 @@ def local_noise(power: np.ndarray, width: int = 200, mask: np.ndarray | None = N
                 relative: float = 0.3, return_bins: bool = False):
     """Local mean noise power around every bin.
 
-    Bins are grouped in consecutive blocks whose width grows with frequency (``relative`` times
-    the block's starting bin, between ``min_width`` and ``width`` bins): a constant relative
-    bandwidth where the noise spectrum is steep (coloured noise at low frequency), a fixed width
-    higher up.  In each block the noise level is the mean power of the bins below ten times the
-    block's median level (so a line does not raise it); block levels are interpolated between
-    block centres, so the cost is O(n), not O(n width).  Bins in ``mask`` are left out.
-
-    With ``return_bins`` also returns, per bin, how many bins its block averaged (for the
-    estimation error of the level; see :func:`false_alarm_probability`).
+    Bins are grouped in blocks whose width grows with frequency (``relative`` times the block's
+    starting bin, between ``min_width`` and ``width``): a constant relative bandwidth where
+    coloured noise is steep, a fixed width higher up.  A block's level is the mean power of its
+    bins below ten times its median level (a line does not raise it), interpolated between block
+    centres (O(n)).  Bins in ``mask`` are left out.  ``return_bins`` also returns how many bins
+    each bin's level averaged (:func:`false_alarm_probability`).
     """
     n = len(power)
     centres, levels, counts = noise_blocks(power, width=width, mask=mask, min_width=min_width, relative=relative)
-    if not len(centres):
-        out = np.full(n, np.nan)
-        return (out, np.zeros(n)) if return_bins else out
     idx = np.arange(n)
-    out = np.interp(idx, centres, levels)
+    out = np.interp(idx, centres, levels) if len(centres) else np.full(n, np.nan)
     if return_bins:
-        return out, np.interp(idx, centres, counts)
+        return out, (np.interp(idx, centres, counts) if len(centres) else np.zeros(n))
     return out
 
 
 def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = None, min_width: int = 40,
                  relative: float = 0.3):
-    """The blocks of :func:`local_noise`: ``(centres, levels, counts)`` of every block with a
-    finite level (bin index of its centre, mean noise power, bins averaged).  ``local_noise`` is
-    their linear interpolation at every bin; evaluating it only where needed saves the work.
-    A single-precision spectrum is worked on in single precision."""
+    """The blocks of :func:`local_noise`: ``(centres, levels, counts)`` (bin index, mean noise power,
+    bins averaged) of every block with a finite level; float32 spectra in single precision."""
     p = np.asarray(power)
     if p.dtype != np.float32:
         p = p.astype(float, copy=False)
@@ -210,33 +173,27 @@ def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN (masked) blocks
         n_grow = int(np.searchsorted(edges, start))
-        for k in range(n_grow):
+        for k in [*range(n_grow), *range(n_grow + n_full, len(edges) - 1)]:  # the growing blocks, a last short one
             lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
             levels[k], counts[k] = lev[0], cnt[0]
         if n_full:
             stop = start + n_full * width
             rows = p[start:stop].reshape(n_full, width)
-            dirty = (mask[start:stop].reshape(n_full, width).any(axis=1) if mask is not None
-                     else np.zeros(n_full, bool))
+            mrows_all = mask[start:stop].reshape(n_full, width) if mask is not None else None
+            dirty = mrows_all.any(axis=1) if mask is not None else np.zeros(n_full, bool)
             lev = np.empty(n_full)
             cnt = np.empty(n_full)
-            mrows_all = mask[start:stop].reshape(n_full, width) if mask is not None else None
             # in groups of rows: the sorted copy and the temporaries stay small
             step = max(1, (1 << 18) // width)
             for i in range(0, n_full, step):
                 r_, d_ = rows[i:i + step], dirty[i:i + step]
                 lv, ct = lev[i:i + step], cnt[i:i + step]
-                if not d_.any():
-                    lv[:], ct[:] = block_levels(r_, masked=False)
-                    continue
                 c_ = ~d_
                 if c_.any():
                     lv[c_], ct[c_] = block_levels(r_[c_], masked=False)
-                lv[d_], ct[d_] = block_levels(np.where(mrows_all[i:i + step][d_], np.nan, r_[d_]))
+                if d_.any():
+                    lv[d_], ct[d_] = block_levels(np.where(mrows_all[i:i + step][d_], np.nan, r_[d_]))
             levels[n_grow:n_grow + n_full], counts[n_grow:n_grow + n_full] = lev, cnt
-        for k in range(n_grow + n_full, len(edges) - 1):
-            lev, cnt = block_levels(*piece(edges[k], edges[k + 1]))
-            levels[k], counts[k] = lev[0], cnt[0]
     good = np.isfinite(levels)
     return centres[good], levels[good], counts[good]
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sys
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 from ..errors import InputError
@@ -25,34 +26,19 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
             workers: int | str = "auto", **options) -> SpectrumResult:
     """Segment a recording and analyse every segment (``gearspec spectrum``).
 
-    Parameters
-    ----------
-    rec : Recording
-    gear : GearTrain, preset name or path, optional
-        Defaults to the recording's own gear spec.
-    segmentation : Segmentation, optional
-        Precomputed segments; otherwise :func:`~gearspec.segment.find_segments` runs with
-        ``window``, ``rel_tol``, ``min_speed`` and ``min_duration``.
-    inertia : bool
-        Subtract ``J * thetadd`` when the gear spec gives an inertia.
-    progress : bool, optional
-        Show a progress bar (default: when stderr is a terminal and there are many segments).
-    workers : int or "auto"
-        Segments analysed at once, in threads (numpy, the BLAS and the FFT release the GIL for
-        the bulk of the work).  The results are the same whatever the number.  ``"auto"``: two
-        on a machine with two or more CPUs when at least two segments are long (more than
-        ``LS_MAX_SAMPLES`` samples), else one.  Each segment in flight holds its own
-        temporaries, so two workers need about twice the memory of one.
-    **options
-        Passed to :func:`analyze_segment` (``max_frequency``, ``min_cycles``, ``harmonics``,
-        ``degree``, ``fap_threshold``, ``max_peaks``, ``oversample``, ``noise``, ``method``,
-        ``keep_spectra``).
+    ``gear``: a GearTrain, preset name or path (default the recording's own).  ``segmentation``:
+    precomputed segments, else :func:`~gearspec.segment.find_segments` runs with ``window``,
+    ``rel_tol``, ``min_speed`` and ``min_duration``.  ``inertia``: subtract ``J * thetadd`` when
+    the gear spec gives J.  ``progress``: a progress bar (default: when stderr is a terminal and
+    there are many segments).  ``workers``: segments analysed at once, in threads, with the same
+    results whatever the number; ``"auto"``: two on a machine with two or more CPUs when at least
+    two segments have more than ``LS_MAX_SAMPLES`` samples (each needs its own memory), else one.
+    ``options`` go to :func:`analyze_segment`.
     """
     gear = load_gear(gear) if gear is not None else rec.gear
     if gear is not None and gear.unit != rec.unit:
         raise InputError(f"gear spec '{gear.name}' is for theta in {gear.unit}, the recording's theta is in {rec.unit}")
-    # `is None`, not `or`: an empty Segmentation is falsy, and the user's segmentation (with its
-    # options) must be honoured -- refused below when it holds no segment -- never replaced
+    # `is None`, not `or`: an empty Segmentation is falsy, and is refused below, never replaced
     seg = segmentation if segmentation is not None else find_segments(
         rec, window=window, rel_tol=rel_tol, min_speed=min_speed, min_duration=min_duration)
     if len(seg) == 0:
@@ -83,23 +69,13 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
         finally:
             _local.in_pool = False
 
-    if n_workers > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=n_workers, thread_name_prefix="gearspec-segment") as pool:
-            it = pool.map(one_in_pool, seg.segments)
-            if progress:
-                from tqdm import tqdm
-
-                it = tqdm(it, total=len(seg), desc="segments", unit="seg", file=sys.stderr)
-            results = list(it)
-    else:
-        iterator = seg.segments
+    with ThreadPoolExecutor(max_workers=n_workers, thread_name_prefix="gearspec-segment") as pool:
+        it = pool.map(one_in_pool, seg.segments) if n_workers > 1 else map(one, seg.segments)
         if progress:
             from tqdm import tqdm
 
-            iterator = tqdm(iterator, desc="segments", unit="seg", file=sys.stderr)
-        results = [one(s) for s in iterator]
+            it = tqdm(it, total=len(seg), desc="segments", unit="seg", file=sys.stderr)
+        results = list(it)
     relabel_aliases(results, gear, unit=rec.unit)
     excluded = Counter(rec.excluded) + Counter(seg.excluded)
     return SpectrumResult(results, excluded, rec.n_read, rec.unit, gear, notes,
@@ -107,11 +83,9 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
 
 
 def relabel_aliases(segments: list[SegmentSpectrum], gear: GearTrain | None = None, unit: str = "rad") -> int:
-    """Label ``alias of <line>`` the unexplained peaks of a segment that sit where a line found
-    in *another* segment (measured there, below its position Nyquist frequency) aliases in this
-    one -- the same ripple seen at a slow speed and, above the Nyquist frequency, at a fast one
-    (:func:`gearspec.gears.alias_of`, the rule the per-segment labels use).  Changes the peaks in
-    place; returns how many were relabelled."""
+    """Label ``alias of <line>`` the unexplained peaks of a segment that sit where a line measured
+    in *another* segment aliases in this one (:func:`gearspec.gears.alias_of`).  Changes the peaks
+    in place; returns how many were relabelled."""
     known: list[tuple[float, str]] = []
     for s in segments:
         for p in s.peaks:

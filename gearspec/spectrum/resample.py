@@ -10,31 +10,14 @@ __all__ = ["resample_over_position", "resample_uniform", "grid_size"]
 
 def resample_over_position(theta: np.ndarray, y: np.ndarray, spacing: float | None = None,
                            max_frequency: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Resample ``y(theta)`` onto a uniform position grid.
+    """Resample ``y(theta)`` (positions in rad or m, any order, may move backwards) onto a uniform
+    position grid: ``(grid, values)``, the grid ascending.
 
-    Samples are first averaged per grid cell (mean position and mean value of the samples in each
-    cell), then the cell means are interpolated linearly onto the cell centres.  Where samples are
-    denser than the grid (a drive that sticks, a slow stretch) the cell average is a boxcar
-    anti-aliasing filter; where they are sparser it is plain linear interpolation.  Samples need
-    not be sorted and may move backwards (encoder jitter at standstill).
-
-    Parameters
-    ----------
-    theta, y : ndarray
-        Positions (rad or m) and values.
-    spacing : float, optional
-        Grid spacing in units of theta.  Default: travel / number of samples, i.e. as many grid
-        points as samples.
-    max_frequency : float, optional
-        Highest frequency (cycles per unit) needed.  When the grid resolves far more, it is
-        decimated by an integer factor with ``scipy.signal.resample_poly`` (a Kaiser-windowed FIR
-        anti-aliasing filter, flat to about 0.1 % in its passband), keeping Nyquist at least
-        2.5 x ``max_frequency``.
-
-    Returns
-    -------
-    grid, values : ndarray
-        Uniform positions (ascending) and resampled values.
+    Samples are averaged per grid cell (a boxcar anti-aliasing filter where they are denser than
+    the grid), and the cell means interpolated linearly onto the cell centres.  ``spacing``:
+    default travel / (samples - 1), as many grid points as samples.  ``max_frequency`` (cycles per
+    unit): when the grid resolves far more, it is decimated by an integer factor with
+    ``scipy.signal.resample_poly`` (Kaiser FIR), keeping Nyquist at least 2.5 x ``max_frequency``.
     """
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -58,15 +41,10 @@ def grid_size(n: int, lo: float, hi: float, spacing: float | None = None) -> tup
 def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = None, lo: float | None = None,
                      hi: float | None = None, chunk: int = 1 << 16, out: np.ndarray | None = None,
                      shift: float = 0.0) -> tuple[float, float, np.ndarray]:
-    """The cell averaging and interpolation of :func:`resample_over_position` (no decimation),
-    returned as ``(first grid position, spacing, values)`` without the grid itself; ``lo`` and
-    ``hi`` (the extremes of theta) may be given when known.  Temporaries are freed as soon as
-    they are used and the grid is made in chunks: the peak memory is about four arrays of the
-    samples' length (none for one sample per cell).
-
-    With ``out`` (e.g. a float32 buffer at least as long as the grid, see :func:`grid_size`) the
-    values minus ``shift`` are written there, chunk by chunk, in double precision until they are
-    stored; ``values`` is then the filled part of ``out``."""
+    """The cell averaging and interpolation of :func:`resample_over_position` (no decimation):
+    ``(first grid position, spacing, values)``; ``lo`` and ``hi`` (theta's extremes) when known.
+    The grid is made in chunks (peak memory about four arrays of the samples).  With ``out``
+    (e.g. a float32 buffer, :func:`grid_size`) the values minus ``shift`` are written there."""
     theta = np.asarray(theta, dtype=float)
     y = np.asarray(y, dtype=float)
     n = len(theta)
@@ -89,10 +67,8 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
         # the common case of steady motion: one sample per cell, in order (every sample within
         # 0.49 cells of its grid point); the cell averages are then the samples themselves, and
         # the bincounts below would return them unchanged
-        inc = theta[-1] >= theta[0]
-        th, yy = (theta, y) if inc else (theta[::-1], y[::-1])
+        th, yy = (theta, y) if theta[-1] >= theta[0] else (theta[::-1], y[::-1])
         dev = np.empty(min(n, chunk))
-        ok = True
         for i in range(0, n, chunk):
             j = min(n, i + chunk)
             d = dev[: j - i]
@@ -100,13 +76,11 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
             d += lo
             np.subtract(th[i:j], d, out=d)
             if not np.all(np.abs(d, out=d) < 0.49 * h):
-                ok = False
                 break
-        if ok:
+        else:
             # grid point k lies between samples k - 1 and k + 1: each chunk of the grid needs only
-            # its own stretch of samples (np.interp copies its inputs when they are read-only, as
-            # a recording's columns are: whole arrays per chunk would cost far more than the
-            # interpolation)
+            # its own stretch of samples (np.interp copies read-only inputs, as a recording's
+            # columns are: whole arrays per chunk would cost far more than the interpolation)
             for i in range(0, m, chunk):
                 j = min(m, i + chunk)
                 a, b = max(0, i - 1), min(n, j + 1)
@@ -123,13 +97,8 @@ def resample_uniform(theta: np.ndarray, y: np.ndarray, spacing: float | None = N
     ys = np.bincount(cell, weights=y, minlength=m)
     del cell
     filled = counts > 0
-    if filled.all():
-        xs /= counts
-        ys /= counts
-    else:
-        cnt = counts[filled]
-        xs = xs[filled] / cnt
-        ys = ys[filled] / cnt
+    xs = xs[filled] / counts[filled]
+    ys = ys[filled] / counts[filled]
     del counts, filled
     for i in range(0, m, chunk):
         j = min(m, i + chunk)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,11 +41,7 @@ class Peak:
     aliased_from: dict | None = None  # a peak labelled 'alias of X': X's label, frequency and order
 
     def to_dict(self) -> dict:
-        return {"frequency": self.frequency, "amplitude": self.amplitude, "amplitude_se": self.amplitude_se,
-                "phase": self.phase, "phase_se": self.phase_se, "fap": self.fap, "order": self.order,
-                "label": self.label, "declared": self.declared, "snr": self.snr, "hint": self.hint,
-                "frequency_se": self.frequency_se, "frequency_exact": self.frequency_exact,
-                "order_exact": self.order_exact, "aliased_from": self.aliased_from}
+        return asdict(self)
 
 
 @dataclass
@@ -79,10 +75,8 @@ class SegmentSpectrum:
 
     def peak(self, label: str) -> Peak | None:
         """The peak labelled ``label`` (or with ``label`` among its ' = '-joined names), or None."""
-        for p in self.peaks:
-            if p.label is not None and (p.label == label or label in p.label.split(" = ")):
-                return p
-        return None
+        return next((p for p in self.peaks
+                     if p.label is not None and (p.label == label or label in p.label.split(" = "))), None)
 
     def to_dict(self) -> dict:
         s = self.segment
@@ -122,23 +116,15 @@ class SpectrumResult:
 
     def peaks_table(self) -> pd.DataFrame:
         """One row per (segment, peak)."""
-        rows = []
-        for i, s in enumerate(self.segments):
-            for p in s.peaks:
-                rows.append({"segment": i, "run": s.segment.run, "direction": s.direction, "speed": s.speed,
-                             "level": s.level, **p.to_dict()})
-        return pd.DataFrame(rows)
+        return pd.DataFrame([{"segment": i, "run": s.segment.run, "direction": s.direction, "speed": s.speed,
+                              "level": s.level, **p.to_dict()} for i, s in enumerate(self.segments) for p in s.peaks])
 
     def amplitude_vs_speed(self, label: str) -> pd.DataFrame:
         """Amplitude of the peak labelled ``label`` in every segment where it was fitted."""
-        rows = []
-        for i, s in enumerate(self.segments):
-            p = s.peak(label)
-            if p is not None:
-                rows.append({"segment": i, "direction": s.direction, "speed": s.speed, "level": s.level,
-                             "amplitude": p.amplitude, "amplitude_se": p.amplitude_se, "phase": p.phase,
-                             "frequency": p.frequency})
-        return pd.DataFrame(rows)
+        return pd.DataFrame([{"segment": i, "direction": s.direction, "speed": s.speed, "level": s.level,
+                              "amplitude": p.amplitude, "amplitude_se": p.amplitude_se, "phase": p.phase,
+                              "frequency": p.frequency}
+                             for i, s in enumerate(self.segments) if (p := s.peak(label)) is not None])
 
     def unexplained(self, max_fap: float = 0.01) -> pd.DataFrame:
         """Peaks found that no declared line, harmonic or sideband explains."""

@@ -1,22 +1,14 @@
-"""The search for peaks no declared line explains, in the residual power spectrum of one segment:
-its uniform frequency grid (:class:`_Grid`), its local noise level (:class:`_LocalNoise`), the
-residual's Hann spectrum over position with fitted lines taken out in closed form
-(:func:`_fft_residual_power`, :class:`_FFTResidual`), the candidates (:func:`_search`) and the joint
-fit's significance test (:func:`_significant`).  Internal to :func:`~gearspec.spectrum.analyze_segment`."""
+"""The search for peaks no declared line explains in the residual power spectrum of one segment
+(internal to :func:`~gearspec.spectrum.analyze_segment`)."""
 
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
-from .fft import (
-    hann_fft_length,
-    hann_sinusoid_dft,
-    hann_spectrum32,
-    hann_spectrum32_buffer,
-    legendre_constant,
-)
+from .fft import hann_fft_length, hann_sinusoid_dft, hann_spectrum32_buffer, legendre_constant
 from .harmonic import HarmonicFit, NormalEquations
 from .periodogram import false_alarm_probability, noise_blocks
 from .resample import grid_size, resample_uniform
@@ -24,12 +16,10 @@ from .resample import grid_size, resample_uniform
 
 def _search(power, grid: "_Grid", noise_model: "_LocalNoise", declared_f, taken, span, guard, f_found_min,
             fap_threshold, m_eff, oversample, room) -> list[float]:
-    """Peaks of a residual power spectrum that nothing fitted explains, strongest first: local
-    maxima whose false-alarm probability (local noise, F-distributed for an estimated level,
-    ``m_eff`` independent frequencies searched) is below ``fap_threshold``; none within 1.5
-    resolution steps of a declared line (the two could not be told apart), within ``guard`` of a
-    line in ``taken`` (found or rejected before) or of a stronger new one, or below
-    ``f_found_min`` (where the nuisance polynomial could mimic it).  At most ``room``."""
+    """At most ``room`` peaks nothing fitted explains, strongest first: local maxima whose
+    false-alarm probability (``m_eff`` frequencies searched) is below ``fap_threshold``; none within
+    1.5 resolution steps of a declared line (not told apart), within ``guard`` of a line in
+    ``taken`` or of a stronger new one, or below ``f_found_min`` (the nuisance could mimic it)."""
     nbin = len(power)
     is_max = np.zeros(nbin, bool)
     np.greater(power[1:-1], power[:-2], out=is_max[1:-1])
@@ -41,9 +31,8 @@ def _search(power, grid: "_Grid", noise_model: "_LocalNoise", declared_f, taken,
     is_max[:grid.first_at_least(f_found_min)] = False
     cand = np.flatnonzero(is_max)
     del is_max
-    # a candidate needs at least the power that a known noise level (the lightest tail) would
-    # call significant; only those get the exact (F-distributed) false-alarm probability.  The
-    # lowest noise level anywhere screens out most of them without evaluating the level.
+    # screened first by the power a known noise level (the lightest tail) would call significant,
+    # against the lowest level anywhere; only those left get the exact (F) false-alarm probability
     z_floor = _z_floor(fap_threshold, m_eff)
     floor = noise_model.lowest()
     if floor > 0:
@@ -87,9 +76,8 @@ def _significant(eq: NormalEquations, keep, noise_model: "_LocalNoise", grid: "_
 
 
 def _z_floor(fap_threshold: float, m_eff: float) -> float:
-    """The least power ratio z whose false-alarm probability can be below ``fap_threshold``:
-    that of an exactly known noise level (``exp(-z)`` per frequency), whose tail is the lightest
-    of the F-family; a little below, for rounding."""
+    """The least power ratio z whose false-alarm probability can be below ``fap_threshold`` (a known
+    noise level, ``exp(-z)``, has the lightest tail of the F-family), a little below for rounding."""
     single = -math.expm1(math.log1p(-min(max(fap_threshold, 1e-300), 1.0)) / max(1.0, m_eff))
     if single <= 0:
         return math.inf
@@ -97,18 +85,14 @@ def _z_floor(fap_threshold: float, m_eff: float) -> float:
 
 
 class _Grid:
-    """The frequencies of a uniform periodogram grid, ``f(i) = base + df (k0 + i)``, computed
-    exactly as the array ``base + df * arange(k0, k0 + n)`` would hold them, but only where
+    """The frequencies ``base + df (k0 + i)`` of a uniform periodogram grid, computed only where
     needed."""
 
     def __init__(self, base: float, df: float, k0: int, n: int):
         self.base, self.df, self.k0, self.n = float(base), float(df), int(k0), int(n)
 
     def at(self, i):
-        i = np.asarray(i)
-        if self.base == 0.0:
-            return self.df * (self.k0 + i)
-        return self.base + self.df * (self.k0 + i)
+        return self.base + self.df * (self.k0 + np.asarray(i))
 
     def frequencies(self) -> np.ndarray:
         return self.at(np.arange(self.n))
@@ -120,8 +104,6 @@ class _Grid:
         """Bins with ``|f - f0| < width`` (a contiguous range)."""
         a = max(0, self._index_near(f0 - width) - 2)
         b = min(self.n, self._index_near(f0 + width) + 3)
-        if b <= a:
-            return slice(0, 0)
         idx = np.arange(a, b)
         hit = idx[np.abs(self.at(idx) - f0) < width]
         return slice(int(hit[0]), int(hit[-1]) + 1) if len(hit) else slice(0, 0)
@@ -146,32 +128,26 @@ class _Grid:
 
 
 class _LocalNoise:
-    """:func:`~gearspec.spectrum.periodogram.local_noise` of a power spectrum, evaluated only at
-    the bins asked for (the same values: linear interpolation between block levels, and the
-    median power wherever the level is missing or not positive); ``bins`` is the number of
-    bins averaged, over the window's equivalent noise bandwidth."""
+    """:func:`~gearspec.spectrum.periodogram.local_noise` evaluated only at the bins asked for (the
+    median power where the level is missing or not positive); ``bins``: bins averaged over the
+    window's equivalent noise bandwidth."""
 
     def __init__(self, power, width, min_width, mask, enbw):
         self.power = power
         self.centres, self.levels, self.counts = noise_blocks(power, width=width, min_width=min_width, mask=mask)
         self.enbw = enbw
-        self._fallback = None
 
+    @cached_property
     def fallback(self) -> float:
-        if self._fallback is None:
-            p = self.power
-            self._fallback = float(np.nanmedian(p)) if np.any(np.isfinite(p)) else 1.0
-        return self._fallback
+        p = self.power
+        return float(np.nanmedian(p)) if np.any(np.isfinite(p)) else 1.0
 
     def level(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
-        if len(self.centres):
-            v = np.interp(idx, self.centres, self.levels)
-        else:
-            v = np.full(idx.shape, np.nan)
+        v = np.interp(idx, self.centres, self.levels) if len(self.centres) else np.full(idx.shape, np.nan)
         bad = ~(np.isfinite(v) & (v > 0))
         if bad.any():
-            v[bad] = self.fallback()
+            v[bad] = self.fallback
         return v
 
     def lowest(self) -> float:
@@ -182,53 +158,32 @@ class _LocalNoise:
 
     def bins(self, idx) -> np.ndarray:
         idx = np.asarray(idx)
-        if len(self.centres):
-            return np.interp(idx, self.centres, self.counts) / self.enbw
-        return np.zeros(idx.shape) / self.enbw
+        return (np.interp(idx, self.centres, self.counts) if len(self.centres) else np.zeros(idx.shape)) / self.enbw
 
 
 def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: float, keep_into=None,
                         lo: float | None = None, hi: float | None = None, keep_residual: bool = False):
-    """Power of the residual of ``fit0`` from one Hann-windowed FFT of the signal resampled over
-    position: the nuisance polynomial is subtracted on the grid, the fitted lines in closed form
-    near their bins (:func:`~gearspec.spectrum.fft.hann_sinusoid_dft`; beyond +-40 bins the
-    window's leakage is below 1e-7).  Scaled so that a sinusoid of amplitude A has power
-    n A^2 / 4; white noise then has power ``enbw * sigma^2``.
-
-    The resampled signal, once the nuisance is off, is windowed and transformed in single
-    precision (:func:`~gearspec.spectrum.fft.hann_spectrum32`): its rounding (~1e-7 of the
-    signal) is far below any noise floor the search could use, and it halves the FFT's time and
-    memory.
-
-    With ``keep_into`` (a SegmentSpectrum) the calibrated amplitude spectrum of the signal (line
-    included, nuisance removed) is stored there for the figures.
-
-    Returns ``(k_lo, k_hi, df, power, enbw, residual)``: ``residual`` (with ``keep_residual``,
-    else None) is a :class:`_FFTResidual` that gives the power of the residual of another fit
-    (more lines) without another transform.
+    """Power of the residual of ``fit0`` from one single-precision Hann FFT of the signal resampled
+    over position: the nuisance subtracted on the grid, the fitted lines in closed form within +-40
+    bins (leakage beyond below 1e-7).  A sinusoid of amplitude A has power n A^2 / 4, white noise
+    ``enbw * sigma^2``.  ``keep_into`` (a SegmentSpectrum) gets the signal's amplitude spectrum for
+    the figures.  Returns ``(k_lo, k_hi, df, power, enbw, residual)``, ``residual`` (with
+    ``keep_residual``) a :class:`_FFTResidual` for the power of another fit's residual.
     """
     n = len(theta)
     if lo is None:
         lo, hi = float(np.min(theta)), float(np.max(theta))
     h, m = grid_size(n, lo, hi)
     g0 = lo
-    # x of the nuisance's Legendre series on the grid: x_k = a + b k
-    if fit0.hi > fit0.lo:
-        b = 2.0 * h / (fit0.hi - fit0.lo)
-        a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
-    else:
-        a = b = 0.0
-    if m < 4:  # degenerate: the general function
-        _, _, vals = resample_uniform(theta, y, lo=lo, hi=hi)
-        spec, df, wsum, enbw = hann_spectrum32(vals, h, pad=oversample, legendre=(fit0.nuisance, a, b))
-    else:
-        # resampled straight into the transform's float32 buffer, the nuisance's constant part
-        # taken off first in double precision: no double-precision copy of the grid
-        buf = np.empty(m, np.float32)  # the transform pads it (in its own work buffer)
-        resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
-        spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b,
-                                                      nfft=hann_fft_length(m, oversample))
-        del buf
+    # x of the nuisance's Legendre series on the grid: x_k = a + b k (fit0 spans theta: hi > lo)
+    b = 2.0 * h / (fit0.hi - fit0.lo)
+    a = 2.0 * (g0 - fit0.lo) / (fit0.hi - fit0.lo) - 1.0
+    # resampled straight into the float32 buffer (the transform pads it), the nuisance's constant
+    # part taken off first in double precision (a segment has 16 samples or more: m >= 15)
+    buf = np.empty(m, np.float32)
+    resample_uniform(theta, y, lo=lo, hi=hi, out=buf, shift=legendre_constant(fit0.nuisance, a))
+    spec, df, wsum, enbw = hann_spectrum32_buffer(buf, m, h, fit0.nuisance, a, b, nfft=hann_fft_length(m, oversample))
+    del buf
     nfft = 2 * (len(spec) - 1) if len(spec) > 1 else 1
     if keep_into is not None:
         keep_into.fft_frequency = (df * np.arange(len(spec))).astype(np.float32)
@@ -249,11 +204,9 @@ def _fft_residual_power(theta, y, fit0: HarmonicFit, oversample: float, f_max: f
 
 
 class _FFTResidual:
-    """The complex residual spectrum of :func:`_fft_residual_power` (a view of its bins k_lo..k_hi),
-    kept to give the power of the residual of a fit with more lines: the bins within +-40 of
-    every line of either fit are recomputed in closed form (the first fit's lines put back, the
-    new fit's taken out, as the first were), the rest copied.  The change of the nuisance
-    polynomial between the two fits is left in (it is slow: it touches the lowest bins only)."""
+    """The complex residual spectrum of :func:`_fft_residual_power` (bins k_lo..k_hi), for the power
+    of the residual of a fit with more lines: bins within +-40 of any line of either fit are
+    recomputed in closed form, the rest copied; the nuisance's change is left in (lowest bins)."""
 
     _HALF = 40  # bins either side of a line (the Hann window's leakage beyond is below 1e-7)
 
