@@ -1,31 +1,15 @@
 """FrictionModel: a friction law with per-direction parameters, position-locked harmonics and
 extra terms; evaluated, serialised, printed like the papers' tables, and scored on data.
 
-A model is
-
     tau(theta, v, ...) = sign(v) * [ base_i(|v|, load) + sum_k H_k,i(theta, |v|, load) + magnitude terms ]
                          + signed terms (inertia, offset)
 
-with ``i`` the direction of motion (``positive`` for v > 0, ``negative`` for v < 0), ``base`` one of
-the laws of :mod:`gearspec.laws` (:data:`LAWS`), ``H_k`` a position-locked sinusoid with a speed-
-dependent amplitude (SILO4 eqs. 6, 8, 14) and the extra terms of :mod:`gearspec.terms` (what the
-closed loop adds).  The friction torque has the sign of the velocity (``CONTRACTS.md``); at
-``v = 0`` the model gives only its signed terms.
-
-Serialised (``to_dict``/``to_json``) in the form of ``gearspec fit --json`` (``CONTRACTS.md`` section
-4): ``{"law", "directions": {"positive": P, "negative": P}, "rmse", "rmse_holdout", "terms", ...}``,
-every value ``x`` with its standard error ``x_se`` (NaN/None where unknown), harmonics as
-``{"frequency", "amplitude", "decay", "phase", "speed_range", ...}`` with ``decay`` in s/rad and
-``speed_range`` the ``[min, max]`` of |v| the amplitude law was fitted on.  A model read back
-evaluates identically.
-
-No extrapolation: a harmonic's amplitude law is evaluated only within its ``speed_range``;
-outside it the amplitude is held at the range's edge (the law at the nearest measured speed).
-A harmonic without ``speed_range`` (JSON written before speed_range existed, or a hand-written model)
-is evaluated as written at every speed (no clamp).
-
-Parameters that the data could not identify are ``None`` (never invented) and listed in
-``not_identified`` with the reason; evaluating a model with a missing parameter raises an error
+with ``i`` the direction of motion, ``base`` a law of :data:`LAWS`, ``H_k`` a position-locked
+sinusoid with a speed-dependent amplitude (SILO4 eqs. 6, 8, 14) and the extra terms of
+:mod:`gearspec.terms`.  At ``v = 0`` the model gives only its signed terms.  The JSON form
+(``to_dict``, ``gearspec fit --json``) is CONTRACTS.md section 4; a model read back evaluates
+identically.  Parameters the data could not identify are ``None`` (never invented), with the
+reason in ``not_identified``; evaluating a direction with a missing parameter raises an error
 that names it.
 """
 
@@ -59,9 +43,8 @@ Law = BaseLaw
 #: base laws by name (the registry's own objects); ``silo4`` is eq. 3 plus the harmonics of eq. 11
 LAWS: dict[str, Law] = BASE_LAWS
 
+#: the keys every harmonic has
 HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
-
-
 _ABSENT = object()
 
 
@@ -113,7 +96,7 @@ class Harmonic(_JsonView):
             raise InputError(f"a harmonic of the model lacks {', '.join(missing)}")
         out = cls(h["frequency"], h["amplitude"], h.get("decay", 0.0), h.get("phase", 0.0))
         for k, val in h.items():
-            if k in ("frequency", "amplitude", "decay", "phase"):
+            if k in HARMONIC_KEYS:
                 continue
             if k.endswith("_se"):
                 out.se[k[:-3]] = val
@@ -132,9 +115,7 @@ class Harmonic(_JsonView):
         return {"kind": "periodic", **self.to_dict()}
 
     def __getitem__(self, key):
-        if key in ("frequency", "amplitude", "decay", "phase"):
-            return getattr(self, key)
-        if key in self._OPTIONAL and getattr(self, key) is not None:
+        if key in HARMONIC_KEYS or (key in self._OPTIONAL and getattr(self, key) is not None):
             return getattr(self, key)
         if key.endswith("_se") and key[:-3] in self.se:
             return self.se[key[:-3]]
@@ -142,12 +123,8 @@ class Harmonic(_JsonView):
 
     def to_dict(self) -> dict:
         out = {}
-        for k in ("frequency", "amplitude", "decay", "phase"):
-            out[k] = getattr(self, k)
-            if k in self.se:
-                out[k + "_se"] = self.se[k]
-        for k in self._OPTIONAL:
-            if getattr(self, k) is not None:
+        for k in HARMONIC_KEYS + self._OPTIONAL:
+            if k in HARMONIC_KEYS or getattr(self, k) is not None:
                 out[k] = list(self.speed_range) if k == "speed_range" else getattr(self, k)
             if k in self.se:
                 out[k + "_se"] = self.se[k]
@@ -208,9 +185,7 @@ class Direction(_JsonView):
     def __getitem__(self, key):
         if key in self.values:
             return self.values[key]
-        if key == "harmonics":
-            return self.harmonics
-        if key in self._COUNTS and getattr(self, key) is not None:
+        if key == "harmonics" or (key in self._COUNTS and getattr(self, key) is not None):
             return getattr(self, key)
         if key.endswith("_se") and key[:-3] in self.se:
             return self.se[key[:-3]]
@@ -238,14 +213,9 @@ class FrictionModel:
     law : str
         Base law, a key of :data:`LAWS`.
     positive, negative : mapping
-        Parameters of the base law for each direction (``x`` and optionally ``x_se``), and
-        ``harmonics``: a list of mappings with ``frequency`` (cycles per unit of theta),
-        ``amplitude`` (Nm), ``decay`` (s/rad, default 0), ``phase`` (rad, default 0) and optionally
-        ``label``, ``law`` (amplitude law: exp (default), const, rational, power),
-        ``load_coefficient`` (SILO4 eq. 14), ``speed_range`` (``[min, max]`` of |v| the amplitude
-        law was fitted on; the amplitude is held at the edge outside it; absent: no clamp) and the
-        ``_se`` of each.  ``negative`` defaults to a
-        copy of ``positive`` (a symmetric model).
+        Parameters of the base law for each direction (``x`` and optionally ``x_se``) and
+        ``harmonics`` (:class:`Harmonic` or its JSON form), as a :class:`Direction` or its JSON
+        form.  ``negative`` defaults to a copy of ``positive`` (a symmetric model).
     terms : iterable of dict
         Extra terms (:mod:`gearspec.terms`).
     unit : {"rad", "m"}
@@ -312,14 +282,6 @@ class FrictionModel:
         m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
         return m
 
-    def with_harmonic(self, harmonic: Mapping, direction=None) -> "FrictionModel":
-        """A copy with a harmonic added in one direction (or in both)."""
-        m = self.copy()
-        for d in ((_dir_name(direction),) if direction is not None else DIRECTIONS):
-            m.directions[d].harmonics.append(Harmonic.of(harmonic))
-        m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
-        return m
-
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None) -> np.ndarray:
         """Torque the drive supplies according to the model, at each sample.
@@ -329,10 +291,9 @@ class FrictionModel:
         broadcast): ``theta`` (rad or m; needed by harmonics), ``v`` (rad/s or m/s), ``load``
         (Nm at the output), ``temperature`` (degC), ``t`` (s), ``acc`` (rad/s^2) and ``run``.
 
-        A harmonic whose amplitude law carries a ``speed_range`` ``[min, max]`` is evaluated with
-        ``|v|`` held within it: below ``min`` (e.g. at standstill) and above ``max`` the amplitude
-        is the law's value at that edge, never an extrapolation of the law past the speeds it was
-        fitted on.  Harmonics without ``speed_range`` are not clamped.
+        No extrapolation: a harmonic with a ``speed_range`` ``[min, max]`` is evaluated with ``|v|``
+        held within it (below ``min``, e.g. at standstill, and above ``max`` the amplitude is the
+        law's value at that edge); a harmonic without one is not clamped.
         """
         if v is None:
             raise InputError("the model needs the velocity v")
@@ -407,7 +368,6 @@ class FrictionModel:
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict:
         """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready."""
-
         return plain({"law": self.law, "name": self.name, "unit": self.unit,
                       "directions": {d: p.to_dict() for d, p in self.directions.items()}, "terms": self.terms,
                       "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
@@ -522,12 +482,9 @@ def _fmt(x):
 
 
 def _dir_name(direction) -> str:
-    if direction in ("positive", "negative"):
-        return direction
-    if direction in (1, 1.0, "+", "+1"):
-        return "positive"
-    if direction in (-1, -1.0, "-", "-1"):
-        return "negative"
+    for name, aliases in (("positive", (1, "+", "+1")), ("negative", (-1, "-", "-1"))):
+        if direction == name or direction in aliases:
+            return name
     raise InputError(f"direction must be 'positive'/'negative' or +1/-1, got {direction!r}")
 
 

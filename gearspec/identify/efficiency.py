@@ -32,9 +32,6 @@ def efficiency_model(model: FrictionModel, v, load, ratio: float) -> np.ndarray:
     return laws.efficiency_from_friction(tau, load, ratio)
 
 
-_EFF_LAWS = ("lola8", "lola11")
-
-
 def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: FrictionModel | None = None,
                    holdout: str | None = None, folds: int = 5, name: str | None = None,
                    gamma_free: bool = True) -> FrictionModel:
@@ -45,7 +42,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
     and ``load`` the output torque (e.g. ``FitData.from_points(v, eta, load=T_l)``).  The RMS of the
     efficiency residual is ``rmse`` (what the paper's Tables III-V call RMS).  Symmetric model.
     """
-    if law not in _EFF_LAWS:
+    if law not in ("lola8", "lola11"):
         raise InputError(f"efficiency fits take law lola8 or lola11, got '{law}'")
     if data.load is None:
         raise InputError("an efficiency fit needs the output load torque ('load')")
@@ -145,5 +142,3 @@ def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_e
                                             out.loc[ok, "load"].to_numpy(), ratio)
     out["used"] = out.index.isin(t.index)
     return m, out
-
-

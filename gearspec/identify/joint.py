@@ -1,26 +1,20 @@
 """The joint fit: weighted nonlinear least squares of all parameters of a direction together, on
 the samples themselves (amplitudes fitted in the position domain, not through logs of noisy
 amplitudes), with standard errors from the covariance (or a bootstrap over segments); as an
-estimator in the scikit-learn manner (:class:`JointFit`) and as a function (:func:`fit`).
+estimator (:class:`JointFit`) and as a function (:func:`fit`).
 
 How it works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
-coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the friction level, and
-``A_k g_k(|v_s|)`` times ``cos phi_k``, ``sin phi_k`` of every harmonic), so the residual sum of
-squares of the segment is exactly ``(beta_s - beta_hat_s)^T G_s (beta_s - beta_hat_s) + const``
-with ``G_s = X_s^T X_s`` and ``beta_hat_s`` the segment's own least-squares coefficients (X_s: the
-columns 1, sin, cos at the samples' positions; :class:`~.stats.SegmentStats`).  One pass over the
-samples gives every ``G_s`` and ``beta_hat_s``; the fit then works on a few numbers per segment --
-exact, and independent of the number of samples.  Each segment is weighted by the inverse of its
-own residual variance (pure error: the variance left after its unrestricted local fit).  The law's
-linear parameters are solved in closed form for given nonlinear ones (variable projection:
-Stribeck velocity, decay constants), the nonlinear ones by ``scipy.optimize.least_squares`` from
-the registry's grid start (:mod:`gearspec.terms.registry`), and a last joint Gauss-Newton pass over
-all parameters gives the covariance.  This needs the velocity constant within a segment: the laws
-are evaluated at each segment's mean velocity (``FitData`` with ``velocity="segment"``), and a
-load-dependent law at the segment's mean load.
-
-Lola/CROPS: :func:`fit` with ``law="lola8"``/``"lola11"`` fits friction points (from
-:meth:`FitData.from_points` or the load-holding segments of a recording).
+coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the level, and ``A_k g_k(|v_s|)``
+times ``cos phi_k``, ``sin phi_k`` of every harmonic), so the segment's residual sum of squares is
+exactly ``(beta_s - beta_hat_s)^T G_s (beta_s - beta_hat_s) + const`` with ``G_s = X_s^T X_s`` and
+``beta_hat_s`` its own least-squares coefficients (:class:`~.stats.SegmentStats`): the fit works on
+a few numbers per segment, exact and independent of the number of samples.  Each segment is
+weighted by the inverse of its pure-error variance.  The law's linear parameters are solved in
+closed form for given nonlinear ones (variable projection), the nonlinear ones (Stribeck velocity,
+decays) by ``scipy.optimize.least_squares`` from the registry's grid start, and a last joint pass
+over all parameters gives the covariance.  The laws are evaluated at each segment's mean velocity
+(``FitData`` with ``velocity="segment"``) and mean load.  Lola/CROPS laws (``lola8``/``lola11``)
+fit friction points (:meth:`FitData.from_points` or load-holding segments).
 """
 
 from __future__ import annotations
@@ -105,9 +99,6 @@ class _Problem:
         beta = np.einsum("spl,l->sp", M, lin)
         return np.einsum("spq,sq->sp", self.Lt, beta - self.stats.beta_hat).ravel()
 
-    def rss_const(self):
-        return float(np.sum(self.weights * self.stats.rss_hat))
-
 
 def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
     basis = _basis(law)
@@ -173,7 +164,6 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         starts = [[] if grid_vs[int(np.argmin(costs))] is None else [float(grid_vs[int(np.argmin(costs))])]]
     # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
     sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
-    x0 = np.concatenate([np.log(starts[0]) if nb_nl else [], dec0[free] / sscale])
 
     def unpack(x):
         nl = list(np.exp(x[:nb_nl])) if nb_nl else []
@@ -185,7 +175,7 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         nl, dec = unpack(x)
         return prob.solve_linear(nl, dec)[1]
 
-    if len(x0):
+    if nb_nl or len(free):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             lb = np.concatenate([[vs_bounds[0]] * nb_nl, np.full(len(free), -np.inf)])
@@ -198,33 +188,27 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
                     res = r_
         if not np.all(np.isfinite(res.x)):
             raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
-        x_opt = res.x
-        status = res.status
+        x_opt, status = res.x, res.status
     else:
-        x_opt = x0
-        status = 1
+        x_opt, status = np.zeros(0), 1
     nl, dec = unpack(x_opt)
     lin, _ = prob.solve_linear(nl, dec)
     # joint pass over all parameters: covariance from the Jacobian at the optimum
     nb = len(prob.basis.lin)
 
     def full(z):
-        lin_ = z[:len(lin)]
-        x = z[len(lin):]
-        nl_, dec_ = unpack(x)
-        return prob.residual_full(lin_, nl_, dec_)
+        return prob.residual_full(z[:len(lin)], *unpack(z[len(lin):]))
 
     z = np.concatenate([lin, x_opt])
     r = full(z)
     J = _jacobian(full, z)
-    rss = float(r @ r) + prob.rss_const()
+    rss = float(r @ r) + float(np.sum(prob.weights * st.rss_hat))
     N = int(np.sum(st.n))
     p = len(z)
     dof = max(N - p, 1)
     s2 = rss / dof
-    JtJ = J.T @ J
     try:
-        cov = np.linalg.inv(JtJ) * s2
+        cov = np.linalg.inv(J.T @ J) * s2
         ok = np.all(np.isfinite(cov))
     except np.linalg.LinAlgError:
         cov = np.full((p, p), np.nan)
@@ -462,8 +446,6 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
             ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h.phase)))
             h.se["phase"] = float(np.sqrt(np.mean(ph ** 2)))
     P.se_method = f"bootstrap over segments ({B} resamples)"
-
-
 
 
 # ---------------------------------------------------------------------- the estimator

@@ -28,6 +28,9 @@ from .validate import _safe_rmse
 
 __all__ = ["silo4_published", "line_amplitudes", "amplitudes_from_spectrum"]
 
+#: the columns of a table of per-segment line amplitudes
+_AMP_COLUMNS = ["segment", "direction", "speed", "label", "frequency", "amplitude", "amplitude_se", "phase"]
+
 
 def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.DataFrame:
     """Amplitude, phase and standard error of each line in each segment where it completes
@@ -56,8 +59,7 @@ def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.
                              "label": h.get("label"), "frequency": h["frequency"], "amplitude": math.hypot(a_, c_),
                              "amplitude_se": pair_se(a_, c_, cov[np.ix_([ia, ic], [ia, ic])])[0],
                              "phase": math.atan2(c_, a_)})
-    return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
-                                       "amplitude_se", "phase"])
+    return pd.DataFrame(rows, columns=_AMP_COLUMNS)
 
 
 def amplitudes_from_spectrum(spectrum, data: FitData, harmonics=None) -> pd.DataFrame:
@@ -75,8 +77,7 @@ def amplitudes_from_spectrum(spectrum, data: FitData, harmonics=None) -> pd.Data
                 rows.append({"segment": sid, "direction": s.direction, "speed": s.speed, "label": h["label"],
                              "frequency": h["frequency"], "amplitude": p.amplitude, "amplitude_se": p.amplitude_se,
                              "phase": p.phase})
-    return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
-                                       "amplitude_se", "phase"])
+    return pd.DataFrame(rows, columns=_AMP_COLUMNS)
 
 
 def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None, high_speed: float = 100 * RPM,
@@ -211,5 +212,3 @@ def _ols(X, y):
     if len(y) <= X.shape[1]:
         se = np.full(X.shape[1], np.nan)
     return coef, se
-
-
