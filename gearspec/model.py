@@ -50,13 +50,20 @@ _ABSENT = object()
 
 class _JsonView(Mapping):
     """Read access by JSON key (``p["tau_c"]``, ``p.get("tau_c_se")``, ``h["amplitude"]``) to a typed
-    record; the record itself is changed through its attributes, never through the view."""
+    record; the record itself is changed through its attributes, never through the view.  ``_json(convert)``
+    is the JSON form (``convert``: with nested records and lists converted, as :meth:`to_dict` gives it)."""
+
+    def __getitem__(self, key):
+        return self._json(convert=False)[key]
 
     def __iter__(self):
-        return iter(self.to_dict())
+        return iter(self._json(convert=False))
 
     def __len__(self):
-        return len(self.to_dict())
+        return len(self._json(convert=False))
+
+    def to_dict(self) -> dict:
+        return self._json(convert=True)
 
 
 @dataclass(eq=True)
@@ -114,18 +121,11 @@ class Harmonic(_JsonView):
         """The harmonic as a ``periodic`` term of :mod:`gearspec.terms` (how it is evaluated)."""
         return {"kind": "periodic", **self.to_dict()}
 
-    def __getitem__(self, key):
-        if key in HARMONIC_KEYS or (key in self._OPTIONAL and getattr(self, key) is not None):
-            return getattr(self, key)
-        if key.endswith("_se") and key[:-3] in self.se:
-            return self.se[key[:-3]]
-        return self.extra[key]
-
-    def to_dict(self) -> dict:
+    def _json(self, convert: bool) -> dict:
         out = {}
         for k in HARMONIC_KEYS + self._OPTIONAL:
             if k in HARMONIC_KEYS or getattr(self, k) is not None:
-                out[k] = list(self.speed_range) if k == "speed_range" else getattr(self, k)
+                out[k] = list(self.speed_range) if k == "speed_range" and convert else getattr(self, k)
             if k in self.se:
                 out[k + "_se"] = self.se[k]
         out.update(self.extra)
@@ -182,16 +182,7 @@ class Direction(_JsonView):
         if se is not _ABSENT:
             self.se[name] = se
 
-    def __getitem__(self, key):
-        if key in self.values:
-            return self.values[key]
-        if key == "harmonics" or (key in self._COUNTS and getattr(self, key) is not None):
-            return getattr(self, key)
-        if key.endswith("_se") and key[:-3] in self.se:
-            return self.se[key[:-3]]
-        return self.extra[key]
-
-    def to_dict(self) -> dict:
+    def _json(self, convert: bool) -> dict:
         out = {}
         for k, val in self.values.items():
             out[k] = val
@@ -200,7 +191,7 @@ class Direction(_JsonView):
         out.update({k + "_se": s for k, s in self.se.items() if k not in self.values})
         out.update({k: getattr(self, k) for k in self._COUNTS if getattr(self, k) is not None})
         out.update(self.extra)
-        out["harmonics"] = [h.to_dict() for h in self.harmonics]
+        out["harmonics"] = [h.to_dict() for h in self.harmonics] if convert else self.harmonics
         return out
 
 
@@ -208,26 +199,14 @@ class FrictionModel:
     """A friction model with direction-dependent parameters (scikit-learn-like: a fitted model
     carries what it learned; configuration and data checks happen in :mod:`gearspec.identify`).
 
-    Parameters
-    ----------
-    law : str
-        Base law, a key of :data:`LAWS`.
-    positive, negative : mapping
-        Parameters of the base law for each direction (``x`` and optionally ``x_se``) and
-        ``harmonics`` (:class:`Harmonic` or its JSON form), as a :class:`Direction` or its JSON
-        form.  ``negative`` defaults to a copy of ``positive`` (a symmetric model).
-    terms : iterable of dict
-        Extra terms (:mod:`gearspec.terms`).
-    unit : {"rad", "m"}
-        Unit of theta: torques are Nm (or N on a linear axis).
-    rmse, rmse_holdout : float, optional
-        Fit statistics (in-sample and on held-out data), in torque units.
-    rmse_holdout_reason : str, optional
-        Why ``rmse_holdout`` is None (cross-validation could not run) or covers only part of the
-        data; None when it was computed on every sample.
-    not_identified : dict, optional
-        ``"direction.parameter" -> reason`` for parameters the data could not identify.
-    notes : list of str, optional
+    ``law``: base law, a key of :data:`LAWS`.  ``positive``, ``negative``: each direction's
+    parameters of the base law (``x`` and optionally ``x_se``) and ``harmonics``, as a
+    :class:`Direction` or its JSON form; ``negative`` defaults to a copy of ``positive`` (a
+    symmetric model).  ``terms``: extra terms (:mod:`gearspec.terms`).  ``unit`` ("rad" or "m"):
+    unit of theta; torques are Nm (N on a linear axis).  ``rmse``, ``rmse_holdout``: in-sample and
+    held-out fit errors (torque units); ``rmse_holdout_reason``: why ``rmse_holdout`` is None or
+    covers only part of the data (None: computed on every sample).  ``not_identified``:
+    ``"direction.parameter" -> reason`` for parameters the data could not identify.
     """
 
     def __init__(self, law: str, positive: Mapping, negative: Mapping | None = None, *, terms: Iterable = (),
@@ -403,18 +382,16 @@ class FrictionModel:
     def table(self) -> pd.DataFrame:
         """One row per parameter: SI value and standard error per direction, and on a rotary axis
         the papers' units beside (mNm, rpm, mNm/rpm, 1/rpm)."""
-        rows = []
         law = self.law_spec
-        for k, u in zip(law.params, law.units):
-            rows.append(_row(k, u, self.directions, lambda p, k=k: (p.get(k), p.get(k + "_se")), self.unit))
+        rows = [_row(k, u, self.directions, lambda p, k=k: (p.get(k), p.get(k + "_se")), self.unit)
+                for k, u in zip(law.params, law.units)]
         nh = max(len(p.harmonics) for p in self.directions.values())
         for i in range(nh):
             hs = {d: (p.harmonics[i] if i < len(p.harmonics) else {}) for d, p in self.directions.items()}
             lab = next((h.get("label") for h in hs.values() if h.get("label")), None) or f"harmonic {i + 1}"
             f = next((h.get("frequency") for h in hs.values() if h.get("frequency") is not None), float("nan"))
             for key, u in (("amplitude", "Nm"), ("decay", "s/rad"), ("phase", "rad")):
-                r = _row(f"{lab} {key}", u, {d: hs[d] for d in hs}, lambda h, key=key: (h.get(key), h.get(key + "_se")),
-                         self.unit)
+                r = _row(f"{lab} {key}", u, hs, lambda h, key=key: (h.get(key), h.get(key + "_se")), self.unit)
                 if key == "phase":
                     r["unit"] = "rad"      # an angle of sin(2 pi f x + phi) on any axis, not a length
                 r["frequency"] = f

@@ -71,12 +71,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
         guess = {"t_f0": float(np.median(tau_implied)), "mu": 1e-3, "b": 1e-4, "gamma": 0.0,
                  "t_fs": float(np.median(tau_implied)), "v_s": float(np.median(v))}
         x0 = np.array([guess[k] for k in names])
-    lo = np.full(len(names), -np.inf)
-    for k in LAWS[law].nonneg:
-        if k in names:
-            lo[names.index(k)] = 0.0
-    if "v_s" in names:
-        lo[names.index("v_s")] = 1e-9
+    lo = np.array([1e-9 if k == "v_s" else 0.0 if k in LAWS[law].nonneg else -np.inf for k in names])
     x0 = np.where(np.isfinite(lo), np.maximum(x0, lo + 1e-12), x0)
 
     def params_of(x):

@@ -266,13 +266,12 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
 
 
 def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
-    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard
-    errors below 0) of each direction: friction
-    that falls with speed over the whole measured range is rarely physical, and more often an
-    inertia, a channel lag or aliasing the model does not hold, or plateau speeds too close
-    together to tell viscous from Stribeck friction.  Each flag is one sentence, added to
-    ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]`` (``"direction.parameter"
-    -> sentence``); returns the sentences."""
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard errors
+    below 0) of each direction: friction that falls with speed over the whole measured range is
+    rarely physical, more often an inertia, a channel lag or aliasing the model does not hold, or
+    plateau speeds too close together to tell viscous from Stribeck friction.  Each flag is one
+    sentence, added to ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]``
+    (``"direction.parameter" -> sentence``); returns the sentences."""
     out = []
     flags = model.meta.setdefault("flags", {})
     su = "rad/s" if model.unit == "rad" else "m/s"
@@ -453,42 +452,27 @@ class JointFit:
     """The joint fit of a friction law, per direction, as an estimator: settings in ``__init__``,
     learned values (trailing underscore) after :meth:`fit`.
 
-    Parameters
-    ----------
-    law : str
-        ``silo4`` (eq. 11: eq. 3 + harmonics), ``stribeck`` (eq. 3 alone), ``coulomb_viscous``,
-        ``lola8``, ``lola11`` or ``none`` (harmonics only).  ``silo4`` fits the declared lines of
-        ``gear`` unless ``harmonics`` says otherwise; the others fit ``harmonics`` only if given.
-    harmonics, gear
-        See :func:`~.stats.harmonic_specs`.
-    weights : {"segment", "uniform"}
-        Weight each segment by the inverse of its own residual variance, or all samples alike.
-    se : {"covariance", "bootstrap"}
-        Standard errors from the covariance of the weighted fit, or from ``bootstrap`` refits on
-        segments resampled with replacement (per direction; ``seed`` seeds the resampling).
-    min_cycles : float
-        A segment counts towards a harmonic where it covers at least this fraction of a cycle;
-        the harmonic is identified when those segments cover at least one cycle together (a line
-        too slow for any one segment, e.g. one joint turn, is fitted from many).  Every segment's
-        level is modelled with the partial cycles of slow lines it contains.
-    holdout : {"segment", "run", None}
-        Also compute ``rmse_holdout`` by ``folds``-fold cross-validation over whole segments or
-        runs (None: skip), each fold refitted with :func:`refit`.
-    init : FrictionModel, optional
-        Starting values (e.g. from :func:`~.published.silo4_published`).
-    name : str, optional
-        The model's name (default: the law).
-    check : bool
-        Warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
-        (:func:`negative_viscous`); it is flagged in the model either way.
+    - ``law``: ``silo4`` (eq. 11: eq. 3 + harmonics), ``stribeck`` (eq. 3 alone), ``coulomb_viscous``,
+      ``lola8``, ``lola11`` or ``none`` (harmonics only).  ``silo4`` fits the declared lines of
+      ``gear`` unless ``harmonics`` says otherwise (:func:`~.stats.harmonic_specs`); the others fit
+      ``harmonics`` only if given.
+    - ``weights`` ("segment" or "uniform"): each segment weighted by the inverse of its own residual
+      variance, or all samples alike.
+    - ``se`` ("covariance" or "bootstrap"): standard errors from the covariance of the weighted fit,
+      or from ``bootstrap`` refits on segments resampled with replacement (``seed`` seeds them).
+    - ``min_cycles``: a segment counts towards a harmonic where it covers at least this fraction of
+      a cycle; the harmonic is identified when those segments cover one cycle together (a line too
+      slow for any one segment, e.g. one joint turn, is fitted from many); every segment's level is
+      modelled with the partial cycles of slow lines it contains.
+    - ``holdout`` ("segment", "run" or None: skip): ``rmse_holdout`` by ``folds``-fold
+      cross-validation over whole segments or runs, each fold refitted with :func:`refit`.
+    - ``init``: a model of starting values; ``name``: the model's (default: the law); ``check``:
+      warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
+      (:func:`negative_viscous`; flagged in the model either way).
 
-    Attributes
-    ----------
-    model_ : FrictionModel
-        With ``rmse`` (in-sample, Nm), ``rmse_holdout``, ``not_identified`` and, in ``meta["fit"]``,
-        the settings :meth:`from_model` rebuilds the estimator from (CONTRACTS.md).
-    harmonics_ : list of dict
-        The lines fitted (``frequency`` in cycles per unit of theta, ``label``, ...).
+    ``model_``: the FrictionModel, with ``rmse`` (in-sample, Nm), ``rmse_holdout``,
+    ``not_identified`` and in ``meta["fit"]`` the settings :meth:`from_model` rebuilds the estimator
+    from; ``harmonics_``: the lines fitted (``frequency`` in cycles per unit of theta, ``label``).
     """
 
     def __init__(self, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",

@@ -17,6 +17,11 @@ from ..model import FrictionModel
 __all__ = ["holdout", "holdout_rmse", "segment_errors"]
 
 
+def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
+    """Fold of every sample: its segment's (or run's) fold by THE rule of :mod:`gearspec.core.crossval`."""
+    return row_folds(data.groups(by), data.direction, data.v, folds)
+
+
 def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
                  folds: int = 5, residual: Callable | None = None) -> float | None:
     """The held-out rmse of :func:`holdout`, without the reason."""
@@ -44,8 +49,7 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
         r = np.asarray(m.residual(t) if residual is None else residual(m, t), dtype=float)
         return np.where(np.isfinite(r), r * r, np.nan)
 
-    fold = row_folds(data.groups(by), data.direction, data.v, folds)
-    h = held_out(fold, lambda train: fit_fn(data.subset(train)), score)
+    h = held_out(_folds(data, by, folds), lambda train: fit_fn(data.subset(train)), score)
     n, failed = h.covered, h.failed
     if not n:
         why = failed[0] if failed else f"every {by} falls into one fold"
