@@ -172,8 +172,7 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         return nl, dec
 
     def proj(x):
-        nl, dec = unpack(x)
-        return prob.solve_linear(nl, dec)[1]
+        return prob.solve_linear(*unpack(x))[1]
 
     if nb_nl or len(free):
         with warnings.catch_warnings():
@@ -194,7 +193,6 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     nl, dec = unpack(x_opt)
     lin, _ = prob.solve_linear(nl, dec)
     # joint pass over all parameters: covariance from the Jacobian at the optimum
-    nb = len(prob.basis.lin)
 
     def full(z):
         return prob.residual_full(z[:len(lin)], *unpack(z[len(lin):]))
@@ -202,21 +200,17 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     z = np.concatenate([lin, x_opt])
     r = full(z)
     J = _jacobian(full, z)
-    rss = float(r @ r) + float(np.sum(prob.weights * st.rss_hat))
-    N = int(np.sum(st.n))
     p = len(z)
-    dof = max(N - p, 1)
-    s2 = rss / dof
+    # residual variance: the weighted rss of the fit plus the segments' own (pure error)
+    s2 = (float(r @ r) + float(np.sum(prob.weights * st.rss_hat))) / max(int(np.sum(st.n)) - p, 1)
     try:
         cov = np.linalg.inv(J.T @ J) * s2
-        ok = np.all(np.isfinite(cov))
     except np.linalg.LinAlgError:
         cov = np.full((p, p), np.nan)
-        ok = False
-    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if ok else np.full(p, np.nan)
+    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if np.all(np.isfinite(cov)) else np.full(p, np.nan)
     on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
-    return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2,
-            "dof": dof, "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
+    return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "status": status,
+            "sscale": sscale, "free": free}
 
 
 def _jacobian(fun, z):
@@ -236,7 +230,7 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
     """Fitted values and standard errors of one direction."""
     basis = prob.basis
     lin, se, cov = sol["lin"], sol["se"], sol["cov"]
-    nb = sol["n_lin"]
+    nb = len(basis.lin)
     L = len(lin)
     P = Direction({})
     for j, name in enumerate(basis.lin):
@@ -247,18 +241,17 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
         P.set(name, val, float(val * se[L + j]))
     free = list(sol["free"])
     for k, h in enumerate(prob.harmonics):
-        a, c = lin[nb + 2 * k], lin[nb + 2 * k + 1]
         ia, ic = nb + 2 * k, nb + 2 * k + 1
-        A = float(math.hypot(a, c))
-        phi = float(math.atan2(c, a))
-        nan2 = (float("nan"),) * 2
-        a_se, p_se = pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov)) else nan2
+        a, c = lin[ia], lin[ic]
+        a_se, p_se = (pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov))
+                      else (float("nan"),) * 2)
         if k in free:
-            decay_se = float(se[L + sol["nb_nl"] + free.index(k)] * sol["sscale"])
+            decay_se = float(se[L + len(basis.nonlin) + free.index(k)] * sol["sscale"])
         else:
             decay_se = 0.0 if prob.amp_law[k] == "const" else float("nan")
         rng = [float(x) for x in prob.ranges[k]] if np.all(np.isfinite(prob.ranges[k])) else None
-        P.harmonics.append(Harmonic(float(h["frequency"]), A, float(sol["decays"][k]), phi,
+        P.harmonics.append(Harmonic(float(h["frequency"]), float(math.hypot(a, c)), float(sol["decays"][k]),
+                                    float(math.atan2(c, a)),
                                     label=h.get("label") or None, law=prob.amp_law[k], speed_range=rng,
                                     segments=int(prob.stats.active[:, k].sum()),
                                     se={"amplitude": a_se, "phase": p_se, "decay": decay_se}))
@@ -306,8 +299,7 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     """One direction's fit: ``(parameters, not_identified, notes)``."""
     notes: list[str] = []
     ni: dict[str, str] = {}
-    freqs = [h["frequency"] for h in specs]
-    stats = segment_stats(sub, freqs, min_cycles=min_cycles)
+    stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
     # harmonics that the segments do not cover by one cycle together cannot be identified: left out
     total = np.where(stats.active, stats.cycles, 0.0).sum(axis=0) if len(specs) else np.zeros(0)
     keep = [k for k in range(len(specs)) if total[k] >= 1.0]
