@@ -132,8 +132,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
         hi = pl[pl["speed"] > high_speed]
         lo = pl[pl["speed"] <= high_speed]
         if len(hi) >= 2:
-            X = np.column_stack([np.ones(len(hi)), hi["speed"]])
-            coef, se = _ols(X, hi["level"].to_numpy())
+            coef, se = _line(hi["speed"], hi["level"].to_numpy())
             P.set("tau_c", float(coef[0]), float(se[0]))
             P.set("viscous", float(coef[1]), float(se[1]))
         else:
@@ -143,8 +142,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
             excess = lo["level"].to_numpy() - P.values["tau_c"]
             ok = excess > 0
             if ok.sum() >= 2:
-                X = np.column_stack([np.ones(ok.sum()), lo["speed"].to_numpy()[ok]])
-                coef, se = _ols(X, np.log(excess[ok]))
+                coef, se = _line(lo["speed"].to_numpy()[ok], np.log(excess[ok]))
                 m_, n_ = coef[1], coef[0]
                 if m_ < 0:
                     P.set("v_s", float(-1.0 / m_), float(se[1] / m_ ** 2))
@@ -180,7 +178,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
                 if lab not in constant:
                     ni[key + ".decay"] = "the line is measured at one speed only"
             else:
-                coef, se = _ols(np.column_stack([np.ones(len(sp)), sp]), np.log(amp))
+                coef, se = _line(sp, np.log(amp))
                 entry.update(amplitude=float(math.exp(coef[0])), amplitude_se=float(math.exp(coef[0]) * se[0]),
                              decay=float(-coef[1]), decay_se=float(se[1]))
             P.harmonics.append(Harmonic.of(entry))
@@ -199,16 +197,15 @@ def _segment_id(segments: pd.DataFrame, seg_spectrum) -> int | None:
     return int(m["segment"].iloc[0]) if len(m) else None
 
 
-def _ols(X, y):
+def _line(x, y):
+    """Least-squares line ``y = coef[0] + coef[1] x``: ``(coef, se)``, se NaN without degrees of freedom."""
+    X = np.column_stack([np.ones(len(y)), x])
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    if len(y) <= 2:
+        return coef, np.full(2, np.nan)
     r = y - X @ coef
-    dof = max(len(y) - X.shape[1], 1)
-    s2 = float(r @ r) / dof
     try:
-        cov = np.linalg.inv(X.T @ X) * s2
-        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+        cov = np.linalg.inv(X.T @ X) * (float(r @ r) / (len(y) - 2))
     except np.linalg.LinAlgError:
-        se = np.full(X.shape[1], np.nan)
-    if len(y) <= X.shape[1]:
-        se = np.full(X.shape[1], np.nan)
-    return coef, se
+        return coef, np.full(2, np.nan)
+    return coef, np.sqrt(np.clip(np.diag(cov), 0, None))
