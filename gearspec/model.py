@@ -438,8 +438,7 @@ class FrictionModel:
                 elif h.get("amplitude") is not None and h.get("law", "exp") != "const":
                     lines.append(f"{lab} ({dname}): no speed range recorded; the amplitude law is "
                                  f"evaluated at every speed")
-        for k, why in self.not_identified.items():
-            lines.append(f"not identified: {k}: {why}")
+        lines += [f"not identified: {k}: {why}" for k, why in self.not_identified.items()]
         return "\n".join(lines)
 
 

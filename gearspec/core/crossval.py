@@ -49,10 +49,8 @@ def group_summary(groups, direction, speed, weight=None) -> tuple[np.ndarray, np
     if not (len(g) == len(d) == len(s) == len(w)):
         raise InputError("group summaries need one direction, speed and weight per row")
     ids, first, inv = np.unique(g, return_index=True, return_inverse=True)
-    dsum = np.bincount(inv, weights=d * w, minlength=len(ids))
-    sign = np.sign(dsum).astype(int)
-    tie = sign == 0
-    sign[tie] = np.sign(d[first[tie]]).astype(int)
+    sign = np.sign(np.bincount(inv, weights=d * w, minlength=len(ids))).astype(int)
+    sign = np.where(sign == 0, np.sign(d[first]), sign).astype(int)
     mean_speed = np.bincount(inv, weights=s * w, minlength=len(ids)) / np.bincount(inv, weights=w, minlength=len(ids))
     return ids, sign, mean_speed
 

@@ -411,30 +411,23 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
     rng = np.random.default_rng(seed)
     S = len(stats.speed)
     base_names = list(_basis(law).lin) + list(_basis(law).nonlin)
-    draws = {k: [] for k in base_names}
-    hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P.harmonics]
+    fits = []
     for _ in range(B):
         bs = stats.take(rng.integers(0, S, S))
         if len(np.unique(np.round(bs.speed, 9))) < len(base_names):
             continue
         try:
             prob = _make_problem(bs, law, specs, weights)
-            Q = _direction_params(prob, _fit_direction(prob))
+            fits.append(_direction_params(prob, _fit_direction(prob)))
         except (InputError, np.linalg.LinAlgError, ValueError):
             continue
+    if len(fits) >= 10:
         for k in base_names:
-            draws[k].append(Q.values[k])
-        for k, h in enumerate(Q.harmonics):
-            for key in ("amplitude", "decay", "phase"):
-                hdraws[k][key].append(getattr(h, key))
-    for k in base_names:
-        if len(draws[k]) >= 10:
-            P.se[k] = float(np.std(draws[k], ddof=1))
-    for h, dr in zip(P.harmonics, hdraws):
-        if len(dr["amplitude"]) >= 10:
-            h.se["amplitude"] = float(np.std(dr["amplitude"], ddof=1))
-            h.se["decay"] = float(np.std(dr["decay"], ddof=1))
-            ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h.phase)))
+            P.se[k] = float(np.std([Q.values[k] for Q in fits], ddof=1))
+        for i, h in enumerate(P.harmonics):
+            h.se["amplitude"] = float(np.std([Q.harmonics[i].amplitude for Q in fits], ddof=1))
+            h.se["decay"] = float(np.std([Q.harmonics[i].decay for Q in fits], ddof=1))
+            ph = np.angle(np.exp(1j * (np.asarray([Q.harmonics[i].phase for Q in fits]) - h.phase)))
             h.se["phase"] = float(np.sqrt(np.mean(ph ** 2)))
     P.se_method = f"bootstrap over segments ({B} resamples)"
 

@@ -45,12 +45,10 @@ def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *,
             else:
                 ho, why = None, "the model carries no fit settings to refit it without the held-out data"
         else:
-            kw = dict(c)
-            kw.setdefault("holdout", None)
+            kw = {"holdout": None, **c}
             m = fit(data, **kw)
             ho, why = holdout(lambda tr, kw=kw: fit(tr, **{**kw, "check": False}), data, by=by, folds=folds)
-        n_par = _n_params(m)
-        rows.append({"model": name, "law": m.law, "parameters": n_par, "rmse": _safe_rmse(m, data),
+        rows.append({"model": name, "law": m.law, "parameters": _n_params(m), "rmse": _safe_rmse(m, data),
                      "rmse_holdout": ho, "rmse_holdout_reason": why})
     return pd.DataFrame(rows)
 

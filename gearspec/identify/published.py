@@ -85,21 +85,13 @@ def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None
                     holdout: str | None = "segment", folds: int = 5) -> FrictionModel:
     """The SILO4 identification procedure as published (section 3-4; see the module docstring).
 
-    Parameters
-    ----------
-    data : FitData
-        Samples in segments (the plateau averages come from it).
-    amplitudes : DataFrame or SpectrumResult, optional
-        Per-segment amplitudes and phases of the lines (:func:`line_amplitudes`, or the spectra of
-        :func:`gearspec.spectrum.analyze` on the same segmentation).  Default: measured from
-        ``data`` at the lines of ``harmonics``/``gear``.
-    harmonics, gear
-        The lines (:func:`harmonic_specs`); none: eq. 3 only.
-    high_speed : float
-        Plateaus above this speed give Coulomb and viscous friction (the paper: 100 rpm, in rad/s
-        here); the others static friction and Stribeck velocity.
-    constant : labels
-        Lines modelled with a constant amplitude (eq. 6): the paper's F1, one joint turn.
+    ``data``: samples in segments (the plateau averages come from it).  ``amplitudes``: per-segment
+    amplitudes and phases of the lines (:func:`line_amplitudes`, or the spectra of
+    :func:`gearspec.spectrum.analyze` on the same segmentation; default: measured from ``data`` at
+    the lines of ``harmonics``/``gear``, :func:`harmonic_specs`; none: eq. 3 only).  ``high_speed``:
+    plateaus above it give Coulomb and viscous friction (the paper: 100 rpm; rad/s here), the others
+    static friction and Stribeck velocity.  ``constant``: labels of lines with a constant amplitude
+    (eq. 6): the paper's F1, one joint turn.
     """
     specs = harmonic_specs(harmonics, gear)
     if amplitudes is None:
