@@ -76,9 +76,9 @@ class _Problem:
         if nb:
             M[:, 0, :nb] = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
         fac = self.factors(decays) * st.sampled
-        for k in range(self.K):
-            M[:, 1 + 2 * k, nb + 2 * k] = fac[:, k]
-            M[:, 2 + 2 * k, nb + 2 * k + 1] = fac[:, k]
+        k = np.arange(self.K)
+        M[:, 1 + 2 * k, nb + 2 * k] = fac
+        M[:, 2 + 2 * k, nb + 2 * k + 1] = fac
         return M
 
     def solve_linear(self, nonlin_base, decays):
@@ -101,8 +101,7 @@ class _Problem:
 
 
 def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
-    basis = _basis(law)
-    S, P = stats.g.shape
+    S = len(stats.g)
     if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
         w = 1.0 / stats.sigma2
         w = w / np.median(w)
@@ -110,15 +109,11 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
         w = np.ones(S)
     else:
         raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
-    Lt = np.zeros((S, P, P))
-    for i in range(S):
-        lam, U = np.linalg.eigh(stats.G[i])
-        lam = np.clip(lam, 0.0, None)
-        Lt[i] = math.sqrt(w[i]) * (np.sqrt(lam)[:, None] * U.T)
-    decay_free = np.array([h.get("decay", True) is not False and h.get("law", "exp") != "const" for h in harmonics],
-                          bool)
+    lam, U = np.linalg.eigh(stats.G)
+    Lt = np.sqrt(w)[:, None, None] * (np.sqrt(np.clip(lam, 0.0, None))[:, :, None] * np.swapaxes(U, 1, 2))
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
-    return _Problem(stats, basis, harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
+    decay_free = np.array([law != "const" for law in amp_law], bool)
+    return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
 
 
 def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
