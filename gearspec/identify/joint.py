@@ -109,10 +109,12 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
         w = np.ones(S)
     else:
         raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
-    lam, U = np.linalg.eigh(stats.G)
-    Lt = np.sqrt(w)[:, None, None] * (np.sqrt(np.clip(lam, 0.0, None))[:, :, None] * np.swapaxes(U, 1, 2))
+    Lt = np.zeros(stats.G.shape)
+    for i in range(S):
+        lam, U = np.linalg.eigh(stats.G[i])
+        Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam, 0.0, None))[:, None] * U.T)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
-    decay_free = np.array([law != "const" for law in amp_law], bool)
+    decay_free = np.array([a != "const" for a in amp_law], bool)
     return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
 
 
