@@ -316,8 +316,7 @@ class FrictionModel:
 
     def friction(self, theta=None, v=None, **inputs) -> np.ndarray:
         """Friction alone: :meth:`evaluate` without the signed terms (inertia, offset)."""
-        signed = [t for t in self.terms if TERMS[t["kind"]].signed]
-        if not signed:
+        if not any(TERMS[t["kind"]].signed for t in self.terms):
             return self.evaluate(theta, v, **inputs)
         m = self.copy()
         m.terms = [t for t in m.terms if not TERMS[t["kind"]].signed]

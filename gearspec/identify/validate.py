@@ -68,9 +68,7 @@ def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
         p = model.params(dname)
         if all(p.get(k) is not None for k in model.law_spec.params if k not in model.law_spec.optional):
             ok |= data.direction == d
-    if not ok.any():
-        return None
-    return model.rmse_on(data.subset(ok))
+    return model.rmse_on(data.subset(ok)) if ok.any() else None
 
 
 def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
