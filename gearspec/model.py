@@ -393,17 +393,15 @@ class FrictionModel:
                 r = _row(f"{lab} {key}", u, hs, lambda h, key=key: (h.get(key), h.get(key + "_se")), self.unit)
                 if key == "phase":
                     r["unit"] = "rad"      # an angle of sin(2 pi f x + phi) on any axis, not a length
-                r["frequency"] = f
-                rows.append(r)
+                rows.append({**r, "frequency": f})
             # the speeds the amplitude law was fitted on (held at the edges outside)
             if any(h.get("speed_range") for h in hs.values()):
                 for j, key in ((0, "min"), (1, "max")):
                     r = _row(f"{lab} law fitted |v| {key}", "rad/s", hs,
                              lambda h, j=j: ((h.get("speed_range") or (None, None))[j], None), self.unit)
-                    r["frequency"] = f
-                    rows.append(r)
-        for t in self.terms:
-            rows.append({"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None})
+                    rows.append({**r, "frequency": f})
+        rows += [{"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None}
+                 for t in self.terms]
         return pd.DataFrame(rows)
 
     def __repr__(self) -> str:
