@@ -305,8 +305,7 @@ class FrictionModel:
                     continue
                 if theta is None:
                     raise InputError("the model has position-locked harmonics and needs theta")
-                contrib, _ = evaluate_term(h.term(), theta=theta[sel], v=v[sel], load=ld)
-                mag += contrib
+                mag += evaluate_term(h.term(), theta=theta[sel], v=v[sel], load=ld)[0]
             out[sel] = d * mag
         inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
         for term in self.terms:
