@@ -1,10 +1,5 @@
-"""The one conversion of gearspec's results to strict JSON.
-
-Every ``to_dict`` / ``--json`` writer passes its result through :func:`plain`: numpy scalars and
-arrays become Python numbers and lists, tuples become lists, keys become strings, and NaN or
-infinity become ``None`` (``null``), because strict JSON has no NaN and a reader in another
-language must not meet ``NaN`` in a file. Callables (a load profile given as a function) are
-written by name.
+"""The one conversion of gearspec's results to strict JSON (every ``to_dict`` / ``--json`` writer uses
+:func:`plain`): strict JSON has no NaN, and a reader in another language must not meet one.
 """
 from __future__ import annotations
 
@@ -26,9 +21,10 @@ def finite_or_none(x):
 
 
 def plain(obj):
-    """``obj`` with every container and number converted to what :func:`json.dumps` writes as
-    strict JSON (see the module docstring). Strings and ``None`` pass through; an object of any
-    other type is returned unchanged (``json.dumps`` then says which)."""
+    """``obj`` as strict JSON values: numpy scalars and arrays become Python numbers and lists, tuples
+    lists, keys strings, NaN and infinity ``None``, callables (a load profile given as a function)
+    their name.  Strings and ``None`` pass through; an object of any other type is returned
+    unchanged (``json.dumps`` then says which)."""
     if isinstance(obj, Mapping):      # dicts and the model's typed records (gearspec.model)
         return {str(k): plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

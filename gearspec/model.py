@@ -1,31 +1,15 @@
 """FrictionModel: a friction law with per-direction parameters, position-locked harmonics and
 extra terms; evaluated, serialised, printed like the papers' tables, and scored on data.
 
-A model is
-
     tau(theta, v, ...) = sign(v) * [ base_i(|v|, load) + sum_k H_k,i(theta, |v|, load) + magnitude terms ]
                          + signed terms (inertia, offset)
 
-with ``i`` the direction of motion (``positive`` for v > 0, ``negative`` for v < 0), ``base`` one of
-the laws of :mod:`gearspec.laws` (:data:`LAWS`), ``H_k`` a position-locked sinusoid with a speed-
-dependent amplitude (SILO4 eqs. 6, 8, 14) and the extra terms of :mod:`gearspec.terms` (what the
-closed loop adds).  The friction torque has the sign of the velocity (``CONTRACTS.md``); at
-``v = 0`` the model gives only its signed terms.
-
-Serialised (``to_dict``/``to_json``) in the form of ``gearspec fit --json`` (``CONTRACTS.md`` section
-4): ``{"law", "directions": {"positive": P, "negative": P}, "rmse", "rmse_holdout", "terms", ...}``,
-every value ``x`` with its standard error ``x_se`` (NaN/None where unknown), harmonics as
-``{"frequency", "amplitude", "decay", "phase", "speed_range", ...}`` with ``decay`` in s/rad and
-``speed_range`` the ``[min, max]`` of |v| the amplitude law was fitted on.  A model read back
-evaluates identically.
-
-No extrapolation: a harmonic's amplitude law is evaluated only within its ``speed_range``;
-outside it the amplitude is held at the range's edge (the law at the nearest measured speed).
-A harmonic without ``speed_range`` (JSON written before speed_range existed, or a hand-written model)
-is evaluated as written at every speed (no clamp).
-
-Parameters that the data could not identify are ``None`` (never invented) and listed in
-``not_identified`` with the reason; evaluating a model with a missing parameter raises an error
+with ``i`` the direction of motion, ``base`` a law of :data:`LAWS`, ``H_k`` a position-locked
+sinusoid with a speed-dependent amplitude (SILO4 eqs. 6, 8, 14) and the extra terms of
+:mod:`gearspec.terms`.  At ``v = 0`` the model gives only its signed terms.  The JSON form
+(``to_dict``, ``gearspec fit --json``) is CONTRACTS.md section 4; a model read back evaluates
+identically.  Parameters the data could not identify are ``None`` (never invented), with the
+reason in ``not_identified``; evaluating a direction with a missing parameter raises an error
 that names it.
 """
 
@@ -59,21 +43,27 @@ Law = BaseLaw
 #: base laws by name (the registry's own objects); ``silo4`` is eq. 3 plus the harmonics of eq. 11
 LAWS: dict[str, Law] = BASE_LAWS
 
+#: the keys every harmonic has
 HARMONIC_KEYS = ("frequency", "amplitude", "decay", "phase")
-
-
 _ABSENT = object()
 
 
 class _JsonView(Mapping):
     """Read access by JSON key (``p["tau_c"]``, ``p.get("tau_c_se")``, ``h["amplitude"]``) to a typed
-    record; the record itself is changed through its attributes, never through the view."""
+    record; the record itself is changed through its attributes, never through the view.  ``_json(convert)``
+    is the JSON form (``convert``: with nested records and lists converted, as :meth:`to_dict` gives it)."""
+
+    def __getitem__(self, key):
+        return self._json(convert=False)[key]
 
     def __iter__(self):
-        return iter(self.to_dict())
+        return iter(self._json(convert=False))
 
     def __len__(self):
-        return len(self.to_dict())
+        return len(self._json(convert=False))
+
+    def to_dict(self) -> dict:
+        return self._json(convert=True)
 
 
 @dataclass(eq=True)
@@ -113,7 +103,7 @@ class Harmonic(_JsonView):
             raise InputError(f"a harmonic of the model lacks {', '.join(missing)}")
         out = cls(h["frequency"], h["amplitude"], h.get("decay", 0.0), h.get("phase", 0.0))
         for k, val in h.items():
-            if k in ("frequency", "amplitude", "decay", "phase"):
+            if k in HARMONIC_KEYS:
                 continue
             if k.endswith("_se"):
                 out.se[k[:-3]] = val
@@ -131,24 +121,11 @@ class Harmonic(_JsonView):
         """The harmonic as a ``periodic`` term of :mod:`gearspec.terms` (how it is evaluated)."""
         return {"kind": "periodic", **self.to_dict()}
 
-    def __getitem__(self, key):
-        if key in ("frequency", "amplitude", "decay", "phase"):
-            return getattr(self, key)
-        if key in self._OPTIONAL and getattr(self, key) is not None:
-            return getattr(self, key)
-        if key.endswith("_se") and key[:-3] in self.se:
-            return self.se[key[:-3]]
-        return self.extra[key]
-
-    def to_dict(self) -> dict:
+    def _json(self, convert: bool) -> dict:
         out = {}
-        for k in ("frequency", "amplitude", "decay", "phase"):
-            out[k] = getattr(self, k)
-            if k in self.se:
-                out[k + "_se"] = self.se[k]
-        for k in self._OPTIONAL:
-            if getattr(self, k) is not None:
-                out[k] = list(self.speed_range) if k == "speed_range" else getattr(self, k)
+        for k in HARMONIC_KEYS + self._OPTIONAL:
+            if k in HARMONIC_KEYS or getattr(self, k) is not None:
+                out[k] = list(self.speed_range) if k == "speed_range" and convert else getattr(self, k)
             if k in self.se:
                 out[k + "_se"] = self.se[k]
         out.update(self.extra)
@@ -205,18 +182,7 @@ class Direction(_JsonView):
         if se is not _ABSENT:
             self.se[name] = se
 
-    def __getitem__(self, key):
-        if key in self.values:
-            return self.values[key]
-        if key == "harmonics":
-            return self.harmonics
-        if key in self._COUNTS and getattr(self, key) is not None:
-            return getattr(self, key)
-        if key.endswith("_se") and key[:-3] in self.se:
-            return self.se[key[:-3]]
-        return self.extra[key]
-
-    def to_dict(self) -> dict:
+    def _json(self, convert: bool) -> dict:
         out = {}
         for k, val in self.values.items():
             out[k] = val
@@ -225,7 +191,7 @@ class Direction(_JsonView):
         out.update({k + "_se": s for k, s in self.se.items() if k not in self.values})
         out.update({k: getattr(self, k) for k in self._COUNTS if getattr(self, k) is not None})
         out.update(self.extra)
-        out["harmonics"] = [h.to_dict() for h in self.harmonics]
+        out["harmonics"] = [h.to_dict() for h in self.harmonics] if convert else self.harmonics
         return out
 
 
@@ -233,31 +199,14 @@ class FrictionModel:
     """A friction model with direction-dependent parameters (scikit-learn-like: a fitted model
     carries what it learned; configuration and data checks happen in :mod:`gearspec.identify`).
 
-    Parameters
-    ----------
-    law : str
-        Base law, a key of :data:`LAWS`.
-    positive, negative : mapping
-        Parameters of the base law for each direction (``x`` and optionally ``x_se``), and
-        ``harmonics``: a list of mappings with ``frequency`` (cycles per unit of theta),
-        ``amplitude`` (Nm), ``decay`` (s/rad, default 0), ``phase`` (rad, default 0) and optionally
-        ``label``, ``law`` (amplitude law: exp (default), const, rational, power),
-        ``load_coefficient`` (SILO4 eq. 14), ``speed_range`` (``[min, max]`` of |v| the amplitude
-        law was fitted on; the amplitude is held at the edge outside it; absent: no clamp) and the
-        ``_se`` of each.  ``negative`` defaults to a
-        copy of ``positive`` (a symmetric model).
-    terms : iterable of dict
-        Extra terms (:mod:`gearspec.terms`).
-    unit : {"rad", "m"}
-        Unit of theta: torques are Nm (or N on a linear axis).
-    rmse, rmse_holdout : float, optional
-        Fit statistics (in-sample and on held-out data), in torque units.
-    rmse_holdout_reason : str, optional
-        Why ``rmse_holdout`` is None (cross-validation could not run) or covers only part of the
-        data; None when it was computed on every sample.
-    not_identified : dict, optional
-        ``"direction.parameter" -> reason`` for parameters the data could not identify.
-    notes : list of str, optional
+    ``law``: base law, a key of :data:`LAWS`.  ``positive``, ``negative``: each direction's
+    parameters of the base law (``x`` and optionally ``x_se``) and ``harmonics``, as a
+    :class:`Direction` or its JSON form; ``negative`` defaults to a copy of ``positive`` (a
+    symmetric model).  ``terms``: extra terms (:mod:`gearspec.terms`).  ``unit`` ("rad" or "m"):
+    unit of theta; torques are Nm (N on a linear axis).  ``rmse``, ``rmse_holdout``: in-sample and
+    held-out fit errors (torque units); ``rmse_holdout_reason``: why ``rmse_holdout`` is None or
+    covers only part of the data (None: computed on every sample).  ``not_identified``:
+    ``"direction.parameter" -> reason`` for parameters the data could not identify.
     """
 
     def __init__(self, law: str, positive: Mapping, negative: Mapping | None = None, *, terms: Iterable = (),
@@ -312,14 +261,6 @@ class FrictionModel:
         m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
         return m
 
-    def with_harmonic(self, harmonic: Mapping, direction=None) -> "FrictionModel":
-        """A copy with a harmonic added in one direction (or in both)."""
-        m = self.copy()
-        for d in ((_dir_name(direction),) if direction is not None else DIRECTIONS):
-            m.directions[d].harmonics.append(Harmonic.of(harmonic))
-        m.rmse = m.rmse_holdout = m.rmse_holdout_reason = None
-        return m
-
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None) -> np.ndarray:
         """Torque the drive supplies according to the model, at each sample.
@@ -329,10 +270,9 @@ class FrictionModel:
         broadcast): ``theta`` (rad or m; needed by harmonics), ``v`` (rad/s or m/s), ``load``
         (Nm at the output), ``temperature`` (degC), ``t`` (s), ``acc`` (rad/s^2) and ``run``.
 
-        A harmonic whose amplitude law carries a ``speed_range`` ``[min, max]`` is evaluated with
-        ``|v|`` held within it: below ``min`` (e.g. at standstill) and above ``max`` the amplitude
-        is the law's value at that edge, never an extrapolation of the law past the speeds it was
-        fitted on.  Harmonics without ``speed_range`` are not clamped.
+        No extrapolation: a harmonic with a ``speed_range`` ``[min, max]`` is evaluated with ``|v|``
+        held within it (below ``min``, e.g. at standstill, and above ``max`` the amplitude is the
+        law's value at that edge); a harmonic without one is not clamped.
         """
         if v is None:
             raise InputError("the model needs the velocity v")
@@ -365,8 +305,7 @@ class FrictionModel:
                     continue
                 if theta is None:
                     raise InputError("the model has position-locked harmonics and needs theta")
-                contrib, _ = evaluate_term(h.term(), theta=theta[sel], v=v[sel], load=ld)
-                mag += contrib
+                mag += evaluate_term(h.term(), theta=theta[sel], v=v[sel], load=ld)[0]
             out[sel] = d * mag
         inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
         for term in self.terms:
@@ -376,8 +315,7 @@ class FrictionModel:
 
     def friction(self, theta=None, v=None, **inputs) -> np.ndarray:
         """Friction alone: :meth:`evaluate` without the signed terms (inertia, offset)."""
-        signed = [t for t in self.terms if TERMS[t["kind"]].signed]
-        if not signed:
+        if not any(TERMS[t["kind"]].signed for t in self.terms):
             return self.evaluate(theta, v, **inputs)
         m = self.copy()
         m.terms = [t for t in m.terms if not TERMS[t["kind"]].signed]
@@ -407,7 +345,6 @@ class FrictionModel:
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict:
         """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready."""
-
         return plain({"law": self.law, "name": self.name, "unit": self.unit,
                       "directions": {d: p.to_dict() for d, p in self.directions.items()}, "terms": self.terms,
                       "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
@@ -443,31 +380,27 @@ class FrictionModel:
     def table(self) -> pd.DataFrame:
         """One row per parameter: SI value and standard error per direction, and on a rotary axis
         the papers' units beside (mNm, rpm, mNm/rpm, 1/rpm)."""
-        rows = []
         law = self.law_spec
-        for k, u in zip(law.params, law.units):
-            rows.append(_row(k, u, self.directions, lambda p, k=k: (p.get(k), p.get(k + "_se")), self.unit))
+        rows = [_row(k, u, self.directions, lambda p, k=k: (p.get(k), p.get(k + "_se")), self.unit)
+                for k, u in zip(law.params, law.units)]
         nh = max(len(p.harmonics) for p in self.directions.values())
         for i in range(nh):
             hs = {d: (p.harmonics[i] if i < len(p.harmonics) else {}) for d, p in self.directions.items()}
             lab = next((h.get("label") for h in hs.values() if h.get("label")), None) or f"harmonic {i + 1}"
             f = next((h.get("frequency") for h in hs.values() if h.get("frequency") is not None), float("nan"))
             for key, u in (("amplitude", "Nm"), ("decay", "s/rad"), ("phase", "rad")):
-                r = _row(f"{lab} {key}", u, {d: hs[d] for d in hs}, lambda h, key=key: (h.get(key), h.get(key + "_se")),
-                         self.unit)
+                r = _row(f"{lab} {key}", u, hs, lambda h, key=key: (h.get(key), h.get(key + "_se")), self.unit)
                 if key == "phase":
                     r["unit"] = "rad"      # an angle of sin(2 pi f x + phi) on any axis, not a length
-                r["frequency"] = f
-                rows.append(r)
+                rows.append({**r, "frequency": f})
             # the speeds the amplitude law was fitted on (held at the edges outside)
             if any(h.get("speed_range") for h in hs.values()):
                 for j, key in ((0, "min"), (1, "max")):
                     r = _row(f"{lab} law fitted |v| {key}", "rad/s", hs,
                              lambda h, j=j: ((h.get("speed_range") or (None, None))[j], None), self.unit)
-                    r["frequency"] = f
-                    rows.append(r)
-        for t in self.terms:
-            rows.append({"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None})
+                    rows.append({**r, "frequency": f})
+        rows += [{"parameter": TERMS[t["kind"]].describe(t), "unit": "", "positive": None, "negative": None}
+                 for t in self.terms]
         return pd.DataFrame(rows)
 
     def __repr__(self) -> str:
@@ -501,8 +434,7 @@ class FrictionModel:
                 elif h.get("amplitude") is not None and h.get("law", "exp") != "const":
                     lines.append(f"{lab} ({dname}): no speed range recorded; the amplitude law is "
                                  f"evaluated at every speed")
-        for k, why in self.not_identified.items():
-            lines.append(f"not identified: {k}: {why}")
+        lines += [f"not identified: {k}: {why}" for k, why in self.not_identified.items()]
         return "\n".join(lines)
 
 
@@ -522,12 +454,9 @@ def _fmt(x):
 
 
 def _dir_name(direction) -> str:
-    if direction in ("positive", "negative"):
-        return direction
-    if direction in (1, 1.0, "+", "+1"):
-        return "positive"
-    if direction in (-1, -1.0, "-", "-1"):
-        return "negative"
+    for name, aliases in (("positive", (1, "+", "+1")), ("negative", (-1, "-", "-1"))):
+        if direction == name or direction in aliases:
+            return name
     raise InputError(f"direction must be 'positive'/'negative' or +1/-1, got {direction!r}")
 
 

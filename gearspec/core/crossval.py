@@ -1,28 +1,16 @@
-"""One cross-validation for the three engines: folds of whole groups, the held-out loop, the
-held-out Z statistic and its critical value, and the parameter count shown beside held-out errors.
+"""One cross-validation for the three engines (identify, diagnose, discover): folds of whole groups,
+the held-out loop, the held-out Z statistic and its critical value, and the parameter count shown
+beside held-out errors.  All three deal their groups (segments, runs or moves) with
+:func:`deal_folds` from the same per-group summaries (:func:`group_summary`), so the same data and
+``folds`` give the same splits everywhere.
 
-:func:`gearspec.identify.fit` (``gearspec fit``), the closed loop of :mod:`gearspec.diagnose`
-(``gearspec diagnose``) and the explorer of :mod:`gearspec.discover` (``gearspec discover``) all
-deal their held-out groups (segments, runs or moves) into folds with :func:`deal_folds`, from
-per-group summaries computed the same way (:func:`group_summary`: the sign of the group's
-directions and its mean ``|v|`` over its rows).  The same data and the same ``--holdout`` /
-``folds`` therefore give the same folds everywhere, and the three report their held-out rmse on
-the same splits.
-
-The fold rule
--------------
-``k = max(2, min(folds, groups))`` folds (never more folds than groups, so no fold is empty; at
-least two, so that something is held out).  Within each direction the groups are sorted by speed
-(ties by group id) and dealt round robin, so every fold spans the speed range of both directions.
-Speeds within ``SPEED_RTOL`` (relative) of each other are ties: plateaus at one commanded speed
-(e.g. one per load) have mean speeds that differ only by rounding, and the order rounding gives
-them depends on how the mean was summed (over samples, over segment means), which would give each
-engine its own folds.
-The positive direction is dealt from fold 0 and the negative one continues where the positive
-one stopped (it starts at fold ``n_positive % k``): the two directions together are one round
-robin, so the folds' sizes differ by at most one group.  Without that rotation both directions
-start in fold 0: one segment per direction puts both in one fold (leaving the other empty), and
-2 + 2 segments in 4 folds leave two folds empty.
+The fold rule: ``k = max(2, min(folds, groups))`` folds (no empty fold; something held out).
+Within each direction the groups are sorted by speed (ties by group id) and dealt round robin, so
+every fold spans the speed range of both directions.  Speeds within ``SPEED_RTOL`` (relative) are
+ties: plateaus at one commanded speed differ only by rounding, whose order depends on how the mean
+was summed and would give each engine its own folds.  The negative direction continues the deal
+where the positive one stopped (fold ``n_positive % k``), so fold sizes differ by at most one
+group (starting both in fold 0 would leave folds empty, e.g. 2 + 2 segments in 4 folds).
 """
 
 from __future__ import annotations
@@ -46,28 +34,13 @@ SPEED_RTOL = 1e-9
 
 # ---------------------------------------------------------------------- folds
 def group_summary(groups, direction, speed, weight=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-group summaries that the fold rule deals by.
+    """Per-group summaries the fold rule deals by: ``(ids, sign, mean_speed)``, each (G,).
 
-    Parameters
-    ----------
-    groups : array_like, (N,)
-        Group id of every row (segment or run id; any integers).
-    direction : array_like, (N,)
-        Direction of every row (+1 / -1).
-    speed : array_like, (N,)
-        Velocity (or speed) of every row, in rad/s or m/s: its absolute value is used.
-    weight : array_like, (N,), optional
-        Samples each row stands for (rows that are themselves segment summaries: their sample
-        counts); default one per row.
-
-    Returns
-    -------
-    ids : ndarray, (G,)
-        The group ids, sorted.
-    sign : ndarray, (G,)
-        Sign of the (weighted) sum of the group's directions; the direction of its first row on a tie.
-    mean_speed : ndarray, (G,)
-        (Weighted) mean of ``|speed|`` over the group's rows.
+    Per row (N,): ``groups`` its group id (any integers), ``direction`` +1 / -1, ``speed`` its
+    velocity (rad/s or m/s; the absolute value is used), ``weight`` the samples it stands for
+    (rows that are segment summaries: their counts; default 1).  ``ids``: the sorted group ids;
+    ``sign``: sign of the weighted sum of the group's directions (its first row's on a tie);
+    ``mean_speed``: weighted mean of ``|speed|`` over its rows.
     """
     g = np.asarray(groups)
     d = np.asarray(direction, dtype=float)
@@ -76,32 +49,18 @@ def group_summary(groups, direction, speed, weight=None) -> tuple[np.ndarray, np
     if not (len(g) == len(d) == len(s) == len(w)):
         raise InputError("group summaries need one direction, speed and weight per row")
     ids, first, inv = np.unique(g, return_index=True, return_inverse=True)
-    dsum = np.bincount(inv, weights=d * w, minlength=len(ids))
-    sign = np.sign(dsum).astype(int)
-    tie = sign == 0
-    sign[tie] = np.sign(d[first[tie]]).astype(int)
+    sign = np.sign(np.bincount(inv, weights=d * w, minlength=len(ids))).astype(int)
+    sign = np.where(sign == 0, np.sign(d[first]), sign).astype(int)
     mean_speed = np.bincount(inv, weights=s * w, minlength=len(ids)) / np.bincount(inv, weights=w, minlength=len(ids))
     return ids, sign, mean_speed
 
 
 def deal_folds(sign, speed, ids, folds: int) -> np.ndarray:
-    """Fold of every group by THE fold rule (module docstring).
+    """Fold (0 .. k-1) of every group, in the order given, by THE fold rule (module docstring).
 
-    Parameters
-    ----------
-    sign : array_like of int, (G,)
-        Direction of each group, +1 or -1.
-    speed : array_like, (G,)
-        Mean ``|v|`` of each group (rad/s or m/s).
-    ids : array_like, (G,)
-        Group ids: they break ties of speed.
-    folds : int
-        Folds asked for (at least 1); at most one per group is used, and at least two.
-
-    Returns
-    -------
-    ndarray of int, (G,)
-        Fold (0 .. k-1) of each group, in the order given.
+    Per group (G,): ``sign`` its direction (+1 / -1), ``speed`` its mean ``|v|`` (rad/s or m/s),
+    ``ids`` its id (breaks ties of speed).  ``folds``: folds asked for (at least 1); at most one
+    per group is used, and at least two.
     """
     sign = np.asarray(sign)
     speed = np.asarray(speed, dtype=float)
@@ -149,22 +108,10 @@ def splits(fold) -> Iterator[tuple[int, np.ndarray]]:
 # ---------------------------------------------------------------------- the held-out loop
 @dataclass
 class HeldOut:
-    """Held-out errors of one cross-validation.
-
-    Attributes
-    ----------
-    sse : ndarray, (U,)
-        Held-out sum of squared errors of every unit (torque units^2); NaN where the unit was not
-        predicted (its fold's fit failed, or a non-finite prediction).
-    n : ndarray, (U,)
-        Samples each unit's ``sse`` covers (0 where NaN).
-    fold : ndarray, (U,)
-        Fold of every unit.
-    failed : list of str
-        Why each fold that could not be fitted failed.
-    ran : int
-        Folds that were tried.
-    """
+    """Held-out errors of one cross-validation, per unit (U,): ``sse`` its held-out sum of squared
+    errors (torque units^2; NaN where not predicted: its fold's fit failed, or a non-finite
+    prediction), ``n`` the samples it covers (0 where NaN), ``fold`` its fold; ``failed``: why each
+    fold that could not be fitted failed; ``ran``: folds tried."""
 
     sse: np.ndarray
     n: np.ndarray
@@ -190,26 +137,14 @@ class HeldOut:
 
 
 def held_out(fold, fit: Callable, score: Callable, *, weight=None, catch=(InputError,)) -> HeldOut:
-    """Cross-validate: every fold predicted by a model fitted without it.
+    """Cross-validate: every fold predicted by a model fitted without it (a :class:`HeldOut`).
 
-    Parameters
-    ----------
-    fold : array_like of int, (U,)
-        Fold of every unit (rows of samples, or per-segment summaries).
-    fit : callable
-        ``fit(train)`` with ``train`` a boolean mask over the units: the model fitted to them.
-    score : callable
-        ``score(model, test)``: the held-out squared error of each test unit, ``(test.sum(),)``
-        (a row: its squared residual, NaN when not finite; a segment: its residual sum of squares).
-    weight : array_like, (U,), optional
-        Samples each unit stands for (default 1: units are samples).
-    catch : tuple of exception types
-        Failures of a fold's fit or prediction that skip the fold (counted in ``failed``);
-        others propagate.
-
-    Returns
-    -------
-    HeldOut
+    ``fold`` (U,): fold of every unit (rows of samples, or per-segment summaries).  ``fit(train)``,
+    ``train`` a boolean mask over the units: the model fitted to them.  ``score(model, test)``: the
+    held-out squared error of each test unit, ``(test.sum(),)`` (a row: its squared residual, NaN
+    when not finite; a segment: its residual sum of squares).  ``weight`` (U,): samples each unit
+    stands for (default 1).  ``catch``: exceptions of a fold's fit or prediction that skip the fold
+    (counted in ``failed``); others propagate.
     """
     fold = np.asarray(fold, dtype=int)
     w = np.ones(len(fold)) if weight is None else np.asarray(weight, dtype=float)
@@ -229,27 +164,13 @@ def held_out(fold, fit: Callable, score: Callable, *, weight=None, catch=(InputE
 def z_statistic(r0, delta, noise, starts, stops, *, blocks: int = 8) -> float:
     """Held-out Z of a change of model: ``Z = sum_g <r0_g, Delta_g> / sqrt(sum_g V_g)``.
 
-    Parameters
-    ----------
-    r0 : ndarray, (N,)
-        Held-out residual without the change (torque units).
-    delta : ndarray, (N,)
-        The change of the held-out prediction it makes (torque units).
-    noise : ndarray, (N,)
-        The held-out residual the variance is estimated from (e.g. the residual with the change).
-    starts, stops : sequence of int
-        Rows ``starts[g]:stops[g]`` of every held-out group ``g``.
-    blocks : int
-        Consecutive blocks per group of the within-group variance.
-
-    Returns
-    -------
-    float
-        ``V_g`` is cluster-robust: the larger of ``<noise_g, Delta_g>^2`` (the group as one
-        cluster) and the sum of the same over ``blocks`` consecutive blocks of the group (coloured
-        noise within it).  When every ``V_g`` is 0 the ratio is taken for what it is: ``+inf``
-        when the numerator is positive (the change explains the held-out data exactly: e.g.
-        ``noise`` = 0), ``-inf`` when it is negative, 0 when it is 0 (no change at all).
+    Per row (N,, torque units): ``r0`` the held-out residual without the change, ``delta`` the
+    change of the held-out prediction it makes, ``noise`` the held-out residual the variance is
+    estimated from (e.g. the residual with the change).  Rows ``starts[g]:stops[g]`` are held-out
+    group ``g``.  ``V_g`` is cluster-robust: the larger of ``<noise_g, Delta_g>^2`` (the group as one
+    cluster) and the sum of the same over ``blocks`` consecutive blocks of it (coloured noise within
+    it).  When every ``V_g`` is 0: ``+inf`` for a positive numerator (the change explains the
+    held-out data exactly, e.g. ``noise`` = 0), ``-inf`` for a negative one, 0 for none.
     """
     num, var = 0.0, 0.0
     for a, z in zip(starts, stops):

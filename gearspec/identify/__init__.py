@@ -1,17 +1,8 @@
 """Identification of friction models: the papers' procedures and better estimators beside them.
 
-- :mod:`.stats`: the lines to fit (:func:`harmonic_specs`) and the exact per-segment statistics
-  of the samples (:class:`SegmentStats`) the fits start from.
-- :mod:`.joint`: the joint fit of all parameters of a direction (weighted nonlinear least squares
-  on the samples, standard errors from the covariance or a bootstrap), as an estimator
-  (:class:`JointFit`, :func:`clone`) and as :func:`fit`; :func:`refit` rebuilds it from a model.
-- :mod:`.published`: the SILO4 procedure as published (:func:`silo4_published`) and the lines'
-  amplitudes per segment it reads.
-- :mod:`.efficiency`: Lola/CROPS fits to efficiency (:func:`fit_efficiency`, :func:`fit_catalog`).
-- :mod:`.validate`: errors per segment (:func:`segment_errors`) and held out (:func:`holdout`),
-  leaving out whole segments or runs, never interleaved samples.
-- :mod:`.pipeline`: models side by side (:func:`compare`) and a whole recording
-  (:func:`identify_recording`, ``gearspec fit``).
+:mod:`.stats` (lines to fit, per-segment statistics), :mod:`.joint` (the joint fit, :class:`JointFit`),
+:mod:`.published` (SILO4 as published), :mod:`.efficiency` (Lola/CROPS efficiency fits),
+:mod:`.validate` (per-segment and held-out errors), :mod:`.pipeline` (:func:`compare`, ``gearspec fit``).
 """
 
 from .efficiency import efficiency_model, fit_catalog, fit_efficiency

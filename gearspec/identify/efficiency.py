@@ -32,9 +32,6 @@ def efficiency_model(model: FrictionModel, v, load, ratio: float) -> np.ndarray:
     return laws.efficiency_from_friction(tau, load, ratio)
 
 
-_EFF_LAWS = ("lola8", "lola11")
-
-
 def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: FrictionModel | None = None,
                    holdout: str | None = None, folds: int = 5, name: str | None = None,
                    gamma_free: bool = True) -> FrictionModel:
@@ -45,7 +42,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
     and ``load`` the output torque (e.g. ``FitData.from_points(v, eta, load=T_l)``).  The RMS of the
     efficiency residual is ``rmse`` (what the paper's Tables III-V call RMS).  Symmetric model.
     """
-    if law not in _EFF_LAWS:
+    if law not in ("lola8", "lola11"):
         raise InputError(f"efficiency fits take law lola8 or lola11, got '{law}'")
     if data.load is None:
         raise InputError("an efficiency fit needs the output load torque ('load')")
@@ -74,12 +71,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
         guess = {"t_f0": float(np.median(tau_implied)), "mu": 1e-3, "b": 1e-4, "gamma": 0.0,
                  "t_fs": float(np.median(tau_implied)), "v_s": float(np.median(v))}
         x0 = np.array([guess[k] for k in names])
-    lo = np.full(len(names), -np.inf)
-    for k in LAWS[law].nonneg:
-        if k in names:
-            lo[names.index(k)] = 0.0
-    if "v_s" in names:
-        lo[names.index("v_s")] = 1e-9
+    lo = np.array([1e-9 if k == "v_s" else 0.0 if k in LAWS[law].nonneg else -np.inf for k in names])
     x0 = np.where(np.isfinite(lo), np.maximum(x0, lo + 1e-12), x0)
 
     def params_of(x):
@@ -145,5 +137,3 @@ def fit_catalog(table: pd.DataFrame, *, ratio: float, law: str = "lola8", drop_e
                                             out.loc[ok, "load"].to_numpy(), ratio)
     out["used"] = out.index.isin(t.index)
     return m, out
-
-

@@ -1,26 +1,20 @@
 """The joint fit: weighted nonlinear least squares of all parameters of a direction together, on
 the samples themselves (amplitudes fitted in the position domain, not through logs of noisy
 amplitudes), with standard errors from the covariance (or a bootstrap over segments); as an
-estimator in the scikit-learn manner (:class:`JointFit`) and as a function (:func:`fit`).
+estimator (:class:`JointFit`) and as a function (:func:`fit`).
 
 How it works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
-coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the friction level, and
-``A_k g_k(|v_s|)`` times ``cos phi_k``, ``sin phi_k`` of every harmonic), so the residual sum of
-squares of the segment is exactly ``(beta_s - beta_hat_s)^T G_s (beta_s - beta_hat_s) + const``
-with ``G_s = X_s^T X_s`` and ``beta_hat_s`` the segment's own least-squares coefficients (X_s: the
-columns 1, sin, cos at the samples' positions; :class:`~.stats.SegmentStats`).  One pass over the
-samples gives every ``G_s`` and ``beta_hat_s``; the fit then works on a few numbers per segment --
-exact, and independent of the number of samples.  Each segment is weighted by the inverse of its
-own residual variance (pure error: the variance left after its unrestricted local fit).  The law's
-linear parameters are solved in closed form for given nonlinear ones (variable projection:
-Stribeck velocity, decay constants), the nonlinear ones by ``scipy.optimize.least_squares`` from
-the registry's grid start (:mod:`gearspec.terms.registry`), and a last joint Gauss-Newton pass over
-all parameters gives the covariance.  This needs the velocity constant within a segment: the laws
-are evaluated at each segment's mean velocity (``FitData`` with ``velocity="segment"``), and a
-load-dependent law at the segment's mean load.
-
-Lola/CROPS: :func:`fit` with ``law="lola8"``/``"lola11"`` fits friction points (from
-:meth:`FitData.from_points` or the load-holding segments of a recording).
+coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the level, and ``A_k g_k(|v_s|)``
+times ``cos phi_k``, ``sin phi_k`` of every harmonic), so the segment's residual sum of squares is
+exactly ``(beta_s - beta_hat_s)^T G_s (beta_s - beta_hat_s) + const`` with ``G_s = X_s^T X_s`` and
+``beta_hat_s`` its own least-squares coefficients (:class:`~.stats.SegmentStats`): the fit works on
+a few numbers per segment, exact and independent of the number of samples.  Each segment is
+weighted by the inverse of its pure-error variance.  The law's linear parameters are solved in
+closed form for given nonlinear ones (variable projection), the nonlinear ones (Stribeck velocity,
+decays) by ``scipy.optimize.least_squares`` from the registry's grid start, and a last joint pass
+over all parameters gives the covariance.  The laws are evaluated at each segment's mean velocity
+(``FitData`` with ``velocity="segment"``) and mean load.  Lola/CROPS laws (``lola8``/``lola11``)
+fit friction points (:meth:`FitData.from_points` or load-holding segments).
 """
 
 from __future__ import annotations
@@ -82,9 +76,9 @@ class _Problem:
         if nb:
             M[:, 0, :nb] = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
         fac = self.factors(decays) * st.sampled
-        for k in range(self.K):
-            M[:, 1 + 2 * k, nb + 2 * k] = fac[:, k]
-            M[:, 2 + 2 * k, nb + 2 * k + 1] = fac[:, k]
+        k = np.arange(self.K)
+        M[:, 1 + 2 * k, nb + 2 * k] = fac
+        M[:, 2 + 2 * k, nb + 2 * k + 1] = fac
         return M
 
     def solve_linear(self, nonlin_base, decays):
@@ -105,13 +99,9 @@ class _Problem:
         beta = np.einsum("spl,l->sp", M, lin)
         return np.einsum("spq,sq->sp", self.Lt, beta - self.stats.beta_hat).ravel()
 
-    def rss_const(self):
-        return float(np.sum(self.weights * self.stats.rss_hat))
-
 
 def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
-    basis = _basis(law)
-    S, P = stats.g.shape
+    S = len(stats.g)
     if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
         w = 1.0 / stats.sigma2
         w = w / np.median(w)
@@ -119,15 +109,13 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
         w = np.ones(S)
     else:
         raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
-    Lt = np.zeros((S, P, P))
+    Lt = np.zeros(stats.G.shape)
     for i in range(S):
         lam, U = np.linalg.eigh(stats.G[i])
-        lam = np.clip(lam, 0.0, None)
-        Lt[i] = math.sqrt(w[i]) * (np.sqrt(lam)[:, None] * U.T)
-    decay_free = np.array([h.get("decay", True) is not False and h.get("law", "exp") != "const" for h in harmonics],
-                          bool)
+        Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam, 0.0, None))[:, None] * U.T)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
-    return _Problem(stats, basis, harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
+    decay_free = np.array([a != "const" for a in amp_law], bool)
+    return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
 
 
 def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
@@ -173,7 +161,6 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         starts = [[] if grid_vs[int(np.argmin(costs))] is None else [float(grid_vs[int(np.argmin(costs))])]]
     # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
     sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
-    x0 = np.concatenate([np.log(starts[0]) if nb_nl else [], dec0[free] / sscale])
 
     def unpack(x):
         nl = list(np.exp(x[:nb_nl])) if nb_nl else []
@@ -182,10 +169,9 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
         return nl, dec
 
     def proj(x):
-        nl, dec = unpack(x)
-        return prob.solve_linear(nl, dec)[1]
+        return prob.solve_linear(*unpack(x))[1]
 
-    if len(x0):
+    if nb_nl or len(free):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             lb = np.concatenate([[vs_bounds[0]] * nb_nl, np.full(len(free), -np.inf)])
@@ -198,41 +184,30 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
                     res = r_
         if not np.all(np.isfinite(res.x)):
             raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
-        x_opt = res.x
-        status = res.status
+        x_opt, status = res.x, res.status
     else:
-        x_opt = x0
-        status = 1
+        x_opt, status = np.zeros(0), 1
     nl, dec = unpack(x_opt)
     lin, _ = prob.solve_linear(nl, dec)
     # joint pass over all parameters: covariance from the Jacobian at the optimum
-    nb = len(prob.basis.lin)
 
     def full(z):
-        lin_ = z[:len(lin)]
-        x = z[len(lin):]
-        nl_, dec_ = unpack(x)
-        return prob.residual_full(lin_, nl_, dec_)
+        return prob.residual_full(z[:len(lin)], *unpack(z[len(lin):]))
 
     z = np.concatenate([lin, x_opt])
     r = full(z)
     J = _jacobian(full, z)
-    rss = float(r @ r) + prob.rss_const()
-    N = int(np.sum(st.n))
     p = len(z)
-    dof = max(N - p, 1)
-    s2 = rss / dof
-    JtJ = J.T @ J
+    # residual variance: the weighted rss of the fit plus the segments' own (pure error)
+    s2 = (float(r @ r) + float(np.sum(prob.weights * st.rss_hat))) / max(int(np.sum(st.n)) - p, 1)
     try:
-        cov = np.linalg.inv(JtJ) * s2
-        ok = np.all(np.isfinite(cov))
+        cov = np.linalg.inv(J.T @ J) * s2
     except np.linalg.LinAlgError:
         cov = np.full((p, p), np.nan)
-        ok = False
-    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if ok else np.full(p, np.nan)
+    se = np.sqrt(np.clip(np.diag(cov), 0, None)) if np.all(np.isfinite(cov)) else np.full(p, np.nan)
     on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
-    return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "rss": rss, "s2": s2,
-            "dof": dof, "status": status, "n_lin": nb, "sscale": sscale, "nb_nl": nb_nl, "free": free}
+    return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "status": status,
+            "sscale": sscale, "free": free}
 
 
 def _jacobian(fun, z):
@@ -252,7 +227,7 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
     """Fitted values and standard errors of one direction."""
     basis = prob.basis
     lin, se, cov = sol["lin"], sol["se"], sol["cov"]
-    nb = sol["n_lin"]
+    nb = len(basis.lin)
     L = len(lin)
     P = Direction({})
     for j, name in enumerate(basis.lin):
@@ -263,18 +238,17 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
         P.set(name, val, float(val * se[L + j]))
     free = list(sol["free"])
     for k, h in enumerate(prob.harmonics):
-        a, c = lin[nb + 2 * k], lin[nb + 2 * k + 1]
         ia, ic = nb + 2 * k, nb + 2 * k + 1
-        A = float(math.hypot(a, c))
-        phi = float(math.atan2(c, a))
-        nan2 = (float("nan"),) * 2
-        a_se, p_se = pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov)) else nan2
+        a, c = lin[ia], lin[ic]
+        a_se, p_se = (pair_se(a, c, cov[np.ix_([ia, ic], [ia, ic])]) if np.all(np.isfinite(cov))
+                      else (float("nan"),) * 2)
         if k in free:
-            decay_se = float(se[L + sol["nb_nl"] + free.index(k)] * sol["sscale"])
+            decay_se = float(se[L + len(basis.nonlin) + free.index(k)] * sol["sscale"])
         else:
             decay_se = 0.0 if prob.amp_law[k] == "const" else float("nan")
         rng = [float(x) for x in prob.ranges[k]] if np.all(np.isfinite(prob.ranges[k])) else None
-        P.harmonics.append(Harmonic(float(h["frequency"]), A, float(sol["decays"][k]), phi,
+        P.harmonics.append(Harmonic(float(h["frequency"]), float(math.hypot(a, c)), float(sol["decays"][k]),
+                                    float(math.atan2(c, a)),
                                     label=h.get("label") or None, law=prob.amp_law[k], speed_range=rng,
                                     segments=int(prob.stats.active[:, k].sum()),
                                     se={"amplitude": a_se, "phase": p_se, "decay": decay_se}))
@@ -282,13 +256,12 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
 
 
 def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
-    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard
-    errors below 0) of each direction: friction
-    that falls with speed over the whole measured range is rarely physical, and more often an
-    inertia, a channel lag or aliasing the model does not hold, or plateau speeds too close
-    together to tell viscous from Stribeck friction.  Each flag is one sentence, added to
-    ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]`` (``"direction.parameter"
-    -> sentence``); returns the sentences."""
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard errors
+    below 0) of each direction: friction that falls with speed over the whole measured range is
+    rarely physical, more often an inertia, a channel lag or aliasing the model does not hold, or
+    plateau speeds too close together to tell viscous from Stribeck friction.  Each flag is one
+    sentence, added to ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]``
+    (``"direction.parameter" -> sentence``); returns the sentences."""
     out = []
     flags = model.meta.setdefault("flags", {})
     su = "rad/s" if model.unit == "rad" else "m/s"
@@ -323,8 +296,7 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     """One direction's fit: ``(parameters, not_identified, notes)``."""
     notes: list[str] = []
     ni: dict[str, str] = {}
-    freqs = [h["frequency"] for h in specs]
-    stats = segment_stats(sub, freqs, min_cycles=min_cycles)
+    stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
     # harmonics that the segments do not cover by one cycle together cannot be identified: left out
     total = np.where(stats.active, stats.cycles, 0.0).sum(axis=0) if len(specs) else np.zeros(0)
     keep = [k for k in range(len(specs)) if total[k] >= 1.0]
@@ -436,34 +408,25 @@ def _bootstrap_se(P, stats: SegmentStats, law, specs, weights, B, seed):
     rng = np.random.default_rng(seed)
     S = len(stats.speed)
     base_names = list(_basis(law).lin) + list(_basis(law).nonlin)
-    draws = {k: [] for k in base_names}
-    hdraws = [{"amplitude": [], "decay": [], "phase": []} for _ in P.harmonics]
+    fits = []
     for _ in range(B):
         bs = stats.take(rng.integers(0, S, S))
         if len(np.unique(np.round(bs.speed, 9))) < len(base_names):
             continue
         try:
             prob = _make_problem(bs, law, specs, weights)
-            Q = _direction_params(prob, _fit_direction(prob))
+            fits.append(_direction_params(prob, _fit_direction(prob)))
         except (InputError, np.linalg.LinAlgError, ValueError):
             continue
+    if len(fits) >= 10:
         for k in base_names:
-            draws[k].append(Q.values[k])
-        for k, h in enumerate(Q.harmonics):
-            for key in ("amplitude", "decay", "phase"):
-                hdraws[k][key].append(getattr(h, key))
-    for k in base_names:
-        if len(draws[k]) >= 10:
-            P.se[k] = float(np.std(draws[k], ddof=1))
-    for h, dr in zip(P.harmonics, hdraws):
-        if len(dr["amplitude"]) >= 10:
-            h.se["amplitude"] = float(np.std(dr["amplitude"], ddof=1))
-            h.se["decay"] = float(np.std(dr["decay"], ddof=1))
-            ph = np.angle(np.exp(1j * (np.asarray(dr["phase"]) - h.phase)))
+            P.se[k] = float(np.std([Q.values[k] for Q in fits], ddof=1))
+        for i, h in enumerate(P.harmonics):
+            h.se["amplitude"] = float(np.std([Q.harmonics[i].amplitude for Q in fits], ddof=1))
+            h.se["decay"] = float(np.std([Q.harmonics[i].decay for Q in fits], ddof=1))
+            ph = np.angle(np.exp(1j * (np.asarray([Q.harmonics[i].phase for Q in fits]) - h.phase)))
             h.se["phase"] = float(np.sqrt(np.mean(ph ** 2)))
     P.se_method = f"bootstrap over segments ({B} resamples)"
-
-
 
 
 # ---------------------------------------------------------------------- the estimator
@@ -471,42 +434,27 @@ class JointFit:
     """The joint fit of a friction law, per direction, as an estimator: settings in ``__init__``,
     learned values (trailing underscore) after :meth:`fit`.
 
-    Parameters
-    ----------
-    law : str
-        ``silo4`` (eq. 11: eq. 3 + harmonics), ``stribeck`` (eq. 3 alone), ``coulomb_viscous``,
-        ``lola8``, ``lola11`` or ``none`` (harmonics only).  ``silo4`` fits the declared lines of
-        ``gear`` unless ``harmonics`` says otherwise; the others fit ``harmonics`` only if given.
-    harmonics, gear
-        See :func:`~.stats.harmonic_specs`.
-    weights : {"segment", "uniform"}
-        Weight each segment by the inverse of its own residual variance, or all samples alike.
-    se : {"covariance", "bootstrap"}
-        Standard errors from the covariance of the weighted fit, or from ``bootstrap`` refits on
-        segments resampled with replacement (per direction; ``seed`` seeds the resampling).
-    min_cycles : float
-        A segment counts towards a harmonic where it covers at least this fraction of a cycle;
-        the harmonic is identified when those segments cover at least one cycle together (a line
-        too slow for any one segment, e.g. one joint turn, is fitted from many).  Every segment's
-        level is modelled with the partial cycles of slow lines it contains.
-    holdout : {"segment", "run", None}
-        Also compute ``rmse_holdout`` by ``folds``-fold cross-validation over whole segments or
-        runs (None: skip), each fold refitted with :func:`refit`.
-    init : FrictionModel, optional
-        Starting values (e.g. from :func:`~.published.silo4_published`).
-    name : str, optional
-        The model's name (default: the law).
-    check : bool
-        Warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
-        (:func:`negative_viscous`); it is flagged in the model either way.
+    - ``law``: ``silo4`` (eq. 11: eq. 3 + harmonics), ``stribeck`` (eq. 3 alone), ``coulomb_viscous``,
+      ``lola8``, ``lola11`` or ``none`` (harmonics only).  ``silo4`` fits the declared lines of
+      ``gear`` unless ``harmonics`` says otherwise (:func:`~.stats.harmonic_specs`); the others fit
+      ``harmonics`` only if given.
+    - ``weights`` ("segment" or "uniform"): each segment weighted by the inverse of its own residual
+      variance, or all samples alike.
+    - ``se`` ("covariance" or "bootstrap"): standard errors from the covariance of the weighted fit,
+      or from ``bootstrap`` refits on segments resampled with replacement (``seed`` seeds them).
+    - ``min_cycles``: a segment counts towards a harmonic where it covers at least this fraction of
+      a cycle; the harmonic is identified when those segments cover one cycle together (a line too
+      slow for any one segment, e.g. one joint turn, is fitted from many); every segment's level is
+      modelled with the partial cycles of slow lines it contains.
+    - ``holdout`` ("segment", "run" or None: skip): ``rmse_holdout`` by ``folds``-fold
+      cross-validation over whole segments or runs, each fold refitted with :func:`refit`.
+    - ``init``: a model of starting values; ``name``: the model's (default: the law); ``check``:
+      warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
+      (:func:`negative_viscous`; flagged in the model either way).
 
-    Attributes
-    ----------
-    model_ : FrictionModel
-        With ``rmse`` (in-sample, Nm), ``rmse_holdout``, ``not_identified`` and, in ``meta["fit"]``,
-        the settings :meth:`from_model` rebuilds the estimator from (CONTRACTS.md).
-    harmonics_ : list of dict
-        The lines fitted (``frequency`` in cycles per unit of theta, ``label``, ...).
+    ``model_``: the FrictionModel, with ``rmse`` (in-sample, Nm), ``rmse_holdout``,
+    ``not_identified`` and in ``meta["fit"]`` the settings :meth:`from_model` rebuilds the estimator
+    from; ``harmonics_``: the lines fitted (``frequency`` in cycles per unit of theta, ``label``).
     """
 
     def __init__(self, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",

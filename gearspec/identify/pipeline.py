@@ -45,12 +45,10 @@ def compare(data: FitData, candidates: Mapping[str, FrictionModel | Mapping], *,
             else:
                 ho, why = None, "the model carries no fit settings to refit it without the held-out data"
         else:
-            kw = dict(c)
-            kw.setdefault("holdout", None)
+            kw = {"holdout": None, **c}
             m = fit(data, **kw)
             ho, why = holdout(lambda tr, kw=kw: fit(tr, **{**kw, "check": False}), data, by=by, folds=folds)
-        n_par = _n_params(m)
-        rows.append({"model": name, "law": m.law, "parameters": n_par, "rmse": _safe_rmse(m, data),
+        rows.append({"model": name, "law": m.law, "parameters": _n_params(m), "rmse": _safe_rmse(m, data),
                      "rmse_holdout": ho, "rmse_holdout_reason": why})
     return pd.DataFrame(rows)
 
@@ -91,26 +89,16 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
                        published: bool | None = None, holdout: str = "segment", folds: int = 5,
                        se: str = "covariance", load_ratio: float | None = None,
                        compare_with=None) -> FitResult:
-    """Identify ``law`` from a recording, beside the published procedure and simpler laws.
+    """Identify ``law`` (a key of :data:`gearspec.model.LAWS`) from a recording ``rec``, beside the
+    published procedure and simpler laws.
 
-    Parameters
-    ----------
-    rec : Recording
-    law : str
-        A key of :data:`gearspec.model.LAWS`.
-    segmentation, gear
-        Default: found segments, the recording's gear spec.
-    harmonics
-        Lines to fit (:func:`harmonic_specs`); default for ``silo4``: every declared line.
-    published : bool
-        Also run :func:`silo4_published` (default: for ``silo4`` and ``stribeck``).
-    holdout, folds, se
-        As in :func:`fit`.
-    load_ratio : float, optional
-        Subtract ``|load| / load_ratio`` (the load seen at the motor, eq. 12) from the torque;
-        default for the Lola laws: the gear's total ratio when the recording has a load.
-    compare_with : sequence of str, optional
-        Other laws fitted to the same data (default: the simpler ones).
+    ``segmentation``, ``gear``: default found segments and the recording's gear spec; ``harmonics``:
+    lines to fit (:func:`harmonic_specs`; default for ``silo4``: every declared line); ``published``:
+    also run :func:`silo4_published` (default: for ``silo4`` and ``stribeck``); ``holdout``,
+    ``folds``, ``se``: as in :func:`fit`; ``load_ratio``: subtract ``|load| / load_ratio`` (the load
+    seen at the motor, eq. 12) from the torque (default for the Lola laws: the gear's total ratio
+    when the recording has a load); ``compare_with``: other laws fitted to the same data (default:
+    the simpler ones).
     """
     gear = load_gear(gear) if gear is not None else rec.gear
     seg = segmentation if segmentation is not None else find_segments(rec)

@@ -28,6 +28,9 @@ from .validate import _safe_rmse
 
 __all__ = ["silo4_published", "line_amplitudes", "amplitudes_from_spectrum"]
 
+#: the columns of a table of per-segment line amplitudes
+_AMP_COLUMNS = ["segment", "direction", "speed", "label", "frequency", "amplitude", "amplitude_se", "phase"]
+
 
 def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.DataFrame:
     """Amplitude, phase and standard error of each line in each segment where it completes
@@ -56,8 +59,7 @@ def line_amplitudes(data: FitData, harmonics, *, min_cycles: float = 1.0) -> pd.
                              "label": h.get("label"), "frequency": h["frequency"], "amplitude": math.hypot(a_, c_),
                              "amplitude_se": pair_se(a_, c_, cov[np.ix_([ia, ic], [ia, ic])])[0],
                              "phase": math.atan2(c_, a_)})
-    return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
-                                       "amplitude_se", "phase"])
+    return pd.DataFrame(rows, columns=_AMP_COLUMNS)
 
 
 def amplitudes_from_spectrum(spectrum, data: FitData, harmonics=None) -> pd.DataFrame:
@@ -75,8 +77,7 @@ def amplitudes_from_spectrum(spectrum, data: FitData, harmonics=None) -> pd.Data
                 rows.append({"segment": sid, "direction": s.direction, "speed": s.speed, "label": h["label"],
                              "frequency": h["frequency"], "amplitude": p.amplitude, "amplitude_se": p.amplitude_se,
                              "phase": p.phase})
-    return pd.DataFrame(rows, columns=["segment", "direction", "speed", "label", "frequency", "amplitude",
-                                       "amplitude_se", "phase"])
+    return pd.DataFrame(rows, columns=_AMP_COLUMNS)
 
 
 def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None, high_speed: float = 100 * RPM,
@@ -84,21 +85,13 @@ def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None
                     holdout: str | None = "segment", folds: int = 5) -> FrictionModel:
     """The SILO4 identification procedure as published (section 3-4; see the module docstring).
 
-    Parameters
-    ----------
-    data : FitData
-        Samples in segments (the plateau averages come from it).
-    amplitudes : DataFrame or SpectrumResult, optional
-        Per-segment amplitudes and phases of the lines (:func:`line_amplitudes`, or the spectra of
-        :func:`gearspec.spectrum.analyze` on the same segmentation).  Default: measured from
-        ``data`` at the lines of ``harmonics``/``gear``.
-    harmonics, gear
-        The lines (:func:`harmonic_specs`); none: eq. 3 only.
-    high_speed : float
-        Plateaus above this speed give Coulomb and viscous friction (the paper: 100 rpm, in rad/s
-        here); the others static friction and Stribeck velocity.
-    constant : labels
-        Lines modelled with a constant amplitude (eq. 6): the paper's F1, one joint turn.
+    ``data``: samples in segments (the plateau averages come from it).  ``amplitudes``: per-segment
+    amplitudes and phases of the lines (:func:`line_amplitudes`, or the spectra of
+    :func:`gearspec.spectrum.analyze` on the same segmentation; default: measured from ``data`` at
+    the lines of ``harmonics``/``gear``, :func:`harmonic_specs`; none: eq. 3 only).  ``high_speed``:
+    plateaus above it give Coulomb and viscous friction (the paper: 100 rpm; rad/s here), the others
+    static friction and Stribeck velocity.  ``constant``: labels of lines with a constant amplitude
+    (eq. 6): the paper's F1, one joint turn.
     """
     specs = harmonic_specs(harmonics, gear)
     if amplitudes is None:
@@ -131,8 +124,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
         hi = pl[pl["speed"] > high_speed]
         lo = pl[pl["speed"] <= high_speed]
         if len(hi) >= 2:
-            X = np.column_stack([np.ones(len(hi)), hi["speed"]])
-            coef, se = _ols(X, hi["level"].to_numpy())
+            coef, se = _line(hi["speed"], hi["level"].to_numpy())
             P.set("tau_c", float(coef[0]), float(se[0]))
             P.set("viscous", float(coef[1]), float(se[1]))
         else:
@@ -142,8 +134,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
             excess = lo["level"].to_numpy() - P.values["tau_c"]
             ok = excess > 0
             if ok.sum() >= 2:
-                X = np.column_stack([np.ones(ok.sum()), lo["speed"].to_numpy()[ok]])
-                coef, se = _ols(X, np.log(excess[ok]))
+                coef, se = _line(lo["speed"].to_numpy()[ok], np.log(excess[ok]))
                 m_, n_ = coef[1], coef[0]
                 if m_ < 0:
                     P.set("v_s", float(-1.0 / m_), float(se[1] / m_ ** 2))
@@ -179,7 +170,7 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
                 if lab not in constant:
                     ni[key + ".decay"] = "the line is measured at one speed only"
             else:
-                coef, se = _ols(np.column_stack([np.ones(len(sp)), sp]), np.log(amp))
+                coef, se = _line(sp, np.log(amp))
                 entry.update(amplitude=float(math.exp(coef[0])), amplitude_se=float(math.exp(coef[0]) * se[0]),
                              decay=float(-coef[1]), decay_se=float(se[1]))
             P.harmonics.append(Harmonic.of(entry))
@@ -198,18 +189,15 @@ def _segment_id(segments: pd.DataFrame, seg_spectrum) -> int | None:
     return int(m["segment"].iloc[0]) if len(m) else None
 
 
-def _ols(X, y):
+def _line(x, y):
+    """Least-squares line ``y = coef[0] + coef[1] x``: ``(coef, se)``, se NaN without degrees of freedom."""
+    X = np.column_stack([np.ones(len(y)), x])
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    if len(y) <= 2:
+        return coef, np.full(2, np.nan)
     r = y - X @ coef
-    dof = max(len(y) - X.shape[1], 1)
-    s2 = float(r @ r) / dof
     try:
-        cov = np.linalg.inv(X.T @ X) * s2
-        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+        cov = np.linalg.inv(X.T @ X) * (float(r @ r) / (len(y) - 2))
     except np.linalg.LinAlgError:
-        se = np.full(X.shape[1], np.nan)
-    if len(y) <= X.shape[1]:
-        se = np.full(X.shape[1], np.nan)
-    return coef, se
-
-
+        return coef, np.full(2, np.nan)
+    return coef, np.sqrt(np.clip(np.diag(cov), 0, None))

@@ -24,23 +24,22 @@ def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
 
 def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
                  folds: int = 5, residual: Callable | None = None) -> float | None:
-    """Root-mean-square error on held-out data: ``folds``-fold cross-validation over whole
-    segments (or runs); each fold is predicted by a model fitted to the others.  Folds where the
-    fit fails (too few speeds left) are skipped; None when every fold fails.  ``residual(model,
-    test_data)`` gives the error of a fold (default: ``model.residual``, friction torque).
-    :func:`holdout` gives the reason too."""
+    """The held-out rmse of :func:`holdout`, without the reason."""
     return holdout(fit_fn, data, by=by, folds=folds, residual=residual)[0]
 
 
 def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
             folds: int = 5, residual: Callable | None = None) -> tuple[float | None, str | None]:
-    """:func:`holdout_rmse` and why it is missing or partial: ``(rmse, reason)``.
+    """Root-mean-square error on held-out data and why it is missing or partial: ``(rmse, reason)``.
 
-    ``rmse`` is None when cross-validation cannot run -- fewer than two held-out groups, or no
+    ``folds``-fold cross-validation over whole segments (or runs, ``by``), folds by THE rule of
+    :mod:`gearspec.core.crossval`; each fold is predicted by a model ``fit_fn(train_data)`` fitted to
+    the others, its error ``residual(model, test_data)`` (default: ``model.residual``, friction
+    torque).  ``rmse`` is None when cross-validation cannot run -- fewer than two held-out groups, or no
     fold whose model can be fitted without it and predict it (each direction needs its own
     groups, and enough speeds left for the law) -- and ``reason`` says which, in one sentence;
     never the in-sample error in its place.  When some folds fail, ``rmse`` comes from the others
-    and ``reason`` says how many held-out samples it covers.  Folds: :mod:`gearspec.core.crossval`."""
+    and ``reason`` says how many held-out samples it covers."""
     ng = len(np.unique(data.groups(by)))
     if ng < 2:
         return None, (f"cross-validation needs two held-out {by}s or more; the data have {ng}")
@@ -69,9 +68,7 @@ def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
         p = model.params(dname)
         if all(p.get(k) is not None for k in model.law_spec.params if k not in model.law_spec.optional):
             ok |= data.direction == d
-    if not ok.any():
-        return None
-    return model.rmse_on(data.subset(ok))
+    return model.rmse_on(data.subset(ok)) if ok.any() else None
 
 
 def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
