@@ -115,8 +115,8 @@ def table2_comparison(joint, published, notes: dict | None = None) -> pd.DataFra
 def _zero_decay(model):
     m = model.copy()
     for p in m.directions.values():
-        for h in p["harmonics"]:
-            h["decay"] = 0.0
+        for h in p.harmonics:
+            h.decay = 0.0
     m.name = "Table 2 with every decay set to 0 (control)"
     return m
 
