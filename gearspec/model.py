@@ -105,7 +105,7 @@ class Harmonic(_JsonView):
         for k, val in h.items():
             if k in HARMONIC_KEYS:
                 continue
-            if k.endswith("_se"):
+            if k.endswith("_se") and k[:-3] in HARMONIC_KEYS + cls._OPTIONAL:
                 out.se[k[:-3]] = val
             elif k in cls._OPTIONAL and val is not None:
                 setattr(out, k, _speed_range(val) if k == "speed_range" else copy.deepcopy(val))

@@ -27,8 +27,10 @@ def test_a_harmonic_reads_typed_and_as_its_json():
     bare = Harmonic.of({"frequency": 1.0, "amplitude": 0.1})
     assert bare.amplitude_law == "exp" and bare.to_dict() == {"frequency": 1.0, "amplitude": 0.1, "decay": 0.0,
                                                                "phase": 0.0}
-    # a key written as null stays null (a file read and written back is unchanged)
+    # a key written as null stays null, and an unknown key (with or without _se) is kept: a file
+    # read and written back is unchanged
     assert Harmonic.of({**H, "label": None}).to_dict() == {**H, "label": None}
+    assert Harmonic.of({**H, "width_se": 0.1}).to_dict() == {**H, "width_se": 0.1}
 
 
 def test_records_are_changed_through_their_attributes_only():
