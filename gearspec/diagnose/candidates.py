@@ -1,28 +1,9 @@
 """Candidate terms: how each one is fitted (what proposes them: :mod:`.detectors`).
 
-A candidate is a *procedure*, not a fixed term: given the data it may use (the training groups of
-a fold, or all of them), it searches its own nonlinear parameters there -- the frequency of a
-line, its amplitude-vs-speed law and decay, a Stribeck velocity, an exponent, a presliding
-length -- and returns the blocks to add to the model (and the blocks they replace).  The held-out
-test (:mod:`.loop`) runs that procedure inside every fold, so that the data a fold is judged on
-never chose the term that predicts it.  A candidate reads the round it is proposed in through its
-context (:class:`~.context.Round`), never the loop.
-
-The procedures:
-
-:class:`GridCandidate`       a term family with a grid of nonlinear values (the grid value with
-                             the smallest training error in each fold): most term kinds
-:class:`FixedCandidate`      blocks as they are (backward elimination)
-:class:`PeriodicCandidate`   a line at a frequency found in the residual spectrum; amplitude law
-                             per direction chosen by the data (const, exp, rational, power; a
-                             decaying law only when it beats a constant amplitude by a
-                             likelihood-ratio test at 1 %)
-:class:`LagCandidate`        the torque channel logged behind position: the lag estimated from the
-                             phases of the model's lines across the training plateaus, every line
-                             fitted at ``theta - v lag``
-:class:`SidebandCandidate`   a line of the model amplitude-modulated by a slower shaft, at the
-                             frequencies the gear declares, pooled per direction over the plateaus
-                             long enough to resolve them
+A candidate is a *procedure*, not a fixed term: given the groups it may use (the training groups
+of a fold, or all of them) it searches its own nonlinear parameters there and returns the blocks
+to add to the model (and those they replace), so that the data a fold is judged on never chose the
+term that predicts it.  It reads the round through its context (:class:`~.context.Round`) only.
 """
 
 from __future__ import annotations

@@ -1,11 +1,5 @@
-"""What the candidates of one round of the closed loop read: the round's context.
-
-The loop builds one :class:`Round` per round (and one per model it compares against); the
-detectors (:mod:`.detectors`) and the candidates (:mod:`.candidates`) receive it and read it,
-never the loop itself.  It is read-only: the model as it stands, fitted on all data, its design
-with the Taylor columns of every nonlinear parameter and the per-group normal equations of that
-design, the held-out folds; the training sums and coefficients of a fold are derived from these
-(and cached: the candidates of a round ask for the same folds many times).
+"""What the candidates of one round of the closed loop read: the round's context (:class:`Round`),
+read-only; the training sums and coefficients of a fold are cached (a round asks for them often).
 """
 
 from __future__ import annotations

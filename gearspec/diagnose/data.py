@@ -1,21 +1,6 @@
-"""The data the closed loop works on: samples, the unit they are held out by, and what the
-residual is looked at against.
-
-:class:`DiagnoseData` wraps a :class:`~gearspec.fitdata.FitData` (the samples, in time order
-within each segment) with
-
-* ``by``: the held-out unit -- whole segments (plateaus), whole runs, or whole *moves* of a
-  trajectory (a motion from one standstill or reversal to the next); never interleaved samples;
-* ``travel``: the distance travelled since the last reversal of the motion, per sample, from the
-  *whole* recording (the turning point lies in the ramps between segments, which the segment
-  samples do not contain), for presliding hysteresis and backlash;
-* optionally a linear *reduction* of every column: the inverse-dynamic-model (IDIM) practice of
-  low-pass filtering and decimating each column of the observation matrix and the measured force
-  (EMPS), so that the loop's errors are those the published reference numbers use.
-
-Two constructors: :meth:`DiagnoseData.from_recording` (constant-speed segments, as ``gearspec
-fit``) and :func:`trajectory_data` (every sample of a whole trajectory: Butterworth-filtered
-position, central differences, optional decimation, as the EMPS reference procedure).
+"""The data the closed loop works on (:class:`DiagnoseData`): samples, the unit they are held out
+by, the travel since the last reversal, and an optional linear reduction of every column (IDIM
+filtering and decimation, :func:`trajectory_data`).
 """
 
 from __future__ import annotations

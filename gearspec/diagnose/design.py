@@ -1,23 +1,12 @@
 """A friction model as a linear design: blocks of columns, fitted jointly by least squares.
 
-Every model the loop handles -- a base law per direction (or shared), position-locked harmonics and
-additive terms -- is *linear* in most of its parameters once its few nonlinear ones are fixed
-(Stribeck velocity, decay constants, exponents, the travel of a presliding curve, a frequency):
-
-    drive torque = sum_blocks  X_block(theta, v, load, temperature, t, acc, travel; nonlinear) @ coef_block
-
-A :class:`Block` makes its columns from the data and writes its fitted coefficients back into a
-:class:`~gearspec.model.FrictionModel`; a :class:`State` is a list of blocks.  The closed loop
-refits the whole state jointly (ordinary least squares: the held-out error it is judged by is an
-unweighted rmse) whenever a term is added, so that a new term and the base law share the data
-honestly (a nonlinear viscous term and the linear viscous coefficient are refitted together, not
-one on the other's residual).  Nonlinear parameters are chosen by each candidate's own search
-(:mod:`.candidates`) on the data it is fitted to.
-
-Columns are torques *with the sign of the motion* for friction (a magnitude ``m`` contributes
-``sign(v) m``) and as they are for signed terms (inertia, offset).  Per-group normal equations
-(:class:`Grams`) make fits on any union of held-out groups cheap: one pass over the samples per
-set of columns, then sums over groups.
+Base law, lines and additive terms are linear in most parameters once their few nonlinear ones
+(Stribeck velocity, decays, exponents, presliding length, a frequency) are fixed.  A :class:`Block`
+makes its columns from the data and writes its fitted coefficients back into a
+:class:`~gearspec.model.FrictionModel`; a :class:`State` is a list of blocks, refitted jointly by
+ordinary least squares (the held-out error it is judged by is an unweighted rmse).  Columns are
+torques *with the sign of the motion* for friction and as they are for signed terms (inertia,
+offset).
 """
 
 from __future__ import annotations

@@ -1,40 +1,15 @@
 """The closed loop: residual -> detectors -> candidate terms -> held-out acceptance -> refit,
-until nothing more is accepted.
+until nothing more is accepted (the rule and its reasons: README, "The closed loop", Acceptance).
 
-Acceptance (why a term goes in)
--------------------------------
-The data are split into ``folds`` folds of whole held-out groups (segments, runs or moves; dealt
-round-robin by direction and speed so that every fold spans the speeds).  For a candidate, in
-every fold: the model as it stands is fitted on the other folds (prediction ``p0``), the
-candidate's procedure runs on the other folds too (it searches its own frequency, law, shape
-there) and the extended model is fitted on them (``p1``).  On the held-out fold, with
-``r0 = y - p0``, ``r1 = y - p1`` and ``Delta = p1 - p0``:
-
-* the held-out sum of squares falls: ``D = |r0|^2 - |r1|^2 = 2 <r0, Delta> - |Delta|^2``;
-* the statistic ``Z = sum_g <r0_g, Delta_g> / sqrt(sum_g V_g)`` over all held-out groups ``g``
-  is large: it is the correlation of the held-out residual with the correction the candidate
-  predicts, in units of its noise.  With a useless term, ``Delta`` comes from the training noise
-  and is independent of the held-out noise, so ``Z`` is centred on 0; with a real effect of size
-  ``delta`` it grows like ``|delta| / sigma``.  ``V_g`` is a cluster-robust variance: the larger
-  of ``<r1_g, Delta_g>^2`` (the whole group as one cluster: a random level per segment counts)
-  and the sum of the same over 8 consecutive blocks of the group (coloured noise within it);
-* three conditions, all required: ``Z`` above the one-sided t quantile with (groups - 1)
-  degrees of freedom at ``alpha / (number of candidates of the round)`` (Bonferroni: the round
-  tests many candidates); sign consistency -- the folds in which the term lowers the held-out
-  error carry at least 90 % of the total change; and a practical margin -- the held-out rmse
-  falls by at least ``min_gain`` (relative).
-
-Of the candidates that pass, the one with the largest held-out drop is added, the model is
-refitted on all data (the candidate's procedure then runs on all of it), and the loop repeats.
-Every candidate of every round is kept with its evidence and its numbers, accepted or not.
-
-The false-discovery rate of this rule on recordings whose model is complete is measured by the
-test suite (``tests/test_diagnose.py``) and stated in the README.
-
-An independent recording (``validation``, e.g. the EMPS cross-test) is the final judge: every
-accepted term must also lower the error there, by the same Z test on its groups and the same
-margin; a term that helps on the estimation data but not there is removed again (one at a time,
-the weakest first), and the report says so.
+In every fold of whole held-out groups the model as it stands is fitted on the other folds
+(prediction ``p0``), the candidate's procedure runs there too and the extended model is fitted
+(``p1``).  With ``r0 = y - p0`` and ``Delta = p1 - p0`` on the held-out fold,
+``Z = sum_g <r0_g, Delta_g> / sqrt(sum_g V_g)`` (:func:`gearspec.core.crossval.z_statistic`,
+``V_g`` cluster-robust); a candidate passes when ``Z`` exceeds the one-sided t quantile at
+``alpha / candidates`` (:func:`~gearspec.core.crossval.critical_z`), the improving folds carry 90 %
+of the change and the held-out rmse falls by ``min_gain``.  The best passing candidate is added,
+the model refitted, and the loop repeats; every candidate is kept with its evidence and decision.
+An independent recording (``validation``) is the final judge (:mod:`.validate`).
 """
 
 from __future__ import annotations

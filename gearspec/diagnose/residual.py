@@ -1,23 +1,9 @@
-"""Residual analysis of a fitted model against a recording: where the structure is that the
-model does not explain.
+"""Residual analyses of a fitted model: where the structure is that the model does not explain
+(over position, against speed, a channel, acceleration, the travel since a reversal).
 
 Every function takes a :class:`~gearspec.diagnose.data.DiagnoseData` and a residual ``r`` (data
-minus model, one value per observation, torque units) and returns tables for the report and a
-test statistic for the detectors:
-
-* :func:`position_spectra` -- the residual over position: Lomb-Scargle periodograms
-  (:class:`gearspec.spectrum.LombScargle`) of every segment and pooled over the segments of one
-  direction and similar speed, with the local noise level and false-alarm probabilities of
-  :mod:`gearspec.spectrum` (each segment's mean removed first: a level misfit is not a ripple);
-* :func:`speed_analysis` -- residual means against speed, per direction (lack of fit of the
-  speed law; the difference between directions is the asymmetry);
-* :func:`channel_analysis` -- residual means against load, temperature or time, per group;
-* :func:`acceleration_analysis` -- residual against acceleration (inertia misfit);
-* :func:`reversal_analysis` -- residual against the travel since the last reversal
-  (presliding hysteresis, backlash).
-
-Statistics that decide between "structure" and "noise" treat whole held-out groups (segments,
-runs, moves) as the independent units, never samples: friction residuals are coloured.
+minus model, torque units).  Statistics that decide between "structure" and "noise" treat whole
+held-out groups (segments, runs, moves) as the independent units: friction residuals are coloured.
 """
 
 from __future__ import annotations

@@ -1,12 +1,9 @@
-"""The registry of detectors: one per term kind (or family), each turning what the residual
-analyses of a round show into candidate terms.
+"""The registry of detectors.
 
 A detector is a function ``detector(rnd, analyses, *, gate) -> list[Candidate]``: ``rnd`` is the
 round's context (:class:`~gearspec.diagnose.context.Round`, read-only), ``analyses`` what
 :func:`~gearspec.diagnose.detectors.analyses.analyse` computed on the round's residual, ``gate``
-the p-value below which a detector that needs evidence proposes its candidates.  The loop asks
-every registered detector, in the order of their ``order`` numbers (then of registration), and
-tests every candidate they propose on held-out data.
+the p-value below which a detector that needs evidence proposes its candidates.
 """
 
 from __future__ import annotations
