@@ -18,6 +18,7 @@ from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .context import Round
 from .coverage import measurable
+from ..core.reduction import group_normal_equations
 from .design import Grams, HarmonicBlock, TermBlock, solve_normal
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
@@ -46,18 +47,19 @@ class Proposal:
     def n_params(self, rnd: Round) -> int:
         return sum(len(b.names) for b in self.add) - sum(len(b.names) for b in self.drop)
 
+    @classmethod
+    def of(cls, rnd: Round, add: list, drop=(), describe: str = "", C: np.ndarray | None = None) -> "Proposal":
+        """The proposal of blocks ``add`` (columns ``C``, default theirs) with their cross products."""
+        prop = cls(add, list(drop), describe=describe)
+        prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd) if C is None else C)
+        return prop
+
 
 def cross_grams(rnd: Round, C: np.ndarray):
     """Per-group X^T C, C^T C and C^T y of new columns ``C`` against the round's design."""
     dd = rnd.dd
-    xtc = Grams.cross(rnd.X, C, dd)
-    ng, q = dd.n_groups, C.shape[1]
-    ctc = np.empty((ng, q, q))
-    cty = np.empty((ng, q))
-    for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-        ctc[g] = C[a:z].T @ C[a:z]
-        cty[g] = C[a:z].T @ dd.y[a:z]
-    return xtc, ctc, cty
+    ctc, cty, _ = group_normal_equations(C, dd.y, dd.starts, dd.stops)
+    return Grams.cross(rnd.X, C, dd), ctc, cty
 
 
 def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
@@ -90,6 +92,13 @@ class Candidate:
         self.frequency = None
         self.label = None
         self.hint = None
+        self._cache = {}
+
+    def _round_cache(self, rnd: Round) -> dict:
+        """The cache of what the candidate computed for round ``rnd`` (emptied for a new round)."""
+        if self._cache.get("round") is not rnd:
+            self._cache = {"round": rnd}
+        return self._cache
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         """The blocks to add (and drop), their nonlinear parameters searched on the groups where
@@ -107,14 +116,12 @@ class FixedCandidate(Candidate):
         self.kind = kind
         self.blocks = list(blocks)
         self.drop = list(drop)
-        self._cache = {}
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
-        if self._cache.get("round") is not rnd:
-            C = np.column_stack([b.columns(rnd.dd) for b in self.blocks])
-            xtc, ctc, cty = cross_grams(rnd, C)
-            self._cache = {"round": rnd, "prop": Proposal(self.blocks, self.drop, xtc, ctc, cty, "")}
-        return self._cache["prop"]
+        cache = self._round_cache(rnd)
+        if "prop" not in cache:
+            cache["prop"] = Proposal.of(rnd, self.blocks, self.drop)
+        return cache["prop"]
 
 
 # ---------------------------------------------------------------------- grid candidates
@@ -129,24 +136,18 @@ class GridCandidate(Candidate):
         self.make = make
         self.grid = list(grid)
         self.describe_value = describe_value or (lambda v: "" if v is None else f"{v:.4g}")
-        self._cache = {}
 
     def _prop(self, rnd: Round, i: int) -> Proposal | None:
-        if self._cache.get("round") is not rnd:
-            self._cache = {"round": rnd}
-        if i not in self._cache:
+        cache = self._round_cache(rnd)
+        if i not in cache:
             made = self.make(self.grid[i])
-            if made is None:
-                self._cache[i] = None
-            else:
+            cache[i] = None
+            if made is not None:
                 add, drop = made
                 C = np.column_stack([b.columns(rnd.dd) for b in add])
-                if np.linalg.norm(C) <= 1e-6 * np.linalg.norm(rnd.dd.y):  # nothing the data can see
-                    self._cache[i] = None
-                else:
-                    xtc, ctc, cty = cross_grams(rnd, C)
-                    self._cache[i] = Proposal(add, drop, xtc, ctc, cty, self.describe_value(self.grid[i]))
-        return self._cache[i]
+                if np.linalg.norm(C) > 1e-6 * np.linalg.norm(rnd.dd.y):  # else nothing the data can see
+                    cache[i] = Proposal.of(rnd, add, drop, self.describe_value(self.grid[i]), C)
+        return cache[i]
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         best = None
@@ -295,10 +296,9 @@ class PeriodicCandidate(Candidate):
             decays.append((x, dec))
         blk = HarmonicBlock(key=f"found {f:.6g}", frequency=f, label=self.label, dirs=tuple(dirs),
                             symmetric=symmetric, law=tuple(laws), decay=tuple(decays), found=True)
-        xtc, ctc, cty = cross_grams(rnd, blk.columns(dd))
         laws_text = ", ".join(f"{DIRECTION_NAMES[x]}: {lw}" + (f" (decay {dc:.3g})" if lw != "const" else "")
                               for (x, lw), (_, dc) in zip(laws, decays))
-        return Proposal([blk], [], xtc, ctc, cty, f"{f:.6g} cycles/{self.unit}; {laws_text}")
+        return Proposal.of(rnd, [blk], (), f"{f:.6g} cycles/{self.unit}; {laws_text}")
 
     def _search(self, theta, d, seg, r0, moving, dirs) -> float:
         """The frequency (cycles per unit of ``theta``) of the strongest line within two
@@ -389,7 +389,6 @@ class LagCandidate(Candidate):
         self.max_lag = float(max_lag)
         self.value = float(estimate.lag)
         self.value_se = float(estimate.se)
-        self._cache = {}
 
     def estimate(self, train: np.ndarray):
         from ..lag import lag_from_phases
@@ -406,14 +405,11 @@ class LagCandidate(Candidate):
         if not lines:
             return None
         ck = (id(rnd), round(est.lag, 15))
-        if self._cache.get("round") is not rnd:
-            self._cache = {"round": rnd}
-        if ck not in self._cache:
-            add = [lagged(b, est.lag) for b in lines]
-            prop = _TaylorProposal(add, lines, describe=f"lag {1e3 * est.lag:.4g} ms")
-            prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd))
-            self._cache[ck] = prop
-        return self._cache[ck]
+        cache = self._round_cache(rnd)
+        if ck not in cache:
+            cache[ck] = _TaylorProposal.of(rnd, [lagged(b, est.lag) for b in lines], lines,
+                                           f"lag {1e3 * est.lag:.4g} ms")
+        return cache[ck]
 
 
 class _TaylorProposal(Proposal):
@@ -485,10 +481,10 @@ class SidebandCandidate(Candidate):
         self.label = lines[0].label
         self.f0 = self.frequency
         self.resolution = 0.0
-        self._cache = {}
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
-        if self._cache.get("round") is not rnd:
+        cache = self._round_cache(rnd)
+        if "prop" not in cache:
             c = next((b for b in rnd.state.blocks if isinstance(b, HarmonicBlock)
                       and math.isclose(b.frequency, self.carrier.frequency, rel_tol=1e-9)), self.carrier)
             add = [SidebandBlock(key=f"sideband {ln.frequency:.6g}", frequency=float(ln.frequency), label=ln.label,
@@ -496,7 +492,5 @@ class SidebandCandidate(Candidate):
                                  min_travel=self.min_travel) for ln in self.lines]
             if isinstance(c, LaggedHarmonicBlock):   # a lag accepted before: the sidebands see it too
                 add = [lagged(b, c.lag) for b in add]
-            C = np.column_stack([b.columns(rnd.dd) for b in add])
-            xtc, ctc, cty = cross_grams(rnd, C)
-            self._cache = {"round": rnd, "prop": Proposal(add, [], xtc, ctc, cty, self.name)}
-        return self._cache["prop"]
+            cache["prop"] = Proposal.of(rnd, add, (), self.name)
+        return cache["prop"]

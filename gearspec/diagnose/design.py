@@ -325,6 +325,11 @@ class TermBlock(Block):
             return [f"{self.kind} sin{tag}", f"{self.kind} cos{tag}"]
         return [f"{self.kind}.{lin}{tag}"]
 
+    def matches(self, t: dict) -> bool:
+        """Whether the model's term ``t`` is this block's (kind, direction and fixed parameters)."""
+        return t["kind"] == self.kind and int(t.get("direction", 0) or 0) == self.direction and all(
+            t.get(k) == v for k, v in self.fixed)
+
     def term(self, **lin) -> dict:
         t = {"kind": self.kind, **dict(self.fixed), **lin}
         if self.direction:
@@ -589,20 +594,16 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
                                     lin=tuple((d, lin_of(P[d])) for d in dirs),
                                     nonlin=tuple((d, {k: P[d].values.get(k) for k in nonlin_names})
                                                  for d in dirs)))
-    # harmonics, paired by frequency
-    freqs = []
+    lines: list = []     # (frequency, {direction: harmonic}): the harmonics paired by frequency
     for d in present:
         for h in model.harmonics(d):
-            if h.amplitude is None:
-                continue
-            if not any(math.isclose(h.frequency, f, rel_tol=1e-9) for f in freqs):
-                freqs.append(float(h.frequency))
-    for f in freqs:
-        per = {}
-        for d in present:
-            for h in model.harmonics(d):
-                if h.amplitude is not None and math.isclose(h.frequency, f, rel_tol=1e-9):
+            if h.amplitude is not None:
+                per = next((x for f, x in lines if math.isclose(h.frequency, f, rel_tol=1e-9)), None)
+                if per is None:
+                    lines.append((float(h.frequency), {d: h}))
+                else:
                     per[d] = h
+    for f, per in lines:
         dirs = tuple(sorted(per, reverse=True))
         any_h = next(iter(per.values()))
         load_phase = tuple((d, float(per[d].phase or 0.0)) for d in dirs if per[d].load_coefficient)
@@ -636,16 +637,11 @@ def predict_model(model: FrictionModel, dd: DiagnoseData) -> np.ndarray:
     """A model's drive torque at the observations of ``dd`` (evaluated per sample, reduced like
     the data; presliding and backlash from the travel since the last reversal)."""
     st = state_from_model(model, dd, symmetric=False, keep_ranges=True)
-    # coefficients as the model has them: fit nothing, read them back
-    cols = []
-    coefs = []
-    for blk in st.blocks:
-        X = blk.columns(dd)
-        cols.append(X)
-        coefs.append(_model_coefs(blk, model))
-    if not cols:
+    if not st.blocks:
         return np.zeros(len(dd))
-    return np.column_stack(cols) @ np.concatenate(coefs)
+    # coefficients as the model has them: fit nothing, read them back
+    return np.column_stack([b.columns(dd) for b in st.blocks]) @ np.concatenate([_model_coefs(b, model)
+                                                                                for b in st.blocks])
 
 
 def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
@@ -664,8 +660,7 @@ def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
             if d in dict(blk.load_phase):
                 out.append(float(h.load_coefficient or 0.0))
         return np.array(out)
-    t = next(t for t in model.terms if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == blk.direction
-             and all(t.get(k) == v for k, v in blk.fixed))
+    t = next(t for t in model.terms if blk.matches(t))
     lin = TERM_LINEAR[blk.kind]
     if lin == "trig":
         A, ph = float(t["amplitude"]), float(t.get("phase", 0.0))

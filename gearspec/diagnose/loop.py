@@ -28,7 +28,7 @@ from .baseline import _as_data, baseline_model, idim_model, relative_error, resi
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import FittedState, HarmonicBlock, State, solve_normal, state_from_model
+from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
 from .detectors import analyse, propose
 from .results import Diagnosis, Effect
@@ -524,20 +524,13 @@ def _settle(state: State, dd: DiagnoseData) -> State:
     return refine(polish(state, dd), dd, steps=8)
 
 
-def _key(c: Candidate) -> str:
-    if isinstance(c, PeriodicCandidate):
-        return f"periodic {c.f0:.4g}"
-    return f"{c.kind}: {c.name}"
-
-
 def _effect_key(effects: dict, c: Candidate) -> str:
     """The key of ``c``'s effect: a line seen again in a later round (within two resolution steps)
     is the same effect."""
-    key = _key(c)
-    if isinstance(c, PeriodicCandidate):
-        key = next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
-                    and abs(e.frequency - c.f0) <= max(2 * c.resolution, 5e-3 * e.frequency)), key)
-    return key
+    if not isinstance(c, PeriodicCandidate):
+        return f"{c.kind}: {c.name}"
+    return next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
+                 and abs(e.frequency - c.f0) <= max(2 * c.resolution, 5e-3 * e.frequency)), f"periodic {c.f0:.4g}")
 
 
 #: a term removed by backward elimination is accepted again at most this many times
@@ -603,11 +596,8 @@ def _written_terms(e: Effect, rnd: Round) -> list:
                 for h in p.harmonics:
                     if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
                         out.append({"direction": dname, "harmonic": h.to_dict()})
-        elif hasattr(blk, "kind"):
-            for t in m.terms:
-                if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == getattr(blk, "direction", 0) and all(
-                        t.get(k) == v for k, v in getattr(blk, "fixed", ())):
-                    out.append({"term": t})
+        elif isinstance(blk, TermBlock):
+            out += [{"term": t} for t in m.terms if blk.matches(t)]
         else:
             out.append({"note": blk.describe()})
     return out
