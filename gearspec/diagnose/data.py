@@ -45,12 +45,8 @@ def travel_since_reversal(theta, v, run=None, deadband: float = 0.0) -> np.ndarr
     # reversals: consecutive nonzero-sign samples of one run with opposite signs
     a, b = nz[:-1], nz[1:]
     rev = (s[a] != s[b]) & (run[a] == run[b])
-    turn_at = np.empty(0, np.int64)
-    turn_pos = []
-    for j, i in zip(a[rev], b[rev]):
-        piece = theta[j:i + 1]
-        turn_pos.append(float(np.max(piece) if s[j] > 0 else np.min(piece)))
-        turn_at = np.append(turn_at, i)
+    turn_at = b[rev].astype(np.int64)
+    turn_pos = [float(np.max(theta[j:i + 1]) if s[j] > 0 else np.min(theta[j:i + 1])) for j, i in zip(a[rev], b[rev])]
     starts = np.flatnonzero(np.concatenate(([True], run[1:] != run[:-1])))
     ev = np.concatenate((turn_at, starts))
     pos = np.concatenate((np.asarray(turn_pos, dtype=float), np.full(len(starts), np.nan)))

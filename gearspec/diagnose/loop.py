@@ -85,13 +85,9 @@ class _Folds:
 
 def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
     """Run a candidate's procedure in every fold: held-out predictions with and without it.
-
-    With ``repolish`` (all but periodic candidates), the model the candidate extends is the
-    present one with its nonlinear parameters refined *together with the candidate* on all data
-    (the baseline's Stribeck velocity was fitted while the effect was missing, and a term that
-    changes levels needs it elsewhere); the comparison is then between the best model without and
-    the best model with the candidate.  Both sides refit their nonlinear parameters in every fold
-    through their Taylor columns."""
+    With ``repolish`` (all but periodic candidates) the model it extends has its nonlinear
+    parameters refined together with the candidate on all data (README: "Nonlinear parameters
+    stay where the data want them")."""
     dd = rnd.dd
     ext = rnd
     prop_all = cand.propose(rnd, rnd.all_groups())
@@ -172,15 +168,13 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
                       fr.contribution)
 
 
-#: the t quantile the Z test needs is called low-power when it exceeds the normal quantile of the same
-#: level by this factor (few held-out groups: t with groups - 1 degrees of freedom)
+#: the Z test is called low-power when its t quantile exceeds the normal quantile of the same level by this factor
 LOW_POWER_RATIO = 1.5
 
 
 def low_power_note(z_crit: float, groups: int) -> str:
-    """A clause for a rejection by the Z gate when the held-out groups are too few for the test to
-    reach significance in practice: its t quantile (``groups - 1`` degrees of freedom) is more
-    than :data:`LOW_POWER_RATIO` times the normal quantile of the same level.  Empty otherwise."""
+    """A clause for a rejection by the Z gate when the held-out groups are too few: its t quantile
+    (``groups - 1`` degrees of freedom) above :data:`LOW_POWER_RATIO` times the normal one."""
     if groups < 2 or not math.isfinite(z_crit):
         return ""
     level = float(stats.t.sf(z_crit, groups - 1))
@@ -204,9 +198,8 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
 
 
 def _full_residual(rnd: Round, runs: list) -> np.ndarray:
-    """Held-out residual of the richest model of the round: the present one with every promising
-    candidate at once (each with the nonlinear parameters it chose in that fold), fitted on the
-    training folds."""
+    """Held-out residual of the present model with every promising candidate at once (each as it
+    chose its nonlinear parameters in that fold), fitted on the training folds."""
     dd = rnd.dd
     out = np.zeros(len(dd))
     for f in range(rnd.K):
@@ -409,10 +402,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
 
 
 def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: State, rnd: Round, k: int) -> Effect:
-    """Record on ``e`` that its candidate ``c`` was accepted in round ``k``: the decision, the blocks
-    the proposal ``prop`` added (as settled in ``new_state``) and dropped, a line's fitted
-    frequency with its standard error, and what it adds to the prediction of ``rnd`` (the round
-    with it)."""
+    """Record on ``e`` that its candidate ``c`` was accepted in round ``k`` (proposal ``prop``,
+    settled in ``new_state``; ``rnd``: the round with it)."""
     dd = rnd.dd
     e.accepted = True
     e.decision = ev.reason
@@ -435,11 +426,7 @@ def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: Sta
 
 
 def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
-    """Why the final held-out rmse is not the last accepted step's number, when it is not: the
-    step re-ran the candidate's own search (frequency, amplitude law, shape) in every fold -- the
-    honest figure for choosing the term; the final model (like the baseline) has its nonlinear
-    parameters settled on all data and refits them in every fold through their Taylor columns;
-    and backward elimination may have removed terms since."""
+    """Why the final held-out rmse is not the last accepted step's number, when it is not."""
     acc = [r for r in rounds if r.get("accepted")]
     if not acc:
         return []
@@ -459,12 +446,9 @@ def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
 
 
 def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) -> list:
-    """Every candidate of a round through the held-out test.  The noise of Z comes from the
-    held-out residual of the richest model the round supports -- the present one with every
-    candidate that lowers the held-out error in most folds, all at once -- as forward stepwise
-    regression estimates its error variance from the full model: effects present together do not
-    pass for each other's noise (a drift, a presliding curve and a nonlinear viscous law in one
-    recording each look like noise to a test of the others)."""
+    """Every candidate of a round through the held-out test, the noise of Z from the held-out
+    residual of the richest model the round supports (README, Acceptance: effects present
+    together do not pass for each other's noise)."""
     runs = [_run_folds(rnd, c) for c in cands]
     first = [_decide(rnd, fr, None, z_crit=z_crit, min_gain=min_gain) for fr in runs]
     # the richest model: the best promising candidate of every kind (members of one family, e.g.
@@ -486,9 +470,9 @@ def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) 
 
 
 def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_gain: float, round_no: int):
-    """Backward elimination: once a term is added, every term accepted before it must still pass
-    the held-out test against the model without it; the first that does not is removed (and the
-    check repeats).  Returns the new round, or None when nothing was removed."""
+    """Backward elimination: every term accepted before ``newest`` must still pass the held-out test
+    against the model without it; the weakest that fails is removed, and the check repeats.
+    Returns the new round, or None when nothing was removed."""
     dd = rnd.dd
     changed = None
     while True:
@@ -517,10 +501,8 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
 
 
 def _settle(state: State, dd: DiagnoseData) -> State:
-    """Nonlinear parameters of a state where all data want them: coordinate searches
-    (:func:`~gearspec.diagnose.nonlinear.polish`), then Gauss-Newton steps to convergence
-    (:func:`~gearspec.diagnose.nonlinear.refine`), so that a candidate's held-out gain is its own and
-    not that of a better-tuned base law."""
+    """Nonlinear parameters of a state where all data want them: :func:`.polish`, then
+    :func:`.refine` (a candidate's held-out gain is then its own, not a better-tuned base law's)."""
     return refine(polish(state, dd), dd, steps=8)
 
 
@@ -538,11 +520,9 @@ MAX_REENTRIES = 1
 
 
 def _bar_reentry(effects: dict, c: Candidate, ev: Evaluation) -> None:
-    """The re-entry rule: a term that backward elimination removed is accepted again only when the
-    evidence changed -- its held-out Z now exceeds the largest Z it was ever accepted with (the
-    model around it explains less than when it was removed, so the term explains more) -- and
-    at most :data:`MAX_REENTRIES` times; otherwise the same evidence would accept and remove the
-    same term round after round.  Marks ``ev`` as failing, with the reason, when barred."""
+    """The re-entry rule: a term that backward elimination removed is accepted again only with a
+    held-out Z above the largest it was accepted with, and at most :data:`MAX_REENTRIES` times (the
+    same evidence would accept and remove it round after round).  Marks ``ev`` failing when barred."""
     prev = effects.get(_effect_key(effects, c))
     if prev is None or prev.accepted or not prev.detail.get("removed") or not ev.passed:
         return

@@ -25,8 +25,7 @@ __all__ = ["ResidualSpectrum", "position_spectra", "speed_groups", "speed_analys
 def magnitude_residual(dd: DiagnoseData, r: np.ndarray) -> np.ndarray:
     """The residual in the friction magnitude (``direction * r``): positive where the drive needs
     more than the model says, in both directions (as SILO4 writes friction)."""
-    d = dd.at("direction")
-    return d * r
+    return dd.at("direction") * r
 
 
 # ---------------------------------------------------------------------- over position
@@ -183,33 +182,20 @@ def position_spectra(dd: DiagnoseData, r: np.ndarray, *, per_segment: bool = Tru
     independent frequency searched).  Frequencies below two cycles of the longest segment are not
     searched (they cannot be told from a level or a drift).
     """
-    out = {"pooled": [], "segments": []}
     d = dd.at("direction")
     s = np.abs(dd.at("v"))
     top = float(np.max(s)) if len(s) else 0.0
     cut = 0.05 * top if dd.kind == "trajectory" else 0.0
-    for direction in dd.directions():
-        idx = np.flatnonzero((d == direction) & (s > cut))
-        sp = _spectrum(dd, r, idx, oversample=oversample, fap_threshold=fap_threshold, max_peaks=max_peaks,
-                       fmax=fmax, pooled=True)
-        if sp is not None:
-            out["pooled"].append(sp)
+    pools = [np.flatnonzero((d == direction) & (s > cut)) for direction in dd.directions()]
     groups = speed_groups(dd, ratio)
     if len(groups) > len(dd.directions()):
-        for direction, idx in groups:
-            sp = _spectrum(dd, r, idx, oversample=oversample, fap_threshold=fap_threshold, max_peaks=max_peaks,
-                           fmax=fmax, pooled=True)
-            if sp is not None:
-                out["pooled"].append(sp)
-    if per_segment and dd.kind == "plateaus":
-        seg = dd.at("segment")
-        for sid in np.unique(seg):
-            idx = np.flatnonzero(seg == sid)
-            sp = _spectrum(dd, r, idx, oversample=oversample, fap_threshold=fap_threshold, max_peaks=3,
-                           fmax=fmax, pooled=False)
-            if sp is not None:
-                out["segments"].append(sp)
-    return out
+        pools += [idx for _, idx in groups]
+    seg = dd.at("segment")
+    singles = [np.flatnonzero(seg == sid) for sid in np.unique(seg)] if per_segment and dd.kind == "plateaus" else []
+    kw = dict(oversample=oversample, fap_threshold=fap_threshold, fmax=fmax)
+    pooled = [_spectrum(dd, r, idx, max_peaks=max_peaks, pooled=True, **kw) for idx in pools]
+    segments = [_spectrum(dd, r, idx, max_peaks=3, pooled=False, **kw) for idx in singles]
+    return {"pooled": [sp for sp in pooled if sp is not None], "segments": [sp for sp in segments if sp is not None]}
 
 
 # ---------------------------------------------------------------------- against speed
