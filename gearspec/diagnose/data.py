@@ -278,9 +278,8 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
     pieces = rec.pieces()
     if not pieces:
         raise InputError("the recording has no samples")
-    th_all, v_all, a_all, y_all, t_all, run_all = [], [], [], [], [], []
     extra = [c for c in ("load", "temperature") if c in rec.data]
-    extra_all: dict = {c: [] for c in extra}
+    parts: dict = {c: [] for c in ("theta", "v", "acc", "y", "t", "run", *extra)}
     resampled = []
     for run, a, b in pieces:
         t = rec.t[a:b]
@@ -309,23 +308,13 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
         qf = butter_filtfilt(cols["theta"], cutoff, 1.0 / dt, order)
         dq = central_difference(qf, dt)
         ddq = central_difference(dq, dt)
-        sl = slice(border, None)
-        th_all.append(qf[sl])
-        v_all.append(dq[sl])
-        a_all.append(ddq[sl])
-        y_all.append(cols["y"][sl])
-        t_all.append(t[sl])
-        run_all.append(np.full(len(t) - border, run))
-        for c in extra:
-            extra_all[c].append(cols[c][sl])
-    if not th_all:
+        for c, x in (("theta", qf), ("v", dq), ("acc", ddq), ("t", t), ("run", np.full(len(t), run)),
+                     *((c, cols[c]) for c in ("y", *extra))):
+            parts[c].append(x[border:])
+    if not parts["theta"]:
         raise InputError("every run is too short for the filter and decimation")
-    theta = np.concatenate(th_all)
-    v = np.concatenate(v_all)
-    acc = np.concatenate(a_all)
-    y = np.concatenate(y_all)
-    t = np.concatenate(t_all)
-    run = np.concatenate(run_all)
+    cat = {c: np.concatenate(x) for c, x in parts.items()}
+    theta, v, acc, y, t, run = (cat[c] for c in ("theta", "v", "acc", "y", "t", "run"))
     notes_resampled = []
     if resampled:
         lo = min(r[1] for r in resampled)
@@ -336,7 +325,6 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
             f"{', ...' if len(resampled) > 5 else ''} s) by linear interpolation of position, torque"
             + "".join(f", {c}" for c in extra) + " before filtering")
     mv = moves(v, run, min_speed)
-    get = lambda c: np.concatenate(extra_all[c]) if c in extra_all else None  # noqa: E731
     seg_rows = []
     for m in np.unique(mv):
         sel = np.flatnonzero(mv == m)
@@ -345,7 +333,7 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
         seg_rows.append({"segment": int(m), "run": int(run[sel[0]]), "direction": d,
                          "speed": float(np.max(np.abs(vv))), "velocity": float(d * np.max(np.abs(vv))),
                          "n": len(sel), "t0": float(t[sel[0]]), "t1": float(t[sel[-1]])})
-    fd = FitData(theta=theta, v=v, y=y, acc=acc, load=get("load"), temperature=get("temperature"), t=t, run=run,
+    fd = FitData(theta=theta, v=v, y=y, acc=acc, load=cat.get("load"), temperature=cat.get("temperature"), t=t, run=run,
                  segment=mv, unit=rec.unit, segments=pd.DataFrame(seg_rows),
                  notes=[f"whole trajectory: position filtered ({order}th-order Butterworth, {cutoff:g} Hz, "
                         f"zero phase), central differences, first {border} samples of each run dropped, "

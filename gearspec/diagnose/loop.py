@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import stats
+from threadpoolctl import threadpool_limits
 
 from ..core.crossval import critical_z, deal_folds, group_summary, splits, z_statistic
 from ..errors import InputError
@@ -280,26 +281,11 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
     The loop works on many small matrices: BLAS runs single-threaded inside it (thread start-up
     costs more than it saves at these sizes, and badly so on a busy machine).
     """
-    with _single_thread_blas():
+    with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(data, model, law=law, gear=gear, harmonics=harmonics, symmetric=symmetric, folds=folds,
                          by=by, alpha=alpha, min_gain=min_gain, max_rounds=max_rounds, gate=gate, fap=fap,
                          kinds=kinds, validation=validation, per_segment_spectra=per_segment_spectra,
                          progress=progress)
-
-
-class _single_thread_blas:
-    def __enter__(self):
-        try:
-            from threadpoolctl import threadpool_limits
-            self._ctx = threadpool_limits(limits=1, user_api="blas")
-        except Exception:  # threadpoolctl absent: run as is
-            self._ctx = None
-        return self
-
-    def __exit__(self, *exc):
-        if self._ctx is not None:
-            self._ctx.restore_original_limits()
-        return False
 
 
 def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,

@@ -298,6 +298,27 @@ def channel_analysis(dd: DiagnoseData, r: np.ndarray, channel: str, *, transform
 
 
 # ---------------------------------------------------------------------- against acceleration
+def _within(dd: DiagnoseData, a: np.ndarray) -> np.ndarray:
+    """``a`` with the mean of each held-out group removed."""
+    out = np.asarray(a, dtype=float).copy()
+    for s0, s1 in zip(dd.starts, dd.stops):
+        out[s0:s1] -= out[s0:s1].mean()
+    return out
+
+
+def _cluster_slope(dd: DiagnoseData, x: np.ndarray, y: np.ndarray) -> tuple | None:
+    """``(slope, se, t)`` of ``y`` on ``x`` (both within groups), the standard error cluster-robust
+    over the held-out groups; None when ``x`` is zero."""
+    sxx = float(x @ x)
+    if sxx <= 0:
+        return None
+    b = float(x @ y) / sxx
+    e = y - b * x
+    score = np.array([float(x[a:z] @ e[a:z]) for a, z in zip(dd.starts, dd.stops)])
+    se = math.sqrt(float(score @ score)) / sxx
+    return b, se, (b / se if se > 0 else 0.0)
+
+
 def acceleration_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 15) -> tuple[pd.DataFrame, dict] | None:
     """Residual (drive torque, signed) against acceleration, both taken relative to their group
     means (so that a level misfit does not count): binned means for the figure, and the slope
@@ -305,19 +326,11 @@ def acceleration_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 15) -> tu
     acc = dd.at("acc")
     if acc is None or not np.any(np.abs(acc) > 0):
         return None
-    a_d = np.empty(len(acc))
-    r_d = np.empty(len(acc))
-    for a, z in zip(dd.starts, dd.stops):
-        a_d[a:z] = acc[a:z] - acc[a:z].mean()
-        r_d[a:z] = r[a:z] - r[a:z].mean()
-    sxx = float(a_d @ a_d)
-    if sxx <= 0:
+    a_d, r_d = _within(dd, acc), _within(dd, r)
+    fit = _cluster_slope(dd, a_d, r_d)
+    if fit is None:
         return None
-    slope = float(a_d @ r_d) / sxx
-    e = r_d - slope * a_d
-    score = np.array([float(a_d[a:z] @ e[a:z]) for a, z in zip(dd.starts, dd.stops)])
-    se = math.sqrt(float(score @ score)) / sxx
-    t = slope / se if se > 0 else 0.0
+    slope, se, t = fit
     G = dd.n_groups
     p = float(2 * stats.t.sf(abs(t), max(G - 1, 1)))
     edges = np.quantile(a_d, np.linspace(0, 1, bins + 1))
@@ -359,24 +372,12 @@ def reversal_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 12) -> tuple[
                      "n": int(far.sum())})
     best = {"t": 0.0, "p": 1.0, "length": float("nan")}
     grid = np.geomspace(lo, hi, 8)
-
-    def within(a):  # each group's mean removed: the profile within a segment, not its level
-        out = a.astype(float).copy()
-        for s0, s1 in zip(dd.starts, dd.stops):
-            out[s0:s1] -= out[s0:s1].mean()
-        return out
-
-    md = within(m)
+    md = _within(dd, m)   # the profile within a segment, not its level
     for L in grid:
-        xd = within(np.where(fin, -np.exp(-np.where(fin, tr, 0) / L), 0.0))
-        sxx = float(xd @ xd)
-        if sxx <= 0:
+        fit = _cluster_slope(dd, _within(dd, np.where(fin, -np.exp(-np.where(fin, tr, 0) / L), 0.0)), md)
+        if fit is None:
             continue
-        b = float(xd @ md) / sxx
-        e = md - b * xd
-        score = np.array([float(xd[a:z] @ e[a:z]) for a, z in zip(dd.starts, dd.stops)])
-        se = math.sqrt(float(score @ score)) / sxx
-        t = b / se if se > 0 else 0.0
+        b, _, t = fit
         if abs(t) > abs(best["t"]):
             best = {"t": float(t), "scale": b, "length": float(L)}
     G = dd.n_groups

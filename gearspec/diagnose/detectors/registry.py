@@ -37,27 +37,13 @@ _SEQ = [0]
 
 
 def register_detector(name: str, *, effect: str, order: float | None = None):
-    """Register a detector (decorator).
+    """Register a detector (decorator; it returns the function unchanged).
 
-    Parameters
-    ----------
-    name : str
-        Unique name: the term kind (:mod:`gearspec.terms`) whose candidates it proposes, or the
-        name of a family of them.
-    effect : str
-        The effect kind (``CONTRACTS.md`` section 4: ``periodic``, ``speed_law``, ``load``,
-        ``temperature``, ``drift``, ``asymmetry``, ``inertia``, ``hysteresis``, ``lag``,
-        ``other``) of every candidate it proposes; ``diagnose(kinds=...)`` selects by it.
-    order : float, optional
-        Place among the detectors (the loop asks them by increasing ``order``; the candidates of a
-        round keep that order, which decides ties between equally good candidates).  Default:
-        :data:`LAST`, after the detectors of this package (several at ``LAST``: in the order they
-        were registered).
-
-    Returns
-    -------
-    callable
-        The decorator; it returns the function unchanged.
+    ``name``: unique, the term kind (:mod:`gearspec.terms`) it proposes or the name of their family;
+    ``effect``: the effect kind (``CONTRACTS.md`` section 4) of every candidate it proposes
+    (``diagnose(kinds=...)`` selects by it); ``order``: the loop asks detectors by increasing
+    ``order``, which decides ties between equally good candidates (default :data:`LAST`, after
+    this package's; several at ``LAST``: in the order they were registered).
     """
     def decorate(fn: Callable) -> Callable:
         if name in _REGISTRY:
