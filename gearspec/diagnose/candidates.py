@@ -9,16 +9,18 @@ term that predicts it.  It reads the round through its context (:class:`~.contex
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+import types
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
+from scipy import stats
 
+from ..core.reduction import group_normal_equations
 from ..gears import integer_hint
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .context import Round
 from .coverage import measurable
-from ..core.reduction import group_normal_equations
 from .design import Grams, HarmonicBlock, TermBlock, solve_normal
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
@@ -220,9 +222,7 @@ def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01
                     best = (val, b)
             out[law] = best
     law, (val, dec) = min(out.items(), key=lambda kv: kv[1][0])
-    n = len(r)
-    s2 = val / max(n - 3 - len(sids), 1)
-    from scipy import stats
+    s2 = val / max(len(r) - 3 - len(sids), 1)
     if law != "const" and (out["const"][0] - val) < stats.chi2.isf(alpha, 1) * s2:
         law, dec = "const", 0.0
     return law, float(dec), {k: v[0] for k, v in out.items()}
@@ -255,10 +255,8 @@ class PeriodicCandidate(Candidate):
         tol = max(3 * se if se is not None and np.isfinite(se) else 0.1 * self.resolution, 2e-3 * f)
         ln = self.gear.label(f, tol) if self.gear is not None else None
         self.label = None if ln is None else ln.label
-        # an integer relation to a shaft is looser: a filtered or delayed signal shifts a fitted
-        # frequency by a few tenths of a percent, and neighbouring multiples (6x, 8x) are far apart;
-        # a high multiple (72x) needs the line's own precision instead, where the loose tolerance
-        # would match a multiple by chance (integer_hint refuses such a tolerance)
+        # an integer relation to a shaft is looser (a filtered or delayed signal shifts a fitted
+        # frequency by a few tenths of a percent); a high multiple (72x) needs the line's own precision
         self.hint = None
         if self.gear is not None and ln is None:
             self.hint = integer_hint(self.gear, f, max(tol, 5e-3 * f))
@@ -344,10 +342,8 @@ class LaggedHarmonicBlock(HarmonicBlock):
         store = dd.cache.setdefault("lagged", {})
         view = store.get(self.lag)
         if view is None:
-            import dataclasses
-            import types
             f = dd.fit
-            view = types.SimpleNamespace(fit=dataclasses.replace(f, theta=f.theta - f.v * self.lag, cache={}),
+            view = types.SimpleNamespace(fit=replace(f, theta=f.theta - f.v * self.lag, cache={}),
                                          cache={}, reduce=dd.reduce)
             while len(store) >= 8:
                 store.pop(next(iter(store)))
@@ -366,11 +362,9 @@ class LaggedHarmonicBlock(HarmonicBlock):
 
 
 def lagged(blk: HarmonicBlock, lag: float) -> LaggedHarmonicBlock:
-    """The lagged form of a line of the model (a sideband stays a sideband: same columns
-    rule)."""
-    import dataclasses
+    """The lagged form of a line of the model (a sideband stays a sideband: same columns rule)."""
     cls = LaggedSidebandBlock if isinstance(blk, SidebandBlock) else LaggedHarmonicBlock
-    kw = {f.name: getattr(blk, f.name) for f in dataclasses.fields(blk) if f.name not in ("uid", "coef", "lag")}
+    kw = {f.name: getattr(blk, f.name) for f in fields(blk) if f.name not in ("uid", "coef", "lag")}
     return cls(**kw, coef=blk.coef, lag=float(lag))
 
 

@@ -19,33 +19,12 @@ __all__ = ["Round"]
 
 @dataclass(frozen=True, eq=False)
 class Round:
-    """The model as it stands, fitted on all data and on the training part of every fold.
-
-    Parameters
-    ----------
-    dd : DiagnoseData
-        The observations (torque in Nm at every sample) and their held-out groups.
-    state : State
-        The model's blocks; the round keeps them refreshed with the coefficients fitted on all
-        data (``state``).
-    fold : ndarray of int
-        Fold of every held-out group.
-
-    Attributes
-    ----------
-    fitted : FittedState
-        The fit on all data (coefficients, standard errors, residual in Nm, prediction).
-    X : ndarray
-        The design on every observation, with the Taylor columns of every nonlinear parameter.
-    grams : Grams
-        Per-group normal equations of ``X`` and ``dd.y``.
-    ref_diag : ndarray
-        Diagonal of the normal equations of all data (the reference of :func:`solve_normal`).
-    K : int
-        Number of folds.
-    keys : frozenset of str
-        The keys of the model's blocks (``"hysteresis"``, ``"viscous_power+"``, ...).
-    """
+    """The model as it stands (``state``: its blocks, kept refreshed with the coefficients fitted
+    on all data) on the observations ``dd`` (torque in Nm), with the fold of every held-out group
+    (``fold``).  Derived: ``fitted`` (the fit on all data), ``X`` (the design with the Taylor
+    columns of every nonlinear parameter), ``grams`` (its per-group normal equations), ``ref_diag``
+    (the diagonal of those of all data: :func:`solve_normal`'s reference), ``K`` (folds) and
+    ``keys`` (of the model's blocks: ``"hysteresis"``, ``"viscous_power+"``, ...)."""
 
     dd: DiagnoseData = field(repr=False)
     state: State = field(repr=False)

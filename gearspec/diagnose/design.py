@@ -582,18 +582,13 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
         return lin_names
 
     if law != "none":
-        if symmetric:
-            p = model.directions["positive"]
-            blocks.append(BaseBlock(key="base", law=law, dirs=tuple(present), symmetric=True,
-                                    lin=((0, lin_of(p)),), nonlin=((0, {k: p.values.get(k) for k in nonlin_names}),)))
-        else:
-            P = {d: model.params(d) for d in present}
-            dirs = tuple(d for d in present if all(P[d].values.get(k) is not None
-                                                   for k in LINEAR[law][0] if k in lin_of(P[d])))
-            blocks.append(BaseBlock(key="base", law=law, dirs=dirs, symmetric=False,
-                                    lin=tuple((d, lin_of(P[d])) for d in dirs),
-                                    nonlin=tuple((d, {k: P[d].values.get(k) for k in nonlin_names})
-                                                 for d in dirs)))
+        # one parameter set (key 0) for both directions, or one per direction with its base law identified
+        P = {0: model.directions["positive"]} if symmetric else {d: model.params(d) for d in present}
+        keys = (0,) if symmetric else tuple(d for d in present if all(P[d].values.get(k) is not None
+                                                                     for k in lin_names if k in lin_of(P[d])))
+        blocks.append(BaseBlock(key="base", law=law, dirs=tuple(present) if symmetric else keys, symmetric=symmetric,
+                                lin=tuple((d, lin_of(P[d])) for d in keys),
+                                nonlin=tuple((d, {k: P[d].values.get(k) for k in nonlin_names}) for d in keys)))
     lines: list = []     # (frequency, {direction: harmonic}): the harmonics paired by frequency
     for d in present:
         for h in model.harmonics(d):
@@ -605,22 +600,16 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
                     per[d] = h
     for f, per in lines:
         dirs = tuple(sorted(per, reverse=True))
-        any_h = next(iter(per.values()))
         load_phase = tuple((d, float(per[d].phase or 0.0)) for d in dirs if per[d].load_coefficient)
         if symmetric:
-            rng = ((0, tuple(any_h.speed_range)),) if keep_ranges and any_h.speed_range else ()
-            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.label, dirs=dirs,
-                                        symmetric=True, law=((0, any_h.amplitude_law),),
-                                        decay=((0, float(any_h.decay or 0.0)),),
-                                        load_phase=((0, load_phase[0][1]),) if load_phase else (),
-                                        speed_range=rng))
-        else:
-            rng = tuple((d, tuple(per[d].speed_range)) for d in dirs
-                        if keep_ranges and per[d].speed_range) if keep_ranges else ()
-            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.label, dirs=dirs,
-                                        law=tuple((d, per[d].amplitude_law) for d in dirs),
-                                        decay=tuple((d, float(per[d].decay or 0.0)) for d in dirs),
-                                        load_phase=load_phase, speed_range=rng))
+            per = {0: next(iter(per.values()))}
+            load_phase = ((0, load_phase[0][1]),) if load_phase else ()
+        keys = tuple(per) if symmetric else dirs
+        rng = tuple((d, tuple(per[d].speed_range)) for d in keys if per[d].speed_range) if keep_ranges else ()
+        blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=per[keys[0]].label, dirs=dirs,
+                                    symmetric=symmetric, law=tuple((d, per[d].amplitude_law) for d in keys),
+                                    decay=tuple((d, float(per[d].decay or 0.0)) for d in keys),
+                                    load_phase=load_phase, speed_range=rng))
     for t in model.terms:
         kind = t["kind"]
         if kind not in TERM_LINEAR:
