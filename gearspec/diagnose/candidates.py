@@ -284,12 +284,10 @@ class PeriodicCandidate(Candidate):
         meas = measurable(dd, f)[dd.index][rows] if dd.reduce is None else np.ones(len(d), bool)
         groups = [(0, moving & meas)] if symmetric else [(x, (d == x) & moving & meas) for x in dirs]
         for x, sel in groups:
-            if not sel.any():
-                laws.append((x, "const"))
-                decays.append((x, 0.0))
-                continue
-            yv = (d[sel] if x == 0 else x) * r0[sel]
-            law, dec, _ = choose_amplitude_law(theta[sel], speed[sel], seg[sel], yv, f)
+            law, dec = "const", 0.0
+            if sel.any():
+                yv = (d[sel] if x == 0 else x) * r0[sel]
+                law, dec, _ = choose_amplitude_law(theta[sel], speed[sel], seg[sel], yv, f)
             laws.append((x, law))
             decays.append((x, dec))
         blk = HarmonicBlock(key=f"found {f:.6g}", frequency=f, label=self.label, dirs=tuple(dirs),

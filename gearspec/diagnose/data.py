@@ -121,24 +121,13 @@ def moves(v, run=None, min_speed: float | None = None) -> np.ndarray:
 # ---------------------------------------------------------------------- the data
 @dataclass
 class DiagnoseData:
-    """Samples the closed loop fits, scores and holds out (see the module docstring).
-
-    Attributes
-    ----------
-    fit : FitData
-        The samples at their own rate, segments contiguous and in time order.
-    by : {"segment", "run"}
-        Held-out unit (whole-trajectory data: segments are moves).
-    travel : ndarray or None
-        Distance since the last reversal per sample of ``fit`` (inf before the first).
-    reduce : callable or None
-        A linear map from an array over the samples of ``fit`` to the *observations* the loop
-        fits (e.g. IDIM filtering and decimation); None: the samples themselves.
-    index : ndarray
-        For every observation, the sample of ``fit`` it stands for.
-    kind : {"plateaus", "trajectory"}
-    name : str
-    """
+    """Samples the closed loop fits, scores and holds out: ``fit`` (the samples at their own rate,
+    segments contiguous and in time order), ``by`` (the held-out unit, "segment" or "run"; on a
+    whole trajectory the segments are moves), ``travel`` (distance since the last reversal per
+    sample, inf before the first), ``reduce`` (a linear map from an array over the samples to the
+    *observations* the loop fits, e.g. IDIM filtering and decimation; None: the samples
+    themselves), ``index`` (the sample every observation stands for), ``kind`` ("plateaus" or
+    "trajectory")."""
 
     fit: FitData
     by: str = "segment"
@@ -263,17 +252,10 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
     matrix and the measured torque decimated by ``decimate_by`` (MATLAB's ``decimate``), so that
     relative errors are those of the reference procedure (EMPS: 4.08 %, 3.11 %).
 
-    Held-out unit: the *moves* (:func:`moves`), one motion between standstills or reversals each.
-    ``fs`` (Hz) gives the nominal sample rate the filter and the differences use (default: from
-    the median time step; EMPS's clock steps are 1.00002 ms, its reference procedure uses 1 ms).
-    ``decimate_by=1`` keeps every sample.
-
-    The filter and the differences need a uniform grid.  A piece whose steps differ from their
-    median by more than 1 % (a logger's jitter, repeated or dropped stamps) is first resampled to a
-    uniform grid at its median step, every column used (position, torque, load, temperature)
-    linearly interpolated, and the notes say so.  It is refused only when a step within it is longer
-    than a quarter period of the filter's cut-off (``0.25 / cutoff``): interpolating across it would
-    invent motion the filter keeps.
+    Held-out unit: the *moves* (:func:`moves`).  ``fs`` (Hz): the nominal sample rate of the filter
+    and the differences (default: from the median time step; EMPS's clock steps are 1.00002 ms, its
+    reference procedure uses 1 ms).  ``decimate_by=1`` keeps every sample.  A piece whose time steps
+    are not uniform is resampled first, or refused (README, "Uniform grids").
     """
     pieces = rec.pieces()
     if not pieces:

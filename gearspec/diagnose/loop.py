@@ -234,11 +234,6 @@ def _contribution(rnd_dd: DiagnoseData, state: State, fitted: FittedState, uids)
     return out
 
 
-def _holdout(rnd: Round) -> tuple[float, dict]:
-    h = rnd.baseline_holdout()
-    return h["rmse"], h
-
-
 def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", gear=None, harmonics=None,
              symmetric: bool | None = None, folds: int = 5, by: str | None = None, alpha: float = 0.01,
              min_gain: float = 0.005, max_rounds: int = 8, gate: float = 0.01, fap: float = 0.01,
@@ -310,7 +305,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
-    base_ho, base_h = _holdout(rnd)
+    base_h = rnd.baseline_holdout()
+    base_ho = base_h["rmse"]
     baseline = base_fit.model(name=f"baseline: {model.name}", rmse_holdout=base_ho)
     effects: dict[str, Effect] = {}
     rounds = []
@@ -352,7 +348,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
         # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
         # data, refitted in every fold as the baseline's are): what the final model reports
-        ho_now, _ = _holdout(rnd)
+        ho_now = rnd.baseline_holdout()["rmse"]
         rounds.append({"round": k, "candidates": len(cands), "accepted": e.name, "z_crit": z_crit,
                        "rmse": rnd.fitted.rmse, "rmse_holdout_step": ev.rmse_holdout_after,
                        "rmse_holdout_model": ho_now, "removed": gone})
@@ -360,7 +356,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             f"{ev.rmse_holdout_after:.4g}; the model with it refitted: {ho_now:.4g})"
             + (f"; removed again: {', '.join(gone)}" if gone else ""))
     final_fit = rnd.fitted
-    final_ho, final_h = _holdout(rnd)
+    final_h = rnd.baseline_holdout()
+    final_ho = final_h["rmse"]
     name = "final: " + model.name + "".join(f" + {e.name}" for e in effects.values() if e.accepted)
     final = final_fit.model(name=name, rmse_holdout=final_ho)
     for e in effects.values():
