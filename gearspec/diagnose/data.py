@@ -68,7 +68,6 @@ def reversal_travel(rec: Recording, seg: Segmentation) -> np.ndarray:
     the turning point between two consecutive segments of opposite directions in one run is the
     extreme position reached between them.  ``inf`` before the first reversal of a run."""
     theta = rec.theta
-    out = []
     segs = list(seg.segments)
     order = sorted(range(len(segs)), key=lambda i: (segs[i].run, segs[i].start))
     turn = {}  # segment index -> turning position before it (None: no reversal yet in the run)
@@ -84,10 +83,8 @@ def reversal_travel(rec: Recording, seg: Segmentation) -> np.ndarray:
             current = float(np.max(piece) if segs[prev].direction > 0 else np.min(piece))
         turn[i] = current
         prev = i
-    for i, s in enumerate(segs):
-        th = theta[s.start:s.stop]
-        tp = turn[i]
-        out.append(np.full(s.n, np.inf) if tp is None else np.abs(th - tp))
+    out = [np.full(s.n, np.inf) if turn[i] is None else np.abs(theta[s.start:s.stop] - turn[i])
+           for i, s in enumerate(segs)]
     return np.concatenate(out) if out else np.zeros(0)
 
 

@@ -68,8 +68,6 @@ class Evaluation:
     n_params: int
     passed: bool
     reason: str
-    group_sse_before: np.ndarray = field(repr=False, default=None)
-    group_sse_after: np.ndarray = field(repr=False, default=None)
     contribution: np.ndarray = field(repr=False, default=None)   # all-data fit with the candidate minus without
 
 
@@ -165,8 +163,7 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
     passed = not reasons
     reason = (f"accepted: held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed
               else "; ".join(reasons))
-    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, sse0, sse1,
-                      fr.contribution)
+    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, fr.contribution)
 
 
 #: the Z test is called low-power when its t quantile exceeds the normal quantile of the same level by this factor

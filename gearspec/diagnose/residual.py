@@ -74,12 +74,10 @@ def speed_groups(dd: DiagnoseData, ratio: float = 1.6, min_speed_fraction: float
         if not len(sel):
             continue
         order = sel[np.argsort(s[sel], kind="stable")]
+        ss = s[order]
         start = 0
         while start < len(order):
-            lo = s[order[start]]
-            stop = start
-            while stop < len(order) and s[order[stop]] <= ratio * lo * (1 + 1e-12):
-                stop += 1
+            stop = int(np.searchsorted(ss, ratio * ss[start] * (1 + 1e-12), side="right"))
             out.append((direction, np.sort(order[start:stop])))
             start = stop
     return out
@@ -95,14 +93,8 @@ def _demean_by_segment(seg: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def _spacing(theta: np.ndarray, seg: np.ndarray) -> float:
     """The 90th percentile of the position step between consecutive observations of a segment."""
-    steps = []
-    for sid in np.unique(seg):
-        th = theta[seg == sid]
-        if len(th) > 2:
-            steps.append(np.abs(np.diff(th)))
-    if not steps:
-        return float("nan")
-    st = np.concatenate(steps)
+    steps = [np.abs(np.diff(theta[seg == sid])) for sid in np.unique(seg) if np.sum(seg == sid) > 2]
+    st = np.concatenate(steps) if steps else np.zeros(0)
     st = st[st > 0]
     return float(np.percentile(st, 90)) if len(st) else float("nan")
 

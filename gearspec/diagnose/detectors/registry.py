@@ -26,14 +26,12 @@ class Detector:
     effect: str
     order: float
     function: Callable
-    seq: int = 0
 
 
 #: the default place of a detector: after those of this package (their ``order`` is 10 to 150)
 LAST = 1000.0
 
 _REGISTRY: dict[str, Detector] = {}
-_SEQ = [0]
 
 
 def register_detector(name: str, *, effect: str, order: float | None = None):
@@ -48,8 +46,7 @@ def register_detector(name: str, *, effect: str, order: float | None = None):
     def decorate(fn: Callable) -> Callable:
         if name in _REGISTRY:
             raise InputError(f"a detector named '{name}' is registered already")
-        _SEQ[0] += 1
-        _REGISTRY[name] = Detector(name, effect, float(LAST if order is None else order), fn, _SEQ[0])
+        _REGISTRY[name] = Detector(name, effect, float(LAST if order is None else order), fn)
         return fn
     return decorate
 
@@ -62,8 +59,9 @@ def unregister_detector(name: str) -> None:
 
 
 def detectors() -> list[Detector]:
-    """The registered detectors in the order the loop asks them."""
-    return sorted(_REGISTRY.values(), key=lambda d: (d.order, d.seq))
+    """The registered detectors in the order the loop asks them (equal orders: as registered, the
+    registry's order, which the stable sort keeps)."""
+    return sorted(_REGISTRY.values(), key=lambda d: d.order)
 
 
 def propose(rnd, analyses: dict, *, gate: float, kinds=None, skip=()) -> list:
