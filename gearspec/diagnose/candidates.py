@@ -367,10 +367,9 @@ def lagged(blk: HarmonicBlock, lag: float) -> LaggedHarmonicBlock:
 
 
 class LagCandidate(Candidate):
-    """The torque channel behind position by a lag (``CONTRACTS.md`` kind ``lag``): in every
-    fold the lag is estimated from the phases of the model's lines across the training plateaus
-    (:func:`gearspec.lag.lag_from_phases`) and every line of the model is replaced by its lagged
-    form (:class:`LaggedHarmonicBlock`).  ``value``: the lag estimated on all data (s)."""
+    """The torque channel behind position by a lag (kind ``lag``): in every fold the lag estimated
+    from the training plateaus' line phases (:func:`gearspec.lag.lag_from_phases`), every line of
+    the model replaced by its lagged form.  ``value``: the lag estimated on all data (s)."""
 
     kind = "lag"
 
@@ -405,9 +404,8 @@ class LagCandidate(Candidate):
 
 
 class _TaylorProposal(Proposal):
-    """Blocks that replace blocks of the model with the same nonlinear parameters (the lines,
-    lagged): they keep their Taylor columns, as the blocks they replace have them in the fits
-    without the candidate, so that the held-out comparison differs by the candidate alone."""
+    """Blocks replacing blocks of the model with the same nonlinear parameters (the lines, lagged)
+    keep their Taylor columns, so that the held-out comparison differs by the candidate alone."""
 
     def columns(self, dd) -> np.ndarray:
         return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
@@ -417,9 +415,8 @@ class _TaylorProposal(Proposal):
 @dataclass(frozen=True, eq=False)
 class SidebandBlock(HarmonicBlock):
     """A sideband line (declared by the gear: carrier +- modulating shaft), pooled per direction
-    over the plateaus whose travel is at least ``min_travel`` (its columns are zero on the
-    others: the loop fits and scores it only there).  The model it writes carries the line as a
-    harmonic at every speed: the modulation is physical, only its estimate needs long plateaus."""
+    over the plateaus whose travel is at least ``min_travel`` (its columns are zero on the others);
+    the model it writes carries it at every speed (README, "Declared sidebands")."""
 
     min_travel: float = 0.0
 
@@ -457,8 +454,7 @@ def travel_ok(dd, min_travel: float) -> np.ndarray:
 class SidebandCandidate(Candidate):
     """Both sidebands ``f_c +- f_m`` of a line of the model (the carrier) modulated by a slower
     shaft, at the frequencies the gear declares (:meth:`GearTrain.candidate_lines`), pooled per
-    direction over the plateaus that resolve them; their amplitude law is the carrier's (an
-    amplitude modulation of depth m gives sidebands of m/2 of the carrier at every speed)."""
+    direction over the plateaus that resolve them, with the carrier's amplitude law."""
 
     kind = "periodic"
 

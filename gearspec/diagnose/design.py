@@ -78,10 +78,9 @@ class Block:
         return cols
 
     def taylor_columns(self, dd: DiagnoseData) -> np.ndarray:
-        """First-order columns of the nonlinear parameters: for each, the derivative of the
-        block's present contribution (``columns @ coef``) with respect to it.  A linear refit with
-        them moves the nonlinear parameters too (one Gauss-Newton step), so that every fit of the
-        held-out test -- before and after a candidate alike -- refits them on its own data."""
+        """First-order columns of the nonlinear parameters: the derivative of the block's present
+        contribution (``columns @ coef``) with respect to each (a linear refit with them is one
+        Gauss-Newton step: every fit of the held-out test refits them on its own data)."""
         if not self.coef:
             return np.zeros((len(dd), 0))
         c = np.asarray(self.coef, dtype=float)
@@ -543,8 +542,7 @@ def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list
 
 def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) -> FittedState:
     """Ordinary least squares of every block's linear parameters on all observations; standard
-    errors from the covariance with the residual variance (white noise: the residual's colour is
-    not accounted for -- the loop's acceptance does not rely on them)."""
+    errors as for white noise (the loop's acceptance does not rely on them)."""
     X = state.design(dd) if X is None else X
     G = X.T @ X
     beta = solve_normal(G, X.T @ dd.y)

@@ -44,9 +44,7 @@ KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "
 
 def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
     """Fold of every held-out group (``dd``'s group order) by THE rule of
-    :mod:`gearspec.core.crossval`: groups sorted by direction and speed (mean ``|v|`` over the
-    group's observations, ties by group id), dealt round-robin, the negative direction continuing
-    where the positive one stopped."""
+    :mod:`gearspec.core.crossval` (:func:`~gearspec.core.crossval.deal_folds`)."""
     gid = dd.fit.groups(dd.by)[dd.index]
     ids, sign, speed = group_summary(gid, dd.at("direction"), dd.at("v"))
     return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, gid[dd.starts])]
@@ -270,8 +268,8 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
 
     Notes
     -----
-    The loop works on many small matrices: BLAS runs single-threaded inside it (thread start-up
-    costs more than it saves at these sizes, and badly so on a busy machine).
+    BLAS runs single-threaded inside the loop: thread start-up costs more than it saves on its
+    many small matrices.
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(data, model, law=law, gear=gear, harmonics=harmonics, symmetric=symmetric, folds=folds,
