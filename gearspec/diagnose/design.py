@@ -294,9 +294,6 @@ class HarmonicBlock(Block):
                 hs[:] = [x for x in hs if not math.isclose(x.frequency, self.frequency, rel_tol=1e-12)]
                 hs.append(Harmonic.of(h))
 
-    def with_(self, **kw) -> "HarmonicBlock":
-        return replace(self, **kw)
-
     def describe(self):
         laws = ", ".join(f"{_DNAME.get(d, 'both')}: {lw} (decay {dict(self.decay).get(d, 0.0):.3g})"
                          for d, lw in self.law)

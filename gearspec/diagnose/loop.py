@@ -316,8 +316,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         if not cands:
             rounds.append({"round": k, "candidates": 0, "accepted": None})
             break
-        G = dd.n_groups
-        z_crit = critical_z(alpha, len(cands), G)
+        z_crit = critical_z(alpha, len(cands), dd.n_groups)
         evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
         for c, ev in evals:
             _bar_reentry(effects, c, ev)
@@ -337,9 +336,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         rnd = Round(dd, new_state, fold)
         e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new_state, rnd, k)
         was_in = {x.name for x in effects.values() if x.accepted}
-        removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
-        if removed:
-            rnd = removed
+        rnd = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k) or rnd
         gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
         # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
         # data, refitted in every fold as the baseline's are): what the final model reports
