@@ -20,7 +20,7 @@ from ..gears import integer_hint
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .context import Round
-from .coverage import measurable
+from .coverage import measurable, segment_span
 from .design import Grams, HarmonicBlock, TermBlock, solve_normal
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
@@ -435,20 +435,7 @@ class LaggedSidebandBlock(SidebandBlock, LaggedHarmonicBlock):
 
 def travel_ok(dd, min_travel: float) -> np.ndarray:
     """Samples (of ``dd.fit``) in a segment whose travel is at least ``min_travel``."""
-    key = ("travel_ok", float(min_travel))
-    hit = dd.cache.get(key)
-    if hit is not None:
-        return hit
-    f = dd.fit
-    seg = f.segment
-    ids, inv = np.unique(seg, return_inverse=True)
-    lo = np.full(len(ids), np.inf)
-    hi = np.full(len(ids), -np.inf)
-    np.minimum.at(lo, inv, f.theta)
-    np.maximum.at(hi, inv, f.theta)
-    out = (hi - lo)[inv] >= min_travel
-    dd.cache[key] = out
-    return out
+    return segment_span(dd) >= min_travel
 
 
 class SidebandCandidate(Candidate):

@@ -41,9 +41,7 @@ class Round:
     def __post_init__(self):
         dd = self.dd
         fitted = fit_state(self.state, dd)
-        state = self.state.refreshed(fitted.coef)
-        fitted = FittedState(state, fitted.coef, fitted.se, fitted.residual, fitted.rmse, fitted.prediction,
-                             speed_ranges=fitted.speed_ranges)
+        state = fitted.state = self.state.refreshed(fitted.coef)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         X = state.design(dd, taylor=True)
         grams = Grams.of(X, dd.y, dd)

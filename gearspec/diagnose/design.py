@@ -675,12 +675,10 @@ def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
     elif isinstance(blk, HarmonicBlock):
         for d, law in blk.law:
             dec = float(dict(blk.decay).get(d, 0.0))
-            if law == "exp":
-                out.append((("decay", d), dec, min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top, False))
-            elif law == "rational":
-                out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 10.0 / top, False))
-            elif law == "power":
-                out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 6.0, False))
+            bounds = {"exp": (min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top),
+                      "rational": (0.0, max(dec, 0.0) + 10.0 / top), "power": (0.0, max(dec, 0.0) + 6.0)}
+            if law in bounds:
+                out.append((("decay", d), dec, *bounds[law], False))
         if blk.found and dd.fit.theta is not None:
             th = dd.at("theta")
             span = max((float(np.ptp(th[a:z])) for a, z in zip(dd.starts, dd.stops)), default=0.0) or 1.0

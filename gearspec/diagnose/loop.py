@@ -202,16 +202,11 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         train = rnd.fold != f
         tr_rows = rnd.rows(train)
         rows = np.flatnonzero(~tr_rows)
+        items = [fr.proposals[f] for fr in runs if fr.proposals[f] is not None]
         keep = np.ones(rnd.X.shape[1], bool)
-        cols = []
-        for fr in runs:
-            item = fr.proposals[f]
-            if item is None:
-                continue
-            k, prop = item
+        for k, _ in items:
             keep &= k
-            cols.append(prop.columns(dd))
-        X = np.column_stack([rnd.X[:, keep]] + cols)
+        X = np.column_stack([rnd.X[:, keep]] + [prop.columns(dd) for _, prop in items])
         Xt = X[tr_rows]
         G = Xt.T @ Xt
         beta = solve_normal(G, Xt.T @ dd.y[tr_rows], reference=np.einsum("ij,ij->j", X, X))
@@ -547,10 +542,8 @@ def _written_terms(e: Effect, rnd: Round) -> list:
     out = []
     for blk in [b for b in blocks if b is not None]:
         if isinstance(blk, HarmonicBlock):
-            for dname, p in m.directions.items():
-                for h in p.harmonics:
-                    if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
-                        out.append({"direction": dname, "harmonic": h.to_dict()})
+            out += [{"direction": dname, "harmonic": h.to_dict()} for dname, p in m.directions.items()
+                    for h in p.harmonics if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12)]
         elif isinstance(blk, TermBlock):
             out += [{"term": t} for t in m.terms if blk.matches(t)]
         else:
