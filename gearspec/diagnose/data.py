@@ -52,11 +52,8 @@ def travel_since_reversal(theta, v, run=None, deadband: float = 0.0) -> np.ndarr
     pos = np.concatenate((np.asarray(turn_pos, dtype=float), np.full(len(starts), np.nan)))
     order = np.argsort(ev, kind="stable")
     ev, pos = ev[order], pos[order]
-    # a run start after a reversal of the same index: the run start wins only if no reversal there
-    fill = np.full(n, np.nan)
-    for k, (i, p) in enumerate(zip(ev, pos)):
-        stop = ev[k + 1] if k + 1 < len(ev) else n
-        fill[i:stop] = p
+    # every sample takes the turning point of the last event at or before it (a run start: none yet)
+    fill = pos[np.searchsorted(ev, np.arange(n), side="right") - 1]
     has = np.isfinite(fill)
     out[has] = np.abs(theta[has] - fill[has])
     return out

@@ -143,12 +143,11 @@ def _spectrum(dd: DiagnoseData, r: np.ndarray, idx: np.ndarray, *, oversample: f
     rows = []
     for i in chosen:
         # parabolic interpolation of the peak in log power
+        off = 0.0
         if 0 < i < nf - 1:
             a, b, c = np.log(power[i - 1:i + 2] + 1e-300)
             den = a - 2 * b + c
             off = 0.5 * (a - c) / den if den < 0 else 0.0
-        else:
-            off = 0.0
         f = float(freqs[i] + np.clip(off, -0.5, 0.5) * df)
         fp = float(false_alarm_probability(z[i], m_indep, noise_bins=bins[i], oversample=oversample))
         rows.append({"frequency": f, "amplitude": float(np.sqrt(4 * power[i] / len(y))), "z": float(z[i]),
