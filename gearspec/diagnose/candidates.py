@@ -204,23 +204,16 @@ def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01
 
     def rss(g):
         A = np.column_stack([dm(g * sn), dm(g * cs)])
-        G = A.T @ A
         b = A.T @ rr
-        beta = solve_normal(G, b)
-        return yy - float(beta @ b)
+        return yy - float(solve_normal(A.T @ A, b) @ b)
 
     top = float(np.max(speed)) if len(speed) else 1.0
     out = {"const": (rss(np.ones_like(speed)), 0.0)}
     speeds = np.unique(np.round(speed, 9))
     if len(speeds) >= 2 and top > 0:
         for law, grid in (("exp", EXP_GRID), ("rational", RAT_GRID), ("power", POW_GRID)):
-            best = None
-            for gval in grid:
-                b = gval if law == "power" else gval / top
-                val = rss(amplitude_law(law, speed, b))
-                if best is None or val < best[0]:
-                    best = (val, b)
-            out[law] = best
+            consts = [g if law == "power" else g / top for g in grid]
+            out[law] = min(((rss(amplitude_law(law, speed, b)), b) for b in consts), key=lambda vb: vb[0])
     law, (val, dec) = min(out.items(), key=lambda kv: kv[1][0])
     s2 = val / max(len(r) - 3 - len(sids), 1)
     if law != "const" and (out["const"][0] - val) < stats.chi2.isf(alpha, 1) * s2:

@@ -238,7 +238,6 @@ class HarmonicBlock(Block):
             while len(trig) > 16:
                 trig.popitem(last=False)
         sn, cs = hit
-        x = None
         cols = []
         lp = dict(self.load_phase)
         # segments whose position sampling cannot carry the line (above 0.8 of their position

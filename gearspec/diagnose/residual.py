@@ -123,8 +123,7 @@ def _spectrum(dd: DiagnoseData, r: np.ndarray, idx: np.ndarray, *, oversample: f
     if nf > max_bins:
         nf = max_bins
         df = (f_hi - f_lo) / (nf - 1)
-    ls = LombScargle(th, y)
-    power = ls.power_grid(f_lo, df, nf)
+    power = LombScargle(th, y).power_grid(f_lo, df, nf)
     noise, bins = local_noise(power, return_bins=True)
     z = power / np.maximum(noise, 1e-300)
     m_indep = max(1.0, span * (f_hi - f_lo))
