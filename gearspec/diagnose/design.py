@@ -507,10 +507,8 @@ class FittedState:
         m.terms = []
         for blk, (a, z) in zip(self.state.blocks, self.state.spans()):
             n_terms = len(m.terms)
-            if isinstance(blk, HarmonicBlock):
-                blk.write(m, self.coef[a:z], self.se[a:z], ranges=self.speed_ranges.get(blk.uid))
-            else:
-                blk.write(m, self.coef[a:z], self.se[a:z])
+            kw = {"ranges": self.speed_ranges.get(blk.uid)} if isinstance(blk, HarmonicBlock) else {}
+            blk.write(m, self.coef[a:z], self.se[a:z], **kw)
             _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
         # through the constructor: the parameters cleaned as every model's are
         return FrictionModel(m.law, m.directions["positive"], m.directions["negative"], terms=m.terms, unit=m.unit,
@@ -629,11 +627,7 @@ def predict_model(model: FrictionModel, dd: DiagnoseData) -> np.ndarray:
 
 def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
     if isinstance(blk, BaseBlock):
-        out = []
-        for d in blk.dirs:
-            p = model.params(d)
-            out += [float(p.values[k]) for k in blk._lin(d)]
-        return np.array(out)
+        return np.array([float(model.params(d).values[k]) for d in blk.dirs for k in blk._lin(d)])
     if isinstance(blk, HarmonicBlock):
         out = []
         for d in blk.dirs:
