@@ -4,6 +4,8 @@ IDIM-LS model of the EMPS procedure (:func:`idim_model`), every residual analysi
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..errors import InputError
@@ -40,22 +42,17 @@ def baseline_model(dd: DiagnoseData, law: str = "silo4", *, gear=None, harmonics
                              f"(coulomb_viscous), not '{law}'; the loop adds a Stribeck term if the data want one")
         from ..model import LAWS
         P = {k: 0.0 for k in LAWS[law].params}
-        m = FrictionModel(law, P, P if symmetric else dict(P), unit=fd.unit, terms=list(terms),
-                          name=f"{law} ({'symmetric' if symmetric else 'per direction'})")
-        return m
+        return FrictionModel(law, P, P if symmetric else dict(P), unit=fd.unit, terms=list(terms),
+                             name=f"{law} ({'symmetric' if symmetric else 'per direction'})")
     if symmetric:
-        mag = fd.direction * fd.y
-        folded = FitData(theta=fd.theta, v=np.abs(fd.v), y=mag, acc=fd.acc, load=fd.load,
-                         temperature=fd.temperature, t=fd.t, run=fd.run, segment=fd.segment,
-                         direction=np.ones(len(fd), np.int8), unit=fd.unit, segments=fd.segments.assign(direction=1),
-                         notes=list(fd.notes))
+        folded = replace(fd, v=np.abs(fd.v), y=fd.direction * fd.y, direction=np.ones(len(fd), np.int8),
+                         segments=fd.segments.assign(direction=1), notes=list(fd.notes), cache={})
         m = identify.fit(folded, law, harmonics=harmonics, gear=gear, holdout=None)
         p = m.directions["positive"]
         ni = {k.replace("positive.", "both."): v for k, v in m.not_identified.items() if not k.startswith("negative.")}
-        m = FrictionModel(m.law, p, p, unit=m.unit, terms=list(terms), not_identified=ni,
-                          notes=m.notes + ["symmetric: one parameter set for both directions"],
-                          name=f"{law} (symmetric)", meta=m.meta)
-        return m
+        return FrictionModel(m.law, p, p, unit=m.unit, terms=list(terms), not_identified=ni,
+                             notes=m.notes + ["symmetric: one parameter set for both directions"],
+                             name=f"{law} (symmetric)", meta=m.meta)
     m = identify.fit(fd, law, harmonics=harmonics, gear=gear, holdout=None)
     if terms:
         m = m.with_terms(*terms)

@@ -1,42 +1,26 @@
 """Candidate terms: how each one is fitted (what proposes them: :mod:`.detectors`).
 
-A candidate is a *procedure*, not a fixed term: given the data it may use (the training groups of
-a fold, or all of them), it searches its own nonlinear parameters there -- the frequency of a
-line, its amplitude-vs-speed law and decay, a Stribeck velocity, an exponent, a presliding
-length -- and returns the blocks to add to the model (and the blocks they replace).  The held-out
-test (:mod:`.loop`) runs that procedure inside every fold, so that the data a fold is judged on
-never chose the term that predicts it.  A candidate reads the round it is proposed in through its
-context (:class:`~.context.Round`), never the loop.
-
-The procedures:
-
-:class:`GridCandidate`       a term family with a grid of nonlinear values (the grid value with
-                             the smallest training error in each fold): most term kinds
-:class:`FixedCandidate`      blocks as they are (backward elimination)
-:class:`PeriodicCandidate`   a line at a frequency found in the residual spectrum; amplitude law
-                             per direction chosen by the data (const, exp, rational, power; a
-                             decaying law only when it beats a constant amplitude by a
-                             likelihood-ratio test at 1 %)
-:class:`LagCandidate`        the torque channel logged behind position: the lag estimated from the
-                             phases of the model's lines across the training plateaus, every line
-                             fitted at ``theta - v lag``
-:class:`SidebandCandidate`   a line of the model amplitude-modulated by a slower shaft, at the
-                             frequencies the gear declares, pooled per direction over the plateaus
-                             long enough to resolve them
+A candidate is a *procedure*, not a fixed term: given the groups it may use (the training groups
+of a fold, or all of them) it searches its own nonlinear parameters there and returns the blocks
+to add to the model (and those they replace), so that the data a fold is judged on never chose the
+term that predicts it.  It reads the round through its context (:class:`~.context.Round`) only.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+import types
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
+from scipy import stats
 
+from ..core.reduction import group_normal_equations
 from ..gears import integer_hint
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .context import Round
-from .coverage import measurable
+from .coverage import measurable, segment_span
 from .design import Grams, HarmonicBlock, TermBlock, solve_normal
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
@@ -65,18 +49,19 @@ class Proposal:
     def n_params(self, rnd: Round) -> int:
         return sum(len(b.names) for b in self.add) - sum(len(b.names) for b in self.drop)
 
+    @classmethod
+    def of(cls, rnd: Round, add: list, drop=(), describe: str = "", C: np.ndarray | None = None) -> "Proposal":
+        """The proposal of blocks ``add`` (columns ``C``, default theirs) with their cross products."""
+        prop = cls(add, list(drop), describe=describe)
+        prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd) if C is None else C)
+        return prop
+
 
 def cross_grams(rnd: Round, C: np.ndarray):
     """Per-group X^T C, C^T C and C^T y of new columns ``C`` against the round's design."""
     dd = rnd.dd
-    xtc = Grams.cross(rnd.X, C, dd)
-    ng, q = dd.n_groups, C.shape[1]
-    ctc = np.empty((ng, q, q))
-    cty = np.empty((ng, q))
-    for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-        ctc[g] = C[a:z].T @ C[a:z]
-        cty[g] = C[a:z].T @ dd.y[a:z]
-    return xtc, ctc, cty
+    ctc, cty, _ = group_normal_equations(C, dd.y, dd.starts, dd.stops)
+    return Grams.cross(rnd.X, C, dd), ctc, cty
 
 
 def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
@@ -109,6 +94,13 @@ class Candidate:
         self.frequency = None
         self.label = None
         self.hint = None
+        self._cache = {}
+
+    def _round_cache(self, rnd: Round) -> dict:
+        """The cache of what the candidate computed for round ``rnd`` (emptied for a new round)."""
+        if self._cache.get("round") is not rnd:
+            self._cache = {"round": rnd}
+        return self._cache
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         """The blocks to add (and drop), their nonlinear parameters searched on the groups where
@@ -126,14 +118,12 @@ class FixedCandidate(Candidate):
         self.kind = kind
         self.blocks = list(blocks)
         self.drop = list(drop)
-        self._cache = {}
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
-        if self._cache.get("round") is not rnd:
-            C = np.column_stack([b.columns(rnd.dd) for b in self.blocks])
-            xtc, ctc, cty = cross_grams(rnd, C)
-            self._cache = {"round": rnd, "prop": Proposal(self.blocks, self.drop, xtc, ctc, cty, "")}
-        return self._cache["prop"]
+        cache = self._round_cache(rnd)
+        if "prop" not in cache:
+            cache["prop"] = Proposal.of(rnd, self.blocks, self.drop)
+        return cache["prop"]
 
 
 # ---------------------------------------------------------------------- grid candidates
@@ -148,24 +138,18 @@ class GridCandidate(Candidate):
         self.make = make
         self.grid = list(grid)
         self.describe_value = describe_value or (lambda v: "" if v is None else f"{v:.4g}")
-        self._cache = {}
 
     def _prop(self, rnd: Round, i: int) -> Proposal | None:
-        if self._cache.get("round") is not rnd:
-            self._cache = {"round": rnd}
-        if i not in self._cache:
+        cache = self._round_cache(rnd)
+        if i not in cache:
             made = self.make(self.grid[i])
-            if made is None:
-                self._cache[i] = None
-            else:
+            cache[i] = None
+            if made is not None:
                 add, drop = made
                 C = np.column_stack([b.columns(rnd.dd) for b in add])
-                if np.linalg.norm(C) <= 1e-6 * np.linalg.norm(rnd.dd.y):  # nothing the data can see
-                    self._cache[i] = None
-                else:
-                    xtc, ctc, cty = cross_grams(rnd, C)
-                    self._cache[i] = Proposal(add, drop, xtc, ctc, cty, self.describe_value(self.grid[i]))
-        return self._cache[i]
+                if np.linalg.norm(C) > 1e-6 * np.linalg.norm(rnd.dd.y):  # else nothing the data can see
+                    cache[i] = Proposal.of(rnd, add, drop, self.describe_value(self.grid[i]), C)
+        return cache[i]
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         best = None
@@ -220,27 +204,18 @@ def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01
 
     def rss(g):
         A = np.column_stack([dm(g * sn), dm(g * cs)])
-        G = A.T @ A
         b = A.T @ rr
-        beta = solve_normal(G, b)
-        return yy - float(beta @ b)
+        return yy - float(solve_normal(A.T @ A, b) @ b)
 
     top = float(np.max(speed)) if len(speed) else 1.0
     out = {"const": (rss(np.ones_like(speed)), 0.0)}
     speeds = np.unique(np.round(speed, 9))
     if len(speeds) >= 2 and top > 0:
         for law, grid in (("exp", EXP_GRID), ("rational", RAT_GRID), ("power", POW_GRID)):
-            best = None
-            for gval in grid:
-                b = gval if law == "power" else gval / top
-                val = rss(amplitude_law(law, speed, b))
-                if best is None or val < best[0]:
-                    best = (val, b)
-            out[law] = best
+            consts = [g if law == "power" else g / top for g in grid]
+            out[law] = min(((rss(amplitude_law(law, speed, b)), b) for b in consts), key=lambda vb: vb[0])
     law, (val, dec) = min(out.items(), key=lambda kv: kv[1][0])
-    n = len(r)
-    s2 = val / max(n - 3 - len(sids), 1)
-    from scipy import stats
+    s2 = val / max(len(r) - 3 - len(sids), 1)
     if law != "const" and (out["const"][0] - val) < stats.chi2.isf(alpha, 1) * s2:
         law, dec = "const", 0.0
     return law, float(dec), {k: v[0] for k, v in out.items()}
@@ -273,10 +248,8 @@ class PeriodicCandidate(Candidate):
         tol = max(3 * se if se is not None and np.isfinite(se) else 0.1 * self.resolution, 2e-3 * f)
         ln = self.gear.label(f, tol) if self.gear is not None else None
         self.label = None if ln is None else ln.label
-        # an integer relation to a shaft is looser: a filtered or delayed signal shifts a fitted
-        # frequency by a few tenths of a percent, and neighbouring multiples (6x, 8x) are far apart;
-        # a high multiple (72x) needs the line's own precision instead, where the loose tolerance
-        # would match a multiple by chance (integer_hint refuses such a tolerance)
+        # an integer relation to a shaft is looser (a filtered or delayed signal shifts a fitted
+        # frequency by a few tenths of a percent); a high multiple (72x) needs the line's own precision
         self.hint = None
         if self.gear is not None and ln is None:
             self.hint = integer_hint(self.gear, f, max(tol, 5e-3 * f))
@@ -304,20 +277,17 @@ class PeriodicCandidate(Candidate):
         meas = measurable(dd, f)[dd.index][rows] if dd.reduce is None else np.ones(len(d), bool)
         groups = [(0, moving & meas)] if symmetric else [(x, (d == x) & moving & meas) for x in dirs]
         for x, sel in groups:
-            if not sel.any():
-                laws.append((x, "const"))
-                decays.append((x, 0.0))
-                continue
-            yv = (d[sel] if x == 0 else x) * r0[sel]
-            law, dec, _ = choose_amplitude_law(theta[sel], speed[sel], seg[sel], yv, f)
+            law, dec = "const", 0.0
+            if sel.any():
+                yv = (d[sel] if x == 0 else x) * r0[sel]
+                law, dec, _ = choose_amplitude_law(theta[sel], speed[sel], seg[sel], yv, f)
             laws.append((x, law))
             decays.append((x, dec))
         blk = HarmonicBlock(key=f"found {f:.6g}", frequency=f, label=self.label, dirs=tuple(dirs),
                             symmetric=symmetric, law=tuple(laws), decay=tuple(decays), found=True)
-        xtc, ctc, cty = cross_grams(rnd, blk.columns(dd))
         laws_text = ", ".join(f"{DIRECTION_NAMES[x]}: {lw}" + (f" (decay {dc:.3g})" if lw != "const" else "")
                               for (x, lw), (_, dc) in zip(laws, decays))
-        return Proposal([blk], [], xtc, ctc, cty, f"{f:.6g} cycles/{self.unit}; {laws_text}")
+        return Proposal.of(rnd, [blk], (), f"{f:.6g} cycles/{self.unit}; {laws_text}")
 
     def _search(self, theta, d, seg, r0, moving, dirs) -> float:
         """The frequency (cycles per unit of ``theta``) of the strongest line within two
@@ -363,10 +333,8 @@ class LaggedHarmonicBlock(HarmonicBlock):
         store = dd.cache.setdefault("lagged", {})
         view = store.get(self.lag)
         if view is None:
-            import dataclasses
-            import types
             f = dd.fit
-            view = types.SimpleNamespace(fit=dataclasses.replace(f, theta=f.theta - f.v * self.lag, cache={}),
+            view = types.SimpleNamespace(fit=replace(f, theta=f.theta - f.v * self.lag, cache={}),
                                          cache={}, reduce=dd.reduce)
             while len(store) >= 8:
                 store.pop(next(iter(store)))
@@ -385,19 +353,16 @@ class LaggedHarmonicBlock(HarmonicBlock):
 
 
 def lagged(blk: HarmonicBlock, lag: float) -> LaggedHarmonicBlock:
-    """The lagged form of a line of the model (a sideband stays a sideband: same columns
-    rule)."""
-    import dataclasses
+    """The lagged form of a line of the model (a sideband stays a sideband: same columns rule)."""
     cls = LaggedSidebandBlock if isinstance(blk, SidebandBlock) else LaggedHarmonicBlock
-    kw = {f.name: getattr(blk, f.name) for f in dataclasses.fields(blk) if f.name not in ("uid", "coef", "lag")}
+    kw = {f.name: getattr(blk, f.name) for f in fields(blk) if f.name not in ("uid", "coef", "lag")}
     return cls(**kw, coef=blk.coef, lag=float(lag))
 
 
 class LagCandidate(Candidate):
-    """The torque channel behind position by a lag (``CONTRACTS.md`` kind ``lag``): in every
-    fold the lag is estimated from the phases of the model's lines across the training plateaus
-    (:func:`gearspec.lag.lag_from_phases`) and every line of the model is replaced by its lagged
-    form (:class:`LaggedHarmonicBlock`).  ``value``: the lag estimated on all data (s)."""
+    """The torque channel behind position by a lag (kind ``lag``): in every fold the lag estimated
+    from the training plateaus' line phases (:func:`gearspec.lag.lag_from_phases`), every line of
+    the model replaced by its lagged form.  ``value``: the lag estimated on all data (s)."""
 
     kind = "lag"
 
@@ -408,7 +373,6 @@ class LagCandidate(Candidate):
         self.max_lag = float(max_lag)
         self.value = float(estimate.lag)
         self.value_se = float(estimate.se)
-        self._cache = {}
 
     def estimate(self, train: np.ndarray):
         from ..lag import lag_from_phases
@@ -425,20 +389,16 @@ class LagCandidate(Candidate):
         if not lines:
             return None
         ck = (id(rnd), round(est.lag, 15))
-        if self._cache.get("round") is not rnd:
-            self._cache = {"round": rnd}
-        if ck not in self._cache:
-            add = [lagged(b, est.lag) for b in lines]
-            prop = _TaylorProposal(add, lines, describe=f"lag {1e3 * est.lag:.4g} ms")
-            prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd))
-            self._cache[ck] = prop
-        return self._cache[ck]
+        cache = self._round_cache(rnd)
+        if ck not in cache:
+            cache[ck] = _TaylorProposal.of(rnd, [lagged(b, est.lag) for b in lines], lines,
+                                           f"lag {1e3 * est.lag:.4g} ms")
+        return cache[ck]
 
 
 class _TaylorProposal(Proposal):
-    """Blocks that replace blocks of the model with the same nonlinear parameters (the lines,
-    lagged): they keep their Taylor columns, as the blocks they replace have them in the fits
-    without the candidate, so that the held-out comparison differs by the candidate alone."""
+    """Blocks replacing blocks of the model with the same nonlinear parameters (the lines, lagged)
+    keep their Taylor columns, so that the held-out comparison differs by the candidate alone."""
 
     def columns(self, dd) -> np.ndarray:
         return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
@@ -448,9 +408,8 @@ class _TaylorProposal(Proposal):
 @dataclass(frozen=True, eq=False)
 class SidebandBlock(HarmonicBlock):
     """A sideband line (declared by the gear: carrier +- modulating shaft), pooled per direction
-    over the plateaus whose travel is at least ``min_travel`` (its columns are zero on the
-    others: the loop fits and scores it only there).  The model it writes carries the line as a
-    harmonic at every speed: the modulation is physical, only its estimate needs long plateaus."""
+    over the plateaus whose travel is at least ``min_travel`` (its columns are zero on the others);
+    the model it writes carries it at every speed (README, "Declared sidebands")."""
 
     min_travel: float = 0.0
 
@@ -469,27 +428,13 @@ class LaggedSidebandBlock(SidebandBlock, LaggedHarmonicBlock):
 
 def travel_ok(dd, min_travel: float) -> np.ndarray:
     """Samples (of ``dd.fit``) in a segment whose travel is at least ``min_travel``."""
-    key = ("travel_ok", float(min_travel))
-    hit = dd.cache.get(key)
-    if hit is not None:
-        return hit
-    f = dd.fit
-    seg = f.segment
-    ids, inv = np.unique(seg, return_inverse=True)
-    lo = np.full(len(ids), np.inf)
-    hi = np.full(len(ids), -np.inf)
-    np.minimum.at(lo, inv, f.theta)
-    np.maximum.at(hi, inv, f.theta)
-    out = (hi - lo)[inv] >= min_travel
-    dd.cache[key] = out
-    return out
+    return segment_span(dd) >= min_travel
 
 
 class SidebandCandidate(Candidate):
     """Both sidebands ``f_c +- f_m`` of a line of the model (the carrier) modulated by a slower
     shaft, at the frequencies the gear declares (:meth:`GearTrain.candidate_lines`), pooled per
-    direction over the plateaus that resolve them; their amplitude law is the carrier's (an
-    amplitude modulation of depth m gives sidebands of m/2 of the carrier at every speed)."""
+    direction over the plateaus that resolve them, with the carrier's amplitude law."""
 
     kind = "periodic"
 
@@ -504,10 +449,10 @@ class SidebandCandidate(Candidate):
         self.label = lines[0].label
         self.f0 = self.frequency
         self.resolution = 0.0
-        self._cache = {}
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
-        if self._cache.get("round") is not rnd:
+        cache = self._round_cache(rnd)
+        if "prop" not in cache:
             c = next((b for b in rnd.state.blocks if isinstance(b, HarmonicBlock)
                       and math.isclose(b.frequency, self.carrier.frequency, rel_tol=1e-9)), self.carrier)
             add = [SidebandBlock(key=f"sideband {ln.frequency:.6g}", frequency=float(ln.frequency), label=ln.label,
@@ -515,7 +460,5 @@ class SidebandCandidate(Candidate):
                                  min_travel=self.min_travel) for ln in self.lines]
             if isinstance(c, LaggedHarmonicBlock):   # a lag accepted before: the sidebands see it too
                 add = [lagged(b, c.lag) for b in add]
-            C = np.column_stack([b.columns(rnd.dd) for b in add])
-            xtc, ctc, cty = cross_grams(rnd, C)
-            self._cache = {"round": rnd, "prop": Proposal(add, [], xtc, ctc, cty, self.name)}
-        return self._cache["prop"]
+            cache["prop"] = Proposal.of(rnd, add, (), self.name)
+        return cache["prop"]

@@ -1,11 +1,5 @@
-"""What the candidates of one round of the closed loop read: the round's context.
-
-The loop builds one :class:`Round` per round (and one per model it compares against); the
-detectors (:mod:`.detectors`) and the candidates (:mod:`.candidates`) receive it and read it,
-never the loop itself.  It is read-only: the model as it stands, fitted on all data, its design
-with the Taylor columns of every nonlinear parameter and the per-group normal equations of that
-design, the held-out folds; the training sums and coefficients of a fold are derived from these
-(and cached: the candidates of a round ask for the same folds many times).
+"""What the candidates of one round of the closed loop read: the round's context (:class:`Round`),
+read-only; the training sums and coefficients of a fold are cached (a round asks for them often).
 """
 
 from __future__ import annotations
@@ -25,33 +19,12 @@ __all__ = ["Round"]
 
 @dataclass(frozen=True, eq=False)
 class Round:
-    """The model as it stands, fitted on all data and on the training part of every fold.
-
-    Parameters
-    ----------
-    dd : DiagnoseData
-        The observations (torque in Nm at every sample) and their held-out groups.
-    state : State
-        The model's blocks; the round keeps them refreshed with the coefficients fitted on all
-        data (``state``).
-    fold : ndarray of int
-        Fold of every held-out group.
-
-    Attributes
-    ----------
-    fitted : FittedState
-        The fit on all data (coefficients, standard errors, residual in Nm, prediction).
-    X : ndarray
-        The design on every observation, with the Taylor columns of every nonlinear parameter.
-    grams : Grams
-        Per-group normal equations of ``X`` and ``dd.y``.
-    ref_diag : ndarray
-        Diagonal of the normal equations of all data (the reference of :func:`solve_normal`).
-    K : int
-        Number of folds.
-    keys : frozenset of str
-        The keys of the model's blocks (``"hysteresis"``, ``"viscous_power+"``, ...).
-    """
+    """The model as it stands (``state``: its blocks, kept refreshed with the coefficients fitted
+    on all data) on the observations ``dd`` (torque in Nm), with the fold of every held-out group
+    (``fold``).  Derived: ``fitted`` (the fit on all data), ``X`` (the design with the Taylor
+    columns of every nonlinear parameter), ``grams`` (its per-group normal equations), ``ref_diag``
+    (the diagonal of those of all data: :func:`solve_normal`'s reference), ``K`` (folds) and
+    ``keys`` (of the model's blocks: ``"hysteresis"``, ``"viscous_power+"``, ...)."""
 
     dd: DiagnoseData = field(repr=False)
     state: State = field(repr=False)
@@ -68,9 +41,7 @@ class Round:
     def __post_init__(self):
         dd = self.dd
         fitted = fit_state(self.state, dd)
-        state = self.state.refreshed(fitted.coef)
-        fitted = FittedState(state, fitted.coef, fitted.se, fitted.residual, fitted.rmse, fitted.prediction,
-                             speed_ranges=fitted.speed_ranges)
+        state = fitted.state = self.state.refreshed(fitted.coef)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         X = state.design(dd, taylor=True)
         grams = Grams.of(X, dd.y, dd)

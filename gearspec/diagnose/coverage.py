@@ -8,7 +8,7 @@ import numpy as np
 from ..spectrum import MEASURABLE_FRACTION, position_nyquist
 from .data import DiagnoseData
 
-__all__ = ["segment_nyquist", "resolved", "measurable", "line_speed_range"]
+__all__ = ["segment_nyquist", "resolved", "measurable", "segment_span", "line_speed_range"]
 
 
 def _segment_bounds(f) -> list:
@@ -48,16 +48,21 @@ def measurable(dd: DiagnoseData, frequency: float) -> np.ndarray:
     fitted from these samples only, and held at the edges of their speeds elsewhere."""
     from ..identify import MIN_CYCLES
 
-    f = dd.fit
-    if f.theta is None:
-        return np.zeros(len(f), bool)
+    if dd.fit.theta is None:
+        return np.zeros(len(dd.fit), bool)
+    return resolved(dd, frequency) & (frequency * segment_span(dd) >= MIN_CYCLES)
+
+
+def segment_span(dd: DiagnoseData) -> np.ndarray:
+    """Travel (largest minus smallest position) of the segment of every sample of ``dd.fit``,
+    cached on the data."""
     span = dd.cache.get("segment_span")
     if span is None:
-        span = np.zeros(len(f))
+        f = dd.fit
+        span = dd.cache["segment_span"] = np.zeros(len(f))
         for a, z in _segment_bounds(f):
             span[a:z] = float(np.ptp(f.theta[a:z])) if z > a else 0.0
-        dd.cache["segment_span"] = span
-    return resolved(dd, frequency) & (frequency * span >= MIN_CYCLES)
+    return span
 
 
 def line_speed_range(dd: DiagnoseData, frequency: float, direction: int = 0) -> tuple | None:

@@ -1,21 +1,6 @@
-"""The data the closed loop works on: samples, the unit they are held out by, and what the
-residual is looked at against.
-
-:class:`DiagnoseData` wraps a :class:`~gearspec.fitdata.FitData` (the samples, in time order
-within each segment) with
-
-* ``by``: the held-out unit -- whole segments (plateaus), whole runs, or whole *moves* of a
-  trajectory (a motion from one standstill or reversal to the next); never interleaved samples;
-* ``travel``: the distance travelled since the last reversal of the motion, per sample, from the
-  *whole* recording (the turning point lies in the ramps between segments, which the segment
-  samples do not contain), for presliding hysteresis and backlash;
-* optionally a linear *reduction* of every column: the inverse-dynamic-model (IDIM) practice of
-  low-pass filtering and decimating each column of the observation matrix and the measured force
-  (EMPS), so that the loop's errors are those the published reference numbers use.
-
-Two constructors: :meth:`DiagnoseData.from_recording` (constant-speed segments, as ``gearspec
-fit``) and :func:`trajectory_data` (every sample of a whole trajectory: Butterworth-filtered
-position, central differences, optional decimation, as the EMPS reference procedure).
+"""The data the closed loop works on (:class:`DiagnoseData`): samples, the unit they are held out
+by, the travel since the last reversal, and an optional linear reduction of every column (IDIM
+filtering and decimation, :func:`trajectory_data`).
 """
 
 from __future__ import annotations
@@ -60,22 +45,15 @@ def travel_since_reversal(theta, v, run=None, deadband: float = 0.0) -> np.ndarr
     # reversals: consecutive nonzero-sign samples of one run with opposite signs
     a, b = nz[:-1], nz[1:]
     rev = (s[a] != s[b]) & (run[a] == run[b])
-    turn_at = np.empty(0, np.int64)
-    turn_pos = []
-    for j, i in zip(a[rev], b[rev]):
-        piece = theta[j:i + 1]
-        turn_pos.append(float(np.max(piece) if s[j] > 0 else np.min(piece)))
-        turn_at = np.append(turn_at, i)
+    turn_at = b[rev].astype(np.int64)
+    turn_pos = [float(np.max(theta[j:i + 1]) if s[j] > 0 else np.min(theta[j:i + 1])) for j, i in zip(a[rev], b[rev])]
     starts = np.flatnonzero(np.concatenate(([True], run[1:] != run[:-1])))
     ev = np.concatenate((turn_at, starts))
     pos = np.concatenate((np.asarray(turn_pos, dtype=float), np.full(len(starts), np.nan)))
     order = np.argsort(ev, kind="stable")
     ev, pos = ev[order], pos[order]
-    # a run start after a reversal of the same index: the run start wins only if no reversal there
-    fill = np.full(n, np.nan)
-    for k, (i, p) in enumerate(zip(ev, pos)):
-        stop = ev[k + 1] if k + 1 < len(ev) else n
-        fill[i:stop] = p
+    # every sample takes the turning point of the last event at or before it (a run start: none yet)
+    fill = pos[np.searchsorted(ev, np.arange(n), side="right") - 1]
     has = np.isfinite(fill)
     out[has] = np.abs(theta[has] - fill[has])
     return out
@@ -87,7 +65,6 @@ def reversal_travel(rec: Recording, seg: Segmentation) -> np.ndarray:
     the turning point between two consecutive segments of opposite directions in one run is the
     extreme position reached between them.  ``inf`` before the first reversal of a run."""
     theta = rec.theta
-    out = []
     segs = list(seg.segments)
     order = sorted(range(len(segs)), key=lambda i: (segs[i].run, segs[i].start))
     turn = {}  # segment index -> turning position before it (None: no reversal yet in the run)
@@ -103,10 +80,8 @@ def reversal_travel(rec: Recording, seg: Segmentation) -> np.ndarray:
             current = float(np.max(piece) if segs[prev].direction > 0 else np.min(piece))
         turn[i] = current
         prev = i
-    for i, s in enumerate(segs):
-        th = theta[s.start:s.stop]
-        tp = turn[i]
-        out.append(np.full(s.n, np.inf) if tp is None else np.abs(th - tp))
+    out = [np.full(s.n, np.inf) if turn[i] is None else np.abs(theta[s.start:s.stop] - turn[i])
+           for i, s in enumerate(segs)]
     return np.concatenate(out) if out else np.zeros(0)
 
 
@@ -140,24 +115,13 @@ def moves(v, run=None, min_speed: float | None = None) -> np.ndarray:
 # ---------------------------------------------------------------------- the data
 @dataclass
 class DiagnoseData:
-    """Samples the closed loop fits, scores and holds out (see the module docstring).
-
-    Attributes
-    ----------
-    fit : FitData
-        The samples at their own rate, segments contiguous and in time order.
-    by : {"segment", "run"}
-        Held-out unit (whole-trajectory data: segments are moves).
-    travel : ndarray or None
-        Distance since the last reversal per sample of ``fit`` (inf before the first).
-    reduce : callable or None
-        A linear map from an array over the samples of ``fit`` to the *observations* the loop
-        fits (e.g. IDIM filtering and decimation); None: the samples themselves.
-    index : ndarray
-        For every observation, the sample of ``fit`` it stands for.
-    kind : {"plateaus", "trajectory"}
-    name : str
-    """
+    """Samples the closed loop fits, scores and holds out: ``fit`` (the samples at their own rate,
+    segments contiguous and in time order), ``by`` (the held-out unit, "segment" or "run"; on a
+    whole trajectory the segments are moves), ``travel`` (distance since the last reversal per
+    sample, inf before the first), ``reduce`` (a linear map from an array over the samples to the
+    *observations* the loop fits, e.g. IDIM filtering and decimation; None: the samples
+    themselves), ``index`` (the sample every observation stands for), ``kind`` ("plateaus" or
+    "trajectory")."""
 
     fit: FitData
     by: str = "segment"
@@ -282,24 +246,16 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
     matrix and the measured torque decimated by ``decimate_by`` (MATLAB's ``decimate``), so that
     relative errors are those of the reference procedure (EMPS: 4.08 %, 3.11 %).
 
-    Held-out unit: the *moves* (:func:`moves`), one motion between standstills or reversals each.
-    ``fs`` (Hz) gives the nominal sample rate the filter and the differences use (default: from
-    the median time step; EMPS's clock steps are 1.00002 ms, its reference procedure uses 1 ms).
-    ``decimate_by=1`` keeps every sample.
-
-    The filter and the differences need a uniform grid.  A piece whose steps differ from their
-    median by more than 1 % (a logger's jitter, repeated or dropped stamps) is first resampled to a
-    uniform grid at its median step, every column used (position, torque, load, temperature)
-    linearly interpolated, and the notes say so.  It is refused only when a step within it is longer
-    than a quarter period of the filter's cut-off (``0.25 / cutoff``): interpolating across it would
-    invent motion the filter keeps.
+    Held-out unit: the *moves* (:func:`moves`).  ``fs`` (Hz): the nominal sample rate of the filter
+    and the differences (default: from the median time step; EMPS's clock steps are 1.00002 ms, its
+    reference procedure uses 1 ms).  ``decimate_by=1`` keeps every sample.  A piece whose time steps
+    are not uniform is resampled first, or refused (README, "Uniform grids").
     """
     pieces = rec.pieces()
     if not pieces:
         raise InputError("the recording has no samples")
-    th_all, v_all, a_all, y_all, t_all, run_all = [], [], [], [], [], []
     extra = [c for c in ("load", "temperature") if c in rec.data]
-    extra_all: dict = {c: [] for c in extra}
+    parts: dict = {c: [] for c in ("theta", "v", "acc", "y", "t", "run", *extra)}
     resampled = []
     for run, a, b in pieces:
         t = rec.t[a:b]
@@ -328,23 +284,13 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
         qf = butter_filtfilt(cols["theta"], cutoff, 1.0 / dt, order)
         dq = central_difference(qf, dt)
         ddq = central_difference(dq, dt)
-        sl = slice(border, None)
-        th_all.append(qf[sl])
-        v_all.append(dq[sl])
-        a_all.append(ddq[sl])
-        y_all.append(cols["y"][sl])
-        t_all.append(t[sl])
-        run_all.append(np.full(len(t) - border, run))
-        for c in extra:
-            extra_all[c].append(cols[c][sl])
-    if not th_all:
+        for c, x in (("theta", qf), ("v", dq), ("acc", ddq), ("t", t), ("run", np.full(len(t), run)),
+                     *((c, cols[c]) for c in ("y", *extra))):
+            parts[c].append(x[border:])
+    if not parts["theta"]:
         raise InputError("every run is too short for the filter and decimation")
-    theta = np.concatenate(th_all)
-    v = np.concatenate(v_all)
-    acc = np.concatenate(a_all)
-    y = np.concatenate(y_all)
-    t = np.concatenate(t_all)
-    run = np.concatenate(run_all)
+    cat = {c: np.concatenate(x) for c, x in parts.items()}
+    theta, v, acc, y, t, run = (cat[c] for c in ("theta", "v", "acc", "y", "t", "run"))
     notes_resampled = []
     if resampled:
         lo = min(r[1] for r in resampled)
@@ -355,7 +301,6 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
             f"{', ...' if len(resampled) > 5 else ''} s) by linear interpolation of position, torque"
             + "".join(f", {c}" for c in extra) + " before filtering")
     mv = moves(v, run, min_speed)
-    get = lambda c: np.concatenate(extra_all[c]) if c in extra_all else None  # noqa: E731
     seg_rows = []
     for m in np.unique(mv):
         sel = np.flatnonzero(mv == m)
@@ -364,7 +309,7 @@ def trajectory_data(rec: Recording, *, cutoff: float = 100.0, order: int = 4, de
         seg_rows.append({"segment": int(m), "run": int(run[sel[0]]), "direction": d,
                          "speed": float(np.max(np.abs(vv))), "velocity": float(d * np.max(np.abs(vv))),
                          "n": len(sel), "t0": float(t[sel[0]]), "t1": float(t[sel[-1]])})
-    fd = FitData(theta=theta, v=v, y=y, acc=acc, load=get("load"), temperature=get("temperature"), t=t, run=run,
+    fd = FitData(theta=theta, v=v, y=y, acc=acc, load=cat.get("load"), temperature=cat.get("temperature"), t=t, run=run,
                  segment=mv, unit=rec.unit, segments=pd.DataFrame(seg_rows),
                  notes=[f"whole trajectory: position filtered ({order}th-order Butterworth, {cutoff:g} Hz, "
                         f"zero phase), central differences, first {border} samples of each run dropped, "

@@ -1,23 +1,12 @@
 """A friction model as a linear design: blocks of columns, fitted jointly by least squares.
 
-Every model the loop handles -- a base law per direction (or shared), position-locked harmonics and
-additive terms -- is *linear* in most of its parameters once its few nonlinear ones are fixed
-(Stribeck velocity, decay constants, exponents, the travel of a presliding curve, a frequency):
-
-    drive torque = sum_blocks  X_block(theta, v, load, temperature, t, acc, travel; nonlinear) @ coef_block
-
-A :class:`Block` makes its columns from the data and writes its fitted coefficients back into a
-:class:`~gearspec.model.FrictionModel`; a :class:`State` is a list of blocks.  The closed loop
-refits the whole state jointly (ordinary least squares: the held-out error it is judged by is an
-unweighted rmse) whenever a term is added, so that a new term and the base law share the data
-honestly (a nonlinear viscous term and the linear viscous coefficient are refitted together, not
-one on the other's residual).  Nonlinear parameters are chosen by each candidate's own search
-(:mod:`.candidates`) on the data it is fitted to.
-
-Columns are torques *with the sign of the motion* for friction (a magnitude ``m`` contributes
-``sign(v) m``) and as they are for signed terms (inertia, offset).  Per-group normal equations
-(:class:`Grams`) make fits on any union of held-out groups cheap: one pass over the samples per
-set of columns, then sums over groups.
+Base law, lines and additive terms are linear in most parameters once their few nonlinear ones
+(Stribeck velocity, decays, exponents, presliding length, a frequency) are fixed.  A :class:`Block`
+makes its columns from the data and writes its fitted coefficients back into a
+:class:`~gearspec.model.FrictionModel`; a :class:`State` is a list of blocks, refitted jointly by
+ordinary least squares (the held-out error it is judged by is an unweighted rmse).  Columns are
+torques *with the sign of the motion* for friction and as they are for signed terms (inertia,
+offset).
 """
 
 from __future__ import annotations
@@ -89,10 +78,9 @@ class Block:
         return cols
 
     def taylor_columns(self, dd: DiagnoseData) -> np.ndarray:
-        """First-order columns of the nonlinear parameters: for each, the derivative of the
-        block's present contribution (``columns @ coef``) with respect to it.  A linear refit with
-        them moves the nonlinear parameters too (one Gauss-Newton step), so that every fit of the
-        held-out test -- before and after a candidate alike -- refits them on its own data."""
+        """First-order columns of the nonlinear parameters: the derivative of the block's present
+        contribution (``columns @ coef``) with respect to each (a linear refit with them is one
+        Gauss-Newton step: every fit of the held-out test refits them on its own data)."""
         if not self.coef:
             return np.zeros((len(dd), 0))
         c = np.asarray(self.coef, dtype=float)
@@ -250,7 +238,6 @@ class HarmonicBlock(Block):
             while len(trig) > 16:
                 trig.popitem(last=False)
         sn, cs = hit
-        x = None
         cols = []
         lp = dict(self.load_phase)
         # segments whose position sampling cannot carry the line (above 0.8 of their position
@@ -306,9 +293,6 @@ class HarmonicBlock(Block):
                 hs[:] = [x for x in hs if not math.isclose(x.frequency, self.frequency, rel_tol=1e-12)]
                 hs.append(Harmonic.of(h))
 
-    def with_(self, **kw) -> "HarmonicBlock":
-        return replace(self, **kw)
-
     def describe(self):
         laws = ", ".join(f"{_DNAME.get(d, 'both')}: {lw} (decay {dict(self.decay).get(d, 0.0):.3g})"
                          for d, lw in self.law)
@@ -335,6 +319,11 @@ class TermBlock(Block):
         if lin == "trig":
             return [f"{self.kind} sin{tag}", f"{self.kind} cos{tag}"]
         return [f"{self.kind}.{lin}{tag}"]
+
+    def matches(self, t: dict) -> bool:
+        """Whether the model's term ``t`` is this block's (kind, direction and fixed parameters)."""
+        return t["kind"] == self.kind and int(t.get("direction", 0) or 0) == self.direction and all(
+            t.get(k) == v for k, v in self.fixed)
 
     def term(self, **lin) -> dict:
         t = {"kind": self.kind, **dict(self.fixed), **lin}
@@ -518,10 +507,8 @@ class FittedState:
         m.terms = []
         for blk, (a, z) in zip(self.state.blocks, self.state.spans()):
             n_terms = len(m.terms)
-            if isinstance(blk, HarmonicBlock):
-                blk.write(m, self.coef[a:z], self.se[a:z], ranges=self.speed_ranges.get(blk.uid))
-            else:
-                blk.write(m, self.coef[a:z], self.se[a:z])
+            kw = {"ranges": self.speed_ranges.get(blk.uid)} if isinstance(blk, HarmonicBlock) else {}
+            blk.write(m, self.coef[a:z], self.se[a:z], **kw)
             _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
         # through the constructor: the parameters cleaned as every model's are
         return FrictionModel(m.law, m.directions["positive"], m.directions["negative"], terms=m.terms, unit=m.unit,
@@ -549,8 +536,7 @@ def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list
 
 def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) -> FittedState:
     """Ordinary least squares of every block's linear parameters on all observations; standard
-    errors from the covariance with the residual variance (white noise: the residual's colour is
-    not accounted for -- the loop's acceptance does not rely on them)."""
+    errors as for white noise (the loop's acceptance does not rely on them)."""
     X = state.design(dd) if X is None else X
     G = X.T @ X
     beta = solve_normal(G, X.T @ dd.y)
@@ -588,49 +574,34 @@ def state_from_model(model: FrictionModel, dd: DiagnoseData, *, symmetric: bool 
         return lin_names
 
     if law != "none":
-        if symmetric:
-            p = model.directions["positive"]
-            blocks.append(BaseBlock(key="base", law=law, dirs=tuple(present), symmetric=True,
-                                    lin=((0, lin_of(p)),), nonlin=((0, {k: p.values.get(k) for k in nonlin_names}),)))
-        else:
-            P = {d: model.params(d) for d in present}
-            dirs = tuple(d for d in present if all(P[d].values.get(k) is not None
-                                                   for k in LINEAR[law][0] if k in lin_of(P[d])))
-            blocks.append(BaseBlock(key="base", law=law, dirs=dirs, symmetric=False,
-                                    lin=tuple((d, lin_of(P[d])) for d in dirs),
-                                    nonlin=tuple((d, {k: P[d].values.get(k) for k in nonlin_names})
-                                                 for d in dirs)))
-    # harmonics, paired by frequency
-    freqs = []
+        # one parameter set (key 0) for both directions, or one per direction with its base law identified
+        P = {0: model.directions["positive"]} if symmetric else {d: model.params(d) for d in present}
+        keys = (0,) if symmetric else tuple(d for d in present if all(P[d].values.get(k) is not None
+                                                                     for k in lin_names if k in lin_of(P[d])))
+        blocks.append(BaseBlock(key="base", law=law, dirs=tuple(present) if symmetric else keys, symmetric=symmetric,
+                                lin=tuple((d, lin_of(P[d])) for d in keys),
+                                nonlin=tuple((d, {k: P[d].values.get(k) for k in nonlin_names}) for d in keys)))
+    lines: list = []     # (frequency, {direction: harmonic}): the harmonics paired by frequency
     for d in present:
         for h in model.harmonics(d):
-            if h.amplitude is None:
-                continue
-            if not any(math.isclose(h.frequency, f, rel_tol=1e-9) for f in freqs):
-                freqs.append(float(h.frequency))
-    for f in freqs:
-        per = {}
-        for d in present:
-            for h in model.harmonics(d):
-                if h.amplitude is not None and math.isclose(h.frequency, f, rel_tol=1e-9):
+            if h.amplitude is not None:
+                per = next((x for f, x in lines if math.isclose(h.frequency, f, rel_tol=1e-9)), None)
+                if per is None:
+                    lines.append((float(h.frequency), {d: h}))
+                else:
                     per[d] = h
+    for f, per in lines:
         dirs = tuple(sorted(per, reverse=True))
-        any_h = next(iter(per.values()))
         load_phase = tuple((d, float(per[d].phase or 0.0)) for d in dirs if per[d].load_coefficient)
         if symmetric:
-            rng = ((0, tuple(any_h.speed_range)),) if keep_ranges and any_h.speed_range else ()
-            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.label, dirs=dirs,
-                                        symmetric=True, law=((0, any_h.amplitude_law),),
-                                        decay=((0, float(any_h.decay or 0.0)),),
-                                        load_phase=((0, load_phase[0][1]),) if load_phase else (),
-                                        speed_range=rng))
-        else:
-            rng = tuple((d, tuple(per[d].speed_range)) for d in dirs
-                        if keep_ranges and per[d].speed_range) if keep_ranges else ()
-            blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=any_h.label, dirs=dirs,
-                                        law=tuple((d, per[d].amplitude_law) for d in dirs),
-                                        decay=tuple((d, float(per[d].decay or 0.0)) for d in dirs),
-                                        load_phase=load_phase, speed_range=rng))
+            per = {0: next(iter(per.values()))}
+            load_phase = ((0, load_phase[0][1]),) if load_phase else ()
+        keys = tuple(per) if symmetric else dirs
+        rng = tuple((d, tuple(per[d].speed_range)) for d in keys if per[d].speed_range) if keep_ranges else ()
+        blocks.append(HarmonicBlock(key=f"line {f:.6g}", frequency=f, label=per[keys[0]].label, dirs=dirs,
+                                    symmetric=symmetric, law=tuple((d, per[d].amplitude_law) for d in keys),
+                                    decay=tuple((d, float(per[d].decay or 0.0)) for d in keys),
+                                    load_phase=load_phase, speed_range=rng))
     for t in model.terms:
         kind = t["kind"]
         if kind not in TERM_LINEAR:
@@ -647,25 +618,16 @@ def predict_model(model: FrictionModel, dd: DiagnoseData) -> np.ndarray:
     """A model's drive torque at the observations of ``dd`` (evaluated per sample, reduced like
     the data; presliding and backlash from the travel since the last reversal)."""
     st = state_from_model(model, dd, symmetric=False, keep_ranges=True)
-    # coefficients as the model has them: fit nothing, read them back
-    cols = []
-    coefs = []
-    for blk in st.blocks:
-        X = blk.columns(dd)
-        cols.append(X)
-        coefs.append(_model_coefs(blk, model))
-    if not cols:
+    if not st.blocks:
         return np.zeros(len(dd))
-    return np.column_stack(cols) @ np.concatenate(coefs)
+    # coefficients as the model has them: fit nothing, read them back
+    return np.column_stack([b.columns(dd) for b in st.blocks]) @ np.concatenate([_model_coefs(b, model)
+                                                                                for b in st.blocks])
 
 
 def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
     if isinstance(blk, BaseBlock):
-        out = []
-        for d in blk.dirs:
-            p = model.params(d)
-            out += [float(p.values[k]) for k in blk._lin(d)]
-        return np.array(out)
+        return np.array([float(model.params(d).values[k]) for d in blk.dirs for k in blk._lin(d)])
     if isinstance(blk, HarmonicBlock):
         out = []
         for d in blk.dirs:
@@ -675,8 +637,7 @@ def _model_coefs(blk: Block, model: FrictionModel) -> np.ndarray:
             if d in dict(blk.load_phase):
                 out.append(float(h.load_coefficient or 0.0))
         return np.array(out)
-    t = next(t for t in model.terms if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == blk.direction
-             and all(t.get(k) == v for k, v in blk.fixed))
+    t = next(t for t in model.terms if blk.matches(t))
     lin = TERM_LINEAR[blk.kind]
     if lin == "trig":
         A, ph = float(t["amplitude"]), float(t.get("phase", 0.0))
@@ -707,12 +668,10 @@ def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
     elif isinstance(blk, HarmonicBlock):
         for d, law in blk.law:
             dec = float(dict(blk.decay).get(d, 0.0))
-            if law == "exp":
-                out.append((("decay", d), dec, min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top, False))
-            elif law == "rational":
-                out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 10.0 / top, False))
-            elif law == "power":
-                out.append((("decay", d), dec, 0.0, max(dec, 0.0) + 6.0, False))
+            bounds = {"exp": (min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top),
+                      "rational": (0.0, max(dec, 0.0) + 10.0 / top), "power": (0.0, max(dec, 0.0) + 6.0)}
+            if law in bounds:
+                out.append((("decay", d), dec, *bounds[law], False))
         if blk.found and dd.fit.theta is not None:
             th = dd.at("theta")
             span = max((float(np.ptp(th[a:z])) for a, z in zip(dd.starts, dd.stops)), default=0.0) or 1.0

@@ -1,40 +1,15 @@
 """The closed loop: residual -> detectors -> candidate terms -> held-out acceptance -> refit,
-until nothing more is accepted.
+until nothing more is accepted (the rule and its reasons: README, "The closed loop", Acceptance).
 
-Acceptance (why a term goes in)
--------------------------------
-The data are split into ``folds`` folds of whole held-out groups (segments, runs or moves; dealt
-round-robin by direction and speed so that every fold spans the speeds).  For a candidate, in
-every fold: the model as it stands is fitted on the other folds (prediction ``p0``), the
-candidate's procedure runs on the other folds too (it searches its own frequency, law, shape
-there) and the extended model is fitted on them (``p1``).  On the held-out fold, with
-``r0 = y - p0``, ``r1 = y - p1`` and ``Delta = p1 - p0``:
-
-* the held-out sum of squares falls: ``D = |r0|^2 - |r1|^2 = 2 <r0, Delta> - |Delta|^2``;
-* the statistic ``Z = sum_g <r0_g, Delta_g> / sqrt(sum_g V_g)`` over all held-out groups ``g``
-  is large: it is the correlation of the held-out residual with the correction the candidate
-  predicts, in units of its noise.  With a useless term, ``Delta`` comes from the training noise
-  and is independent of the held-out noise, so ``Z`` is centred on 0; with a real effect of size
-  ``delta`` it grows like ``|delta| / sigma``.  ``V_g`` is a cluster-robust variance: the larger
-  of ``<r1_g, Delta_g>^2`` (the whole group as one cluster: a random level per segment counts)
-  and the sum of the same over 8 consecutive blocks of the group (coloured noise within it);
-* three conditions, all required: ``Z`` above the one-sided t quantile with (groups - 1)
-  degrees of freedom at ``alpha / (number of candidates of the round)`` (Bonferroni: the round
-  tests many candidates); sign consistency -- the folds in which the term lowers the held-out
-  error carry at least 90 % of the total change; and a practical margin -- the held-out rmse
-  falls by at least ``min_gain`` (relative).
-
-Of the candidates that pass, the one with the largest held-out drop is added, the model is
-refitted on all data (the candidate's procedure then runs on all of it), and the loop repeats.
-Every candidate of every round is kept with its evidence and its numbers, accepted or not.
-
-The false-discovery rate of this rule on recordings whose model is complete is measured by the
-test suite (``tests/test_diagnose.py``) and stated in the README.
-
-An independent recording (``validation``, e.g. the EMPS cross-test) is the final judge: every
-accepted term must also lower the error there, by the same Z test on its groups and the same
-margin; a term that helps on the estimation data but not there is removed again (one at a time,
-the weakest first), and the report says so.
+In every fold of whole held-out groups the model as it stands is fitted on the other folds
+(prediction ``p0``), the candidate's procedure runs there too and the extended model is fitted
+(``p1``).  With ``r0 = y - p0`` and ``Delta = p1 - p0`` on the held-out fold,
+``Z = sum_g <r0_g, Delta_g> / sqrt(sum_g V_g)`` (:func:`gearspec.core.crossval.z_statistic`,
+``V_g`` cluster-robust); a candidate passes when ``Z`` exceeds the one-sided t quantile at
+``alpha / candidates`` (:func:`~gearspec.core.crossval.critical_z`), the improving folds carry 90 %
+of the change and the held-out rmse falls by ``min_gain``.  The best passing candidate is added,
+the model refitted, and the loop repeats; every candidate is kept with its evidence and decision.
+An independent recording (``validation``) is the final judge (:mod:`.validate`).
 """
 
 from __future__ import annotations
@@ -45,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import stats
+from threadpoolctl import threadpool_limits
 
 from ..core.crossval import critical_z, deal_folds, group_summary, splits, z_statistic
 from ..errors import InputError
@@ -53,7 +29,7 @@ from .baseline import _as_data, baseline_model, idim_model, relative_error, resi
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import FittedState, HarmonicBlock, State, solve_normal, state_from_model
+from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
 from .detectors import analyse, propose
 from .results import Diagnosis, Effect
@@ -68,9 +44,7 @@ KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "
 
 def folds_of(dd: DiagnoseData, folds: int) -> np.ndarray:
     """Fold of every held-out group (``dd``'s group order) by THE rule of
-    :mod:`gearspec.core.crossval`: groups sorted by direction and speed (mean ``|v|`` over the
-    group's observations, ties by group id), dealt round-robin, the negative direction continuing
-    where the positive one stopped."""
+    :mod:`gearspec.core.crossval` (:func:`~gearspec.core.crossval.deal_folds`)."""
     gid = dd.fit.groups(dd.by)[dd.index]
     ids, sign, speed = group_summary(gid, dd.at("direction"), dd.at("v"))
     return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, gid[dd.starts])]
@@ -92,8 +66,6 @@ class Evaluation:
     n_params: int
     passed: bool
     reason: str
-    group_sse_before: np.ndarray = field(repr=False, default=None)
-    group_sse_after: np.ndarray = field(repr=False, default=None)
     contribution: np.ndarray = field(repr=False, default=None)   # all-data fit with the candidate minus without
 
 
@@ -110,13 +82,9 @@ class _Folds:
 
 def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
     """Run a candidate's procedure in every fold: held-out predictions with and without it.
-
-    With ``repolish`` (all but periodic candidates), the model the candidate extends is the
-    present one with its nonlinear parameters refined *together with the candidate* on all data
-    (the baseline's Stribeck velocity was fitted while the effect was missing, and a term that
-    changes levels needs it elsewhere); the comparison is then between the best model without and
-    the best model with the candidate.  Both sides refit their nonlinear parameters in every fold
-    through their Taylor columns."""
+    With ``repolish`` (all but periodic candidates) the model it extends has its nonlinear
+    parameters refined together with the candidate on all data (README: "Nonlinear parameters
+    stay where the data want them")."""
     dd = rnd.dd
     ext = rnd
     prop_all = cand.propose(rnd, rnd.all_groups())
@@ -193,19 +161,16 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
     passed = not reasons
     reason = (f"accepted: held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed
               else "; ".join(reasons))
-    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, sse0, sse1,
-                      fr.contribution)
+    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, fr.contribution)
 
 
-#: the t quantile the Z test needs is called low-power when it exceeds the normal quantile of the same
-#: level by this factor (few held-out groups: t with groups - 1 degrees of freedom)
+#: the Z test is called low-power when its t quantile exceeds the normal quantile of the same level by this factor
 LOW_POWER_RATIO = 1.5
 
 
 def low_power_note(z_crit: float, groups: int) -> str:
-    """A clause for a rejection by the Z gate when the held-out groups are too few for the test to
-    reach significance in practice: its t quantile (``groups - 1`` degrees of freedom) is more
-    than :data:`LOW_POWER_RATIO` times the normal quantile of the same level.  Empty otherwise."""
+    """A clause for a rejection by the Z gate when the held-out groups are too few: its t quantile
+    (``groups - 1`` degrees of freedom) above :data:`LOW_POWER_RATIO` times the normal one."""
     if groups < 2 or not math.isfinite(z_crit):
         return ""
     level = float(stats.t.sf(z_crit, groups - 1))
@@ -229,25 +194,19 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
 
 
 def _full_residual(rnd: Round, runs: list) -> np.ndarray:
-    """Held-out residual of the richest model of the round: the present one with every promising
-    candidate at once (each with the nonlinear parameters it chose in that fold), fitted on the
-    training folds."""
+    """Held-out residual of the present model with every promising candidate at once (each as it
+    chose its nonlinear parameters in that fold), fitted on the training folds."""
     dd = rnd.dd
     out = np.zeros(len(dd))
     for f in range(rnd.K):
         train = rnd.fold != f
         tr_rows = rnd.rows(train)
         rows = np.flatnonzero(~tr_rows)
+        items = [fr.proposals[f] for fr in runs if fr.proposals[f] is not None]
         keep = np.ones(rnd.X.shape[1], bool)
-        cols = []
-        for fr in runs:
-            item = fr.proposals[f]
-            if item is None:
-                continue
-            k, prop = item
+        for k, _ in items:
             keep &= k
-            cols.append(prop.columns(dd))
-        X = np.column_stack([rnd.X[:, keep]] + cols)
+        X = np.column_stack([rnd.X[:, keep]] + [prop.columns(dd) for _, prop in items])
         Xt = X[tr_rows]
         G = Xt.T @ Xt
         beta = solve_normal(G, Xt.T @ dd.y[tr_rows], reference=np.einsum("ij,ij->j", X, X))
@@ -263,11 +222,6 @@ def _contribution(rnd_dd: DiagnoseData, state: State, fitted: FittedState, uids)
         if blk.uid in set(uids):
             out += blk.columns(rnd_dd) @ fitted.coef[a:z]
     return out
-
-
-def _holdout(rnd: Round) -> tuple[float, dict]:
-    h = rnd.baseline_holdout()
-    return h["rmse"], h
 
 
 def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", gear=None, harmonics=None,
@@ -309,29 +263,14 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
 
     Notes
     -----
-    The loop works on many small matrices: BLAS runs single-threaded inside it (thread start-up
-    costs more than it saves at these sizes, and badly so on a busy machine).
+    BLAS runs single-threaded inside the loop: thread start-up costs more than it saves on its
+    many small matrices.
     """
-    with _single_thread_blas():
+    with threadpool_limits(limits=1, user_api="blas"):
         return _diagnose(data, model, law=law, gear=gear, harmonics=harmonics, symmetric=symmetric, folds=folds,
                          by=by, alpha=alpha, min_gain=min_gain, max_rounds=max_rounds, gate=gate, fap=fap,
                          kinds=kinds, validation=validation, per_segment_spectra=per_segment_spectra,
                          progress=progress)
-
-
-class _single_thread_blas:
-    def __enter__(self):
-        try:
-            from threadpoolctl import threadpool_limits
-            self._ctx = threadpool_limits(limits=1, user_api="blas")
-        except Exception:  # threadpoolctl absent: run as is
-            self._ctx = None
-        return self
-
-    def __exit__(self, *exc):
-        if self._ctx is not None:
-            self._ctx.restore_original_limits()
-        return False
 
 
 def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,
@@ -356,7 +295,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
-    base_ho, base_h = _holdout(rnd)
+    base_h = rnd.baseline_holdout()
+    base_ho = base_h["rmse"]
     baseline = base_fit.model(name=f"baseline: {model.name}", rmse_holdout=base_ho)
     effects: dict[str, Effect] = {}
     rounds = []
@@ -371,8 +311,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         if not cands:
             rounds.append({"round": k, "candidates": 0, "accepted": None})
             break
-        G = dd.n_groups
-        z_crit = critical_z(alpha, len(cands), G)
+        z_crit = critical_z(alpha, len(cands), dd.n_groups)
         evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
         for c, ev in evals:
             _bar_reentry(effects, c, ev)
@@ -392,13 +331,11 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         rnd = Round(dd, new_state, fold)
         e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new_state, rnd, k)
         was_in = {x.name for x in effects.values() if x.accepted}
-        removed = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k)
-        if removed:
-            rnd = removed
+        rnd = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k) or rnd
         gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
         # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
         # data, refitted in every fold as the baseline's are): what the final model reports
-        ho_now, _ = _holdout(rnd)
+        ho_now = rnd.baseline_holdout()["rmse"]
         rounds.append({"round": k, "candidates": len(cands), "accepted": e.name, "z_crit": z_crit,
                        "rmse": rnd.fitted.rmse, "rmse_holdout_step": ev.rmse_holdout_after,
                        "rmse_holdout_model": ho_now, "removed": gone})
@@ -406,7 +343,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
             f"{ev.rmse_holdout_after:.4g}; the model with it refitted: {ho_now:.4g})"
             + (f"; removed again: {', '.join(gone)}" if gone else ""))
     final_fit = rnd.fitted
-    final_ho, final_h = _holdout(rnd)
+    final_h = rnd.baseline_holdout()
+    final_ho = final_h["rmse"]
     name = "final: " + model.name + "".join(f" + {e.name}" for e in effects.values() if e.accepted)
     final = final_fit.model(name=name, rmse_holdout=final_ho)
     for e in effects.values():
@@ -434,10 +372,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
 
 
 def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: State, rnd: Round, k: int) -> Effect:
-    """Record on ``e`` that its candidate ``c`` was accepted in round ``k``: the decision, the blocks
-    the proposal ``prop`` added (as settled in ``new_state``) and dropped, a line's fitted
-    frequency with its standard error, and what it adds to the prediction of ``rnd`` (the round
-    with it)."""
+    """Record on ``e`` that its candidate ``c`` was accepted in round ``k`` (proposal ``prop``,
+    settled in ``new_state``; ``rnd``: the round with it)."""
     dd = rnd.dd
     e.accepted = True
     e.decision = ev.reason
@@ -460,11 +396,7 @@ def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: Sta
 
 
 def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
-    """Why the final held-out rmse is not the last accepted step's number, when it is not: the
-    step re-ran the candidate's own search (frequency, amplitude law, shape) in every fold -- the
-    honest figure for choosing the term; the final model (like the baseline) has its nonlinear
-    parameters settled on all data and refits them in every fold through their Taylor columns;
-    and backward elimination may have removed terms since."""
+    """Why the final held-out rmse is not the last accepted step's number, when it is not."""
     acc = [r for r in rounds if r.get("accepted")]
     if not acc:
         return []
@@ -484,12 +416,9 @@ def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
 
 
 def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) -> list:
-    """Every candidate of a round through the held-out test.  The noise of Z comes from the
-    held-out residual of the richest model the round supports -- the present one with every
-    candidate that lowers the held-out error in most folds, all at once -- as forward stepwise
-    regression estimates its error variance from the full model: effects present together do not
-    pass for each other's noise (a drift, a presliding curve and a nonlinear viscous law in one
-    recording each look like noise to a test of the others)."""
+    """Every candidate of a round through the held-out test, the noise of Z from the held-out
+    residual of the richest model the round supports (README, Acceptance: effects present
+    together do not pass for each other's noise)."""
     runs = [_run_folds(rnd, c) for c in cands]
     first = [_decide(rnd, fr, None, z_crit=z_crit, min_gain=min_gain) for fr in runs]
     # the richest model: the best promising candidate of every kind (members of one family, e.g.
@@ -511,9 +440,9 @@ def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) 
 
 
 def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_gain: float, round_no: int):
-    """Backward elimination: once a term is added, every term accepted before it must still pass
-    the held-out test against the model without it; the first that does not is removed (and the
-    check repeats).  Returns the new round, or None when nothing was removed."""
+    """Backward elimination: every term accepted before ``newest`` must still pass the held-out test
+    against the model without it; the weakest that fails is removed, and the check repeats.
+    Returns the new round, or None when nothing was removed."""
     dd = rnd.dd
     changed = None
     while True:
@@ -542,27 +471,18 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
 
 
 def _settle(state: State, dd: DiagnoseData) -> State:
-    """Nonlinear parameters of a state where all data want them: coordinate searches
-    (:func:`~gearspec.diagnose.nonlinear.polish`), then Gauss-Newton steps to convergence
-    (:func:`~gearspec.diagnose.nonlinear.refine`), so that a candidate's held-out gain is its own and
-    not that of a better-tuned base law."""
+    """Nonlinear parameters of a state where all data want them: :func:`.polish`, then
+    :func:`.refine` (a candidate's held-out gain is then its own, not a better-tuned base law's)."""
     return refine(polish(state, dd), dd, steps=8)
-
-
-def _key(c: Candidate) -> str:
-    if isinstance(c, PeriodicCandidate):
-        return f"periodic {c.f0:.4g}"
-    return f"{c.kind}: {c.name}"
 
 
 def _effect_key(effects: dict, c: Candidate) -> str:
     """The key of ``c``'s effect: a line seen again in a later round (within two resolution steps)
     is the same effect."""
-    key = _key(c)
-    if isinstance(c, PeriodicCandidate):
-        key = next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
-                    and abs(e.frequency - c.f0) <= max(2 * c.resolution, 5e-3 * e.frequency)), key)
-    return key
+    if not isinstance(c, PeriodicCandidate):
+        return f"{c.kind}: {c.name}"
+    return next((kk for kk, e in effects.items() if e.kind == "periodic" and e.frequency
+                 and abs(e.frequency - c.f0) <= max(2 * c.resolution, 5e-3 * e.frequency)), f"periodic {c.f0:.4g}")
 
 
 #: a term removed by backward elimination is accepted again at most this many times
@@ -570,11 +490,9 @@ MAX_REENTRIES = 1
 
 
 def _bar_reentry(effects: dict, c: Candidate, ev: Evaluation) -> None:
-    """The re-entry rule: a term that backward elimination removed is accepted again only when the
-    evidence changed -- its held-out Z now exceeds the largest Z it was ever accepted with (the
-    model around it explains less than when it was removed, so the term explains more) -- and
-    at most :data:`MAX_REENTRIES` times; otherwise the same evidence would accept and remove the
-    same term round after round.  Marks ``ev`` as failing, with the reason, when barred."""
+    """The re-entry rule: a term that backward elimination removed is accepted again only with a
+    held-out Z above the largest it was accepted with, and at most :data:`MAX_REENTRIES` times (the
+    same evidence would accept and remove it round after round).  Marks ``ev`` failing when barred."""
     prev = effects.get(_effect_key(effects, c))
     if prev is None or prev.accepted or not prev.detail.get("removed") or not ev.passed:
         return
@@ -624,15 +542,10 @@ def _written_terms(e: Effect, rnd: Round) -> list:
     out = []
     for blk in [b for b in blocks if b is not None]:
         if isinstance(blk, HarmonicBlock):
-            for dname, p in m.directions.items():
-                for h in p.harmonics:
-                    if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
-                        out.append({"direction": dname, "harmonic": h.to_dict()})
-        elif hasattr(blk, "kind"):
-            for t in m.terms:
-                if t["kind"] == blk.kind and int(t.get("direction", 0) or 0) == getattr(blk, "direction", 0) and all(
-                        t.get(k) == v for k, v in getattr(blk, "fixed", ())):
-                    out.append({"term": t})
+            out += [{"direction": dname, "harmonic": h.to_dict()} for dname, p in m.directions.items()
+                    for h in p.harmonics if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12)]
+        elif isinstance(blk, TermBlock):
+            out += [{"term": t} for t in m.terms if blk.matches(t)]
         else:
             out.append({"note": blk.describe()})
     return out

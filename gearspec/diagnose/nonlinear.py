@@ -100,25 +100,19 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
     for _ in range(steps):
         cur = cur.refreshed(beta)
         blocks = list(cur.blocks)
-        cols, moves = [], []
+        cols, moves, at = [], [], []     # at: the column of every Taylor coefficient
         for i, b in enumerate(blocks):
             cols.append(b.columns(dd))
             if (only is None or b.uid in only) and b.coef:
                 T = b.taylor_columns(dd)
                 for j, par in enumerate(nonlinear_parameters(b, dd)):
+                    at.append(sum(c.shape[1] for c in cols))
                     cols.append(T[:, j:j + 1])
                     moves.append((i, par))
         if not moves:
             return cur
         X = np.column_stack(cols)
-        sol = solve_normal(X.T @ X, X.T @ y)
-        # the Taylor coefficients sit right after each block's plain columns
-        k, taylor = 0, []
-        for i, b in enumerate(blocks):
-            k += len(b.names)
-            n_t = sum(1 for (ii, _) in moves if ii == i)
-            taylor += list(sol[k:k + n_t])
-            k += n_t
+        taylor = solve_normal(X.T @ X, X.T @ y)[at]
         improved = False
         for scale in (1.0, 0.5, 0.25):
             trial = list(blocks)

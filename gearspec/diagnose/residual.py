@@ -1,23 +1,9 @@
-"""Residual analysis of a fitted model against a recording: where the structure is that the
-model does not explain.
+"""Residual analyses of a fitted model: where the structure is that the model does not explain
+(over position, against speed, a channel, acceleration, the travel since a reversal).
 
 Every function takes a :class:`~gearspec.diagnose.data.DiagnoseData` and a residual ``r`` (data
-minus model, one value per observation, torque units) and returns tables for the report and a
-test statistic for the detectors:
-
-* :func:`position_spectra` -- the residual over position: Lomb-Scargle periodograms
-  (:class:`gearspec.spectrum.LombScargle`) of every segment and pooled over the segments of one
-  direction and similar speed, with the local noise level and false-alarm probabilities of
-  :mod:`gearspec.spectrum` (each segment's mean removed first: a level misfit is not a ripple);
-* :func:`speed_analysis` -- residual means against speed, per direction (lack of fit of the
-  speed law; the difference between directions is the asymmetry);
-* :func:`channel_analysis` -- residual means against load, temperature or time, per group;
-* :func:`acceleration_analysis` -- residual against acceleration (inertia misfit);
-* :func:`reversal_analysis` -- residual against the travel since the last reversal
-  (presliding hysteresis, backlash).
-
-Statistics that decide between "structure" and "noise" treat whole held-out groups (segments,
-runs, moves) as the independent units, never samples: friction residuals are coloured.
+minus model, torque units).  Statistics that decide between "structure" and "noise" treat whole
+held-out groups (segments, runs, moves) as the independent units: friction residuals are coloured.
 """
 
 from __future__ import annotations
@@ -39,8 +25,7 @@ __all__ = ["ResidualSpectrum", "position_spectra", "speed_groups", "speed_analys
 def magnitude_residual(dd: DiagnoseData, r: np.ndarray) -> np.ndarray:
     """The residual in the friction magnitude (``direction * r``): positive where the drive needs
     more than the model says, in both directions (as SILO4 writes friction)."""
-    d = dd.at("direction")
-    return d * r
+    return dd.at("direction") * r
 
 
 # ---------------------------------------------------------------------- over position
@@ -89,12 +74,10 @@ def speed_groups(dd: DiagnoseData, ratio: float = 1.6, min_speed_fraction: float
         if not len(sel):
             continue
         order = sel[np.argsort(s[sel], kind="stable")]
+        ss = s[order]
         start = 0
         while start < len(order):
-            lo = s[order[start]]
-            stop = start
-            while stop < len(order) and s[order[stop]] <= ratio * lo * (1 + 1e-12):
-                stop += 1
+            stop = int(np.searchsorted(ss, ratio * ss[start] * (1 + 1e-12), side="right"))
             out.append((direction, np.sort(order[start:stop])))
             start = stop
     return out
@@ -110,14 +93,8 @@ def _demean_by_segment(seg: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def _spacing(theta: np.ndarray, seg: np.ndarray) -> float:
     """The 90th percentile of the position step between consecutive observations of a segment."""
-    steps = []
-    for sid in np.unique(seg):
-        th = theta[seg == sid]
-        if len(th) > 2:
-            steps.append(np.abs(np.diff(th)))
-    if not steps:
-        return float("nan")
-    st = np.concatenate(steps)
+    steps = [np.abs(np.diff(theta[seg == sid])) for sid in np.unique(seg) if np.sum(seg == sid) > 2]
+    st = np.concatenate(steps) if steps else np.zeros(0)
     st = st[st > 0]
     return float(np.percentile(st, 90)) if len(st) else float("nan")
 
@@ -146,8 +123,7 @@ def _spectrum(dd: DiagnoseData, r: np.ndarray, idx: np.ndarray, *, oversample: f
     if nf > max_bins:
         nf = max_bins
         df = (f_hi - f_lo) / (nf - 1)
-    ls = LombScargle(th, y)
-    power = ls.power_grid(f_lo, df, nf)
+    power = LombScargle(th, y).power_grid(f_lo, df, nf)
     noise, bins = local_noise(power, return_bins=True)
     z = power / np.maximum(noise, 1e-300)
     m_indep = max(1.0, span * (f_hi - f_lo))
@@ -166,12 +142,11 @@ def _spectrum(dd: DiagnoseData, r: np.ndarray, idx: np.ndarray, *, oversample: f
     rows = []
     for i in chosen:
         # parabolic interpolation of the peak in log power
+        off = 0.0
         if 0 < i < nf - 1:
             a, b, c = np.log(power[i - 1:i + 2] + 1e-300)
             den = a - 2 * b + c
             off = 0.5 * (a - c) / den if den < 0 else 0.0
-        else:
-            off = 0.0
         f = float(freqs[i] + np.clip(off, -0.5, 0.5) * df)
         fp = float(false_alarm_probability(z[i], m_indep, noise_bins=bins[i], oversample=oversample))
         rows.append({"frequency": f, "amplitude": float(np.sqrt(4 * power[i] / len(y))), "z": float(z[i]),
@@ -197,33 +172,20 @@ def position_spectra(dd: DiagnoseData, r: np.ndarray, *, per_segment: bool = Tru
     independent frequency searched).  Frequencies below two cycles of the longest segment are not
     searched (they cannot be told from a level or a drift).
     """
-    out = {"pooled": [], "segments": []}
     d = dd.at("direction")
     s = np.abs(dd.at("v"))
     top = float(np.max(s)) if len(s) else 0.0
     cut = 0.05 * top if dd.kind == "trajectory" else 0.0
-    for direction in dd.directions():
-        idx = np.flatnonzero((d == direction) & (s > cut))
-        sp = _spectrum(dd, r, idx, oversample=oversample, fap_threshold=fap_threshold, max_peaks=max_peaks,
-                       fmax=fmax, pooled=True)
-        if sp is not None:
-            out["pooled"].append(sp)
+    pools = [np.flatnonzero((d == direction) & (s > cut)) for direction in dd.directions()]
     groups = speed_groups(dd, ratio)
     if len(groups) > len(dd.directions()):
-        for direction, idx in groups:
-            sp = _spectrum(dd, r, idx, oversample=oversample, fap_threshold=fap_threshold, max_peaks=max_peaks,
-                           fmax=fmax, pooled=True)
-            if sp is not None:
-                out["pooled"].append(sp)
-    if per_segment and dd.kind == "plateaus":
-        seg = dd.at("segment")
-        for sid in np.unique(seg):
-            idx = np.flatnonzero(seg == sid)
-            sp = _spectrum(dd, r, idx, oversample=oversample, fap_threshold=fap_threshold, max_peaks=3,
-                           fmax=fmax, pooled=False)
-            if sp is not None:
-                out["segments"].append(sp)
-    return out
+        pools += [idx for _, idx in groups]
+    seg = dd.at("segment")
+    singles = [np.flatnonzero(seg == sid) for sid in np.unique(seg)] if per_segment and dd.kind == "plateaus" else []
+    kw = dict(oversample=oversample, fap_threshold=fap_threshold, fmax=fmax)
+    pooled = [_spectrum(dd, r, idx, max_peaks=max_peaks, pooled=True, **kw) for idx in pools]
+    segments = [_spectrum(dd, r, idx, max_peaks=3, pooled=False, **kw) for idx in singles]
+    return {"pooled": [sp for sp in pooled if sp is not None], "segments": [sp for sp in segments if sp is not None]}
 
 
 # ---------------------------------------------------------------------- against speed
@@ -326,6 +288,27 @@ def channel_analysis(dd: DiagnoseData, r: np.ndarray, channel: str, *, transform
 
 
 # ---------------------------------------------------------------------- against acceleration
+def _within(dd: DiagnoseData, a: np.ndarray) -> np.ndarray:
+    """``a`` with the mean of each held-out group removed."""
+    out = np.asarray(a, dtype=float).copy()
+    for s0, s1 in zip(dd.starts, dd.stops):
+        out[s0:s1] -= out[s0:s1].mean()
+    return out
+
+
+def _cluster_slope(dd: DiagnoseData, x: np.ndarray, y: np.ndarray) -> tuple | None:
+    """``(slope, se, t)`` of ``y`` on ``x`` (both within groups), the standard error cluster-robust
+    over the held-out groups; None when ``x`` is zero."""
+    sxx = float(x @ x)
+    if sxx <= 0:
+        return None
+    b = float(x @ y) / sxx
+    e = y - b * x
+    score = np.array([float(x[a:z] @ e[a:z]) for a, z in zip(dd.starts, dd.stops)])
+    se = math.sqrt(float(score @ score)) / sxx
+    return b, se, (b / se if se > 0 else 0.0)
+
+
 def acceleration_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 15) -> tuple[pd.DataFrame, dict] | None:
     """Residual (drive torque, signed) against acceleration, both taken relative to their group
     means (so that a level misfit does not count): binned means for the figure, and the slope
@@ -333,19 +316,11 @@ def acceleration_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 15) -> tu
     acc = dd.at("acc")
     if acc is None or not np.any(np.abs(acc) > 0):
         return None
-    a_d = np.empty(len(acc))
-    r_d = np.empty(len(acc))
-    for a, z in zip(dd.starts, dd.stops):
-        a_d[a:z] = acc[a:z] - acc[a:z].mean()
-        r_d[a:z] = r[a:z] - r[a:z].mean()
-    sxx = float(a_d @ a_d)
-    if sxx <= 0:
+    a_d, r_d = _within(dd, acc), _within(dd, r)
+    fit = _cluster_slope(dd, a_d, r_d)
+    if fit is None:
         return None
-    slope = float(a_d @ r_d) / sxx
-    e = r_d - slope * a_d
-    score = np.array([float(a_d[a:z] @ e[a:z]) for a, z in zip(dd.starts, dd.stops)])
-    se = math.sqrt(float(score @ score)) / sxx
-    t = slope / se if se > 0 else 0.0
+    slope, se, t = fit
     G = dd.n_groups
     p = float(2 * stats.t.sf(abs(t), max(G - 1, 1)))
     edges = np.quantile(a_d, np.linspace(0, 1, bins + 1))
@@ -387,24 +362,12 @@ def reversal_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 12) -> tuple[
                      "n": int(far.sum())})
     best = {"t": 0.0, "p": 1.0, "length": float("nan")}
     grid = np.geomspace(lo, hi, 8)
-
-    def within(a):  # each group's mean removed: the profile within a segment, not its level
-        out = a.astype(float).copy()
-        for s0, s1 in zip(dd.starts, dd.stops):
-            out[s0:s1] -= out[s0:s1].mean()
-        return out
-
-    md = within(m)
+    md = _within(dd, m)   # the profile within a segment, not its level
     for L in grid:
-        xd = within(np.where(fin, -np.exp(-np.where(fin, tr, 0) / L), 0.0))
-        sxx = float(xd @ xd)
-        if sxx <= 0:
+        fit = _cluster_slope(dd, _within(dd, np.where(fin, -np.exp(-np.where(fin, tr, 0) / L), 0.0)), md)
+        if fit is None:
             continue
-        b = float(xd @ md) / sxx
-        e = md - b * xd
-        score = np.array([float(xd[a:z] @ e[a:z]) for a, z in zip(dd.starts, dd.stops)])
-        se = math.sqrt(float(score @ score)) / sxx
-        t = b / se if se > 0 else 0.0
+        b, _, t = fit
         if abs(t) > abs(best["t"]):
             best = {"t": float(t), "scale": b, "length": float(L)}
     G = dd.n_groups

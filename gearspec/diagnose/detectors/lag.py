@@ -44,14 +44,11 @@ def segment_phases(dd, frequencies, *, min_snr: float = 5.0) -> dict:
     return out
 
 
-
-
 @register_detector("lag", effect="lag", order=140)
 def lag_candidates(rnd: Round, analyses: dict | None = None, *, gate: float = 0.01) -> list[Candidate]:
-    """The lag candidate, when the data can show a lag: plateau data (not reduced), no lag in
-    the model yet, a line of the model seen strongly at :data:`gearspec.lag.MIN_SPEEDS` speeds
-    or more of one direction, and a lag estimated on all data that differs from zero at
-    p < ``gate`` (its phases are otherwise consistent with no lag).  ``analyses`` is not used."""
+    """The lag candidate, when the data can show a lag: plateau data (not reduced), no lag in the
+    model yet, a line of the model seen strongly at :data:`gearspec.lag.MIN_SPEEDS` speeds or more
+    of one direction, and a lag estimated on all data nonzero at p < ``gate`` (``analyses``: unused)."""
     dd = rnd.dd
     if "lag" in rnd.keys:
         return []

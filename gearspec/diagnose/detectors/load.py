@@ -3,6 +3,8 @@ and a line whose amplitude grows with load^2 (SILO4 eq. 14)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ..candidates import DIRECTION_NAMES, Candidate, GridCandidate, per_direction
 from ..context import Round
 from .registry import register_detector
@@ -47,7 +49,7 @@ def load_line(rnd: Round, analyses: dict, *, gate: float) -> list[Candidate]:
         lab = blk.label or f"{blk.frequency:.6g}"
         out.append(GridCandidate(
             "load", f"amplitude of {lab} growing with load^2 (SILO4 eq. 14)",
-            lambda _, blk=blk, phases=phases: ([blk.with_(load_phase=phases)], [blk]), [None],
+            lambda _, blk=blk, phases=phases: ([replace(blk, load_phase=phases)], [blk]), [None],
             evidence=(f"the in-phase residual at {lab} grows with load^2 across segments (t {res['t']:.1f}, "
                       f"p {res['p']:.2g})"), detail={"analysis": "load_line", "key": blk.key}, gate_p=res["p"]))
     return out

@@ -1,12 +1,9 @@
-"""The registry of detectors: one per term kind (or family), each turning what the residual
-analyses of a round show into candidate terms.
+"""The registry of detectors.
 
 A detector is a function ``detector(rnd, analyses, *, gate) -> list[Candidate]``: ``rnd`` is the
 round's context (:class:`~gearspec.diagnose.context.Round`, read-only), ``analyses`` what
 :func:`~gearspec.diagnose.detectors.analyses.analyse` computed on the round's residual, ``gate``
-the p-value below which a detector that needs evidence proposes its candidates.  The loop asks
-every registered detector, in the order of their ``order`` numbers (then of registration), and
-tests every candidate they propose on held-out data.
+the p-value below which a detector that needs evidence proposes its candidates.
 """
 
 from __future__ import annotations
@@ -29,44 +26,27 @@ class Detector:
     effect: str
     order: float
     function: Callable
-    seq: int = 0
 
 
 #: the default place of a detector: after those of this package (their ``order`` is 10 to 150)
 LAST = 1000.0
 
 _REGISTRY: dict[str, Detector] = {}
-_SEQ = [0]
 
 
 def register_detector(name: str, *, effect: str, order: float | None = None):
-    """Register a detector (decorator).
+    """Register a detector (decorator; it returns the function unchanged).
 
-    Parameters
-    ----------
-    name : str
-        Unique name: the term kind (:mod:`gearspec.terms`) whose candidates it proposes, or the
-        name of a family of them.
-    effect : str
-        The effect kind (``CONTRACTS.md`` section 4: ``periodic``, ``speed_law``, ``load``,
-        ``temperature``, ``drift``, ``asymmetry``, ``inertia``, ``hysteresis``, ``lag``,
-        ``other``) of every candidate it proposes; ``diagnose(kinds=...)`` selects by it.
-    order : float, optional
-        Place among the detectors (the loop asks them by increasing ``order``; the candidates of a
-        round keep that order, which decides ties between equally good candidates).  Default:
-        :data:`LAST`, after the detectors of this package (several at ``LAST``: in the order they
-        were registered).
-
-    Returns
-    -------
-    callable
-        The decorator; it returns the function unchanged.
+    ``name``: unique, the term kind (:mod:`gearspec.terms`) it proposes or the name of their family;
+    ``effect``: the effect kind (``CONTRACTS.md`` section 4) of every candidate it proposes
+    (``diagnose(kinds=...)`` selects by it); ``order``: the loop asks detectors by increasing
+    ``order``, which decides ties between equally good candidates (default :data:`LAST`, after
+    this package's; several at ``LAST``: in the order they were registered).
     """
     def decorate(fn: Callable) -> Callable:
         if name in _REGISTRY:
             raise InputError(f"a detector named '{name}' is registered already")
-        _SEQ[0] += 1
-        _REGISTRY[name] = Detector(name, effect, float(LAST if order is None else order), fn, _SEQ[0])
+        _REGISTRY[name] = Detector(name, effect, float(LAST if order is None else order), fn)
         return fn
     return decorate
 
@@ -79,8 +59,9 @@ def unregister_detector(name: str) -> None:
 
 
 def detectors() -> list[Detector]:
-    """The registered detectors in the order the loop asks them."""
-    return sorted(_REGISTRY.values(), key=lambda d: (d.order, d.seq))
+    """The registered detectors in the order the loop asks them (equal orders: as registered, the
+    registry's order, which the stable sort keeps)."""
+    return sorted(_REGISTRY.values(), key=lambda d: d.order)
 
 
 def propose(rnd, analyses: dict, *, gate: float, kinds=None, skip=()) -> list:

@@ -5,6 +5,7 @@ amplitude-vs-speed law for it)."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -119,7 +120,7 @@ def line_amplitude_law(rnd: Round, analyses: dict, *, gate: float) -> list[Candi
                 b = g if law == "power" else (g / top if top > 0 else 0.0)
                 law_t = tuple((k, law if k == x else v) for k, v in blk.law)
                 dec_t = tuple((k, (b if law != "const" else 0.0) if k == x else v) for k, v in blk.decay)
-                return [blk.with_(law=law_t, decay=dec_t)], [blk]
+                return [replace(blk, law=law_t, decay=dec_t)], [blk]
 
             lab = blk.label or f"{blk.frequency:.6g}"
             out.append(GridCandidate(
