@@ -388,7 +388,7 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold) for law in references or ()]
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
-    levels = {"data": M.c[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}
+    levels = {"data": M.b[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}
     for r in refs:
         if r.model is not None:
             try:
@@ -403,7 +403,7 @@ def _mean_prediction(fit: LawFit, M: Moments) -> np.ndarray:
     each segment's Gram matrix holds the sums of the bases)."""
     A = _multipliers(fit.parts, fit.layout, M, fit.z)
     k = np.array([M.index(b) for _, _, b in fit.layout.cols], dtype=int)
-    sums = M.B[:, 0, :][:, k]
+    sums = M.G[:, 0, :][:, k]
     return np.sum(A * sums * fit.w[None, :], axis=1) / M.n
 
 

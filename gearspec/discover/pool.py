@@ -303,7 +303,7 @@ def _excess(c: Candidate, best: Candidate, M: Moments, groups) -> float:
         return D
     if M.noise is not None and np.all(np.isfinite(M.noise)) and c.cv_pred is not None and best.cv_pred is not None:
         d = c.cv_pred - best.cv_pred               # held-out prediction difference, as basis coefficients
-        d2 = np.einsum("sk,skl,sl->s", d, M.B, d)
+        d2 = np.einsum("sk,skl,sl->s", d, M.G, d)
         se = 2.0 * math.sqrt(float(np.sum(M.noise * d2)))
     else:
         p = _paired(c.cv_sse, best.cv_sse, groups, M.N)
