@@ -1,29 +1,15 @@
 """The candidate library: physically meaningful friction terms, each printed as its equation.
 
-A library is a list of :class:`Term` objects; it knows nothing of the optimiser (as in pysindy,
-library and optimiser are separate, composable objects).  A term is a *family* (Coulomb, viscous,
-power law, Stribeck of three shapes, load- and temperature-coupled terms, a position-locked ripple
-with an amplitude law, inertia), the value of the family's nonlinear parameter on a grid
-(Stribeck velocity, decay constant, exponent), a ripple frequency where it has one, and a
-*variant*:
-
-``sym``
-    the friction form ``sign(v) * m(|v|)``: the same magnitude in both directions;
-``asym``
-    the even form ``m(|v|)`` (no sign): added to ``sym`` it makes the magnitude direction-
-    dependent, ``m_i = (c_sym + i c_asym) m`` for direction ``i`` = +1/-1.  So sparsity in the
-    asym columns *is* the question "does this term depend on the direction?".  (The asym Coulomb
-    column is the constant 1, i.e. also an offset such as gravity; constant-speed data cannot
-    tell the two apart.)
-``signed``
-    a torque that is not friction and does not reverse with the motion (inertia).
-
-Ripple terms have two columns (sin and cos of ``2 pi f theta``: amplitude and phase).  Every column
-is ``multiplier(speed_s, direction_s) * basis_k(sample)`` (see :mod:`.moments`), which is what makes
-the exact per-segment reduction possible.
-
-Units: SI (velocity rad/s or m/s, load Nm, temperature degC, theta rad or m); the names print the
-numbers in those units, e.g. ``sign(v)*exp(-|v|/2.95)`` or ``exp(-0.0012|v|)*sin(2pi*0.159*theta)``.
+A library is a list of :class:`Term` (as in pysindy, library and optimiser are separate objects):
+a *family* (:data:`FAMILIES`), the value of its nonlinear parameter on a grid, a ripple frequency
+where it has one, and a *variant*: ``sym``, the friction form ``sign(v) m(|v|)``; ``asym``, the
+even form ``m(|v|)``, which added to ``sym`` makes the magnitude direction-dependent (``m_i =
+(c_sym + i c_asym) m`` in direction ``i`` = +1/-1, so sparsity in the asym columns *is* the
+question "does this term depend on the direction?"; the asym Coulomb column is also an offset
+such as gravity); ``signed``, a torque that does not reverse with the motion (inertia).  Ripple
+terms have a sin and a cos column.  Every column is ``multiplier(speed_s, direction_s) *
+basis_k(sample)`` (:mod:`.moments`).  Units SI; names print the numbers in them, e.g.
+``sign(v)*exp(-|v|/2.95)``.
 """
 
 from __future__ import annotations

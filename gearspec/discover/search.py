@@ -1,18 +1,11 @@
-"""Sparse regression over the library: pysindy's optimisers on the exact pseudo rows.
+"""Sparse regression over the library: pysindy's optimisers (scikit-learn regressors) run
+unchanged on the exact pseudo rows of :mod:`.moments` and give what they would give on the samples.
 
-The least-squares objective of the N samples equals, up to a constant, that of the S*K pseudo rows
-of :mod:`.moments` (``||y - Xw||^2 = ||q - X~w||^2 + rest``).  So pysindy's optimisers, which are
-scikit-learn regressors with ``fit(X, y)`` and ``coef_``, run unchanged on the pseudo rows and
-give exactly the result they would give on the samples, at a cost independent of N.
-
-Columns are scaled to unit RMS over the samples and the friction to unit RMS before regression, so
-a threshold reads as "the smallest term worth keeping, as a fraction of the friction's RMS".
-
-Inclusion probabilities come from a bootstrap over *whole segments* (or runs): the segments are
-resampled with replacement, their pseudo rows stacked, the optimiser run again.  pysindy's
-``EnsembleOptimizer(bagging=True)`` draws individual rows instead, which on the pseudo rows would
-split a segment's rows apart (meaningless) and on the samples would leak interleaved samples
-between replicates; so the bootstrap is done here, around the same optimiser.
+Columns and friction are scaled to unit RMS over the samples, so a threshold reads as "the
+smallest term worth keeping, as a fraction of the friction's RMS".  Inclusion probabilities come
+from a bootstrap over *whole segments* (or runs), done here around the optimiser:
+pysindy's ``EnsembleOptimizer(bagging=True)`` draws single rows, which would split a segment's
+pseudo rows apart.
 """
 
 from __future__ import annotations
