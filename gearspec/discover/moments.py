@@ -152,13 +152,8 @@ class Moments(GroupNormals):
             self._cache[key] = replace(self, basis=key, G=G, b=b, P=None, q=None, rest=None)
         return self._cache[key]
 
-    def groups(self, by: str = "segment") -> np.ndarray:
-        """Group id of each segment for held-out folds: ``"segment"`` or ``"run"``."""
-        if by == "segment":
-            return self.segment
-        if by == "run":
-            return self.run
-        raise InputError(f"held-out groups must be 'segment' or 'run', got '{by}'")
+    #: group id of each segment for held-out folds: ``"segment"`` or ``"run"`` (FitData's rule)
+    groups = FitData.groups
 
     def sse(self, X: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Residual sum of squares of each segment for the pseudo-row design ``X`` (S*K, p) and
@@ -199,23 +194,27 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     if len(data) == 0:
         raise InputError("fit data: no samples")
     notes: list[str] = []
+    order = np.argsort(data.segment, kind="stable")
+    sids, starts = np.unique(data.segment[order], return_index=True)
+    segs = [slice(a, z) for a, z in zip(starts, np.append(starts[1:], len(order)))]
+    th = np.asarray(data.theta, dtype=float)[order] if len(freqs) else None
+    span = np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts) if len(freqs) else None
     if min_cycles is not None and len(freqs):
-        freqs, labels = _lines_with_cycles(data, freqs, labels, min_cycles, notes)
+        ok = freqs * float(np.max(span)) >= min_cycles
+        for f, lab in zip(freqs[~ok], np.asarray(labels, dtype=object)[~ok]):
+            notes.append(f"ripple line {f:.6g} cycles/{data.unit}" + (f" ({lab})" if lab else "")
+                         + f" completes fewer than {min_cycles:g} cycle(s) in every segment: left out")
+        freqs, labels = freqs[ok], [lab for lab, k in zip(labels, ok) if k]
     if not np.all(np.isfinite(data.y)) or not np.all(np.isfinite(data.v)):
         raise InputError("fit data: friction or velocity has NaN or infinite values")
     basis, load, temp, t_ref, acc = _sample_bases(data, inertia, notes)
     K0, F = len(basis), len(freqs)
     basis += [f"{sc}{i}" for i in range(F) for sc in ("sin", "cos")]
     chans = [np.ones(len(data))] + [x for x in (load, None if temp is None else temp - t_ref, acc) if x is not None]
-    order = np.argsort(data.segment, kind="stable")
-    sids, starts = np.unique(data.segment[order], return_index=True)
-    segs = [slice(a, z) for a, z in zip(starts, np.append(starts[1:], len(order)))]
     Phi = np.empty((len(order), len(basis)))
     Phi[:, :K0] = np.column_stack(chans)[order]
-    th = np.asarray(data.theta, dtype=float)[order] if F else None
-    cycles = np.zeros((len(segs), F))
-    for s, sl in enumerate(segs if F else ()):
-        cycles[s] = freqs * (float(np.ptp(th[sl])) if sl.stop - sl.start > 1 else 0.0)
+    cycles = np.outer(span, freqs) if F else np.zeros((len(segs), 0))
+    for sl in segs if F else ():
         Phi[sl, K0::2], Phi[sl, K0 + 1::2] = harmonic_columns(th[sl], freqs)   # phases about the segment's mean
     y, v, dirs = data.y[order], data.v[order], data.direction[order]
     gn = GroupNormals.of(Phi, y, starts, [sl.stop for sl in segs])
@@ -239,33 +238,13 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
                    t_ref=t_ref, unit=data.unit, notes=notes)
 
 
-def _lines_with_cycles(data: FitData, freqs, labels, min_cycles: float, notes: list) -> tuple:
-    """The frequencies (and their labels) that complete at least ``min_cycles`` cycles in some
-    segment; a note for each left out."""
-    order = np.argsort(data.segment, kind="stable")
-    _, starts = np.unique(data.segment[order], return_index=True)
-    th = np.asarray(data.theta, dtype=float)[order]
-    span = np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts)
-    ok = freqs * float(np.max(span)) >= min_cycles
-    for f, lab in zip(freqs[~ok], np.asarray(labels, dtype=object)[~ok]):
-        notes.append(f"ripple line {f:.6g} cycles/{data.unit}" + (f" ({lab})" if lab else "")
-                     + f" completes fewer than {min_cycles:g} cycle(s) in every segment: left out")
-    return freqs[ok], [lab for lab, k in zip(labels, ok) if k]
-
-
 def _sample_bases(data: FitData, inertia, notes: list) -> tuple:
     """The sample bases besides the ripple's (``1`` and those of the channels that vary), and the
     channels they are built from: ``(basis, |load| or None, temperature or None, t_ref, acc or None)``."""
-    basis = ["1"]
-    load = None
-    if data.load is not None:
+    basis, load, temp, t_ref = ["1"], None, None, None
+    if data.load is not None and np.any(np.abs(data.load) > 0):
         load = np.abs(np.asarray(data.load, dtype=float))
-        if np.ptp(load) > 0 or np.any(load > 0):
-            basis.append("load")
-        else:
-            load = None
-    temp = None
-    t_ref = None
+        basis.append("load")
     if data.temperature is not None:
         temp = np.asarray(data.temperature, dtype=float)
         if np.ptp(temp) > 0:
@@ -282,6 +261,7 @@ def _sample_bases(data: FitData, inertia, notes: list) -> tuple:
             acc = a
             basis.append("acc")
     return basis, load, temp, t_ref, acc
+
 
 def _noise_variance(Phi, y, B, c, blocks: int = 10) -> float:
     """Noise variance of one segment (see :attr:`Moments.noise`); NaN for segments too short."""
