@@ -420,10 +420,7 @@ def _fixed_columns(M: Moments, keep, parts, z) -> np.ndarray:
 
 def _threshold_for(path_structs, n_parts: int) -> float:
     """The largest threshold of a path whose structure has at least ``n_parts`` terms."""
-    for t, parts in path_structs:
-        if len(parts) >= n_parts:
-            return t
-    return path_structs[-1][0]
+    return next((t for t, parts in path_structs if len(parts) >= n_parts), path_structs[-1][0])
 
 
 def _inclusion_table(lib: Library, prob: np.ndarray, M, stage: str = "", threshold=None) -> pd.DataFrame:

@@ -44,9 +44,7 @@ class Part:
 
     def slots(self) -> tuple[int, ...]:
         """0: both directions alike; (+1, -1): one set of values per direction."""
-        if self.fam.basis == "acc":
-            return (0,)
-        return (1, -1) if self.split else (0,)
+        return (1, -1) if self.split and self.fam.basis != "acc" else (0,)
 
     def n_linear(self) -> int:
         return 2 if self.fam.basis == "ripple" else 1
@@ -143,8 +141,7 @@ def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
 
 def _design(parts, lay, m: Moments, z) -> np.ndarray:
     A = _multipliers(parts, lay, m, z)
-    k = _basis_index(lay, m)
-    return (A[:, None, :] * m.P[:, :, k]).reshape(m.S * m.K, len(lay.cols))
+    return (A[:, None, :] * m.P[:, :, _basis_index(lay, m)]).reshape(m.S * m.K, len(lay.cols))
 
 
 def _solve(X, y):

@@ -152,6 +152,11 @@ class Moments(GroupNormals):
             self._cache[key] = replace(self, basis=key, G=G, b=b, P=None, q=None, rest=None)
         return self._cache[key]
 
+    def rows(self, segment) -> np.ndarray:
+        """Position in these moments of each of the segment ids ``segment`` (e.g. every sample's)."""
+        pos = {int(s): i for i, s in enumerate(self.segment)}
+        return np.array([pos[int(s)] for s in segment], dtype=int)
+
     #: group id of each segment for held-out folds: ``"segment"`` or ``"run"`` (FitData's rule)
     groups = FitData.groups
 

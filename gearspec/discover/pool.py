@@ -279,12 +279,7 @@ def _front(cands: dict) -> list:
 
 def _path_structures(lib: Library, coefs, ths, offset: int = 0):
     """(threshold, structure) along a path, ``offset`` leading fixed columns skipped."""
-    out = []
-    for t, w in zip(ths, coefs):
-        w = w[offset:]
-        if np.any(w):
-            out.append((float(t), _structure(lib, w)))
-    return out
+    return [(float(t), _structure(lib, w[offset:])) for t, w in zip(ths, coefs) if np.any(w[offset:])]
 
 
 def _short(c: Candidate, M) -> str:

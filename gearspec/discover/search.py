@@ -106,17 +106,11 @@ def bootstrap_inclusion(X: np.ndarray, m, threshold: float, *, by: str = "segmen
     g = m.groups(by)
     ug = np.unique(g)
     members = [np.flatnonzero(g == u) for u in ug]
-    S, K = m.S, m.K
-    Xs = X.reshape(S, K, -1)
-    qs = m.q
+    Xs = X.reshape(m.S, m.K, -1)
     hits = np.zeros(X.shape[1])
-    done = 0
     for _ in range(n_models):
         pick = np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))])
-        Xb = Xs[pick].reshape(len(pick) * K, -1)
-        qb = qs[pick].reshape(-1)
-        sc = Scaled(Xb, qb, float(np.sum(m.n[pick])), float(np.sum(m.yy[pick])))
-        w = _fit(method, threshold, alpha, sc, free)
-        hits += w != 0
-        done += 1
-    return hits / max(done, 1)
+        sc = Scaled(Xs[pick].reshape(len(pick) * m.K, -1), m.q[pick].reshape(-1), float(np.sum(m.n[pick])),
+                    float(np.sum(m.yy[pick])))
+        hits += _fit(method, threshold, alpha, sc, free) != 0
+    return hits / max(n_models, 1)
