@@ -78,18 +78,14 @@ def _inherit(fit: LawFit) -> tuple:
                  for i, p in enumerate(fit.parts))
 
 
-def _compound(parts, M: Moments, addable) -> list[tuple]:
+def _compound(parts, M: Moments) -> list[tuple]:
     """Two moves at once: a term dropped and another made direction-dependent -- to leave a local
     optimum where one term stands in for the direction dependence of another."""
     out = []
-    both = len(M.directions) == 2
-    for i in range(len(parts)):
+    for i in range(len(parts) if len(M.directions) == 2 else 0):
         rest = list(parts[:i]) + list(parts[i + 1:])
-        if not rest:
-            continue
-        for j, p in enumerate(rest):
-            if both and not p.split and p.fam.basis != "acc":
-                out.append(canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)]))
+        out += [canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)])
+                for j, p in enumerate(rest) if not p.split and p.fam.basis != "acc"]
     return out
 
 
@@ -212,7 +208,7 @@ def _climb_step(pool: _Pool, cur, compound: bool):
     """One round of moves (or pairs of moves) from the structure ``cur``; the best structure after it."""
     base = pool.cands[cur]
     start = _inherit(base.fit)
-    moves = _compound(start, pool.M, pool.addable) if compound else _neighbours(start, pool.M, pool.addable)
+    moves = _compound(start, pool.M) if compound else _neighbours(start, pool.M, pool.addable)
     new = []
     for parts in moves:
         sig = pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold, refine=False)
