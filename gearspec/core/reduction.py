@@ -1,15 +1,18 @@
 """The exact per-group reduction the three engines share: a group's (segment's, run's, move's)
-samples become the normal equations of its columns, so that a fit's cost does not grow with the
-samples (:mod:`gearspec.identify` ``SegmentStats``, :mod:`gearspec.diagnose.design` ``Grams``,
-:mod:`gearspec.discover.moments` ``Moments``), with the lines' columns phased about the group's
-mean position.
+samples become the normal equations of its columns (:class:`GroupNormals`), so that a fit's cost
+does not grow with the samples, with the lines' columns phased about the group's mean position.
+:mod:`gearspec.identify` ``SegmentStats`` and :mod:`gearspec.discover.moments` ``Moments`` are
+:class:`GroupNormals` with their engine's metadata.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+from typing import ClassVar
+
 import numpy as np
 
-__all__ = ["harmonic_columns", "normal_equations", "group_normal_equations"]
+__all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -32,6 +35,81 @@ def group_normal_equations(X, y, starts, stops) -> tuple[np.ndarray, np.ndarray,
     for g, (a, z) in enumerate(zip(starts, stops)):
         G[g], b[g], yy[g] = normal_equations(X[a:z], y[a:z])
     return G, b, yy
+
+
+@dataclass
+class GroupNormals:
+    """Normal equations of a least-squares problem per group of rows: ``G[g] = X_g^T X_g``
+    (groups, p, p), ``b[g] = X_g^T y_g`` (groups, p), ``yy[g] = y_g^T y_g`` (groups,) and the
+    group's number of rows ``n`` (groups,).  Any fit on any union of groups follows from them.
+
+    Subclasses add per-group metadata: the names in :attr:`per_group` are taken along by
+    :meth:`take`.
+    """
+
+    G: np.ndarray
+    b: np.ndarray
+    yy: np.ndarray
+    n: np.ndarray
+
+    #: attributes indexed by group (None allowed), taken along by :meth:`take`
+    per_group: ClassVar[tuple] = ("G", "b", "yy", "n")
+
+    @classmethod
+    def of(cls, X, y, starts, stops) -> "GroupNormals":
+        """The normal equations of the contiguous groups ``[starts[g], stops[g])`` of the rows of
+        ``X`` (n, p) and ``y`` (n,)."""
+        G, b, yy = group_normal_equations(X, y, starts, stops)
+        return cls(G, b, yy, np.asarray(stops) - np.asarray(starts))
+
+    def __len__(self) -> int:
+        return len(self.yy)
+
+    def take(self, idx):
+        """The groups ``idx`` (indices, repeats allowed as in a bootstrap, or a boolean mask)."""
+        idx = np.asarray(idx)
+        return replace(self, **{k: getattr(self, k)[idx] for k in self.per_group if getattr(self, k) is not None})
+
+    def sum(self, idx=None) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(X^T X, X^T y, y^T y)`` summed over the groups ``idx`` (default: all)."""
+        sel = slice(None) if idx is None else np.asarray(idx)
+        return self.G[sel].sum(0), self.b[sel].sum(0), float(self.yy[sel].sum())
+
+    def rss(self, beta, idx=None) -> np.ndarray:
+        """Residual sum of squares of every group (of ``idx``) for the coefficients ``beta`` (p,):
+        ``yy - 2 b.beta + beta.G.beta``."""
+        sel = slice(None) if idx is None else np.asarray(idx)
+        beta = np.asarray(beta, dtype=float)
+        return self.yy[sel] - 2.0 * self.b[sel] @ beta + np.einsum("p,gpq,q->g", beta, self.G[sel], beta)
+
+    def columns(self, cols) -> tuple[np.ndarray, np.ndarray]:
+        """``(G, b)`` of the columns ``cols`` alone (the others ignored)."""
+        cols = np.asarray(cols, dtype=int)
+        return self.G[:, cols][:, :, cols], self.b[:, cols]
+
+    def pseudo_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``p`` pseudo rows per group, ``P[g]`` (p x p, ``P^T P = G``), targets ``q[g]``
+        (``P^T q = b``) and ``rest = yy - |q|^2``, so that for every ``w``
+        ``|y_g - X_g w|^2 = |q_g - P_g w|^2 + rest_g``: a least-squares solver (or a sparse
+        regression) on the pseudo rows gives exactly what it gives on the samples.  From the
+        eigen-decomposition of each ``G[g]`` in columns scaled to unit RMS (a scale-free rank test)."""
+        G, b = self.G, self.b
+        S, K = b.shape
+        diag = np.einsum("skk->k", G) if S else np.ones(K)
+        scale = np.sqrt(np.maximum(diag / max(S, 1), 0.0))
+        scale[scale == 0] = 1.0
+        P = np.zeros((S, K, K))
+        q = np.zeros((S, K))
+        for s in range(S):
+            lam, U = np.linalg.eigh(G[s] / np.outer(scale, scale))
+            keep = lam > max(lam[-1], 0.0) * 1e-12
+            r = int(keep.sum())
+            if r == 0:
+                continue
+            lam, U = lam[keep], U[:, keep]
+            P[s, :r] = (np.sqrt(lam)[:, None] * U.T) * scale[None, :]
+            q[s, :r] = (U.T @ (b[s] / scale)) / np.sqrt(lam)
+        return P, q, np.maximum(self.yy - np.sum(q * q, axis=1), 0.0)
 
 
 def harmonic_columns(theta, frequencies) -> tuple[np.ndarray, np.ndarray]:

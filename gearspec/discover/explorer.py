@@ -144,11 +144,36 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
 
     # the work is many small dense problems: BLAS threads only add overhead (and contend)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _discover(data, frequencies=frequencies, gear=gear, spectrum=spectrum, library=library,
-                         library_options=library_options, optimizer=optimizer, alpha=alpha, thresholds=thresholds,
-                         folds=folds, by=by, n_models=n_models, max_parts=max_parts, se_rule=se_rule,
-                         local_search=local_search, references=references, published=published, inertia=inertia,
-                         seed=seed)
+        t_start = time.perf_counter()
+        run = _prepare(data, t_start, frequencies=frequencies, gear=gear, spectrum=spectrum, library=library,
+                       library_options=library_options, optimizer=optimizer, alpha=alpha, thresholds=thresholds,
+                       folds=folds, by=by, n_models=n_models, max_parts=max_parts, se_rule=se_rule,
+                       local_search=local_search, inertia=inertia, seed=seed)
+        M, lib = run.M, run.lib
+        lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
+        lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
+        M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
+              if len(lib2) else M)
+        pool1, path1, level, z_level = _level_stage(run, M1, lib1)
+        t0 = time.perf_counter()
+        pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
+        if not pool.fits:
+            raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
+                             "zero or the library does not fit the data")
+        run.timings["ripple path"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        if run.local_search:
+            climb(pool)
+        sel = finalize(pool, run.local_search)
+        run.timings["selection"] = time.perf_counter() - t0
+        run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
+        cand_list, front, selected = _finish(run, pool, sel)
+        inclusion = _inclusion(run, cand_list[selected].parts, (M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
+        refs, levels = _compare(data, run, cand_list[selected], references, published)
+        run.timings["total"] = time.perf_counter() - t_start
+        run.settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
+        return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, run.fold, run.settings,
+                               run.notes, run.timings, levels)
 
 
 @dataclass
@@ -185,37 +210,6 @@ class _Run:
         coefs = path(Scaled(X, M.q.reshape(-1), M.N, float(np.sum(M.yy))), self.ths, self.optimizer, self.alpha,
                      free=_free(X, nf), max_columns=nf + 2 * self.max_parts)
         return _path_structures(lib, coefs, self.ths, offset=nf), X
-
-
-def _discover(data, *, references, published, **options) -> DiscoveryResult:
-    """:func:`discover`'s steps, in order."""
-    t_start = time.perf_counter()
-    run = _prepare(data, t_start, **options)
-    M, lib = run.M, run.lib
-    lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
-    lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
-    M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
-          if len(lib2) else M)
-    pool1, path1, level, z_level = _level_stage(run, M1, lib1)
-    t0 = time.perf_counter()
-    pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
-    if not pool.fits:
-        raise InputError("the sparse regression selected no term at any threshold: the friction signal is zero "
-                         "or the library does not fit the data")
-    run.timings["ripple path"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    if run.local_search:
-        climb(pool)
-    sel = finalize(pool, run.local_search)
-    run.timings["selection"] = time.perf_counter() - t0
-    run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
-    cand_list, front, selected = _finish(run, pool, sel)
-    inclusion = _inclusion(run, cand_list[selected].parts, (M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
-    refs, levels = _compare(data, run, cand_list[selected], references, published)
-    run.timings["total"] = time.perf_counter() - t_start
-    run.settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
-    return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, run.fold, run.settings, run.notes,
-                           run.timings, levels)
 
 
 def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_options, optimizer, alpha, thresholds,
@@ -388,7 +382,7 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold) for law in references or ()]
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
-    levels = {"data": M.c[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}
+    levels = {"data": M.b[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}
     for r in refs:
         if r.model is not None:
             try:
@@ -403,7 +397,7 @@ def _mean_prediction(fit: LawFit, M: Moments) -> np.ndarray:
     each segment's Gram matrix holds the sums of the bases)."""
     A = _multipliers(fit.parts, fit.layout, M, fit.z)
     k = np.array([M.index(b) for _, _, b in fit.layout.cols], dtype=int)
-    sums = M.B[:, 0, :][:, k]
+    sums = M.G[:, 0, :][:, k]
     return np.sum(A * sums * fit.w[None, :], axis=1) / M.n
 
 
@@ -426,10 +420,7 @@ def _fixed_columns(M: Moments, keep, parts, z) -> np.ndarray:
 
 def _threshold_for(path_structs, n_parts: int) -> float:
     """The largest threshold of a path whose structure has at least ``n_parts`` terms."""
-    for t, parts in path_structs:
-        if len(parts) >= n_parts:
-            return t
-    return path_structs[-1][0]
+    return next((t for t, parts in path_structs if len(parts) >= n_parts), path_structs[-1][0])
 
 
 def _inclusion_table(lib: Library, prob: np.ndarray, M, stage: str = "", threshold=None) -> pd.DataFrame:

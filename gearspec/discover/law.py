@@ -1,19 +1,11 @@
-"""Candidate laws: a structure (which terms, which are direction-dependent), fitted with its
-nonlinear parameters free, scored on held-out segments, printed as an equation, exported as a
-:class:`~gearspec.model.FrictionModel`.
+"""Candidate laws: a structure (a tuple of :class:`Part`), fitted on the pseudo rows of
+:mod:`.moments` with its nonlinear parameters refined by variable projection (:func:`fit_law`: a
+refit costs microseconds, whatever the number of samples), scored on held-out segments, printed as
+an equation, exported as a :class:`~gearspec.model.FrictionModel`.
 
-A structure is a tuple of :class:`Part`: a library family, its ripple frequency, whether it is
-direction-dependent (``split``: its own coefficients -- and nonlinear parameter -- per direction)
-and a start value of its nonlinear parameter (the library grid value the sparse regression
-picked).  :func:`fit_law` solves the linear coefficients in closed form for given nonlinear
-parameters and refines those by ``scipy.optimize.least_squares`` (variable projection), on the
-exact per-segment pseudo rows of :mod:`.moments` -- so a refit costs microseconds, independent of
-the number of samples, and cross-validation refits every fold completely.
-
-Standard errors: cluster-robust (sandwich) covariance with the segments as clusters, from the
-Jacobian of all parameters jointly: honest when residuals are correlated within a segment (they
-are: unmodelled ripple, coloured noise).  With fewer segments than parameters + 2 the ordinary
-covariance (i.i.d. samples) is used instead and the law says so.
+Standard errors: cluster-robust (sandwich) covariance with the segments as clusters (residuals are
+correlated within a segment: unmodelled ripple, coloured noise); with fewer segments than
+parameters + 2 the ordinary covariance, and the law says so.
 """
 
 from __future__ import annotations
@@ -37,7 +29,9 @@ _ORDER = list(FAMILIES)
 
 @dataclass(frozen=True)
 class Part:
-    """One term of a candidate law."""
+    """One term of a candidate law: a library family, its ripple frequency (index), whether it is
+    direction-dependent (``split``: its own coefficients and nonlinear parameter per direction) and
+    the start value of its nonlinear parameter (the grid value the sparse regression picked)."""
 
     family: str
     freq: int | None = None
@@ -50,9 +44,7 @@ class Part:
 
     def slots(self) -> tuple[int, ...]:
         """0: both directions alike; (+1, -1): one set of values per direction."""
-        if self.fam.basis == "acc":
-            return (0,)
-        return (1, -1) if self.split else (0,)
+        return (1, -1) if self.split and self.fam.basis != "acc" else (0,)
 
     def n_linear(self) -> int:
         return 2 if self.fam.basis == "ripple" else 1
@@ -124,36 +116,23 @@ def _layout(parts, m: Moments) -> _Layout:
 def _multipliers(parts, lay: _Layout, m: Moments, z: np.ndarray, deriv: bool = False):
     """(S, p) per-segment multipliers of the law's columns for nonlinear parameters exp(z); with
     ``deriv`` also their derivatives with respect to each z (a list of (columns, (S, n)) pairs)."""
-    par = {key: math.exp(v) for key, v in zip(lay.nl, z)}
     A = np.empty((m.S, len(lay.cols)))
-    dA = {}
-    done = {}
+    dA = [[] for _ in lay.nl]
+    zpos = {key: k for k, key in enumerate(lay.nl)}
     d = m.direction.astype(float)
-    for j, (i, sl, _) in enumerate(lay.cols):
-        key = (i, sl)
-        if key not in done:
-            p = parts[i]
-            pv = par.get(key) if p.free else p.param0
-            if p.fam.basis == "acc":
-                sgn = np.ones(m.S)
-            elif sl == 0:
-                sgn = d
-            else:
-                sgn = sl * (m.direction == sl)
-            col = sgn * p.fam.magnitude(m.speed, pv)
-            dcol = None
-            if deriv and p.free:
-                h = 1e-6
-                dcol = sgn * (p.fam.magnitude(m.speed, pv * math.exp(h))
-                              - p.fam.magnitude(m.speed, pv * math.exp(-h))) / (2 * h)
-            done[key] = (col, dcol)
-        col, dcol = done[key]
-        A[:, j] = col
-        if dcol is not None:
-            dA.setdefault(key, []).append((j, dcol))
-    if not deriv:
-        return A
-    return A, [dA[key] for key in lay.nl]
+    for key in dict.fromkeys((i, sl) for i, sl, _ in lay.cols):
+        i, sl = key
+        p, k = parts[i], zpos.get(key)
+        pv = p.param0 if k is None else math.exp(z[k])
+        sgn = np.ones(m.S) if p.fam.basis == "acc" else (d if sl == 0 else sl * (m.direction == sl))
+        cols = [j for j, (ii, ss, _) in enumerate(lay.cols) if (ii, ss) == key]
+        A[:, cols] = (sgn * p.fam.magnitude(m.speed, pv))[:, None]
+        if deriv and k is not None:
+            h = 1e-6
+            mag = p.fam.magnitude
+            dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
+            dA[k] = [(j, dcol) for j in cols]
+    return (A, dA) if deriv else A
 
 
 def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
@@ -162,8 +141,7 @@ def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
 
 def _design(parts, lay, m: Moments, z) -> np.ndarray:
     A = _multipliers(parts, lay, m, z)
-    k = _basis_index(lay, m)
-    return (A[:, None, :] * m.P[:, :, k]).reshape(m.S * m.K, len(lay.cols))
+    return (A[:, None, :] * m.P[:, :, _basis_index(lay, m)]).reshape(m.S * m.K, len(lay.cols))
 
 
 def _solve(X, y):
@@ -183,10 +161,6 @@ def _solve(X, y):
     U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
     w = (Vt.T @ ((U.T @ y) / sv)) / nrm
     return w, U
-
-
-def _lstsq(X, y):
-    return _solve(X, y)[0]
 
 
 # ---------------------------------------------------------------------- fit
@@ -267,37 +241,14 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     converged = True
     kidx = _basis_index(lay, m)
     Pk = m.P[:, :, kidx]                     # (S, K, p)
-    # per (part, slot): its columns, magnitude function, sign pattern and parameter (z index or fixed)
-    slots = []
-    zpos = {key: k for k, key in enumerate(lay.nl)}
-    d = m.direction.astype(float)
-    for key in dict.fromkeys((i, sl) for i, sl, _ in lay.cols):
-        i, sl = key
-        p = parts[i]
-        cols = [j for j, (ii, ss, _) in enumerate(lay.cols) if (ii, ss) == key]
-        sgn = np.ones(m.S) if p.fam.basis == "acc" else (d if sl == 0 else sl * (m.direction == sl))
-        slots.append((cols, p.fam.magnitude, sgn, zpos.get(key), p.param0))
     ncol = len(lay.cols)
     cache = {}
-
-    def mult(zz, deriv):
-        A = np.empty((m.S, ncol))
-        dA = [None] * len(zz)
-        for cols, mag, sgn, k, p0 in slots:
-            pv = p0 if k is None else math.exp(zz[k])
-            col = sgn * mag(m.speed, pv)
-            A[:, cols] = col[:, None]
-            if deriv and k is not None:
-                h = 1e-6
-                dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
-                dA[k] = [(j, dcol) for j in cols]
-        return A, dA
 
     def state(zz):
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
-            A, dA = mult(zz, True)
+            A, dA = _multipliers(parts, lay, m, zz, deriv=True)
             X = (A[:, None, :] * Pk).reshape(-1, ncol)
             w, U = _solve(X, q)
             cache[key] = (X, w, U, dA)
@@ -308,7 +259,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         return q - X @ w
 
     def sse_at(zz):
-        A, _ = mult(zz, False)
+        A = _multipliers(parts, lay, m, zz)
         X = (A[:, None, :] * Pk).reshape(-1, ncol)
         r = q - X @ _solve(X, q)[0]
         return float(r @ r)
@@ -345,7 +296,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         z = sol.x
         converged = sol.status > 0
     X = _design(parts, lay, m, z)
-    w = _lstsq(X, q)
+    w = _solve(X, q)[0]
     fit = LawFit(parts, z, w, m.sse(X, w), m.N, converged, layout=lay)
     if se:
         _covariance(fit, m, X)
@@ -429,7 +380,7 @@ def cross_validate_linear(m: Moments, fit: LawFit, fold: np.ndarray) -> np.ndarr
         return np.sum(r * r, axis=1) + m.rest[test]
 
     def refit(train):
-        return _lstsq(Xs[train].reshape(-1, Xs.shape[2]), m.q[train].reshape(-1))
+        return _solve(Xs[train].reshape(-1, Xs.shape[2]), m.q[train].reshape(-1))[0]
 
     return held_out(fold, refit, score, catch=()).sse, beta
 

@@ -1,29 +1,15 @@
 """The candidate library: physically meaningful friction terms, each printed as its equation.
 
-A library is a list of :class:`Term` objects; it knows nothing of the optimiser (as in pysindy,
-library and optimiser are separate, composable objects).  A term is a *family* (Coulomb, viscous,
-power law, Stribeck of three shapes, load- and temperature-coupled terms, a position-locked ripple
-with an amplitude law, inertia), the value of the family's nonlinear parameter on a grid
-(Stribeck velocity, decay constant, exponent), a ripple frequency where it has one, and a
-*variant*:
-
-``sym``
-    the friction form ``sign(v) * m(|v|)``: the same magnitude in both directions;
-``asym``
-    the even form ``m(|v|)`` (no sign): added to ``sym`` it makes the magnitude direction-
-    dependent, ``m_i = (c_sym + i c_asym) m`` for direction ``i`` = +1/-1.  So sparsity in the
-    asym columns *is* the question "does this term depend on the direction?".  (The asym Coulomb
-    column is the constant 1, i.e. also an offset such as gravity; constant-speed data cannot
-    tell the two apart.)
-``signed``
-    a torque that is not friction and does not reverse with the motion (inertia).
-
-Ripple terms have two columns (sin and cos of ``2 pi f theta``: amplitude and phase).  Every column
-is ``multiplier(speed_s, direction_s) * basis_k(sample)`` (see :mod:`.moments`), which is what makes
-the exact per-segment reduction possible.
-
-Units: SI (velocity rad/s or m/s, load Nm, temperature degC, theta rad or m); the names print the
-numbers in those units, e.g. ``sign(v)*exp(-|v|/2.95)`` or ``exp(-0.0012|v|)*sin(2pi*0.159*theta)``.
+A library is a list of :class:`Term` (as in pysindy, library and optimiser are separate objects):
+a *family* (:data:`FAMILIES`), the value of its nonlinear parameter on a grid, a ripple frequency
+where it has one, and a *variant*: ``sym``, the friction form ``sign(v) m(|v|)``; ``asym``, the
+even form ``m(|v|)``, which added to ``sym`` makes the magnitude direction-dependent (``m_i =
+(c_sym + i c_asym) m`` in direction ``i`` = +1/-1, so sparsity in the asym columns *is* the
+question "does this term depend on the direction?"; the asym Coulomb column is also an offset
+such as gravity); ``signed``, a torque that does not reverse with the motion (inertia).  Ripple
+terms have a sin and a cos column.  Every column is ``multiplier(speed_s, direction_s) *
+basis_k(sample)`` (:mod:`.moments`).  Units SI; names print the numbers in them, e.g.
+``sign(v)*exp(-|v|/2.95)``.
 """
 
 from __future__ import annotations
@@ -215,20 +201,15 @@ class Library:
             if t.fam.basis == "ripple" and (t.freq is None or not 0 <= t.freq < len(self.frequencies)):
                 raise InputError(f"ripple term {t.family} refers to frequency {t.freq}, the library has "
                                  f"{len(self.frequencies)}")
-        self.columns: list[tuple[int, str, str]] = []      # (term index, part, basis name)
-        for i, t in enumerate(self.terms):
-            for part, b in zip(t.parts(), t.basis_names()):
-                self.columns.append((i, part, b))
+        #: (term index, part, basis name) of every column
+        self.columns = [(i, part, b) for i, t in enumerate(self.terms) for part, b in zip(t.parts(), t.basis_names())]
 
     def __len__(self) -> int:
         return len(self.columns)
 
     @property
     def names(self) -> list[str]:
-        out = []
-        for t in self.terms:
-            out += t.names(self.frequencies, self.t_ref)
-        return out
+        return [name for t in self.terms for name in t.names(self.frequencies, self.t_ref)]
 
     def column_terms(self) -> np.ndarray:
         return np.array([c[0] for c in self.columns], dtype=int)
@@ -253,15 +234,12 @@ class Library:
     def design(self, m: Moments) -> np.ndarray:
         """(S*K, p): the library's columns on the pseudo rows of ``m`` (exact normal equations)."""
         A = self.multipliers(m)
-        k = self.basis_index(m)
-        return (A[:, None, :] * m.P[:, :, k]).reshape(m.S * m.K, len(self.columns))
+        return (A[:, None, :] * m.P[:, :, self.basis_index(m)]).reshape(m.S * m.K, len(self.columns))
 
     def evaluate(self, data, m: Moments) -> np.ndarray:
         """(N, p): the columns at every sample of ``data`` (dense; for checks and baselines -- the
         search itself never builds this).  Rows in the order of ``data``."""
-        sid_of = {int(s): i for i, s in enumerate(m.segment)}
-        seg_idx = np.array([sid_of[int(s)] for s in data.segment])
-        A = self.multipliers(m)[seg_idx]
+        A = self.multipliers(m)[m.rows(data.segment)]
         X = np.empty((len(data), len(self.columns)))
         bases = {"1": np.ones(len(data))}
         if "load" in m.basis:
@@ -319,18 +297,12 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
         raise InputError("fit data: every segment is at standstill; nothing to explore")
     lo, hi = float(np.min(speeds)), float(np.max(speeds))
     distinct = len(np.unique(np.round(speeds / hi, 6)))
-    allowed = {"coulomb", "viscous", "power", "stribeck_exp", "stribeck_gauss", "stribeck_rational"}
-    if m.has("load"):
-        allowed |= {"load_coulomb", "load_viscous"}
-    if m.has("temperature"):
-        allowed.add("temperature")
-    if m.has("acc"):
-        allowed.add("inertia")
     ripple = {f"ripple_{law}" for law in ripple_laws}
     unknown = ripple - set(FAMILIES)
     if unknown:
         raise InputError(f"unknown ripple amplitude law(s) {sorted(unknown)} (const, exp, rational)")
-    allowed |= ripple
+    # the speed laws, the families of the channels the data has, and the ripple laws asked for
+    allowed = {name for name, fam in FAMILIES.items() if fam.basis == "1" or m.has(fam.basis)} | ripple
     fams = [f for f in (families or FAMILIES) if f in allowed]
     bad = [f for f in (families or ()) if f not in FAMILIES]
     if bad:
@@ -342,6 +314,7 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
     # grid values rounded to 3 significant digits, so that the names print them exactly
     vs_grid = _round3(np.geomspace(lo / 2, hi / 2, n_stribeck)) if n_stribeck > 0 and hi > lo else np.array([])
     decay_grid = _round3(np.geomspace(0.5, 4.5, n_decay) / hi) if n_decay > 0 else np.array([])
+    grids = {"v_s": vs_grid, "decay": decay_grid, "exponent": np.asarray(exponents, dtype=float)}
     # frequencies that complete enough cycles somewhere
     need = min(min_segments, m.S)
     freqs = [i for i in range(len(m.frequencies)) if np.sum(m.cycles[:, i] >= min_cycles) >= need]
@@ -351,22 +324,11 @@ def default_library(m: Moments, *, families=None, n_stribeck: int = 5, n_decay: 
         if fam.basis == "acc":
             terms.append(Term(f, None, None, "signed"))
             continue
-        if fam.param == "v_s":
-            grid = vs_grid
-        elif fam.param == "decay":
-            grid = decay_grid
-        elif fam.param == "exponent":
-            grid = np.asarray(exponents, dtype=float)
-        else:
-            grid = [None]
-        idx = freqs if fam.basis == "ripple" else [None]
-        for fi in idx:
-            for p in grid:
-                for var in variants:
-                    terms.append(Term(f, None if p is None else float(p), fi, var))
+        lines = freqs if fam.basis == "ripple" else [None]
+        terms += [Term(f, None if p is None else float(p), fi, var) for fi in lines
+                  for p in grids.get(fam.param, [None]) for var in variants]
     return Library(terms, m.frequencies, m.t_ref)
 
 
 def _round3(x):
-    x = np.asarray(x, dtype=float)
-    return np.array([float(f"{v:.3g}") for v in x])
+    return np.array([float(f"{v:.3g}") for v in np.asarray(x, dtype=float)])

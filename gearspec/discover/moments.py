@@ -1,28 +1,14 @@
 """Per-segment moments: the exact reduction of the samples that every library column needs.
 
-Within a constant-speed segment ``s`` the velocity is the segment's own (``FitData`` with
-``velocity="segment"``), so every candidate column of the library factors into a per-segment
-multiplier times one of a few *sample bases*:
-
-    X[i, j] = a_j(speed_s, direction_s) * phi_k(j)(sample i)
-
-with ``phi`` = 1, |load|, temperature - T_ref, acceleration, and sin / cos(2 pi f theta) for every
-ripple frequency f.  So one pass over the samples that accumulates, per segment, the Gram matrix
-``B_s = Phi_s^T Phi_s`` and ``c_s = Phi_s^T y_s`` of the K sample bases (K is small: 1 + 2F + up to
-3) gives, for *any* library and any value of its nonlinear parameters,
-
-    X_s^T X_s = A_s^T B_s A_s,    X_s^T y_s = A_s^T c_s
-
-exactly.  These are stored as K "pseudo rows" per segment, ``P_s`` (K x K) and ``q_s`` (K) with
-``P_s^T P_s = B_s`` and ``P_s^T q_s = c_s`` (from the eigen-decomposition of ``B_s``), so that
-``||y_s - X_s w||^2 = ||q_s - (A_s-weighted P_s) w||^2 + rest_s`` for every ``w``, where
-``rest_s = y_s^T y_s - ||q_s||^2`` is what no combination of the bases can explain.  Sparse
-regression, cross-validation, the bootstrap and the nonlinear refinement then work on S x K rows
-instead of N samples, exactly.
-
-:mod:`gearspec.identify` keeps a similar reduction for the papers' laws (basis 1, sin, cos, one
-direction at a time, segment-mean load); the explorer needs both directions at once and
-per-sample load, temperature and acceleration bases, hence this one.
+Within a constant-speed segment ``s`` (``FitData(velocity="segment")``) every library column is a
+per-segment multiplier times one of a few *sample bases* ``phi`` (1, |load|, temperature - T_ref,
+acceleration, sin / cos(2 pi f theta) per ripple line): ``X[i, j] = a_j(speed_s, direction_s)
+phi_k(j)(i)``.  So the per-segment normal equations of the bases (``G_s = Phi_s^T Phi_s``,
+``b_s = Phi_s^T y_s``, :class:`~gearspec.core.reduction.GroupNormals`) give those of any library and
+any value of its nonlinear parameters exactly: ``X_s^T X_s = A_s^T G_s A_s``, ``X_s^T y_s =
+A_s^T b_s``.  They are held as K pseudo rows per segment
+(:meth:`~gearspec.core.reduction.GroupNormals.pseudo_rows`), on which sparse regression,
+cross-validation, the bootstrap and the refinement work exactly, on S x K rows instead of N samples.
 """
 
 from __future__ import annotations
@@ -31,7 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.reduction import harmonic_columns, normal_equations
+from ..core.reduction import GroupNormals, harmonic_columns
 from ..errors import InputError
 from ..fitdata import FitData
 
@@ -39,8 +25,9 @@ __all__ = ["Moments", "moments"]
 
 
 @dataclass
-class Moments:
-    """Exact per-segment sufficient statistics of a :class:`~gearspec.fitdata.FitData`.
+class Moments(GroupNormals):
+    """Exact per-segment sufficient statistics of a :class:`~gearspec.fitdata.FitData`: the normal
+    equations ``G``, ``b``, ``yy``, ``n`` of the sample bases per segment, and
 
     Attributes
     ----------
@@ -51,21 +38,13 @@ class Moments:
         Ripple frequencies, cycles per unit of theta.
     labels : list
         Their labels (None where unlabelled).
-    segment, run, direction, speed, n : ndarray, (S,)
-        Segment id, run id, direction (+1/-1), speed (|mean velocity|) and sample count.
+    segment, run, direction, speed : ndarray, (S,)
+        Segment id, run id, direction (+1/-1) and speed (|mean velocity|).
     vabs : ndarray, (S,) or None
         Mean |velocity| over the segment's samples (the speed the held-out folds are dealt by,
         :mod:`gearspec.core.crossval`); equal to ``speed`` where the velocity keeps its sign.
-    B, c : ndarray, (S, K, K) and (S, K)
-        Gram matrix of the bases and their products with the friction, per segment.
-    yy : ndarray, (S,)
-        Sum of squares of the friction samples.
-    P : ndarray, (S, K, K)
-        Pseudo rows of each segment (``P_s^T P_s = B_s``).
-    q : ndarray, (S, K)
-        Pseudo targets (``P_s^T q_s = c_s``).
-    rest : ndarray, (S,)
-        ``yy - ||q||^2``: what no column of any library can explain.
+    P, q, rest : ndarray, (S, K, K), (S, K), (S,)
+        The pseudo rows, targets and unexplained rest (:meth:`GroupNormals.pseudo_rows`).
     load, temperature : ndarray (S,) or None
         Mean |load| and mean temperature of each segment (for tables and plots).
     cycles : ndarray, (S, F)
@@ -80,17 +59,13 @@ class Moments:
     notes : list of str
     """
 
-    basis: tuple
-    frequencies: np.ndarray
-    labels: list
-    segment: np.ndarray
-    run: np.ndarray
-    direction: np.ndarray
-    speed: np.ndarray
-    n: np.ndarray
-    B: np.ndarray
-    c: np.ndarray
-    yy: np.ndarray
+    basis: tuple = ()
+    frequencies: np.ndarray | None = None
+    labels: list | None = None
+    segment: np.ndarray | None = None
+    run: np.ndarray | None = None
+    direction: np.ndarray | None = None
+    speed: np.ndarray | None = None
     P: np.ndarray | None = None
     q: np.ndarray | None = None
     rest: np.ndarray | None = None
@@ -102,11 +77,14 @@ class Moments:
     vabs: np.ndarray | None = None
     unit: str = "rad"
     notes: list = field(default_factory=list)
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    per_group = GroupNormals.per_group + ("segment", "run", "direction", "speed", "P", "q", "rest", "load",
+                                          "temperature", "cycles", "noise", "vabs")
 
     def __post_init__(self):
         if self.P is None:
-            self.P, self.q, self.rest = _pseudo_rows(self.B, self.c, self.yy)
+            self.P, self.q, self.rest = self.pseudo_rows()
 
     @property
     def S(self) -> int:
@@ -132,14 +110,7 @@ class Moments:
 
     def take(self, idx) -> "Moments":
         """The moments of segments ``idx`` (repeats allowed, as in a bootstrap)."""
-        idx = np.asarray(idx)
-        t = lambda a: None if a is None else a[idx]  # noqa: E731
-        return replace(self, segment=t(self.segment), run=t(self.run), direction=t(self.direction),
-                       speed=t(self.speed), n=t(self.n), B=t(self.B), c=t(self.c), P=t(self.P), q=t(self.q),
-                       yy=t(self.yy),
-                       rest=t(self.rest), load=t(self.load), temperature=t(self.temperature),
-                       cycles=t(self.cycles), noise=t(self.noise), vabs=t(self.vabs), notes=list(self.notes),
-                       _cache={})
+        return replace(super().take(idx), notes=list(self.notes))
 
     def profile(self, keep, min_cycles: float | None = None) -> "Moments":
         """The moments of the bases ``keep`` with the others profiled out *per segment* (each
@@ -153,30 +124,22 @@ class Moments:
         R = [i for i, b in enumerate(self.basis) if b not in keep]
         if not R:
             return self
-        B, c, yy = self.B, self.c, self.yy
-        S = self.S
-        B2 = np.empty((S, len(L), len(L)))
-        c2 = np.empty((S, len(L)))
-        yy2 = np.empty(S)
-        for s in range(S):
-            Rs = R
-            if min_cycles is not None:
-                Rs = [i for i in R if not self.basis[i].startswith(("sin", "cos"))
-                      or self.cycles[s, int(self.basis[i][3:])] >= min_cycles]
-            BLL = B[s][np.ix_(L, L)]
+        G, b, yy = self.G, self.b, self.yy
+        G2, b2, yy2 = G[:, L][:, :, L].copy(), b[:, L].copy(), yy.copy()
+        for s in range(self.S):
+            Rs = [i for i in R if min_cycles is None or not self.basis[i].startswith(("sin", "cos"))
+                  or self.cycles[s, int(self.basis[i][3:])] >= min_cycles]
             if not Rs:
-                B2[s], c2[s], yy2[s] = BLL, c[s, L], yy[s]
                 continue
-            BLR = B[s][np.ix_(L, Rs)]
-            iRR = np.linalg.pinv(B[s][np.ix_(Rs, Rs)], rcond=1e-10, hermitian=True)
-            T = BLR @ iRR
-            B2[s] = BLL - T @ BLR.T
-            c2[s] = c[s, L] - T @ c[s, Rs]
-            yy2[s] = yy[s] - c[s, Rs] @ iRR @ c[s, Rs]
-        return replace(self, basis=tuple(self.basis[i] for i in L), B=B2, c=c2, yy=np.maximum(yy2, 0.0), P=None, q=None,
-                       noise=self.noise, _cache={},
-                       rest=None, notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
-                                                            + " profiled out per segment"])
+            GLR = G[s][np.ix_(L, Rs)]
+            iRR = np.linalg.pinv(G[s][np.ix_(Rs, Rs)], rcond=1e-10, hermitian=True)
+            T = GLR @ iRR
+            G2[s] -= T @ GLR.T
+            b2[s] -= T @ b[s, Rs]
+            yy2[s] -= b[s, Rs] @ iRR @ b[s, Rs]
+        return replace(self, basis=tuple(self.basis[i] for i in L), G=G2, b=b2, yy=np.maximum(yy2, 0.0), P=None,
+                       q=None, rest=None, notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
+                                                                    + " profiled out per segment"])
 
     def restrict(self, names) -> "Moments":
         """The moments of the bases ``names`` alone (the others ignored, not profiled out): exact
@@ -185,18 +148,17 @@ class Moments:
         if key == self.basis:
             return self
         if key not in self._cache:
-            idx = [self.index(b) for b in key]
-            self._cache[key] = replace(self, basis=key, B=self.B[:, idx][:, :, idx], c=self.c[:, idx], P=None,
-                                       q=None, rest=None, _cache={})
+            G, b = self.columns([self.index(b) for b in key])
+            self._cache[key] = replace(self, basis=key, G=G, b=b, P=None, q=None, rest=None)
         return self._cache[key]
 
-    def groups(self, by: str = "segment") -> np.ndarray:
-        """Group id of each segment for held-out folds: ``"segment"`` or ``"run"``."""
-        if by == "segment":
-            return self.segment
-        if by == "run":
-            return self.run
-        raise InputError(f"held-out groups must be 'segment' or 'run', got '{by}'")
+    def rows(self, segment) -> np.ndarray:
+        """Position in these moments of each of the segment ids ``segment`` (e.g. every sample's)."""
+        pos = {int(s): i for i, s in enumerate(self.segment)}
+        return np.array([pos[int(s)] for s in segment], dtype=int)
+
+    #: group id of each segment for held-out folds: ``"segment"`` or ``"run"`` (FitData's rule)
+    groups = FitData.groups
 
     def sse(self, X: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Residual sum of squares of each segment for the pseudo-row design ``X`` (S*K, p) and
@@ -237,103 +199,57 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     if len(data) == 0:
         raise InputError("fit data: no samples")
     notes: list[str] = []
+    order = np.argsort(data.segment, kind="stable")
+    sids, starts = np.unique(data.segment[order], return_index=True)
+    segs = [slice(a, z) for a, z in zip(starts, np.append(starts[1:], len(order)))]
+    th = np.asarray(data.theta, dtype=float)[order] if len(freqs) else None
+    span = np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts) if len(freqs) else None
     if min_cycles is not None and len(freqs):
-        freqs, labels = _lines_with_cycles(data, freqs, labels, min_cycles, notes)
+        ok = freqs * float(np.max(span)) >= min_cycles
+        for f, lab in zip(freqs[~ok], np.asarray(labels, dtype=object)[~ok]):
+            notes.append(f"ripple line {f:.6g} cycles/{data.unit}" + (f" ({lab})" if lab else "")
+                         + f" completes fewer than {min_cycles:g} cycle(s) in every segment: left out")
+        freqs, labels = freqs[ok], [lab for lab, k in zip(labels, ok) if k]
     if not np.all(np.isfinite(data.y)) or not np.all(np.isfinite(data.v)):
         raise InputError("fit data: friction or velocity has NaN or infinite values")
     basis, load, temp, t_ref, acc = _sample_bases(data, inertia, notes)
-    for i in range(len(freqs)):
-        basis += [f"sin{i}", f"cos{i}"]
-    K = len(basis)
-    F = len(freqs)
-
-    order = np.argsort(data.segment, kind="stable")
-    sids, starts = np.unique(data.segment[order], return_index=True)
-    bounds = np.append(starts, len(order))
-    S = len(sids)
-    B = np.zeros((S, K, K))
-    c = np.zeros((S, K))
-    yy = np.zeros(S)
-    speed = np.zeros(S)
-    vabs = np.zeros(S)
-    direction = np.zeros(S, np.int64)
-    run = np.zeros(S, np.int64)
-    n = np.zeros(S, np.int64)
-    seg_load = np.zeros(S) if load is not None else None
-    seg_temp = np.zeros(S) if temp is not None else None
-    cycles = np.zeros((S, F))
-    noise = np.full(S, np.nan)
-    varying = 0
-    for s, (a0, b0) in enumerate(zip(bounds[:-1], bounds[1:])):
-        ii = order[a0:b0]
-        v = data.v[ii]
-        vm = float(np.mean(v))
-        if np.ptp(v) > 1e-9 * max(abs(vm), 1e-300):
-            varying += 1
-        dirs = data.direction[ii]
-        d = int(np.sign(np.sum(dirs))) or int(dirs[0])
-        speed[s] = abs(vm)
-        vabs[s] = float(np.mean(np.abs(v)))
-        direction[s] = d
-        run[s] = int(data.run[ii[0]])
-        n[s] = len(ii)
-        Phi = np.empty((len(ii), K))
-        Phi[:, 0] = 1.0
-        col = 1
-        if load is not None:
-            Phi[:, col] = load[ii]
-            seg_load[s] = float(np.mean(load[ii]))
-            col += 1
-        if temp is not None:
-            Phi[:, col] = temp[ii] - t_ref
-            seg_temp[s] = float(np.mean(temp[ii]))
-            col += 1
-        if acc is not None:
-            Phi[:, col] = acc[ii]
-            col += 1
-        if F:
-            th = np.asarray(data.theta[ii], dtype=float)
-            cycles[s] = freqs * (float(np.ptp(th)) if len(th) > 1 else 0.0)
-            Phi[:, col::2], Phi[:, col + 1::2] = harmonic_columns(th, freqs)   # phases about the segment's mean
-        y = data.y[ii]
-        B[s], c[s], yy[s] = normal_equations(Phi, y)
-        noise[s] = _noise_variance(Phi, y, B[s], c[s])
+    K0, F = len(basis), len(freqs)
+    basis += [f"{sc}{i}" for i in range(F) for sc in ("sin", "cos")]
+    chans = [np.ones(len(data))] + [x for x in (load, None if temp is None else temp - t_ref, acc) if x is not None]
+    Phi = np.empty((len(order), len(basis)))
+    Phi[:, :K0] = np.column_stack(chans)[order]
+    cycles = np.outer(span, freqs) if F else np.zeros((len(segs), 0))
+    for sl in segs if F else ():
+        Phi[sl, K0::2], Phi[sl, K0 + 1::2] = harmonic_columns(th[sl], freqs)   # phases about the segment's mean
+    y, v, dirs = data.y[order], data.v[order], data.direction[order]
+    gn = GroupNormals.of(Phi, y, starts, [sl.stop for sl in segs])
+    noise = np.array([_noise_variance(Phi[sl], y[sl], gn.G[s], gn.b[s]) for s, sl in enumerate(segs)])
+    vm = np.array([np.mean(v[sl]) for sl in segs])
+    varying = sum(np.ptp(v[sl]) > 1e-9 * max(abs(m), 1e-300) for sl, m in zip(segs, vm))
     if varying:
-        notes.append(f"velocity varies within {varying} of {S} segments: speed laws are evaluated at each "
+        notes.append(f"velocity varies within {varying} of {len(segs)} segments: speed laws are evaluated at each "
                      "segment's mean velocity")
-    return Moments(basis=tuple(basis), frequencies=freqs, labels=labels, segment=sids, run=run, direction=direction,
-                   speed=speed, n=n, B=B, c=c, yy=yy, load=seg_load, temperature=seg_temp, cycles=cycles,
-                   noise=_fill_noise(noise), t_ref=t_ref, vabs=vabs, unit=data.unit, notes=notes)
 
+    def seg_mean(x):
+        if x is None:
+            return None
+        x = x[order]
+        return np.array([np.mean(x[sl]) for sl in segs])
 
-
-def _lines_with_cycles(data: FitData, freqs, labels, min_cycles: float, notes: list) -> tuple:
-    """The frequencies (and their labels) that complete at least ``min_cycles`` cycles in some
-    segment; a note for each left out."""
-    order = np.argsort(data.segment, kind="stable")
-    _, starts = np.unique(data.segment[order], return_index=True)
-    th = np.asarray(data.theta, dtype=float)[order]
-    span = np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts)
-    ok = freqs * float(np.max(span)) >= min_cycles
-    for f, lab in zip(freqs[~ok], np.asarray(labels, dtype=object)[~ok]):
-        notes.append(f"ripple line {f:.6g} cycles/{data.unit}" + (f" ({lab})" if lab else "")
-                     + f" completes fewer than {min_cycles:g} cycle(s) in every segment: left out")
-    return freqs[ok], [lab for lab, k in zip(labels, ok) if k]
+    return Moments(gn.G, gn.b, gn.yy, gn.n, basis=tuple(basis), frequencies=freqs, labels=labels, segment=sids,
+                   run=data.run[order][starts].astype(np.int64), speed=np.abs(vm), vabs=seg_mean(np.abs(data.v)),
+                   direction=np.array([int(np.sign(np.sum(dirs[sl]))) or int(dirs[sl][0]) for sl in segs], np.int64),
+                   load=seg_mean(load), temperature=seg_mean(temp), cycles=cycles, noise=_fill_noise(noise),
+                   t_ref=t_ref, unit=data.unit, notes=notes)
 
 
 def _sample_bases(data: FitData, inertia, notes: list) -> tuple:
     """The sample bases besides the ripple's (``1`` and those of the channels that vary), and the
     channels they are built from: ``(basis, |load| or None, temperature or None, t_ref, acc or None)``."""
-    basis = ["1"]
-    load = None
-    if data.load is not None:
+    basis, load, temp, t_ref = ["1"], None, None, None
+    if data.load is not None and np.any(np.abs(data.load) > 0):
         load = np.abs(np.asarray(data.load, dtype=float))
-        if np.ptp(load) > 0 or np.any(load > 0):
-            basis.append("load")
-        else:
-            load = None
-    temp = None
-    t_ref = None
+        basis.append("load")
     if data.temperature is not None:
         temp = np.asarray(data.temperature, dtype=float)
         if np.ptp(temp) > 0:
@@ -350,6 +266,7 @@ def _sample_bases(data: FitData, inertia, notes: list) -> tuple:
             acc = a
             basis.append("acc")
     return basis, load, temp, t_ref, acc
+
 
 def _noise_variance(Phi, y, B, c, blocks: int = 10) -> float:
     """Noise variance of one segment (see :attr:`Moments.noise`); NaN for segments too short."""
@@ -375,28 +292,3 @@ def _fill_noise(noise):
         noise = noise.copy()
         noise[~ok] = np.median(noise[ok])
     return noise
-
-
-def _pseudo_rows(B, c, yy):
-    """Pseudo rows ``P_s`` (K x K, ``P_s^T P_s = B_s``), targets ``q_s`` (``P_s^T q_s = c_s``) and
-    ``rest_s = yy_s - ||q_s||^2``, from the eigen-decomposition of each B_s in a basis scaled to
-    unit RMS (so that the rank test is scale-free)."""
-    S, K = c.shape
-    diag = np.einsum("skk->k", B) if S else np.ones(K)
-    scale = np.sqrt(np.maximum(diag / max(S, 1), 0.0))
-    scale[scale == 0] = 1.0
-    P = np.zeros((S, K, K))
-    q = np.zeros((S, K))
-    for s in range(S):
-        Bs = B[s] / np.outer(scale, scale)
-        lam, U = np.linalg.eigh(Bs)
-        keep = lam > max(lam[-1], 0.0) * 1e-12
-        r = int(keep.sum())
-        if r == 0:
-            continue
-        lam, U = lam[keep], U[:, keep]
-        P[s, :r] = (np.sqrt(lam)[:, None] * U.T) * scale[None, :]
-        q[s, :r] = (U.T @ (c[s] / scale)) / np.sqrt(lam)
-    rest = np.maximum(yy - np.sum(q * q, axis=1), 0.0)
-    return P, q, rest
-

@@ -78,18 +78,14 @@ def _inherit(fit: LawFit) -> tuple:
                  for i, p in enumerate(fit.parts))
 
 
-def _compound(parts, M: Moments, addable) -> list[tuple]:
+def _compound(parts, M: Moments) -> list[tuple]:
     """Two moves at once: a term dropped and another made direction-dependent -- to leave a local
     optimum where one term stands in for the direction dependence of another."""
     out = []
-    both = len(M.directions) == 2
-    for i in range(len(parts)):
+    for i in range(len(parts) if len(M.directions) == 2 else 0):
         rest = list(parts[:i]) + list(parts[i + 1:])
-        if not rest:
-            continue
-        for j, p in enumerate(rest):
-            if both and not p.split and p.fam.basis != "acc":
-                out.append(canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)]))
+        out += [canonical(rest[:j] + rest[j + 1:] + [Part(p.family, p.freq, True, p.param0)])
+                for j, p in enumerate(rest) if not p.split and p.fam.basis != "acc"]
     return out
 
 
@@ -212,7 +208,7 @@ def _climb_step(pool: _Pool, cur, compound: bool):
     """One round of moves (or pairs of moves) from the structure ``cur``; the best structure after it."""
     base = pool.cands[cur]
     start = _inherit(base.fit)
-    moves = _compound(start, pool.M, pool.addable) if compound else _neighbours(start, pool.M, pool.addable)
+    moves = _compound(start, pool.M) if compound else _neighbours(start, pool.M, pool.addable)
     new = []
     for parts in moves:
         sig = pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold, refine=False)
@@ -279,12 +275,7 @@ def _front(cands: dict) -> list:
 
 def _path_structures(lib: Library, coefs, ths, offset: int = 0):
     """(threshold, structure) along a path, ``offset`` leading fixed columns skipped."""
-    out = []
-    for t, w in zip(ths, coefs):
-        w = w[offset:]
-        if np.any(w):
-            out.append((float(t), _structure(lib, w)))
-    return out
+    return [(float(t), _structure(lib, w[offset:])) for t, w in zip(ths, coefs) if np.any(w[offset:])]
 
 
 def _short(c: Candidate, M) -> str:
@@ -303,7 +294,7 @@ def _excess(c: Candidate, best: Candidate, M: Moments, groups) -> float:
         return D
     if M.noise is not None and np.all(np.isfinite(M.noise)) and c.cv_pred is not None and best.cv_pred is not None:
         d = c.cv_pred - best.cv_pred               # held-out prediction difference, as basis coefficients
-        d2 = np.einsum("sk,skl,sl->s", d, M.B, d)
+        d2 = np.einsum("sk,skl,sl->s", d, M.G, d)
         se = 2.0 * math.sqrt(float(np.sum(M.noise * d2)))
     else:
         p = _paired(c.cv_sse, best.cv_sse, groups, M.N)

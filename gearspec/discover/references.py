@@ -27,15 +27,9 @@ _LABELS = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per directi
            "lola8": "Lola law (8)", "lola11": "Lola law (11)"}
 
 
-def _segment_index(data: FitData, M: Moments) -> np.ndarray:
-    """Position in ``M`` of every sample's segment."""
-    pos = {int(s): i for i, s in enumerate(M.segment)}
-    return np.array([pos[int(s)] for s in data.segment], dtype=int)
-
-
 def _segment_mean(data: FitData, model: FrictionModel, M: Moments) -> np.ndarray:
     pred = model.evaluate(**data.inputs())
-    return np.bincount(_segment_index(data, M), weights=np.nan_to_num(pred), minlength=M.S) / M.n
+    return np.bincount(M.rows(data.segment), weights=np.nan_to_num(pred), minlength=M.S) / M.n
 
 
 def _segment_sse(data: FitData, model: FrictionModel, M: Moments, mask=None) -> np.ndarray:
@@ -43,7 +37,7 @@ def _segment_sse(data: FitData, model: FrictionModel, M: Moments, mask=None) -> 
     sub = data if mask is None else data.subset(mask)
     r = model.residual(sub)
     out = np.zeros(M.S)
-    np.add.at(out, _segment_index(sub, M), np.nan_to_num(r * r, nan=0.0))
+    np.add.at(out, M.rows(sub.segment), np.nan_to_num(r * r, nan=0.0))
     return out
 
 
@@ -70,7 +64,7 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:   # a comparison is never worth a crash
         return Reference(label, "paper law", None, None, None, None,
                          note=f"identify.fit failed ({type(exc).__name__}: {exc})")
-    seg = _segment_index(data, M)
+    seg = M.rows(data.segment)
     ho = held_out(fold, lambda train: identify.fit(data.subset(train[seg]), law, **kw),
                   lambda mf, test: _segment_sse(data, mf, M, test[seg])[test], weight=M.n,
                   catch=(InputError, np.linalg.LinAlgError, ValueError, FloatingPointError))

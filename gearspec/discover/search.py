@@ -1,18 +1,11 @@
-"""Sparse regression over the library: pysindy's optimisers on the exact pseudo rows.
+"""Sparse regression over the library: pysindy's optimisers (scikit-learn regressors) run
+unchanged on the exact pseudo rows of :mod:`.moments` and give what they would give on the samples.
 
-The least-squares objective of the N samples equals, up to a constant, that of the S*K pseudo rows
-of :mod:`.moments` (``||y - Xw||^2 = ||q - X~w||^2 + rest``).  So pysindy's optimisers, which are
-scikit-learn regressors with ``fit(X, y)`` and ``coef_``, run unchanged on the pseudo rows and
-give exactly the result they would give on the samples, at a cost independent of N.
-
-Columns are scaled to unit RMS over the samples and the friction to unit RMS before regression, so
-a threshold reads as "the smallest term worth keeping, as a fraction of the friction's RMS".
-
-Inclusion probabilities come from a bootstrap over *whole segments* (or runs): the segments are
-resampled with replacement, their pseudo rows stacked, the optimiser run again.  pysindy's
-``EnsembleOptimizer(bagging=True)`` draws individual rows instead, which on the pseudo rows would
-split a segment's rows apart (meaningless) and on the samples would leak interleaved samples
-between replicates; so the bootstrap is done here, around the same optimiser.
+Columns and friction are scaled to unit RMS over the samples, so a threshold reads as "the
+smallest term worth keeping, as a fraction of the friction's RMS".  Inclusion probabilities come
+from a bootstrap over *whole segments* (or runs), done here around the optimiser:
+pysindy's ``EnsembleOptimizer(bagging=True)`` draws single rows, which would split a segment's
+pseudo rows apart.
 """
 
 from __future__ import annotations
@@ -113,17 +106,11 @@ def bootstrap_inclusion(X: np.ndarray, m, threshold: float, *, by: str = "segmen
     g = m.groups(by)
     ug = np.unique(g)
     members = [np.flatnonzero(g == u) for u in ug]
-    S, K = m.S, m.K
-    Xs = X.reshape(S, K, -1)
-    qs = m.q
+    Xs = X.reshape(m.S, m.K, -1)
     hits = np.zeros(X.shape[1])
-    done = 0
     for _ in range(n_models):
         pick = np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))])
-        Xb = Xs[pick].reshape(len(pick) * K, -1)
-        qb = qs[pick].reshape(-1)
-        sc = Scaled(Xb, qb, float(np.sum(m.n[pick])), float(np.sum(m.yy[pick])))
-        w = _fit(method, threshold, alpha, sc, free)
-        hits += w != 0
-        done += 1
-    return hits / max(done, 1)
+        sc = Scaled(Xs[pick].reshape(len(pick) * m.K, -1), m.q[pick].reshape(-1), float(np.sum(m.n[pick])),
+                    float(np.sum(m.yy[pick])))
+        hits += _fit(method, threshold, alpha, sc, free) != 0
+    return hits / max(n_models, 1)

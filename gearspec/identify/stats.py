@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core.reduction import harmonic_columns, normal_equations
+from ..core.reduction import GroupNormals, harmonic_columns, normal_equations
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
@@ -61,40 +61,37 @@ def harmonic_specs(harmonics=None, gear: GearTrain | str | None = None) -> list[
 
 # ---------------------------------------------------------------------- sufficient statistics
 @dataclass
-class SegmentStats:
+class SegmentStats(GroupNormals):
     """Per-segment sufficient statistics of the samples for one direction.
 
-    ``G[s]``, ``g[s]``, ``yy[s]``: normal equations of the local model ``[1, sin_k, cos_k]`` on the
-    friction magnitude; ``sampled[s, k]``: harmonic k lies below ``nyquist_fraction`` of the
+    ``G[s]``, ``b[s]`` (also ``g[s]``), ``yy[s]``, ``n[s]``: normal equations of the local model
+    ``[1, sin_k, cos_k]`` on the friction magnitude (:class:`~gearspec.core.reduction.GroupNormals`);
+    ``sampled[s, k]``: harmonic k lies below ``nyquist_fraction`` of the
     segment's position Nyquist frequency (its columns are in ``G``, whatever the number of cycles:
     the global model predicts what a partial cycle does to the segment's level); ``active[s, k]``:
     it can also be measured in the segment on its own (it completes
     at least ``min_cycles`` cycles and lies below ``nyquist_fraction`` of the position Nyquist);
-    ``speed``, ``load`` (mean), ``n``, ``sigma2`` (residual variance of the unrestricted local fit).
+    ``speed``, ``load`` (mean), ``sigma2`` (residual variance of the unrestricted local fit).
     """
 
-    segment: np.ndarray
-    speed: np.ndarray
-    load: np.ndarray | None
-    n: np.ndarray
-    G: np.ndarray          # (S, P, P)
-    g: np.ndarray          # (S, P)
-    yy: np.ndarray         # (S,)
-    active: np.ndarray     # (S, K) bool
-    sampled: np.ndarray    # (S, K) bool
-    cycles: np.ndarray     # (S, K) cycles of each line in each segment
-    sigma2: np.ndarray     # (S,)
-    beta_hat: np.ndarray   # (S, P)
-    rss_hat: np.ndarray    # (S,)
-    frequencies: np.ndarray
+    segment: np.ndarray = None
+    speed: np.ndarray = None
+    load: np.ndarray | None = None
+    active: np.ndarray = None     # (S, K) bool
+    sampled: np.ndarray = None    # (S, K) bool
+    cycles: np.ndarray = None     # (S, K) cycles of each line in each segment
+    sigma2: np.ndarray = None     # (S,)
+    beta_hat: np.ndarray = None   # (S, P)
+    rss_hat: np.ndarray = None    # (S,)
+    frequencies: np.ndarray = None
 
-    def take(self, idx) -> "SegmentStats":
-        """The statistics of the segments ``idx`` (rows; repeats allowed, as in a bootstrap)."""
-        idx = np.asarray(idx)
-        t = lambda a: None if a is None else a[idx]  # noqa: E731
-        return SegmentStats(np.arange(len(idx)), t(self.speed), t(self.load), t(self.n), t(self.G), t(self.g),
-                            t(self.yy), t(self.active), t(self.sampled), t(self.cycles), t(self.sigma2),
-                            t(self.beta_hat), t(self.rss_hat), self.frequencies)
+    per_group = GroupNormals.per_group + ("segment", "speed", "load", "active", "sampled", "cycles", "sigma2",
+                                          "beta_hat", "rss_hat")
+
+    @property
+    def g(self) -> np.ndarray:
+        """``X^T y`` per segment (``b``)."""
+        return self.b
 
 
 def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: float = 1.0,
@@ -114,21 +111,19 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
     for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
         ii = order[a:b]
         tag = (int(sid), len(ii), float(data.y[ii[0]]), float(data.y[ii[-1]]))
-        row = cache.get(tag)
-        if row is None:
-            row = _one_segment_stats(data, ii, freqs, min_cycles, nyquist_fraction)
-            cache[tag] = row
-        rows.append(row)
-    K = len(freqs)
-    P = 1 + 2 * K
-    S = len(rows)
-    stack = lambda name, shape: (np.array([r[name] for r in rows]) if S else np.zeros(shape))  # noqa: E731
-    load = stack("load", (0,)) if data.load is not None else None
-    return SegmentStats(sids, stack("speed", (0,)), load, stack("n", (0,)).astype(int), stack("G", (0, P, P)),
-                        stack("g", (0, P)), stack("yy", (0,)), stack("active", (0, K)).astype(bool),
-                        stack("sampled", (0, K)).astype(bool),
-                        stack("cycles", (0, K)), stack("sigma2", (0,)), stack("beta_hat", (0, P)),
-                        stack("rss_hat", (0,)), freqs)
+        if tag not in cache:
+            cache[tag] = _one_segment_stats(data, ii, freqs, min_cycles, nyquist_fraction)
+        rows.append(cache[tag])
+    K, P = len(freqs), 1 + 2 * len(freqs)
+    shape = {"G": (0, P, P), "g": (0, P), "beta_hat": (0, P), "active": (0, K), "sampled": (0, K), "cycles": (0, K)}
+
+    def stack(name):
+        return np.array([r[name] for r in rows]) if rows else np.zeros(shape.get(name, (0,)))
+
+    return SegmentStats(stack("G"), stack("g"), stack("yy"), stack("n").astype(int), segment=sids, speed=stack("speed"),
+                        load=stack("load") if data.load is not None else None, active=stack("active").astype(bool),
+                        sampled=stack("sampled").astype(bool), cycles=stack("cycles"), sigma2=stack("sigma2"),
+                        beta_hat=stack("beta_hat"), rss_hat=stack("rss_hat"), frequencies=freqs)
 
 
 def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cycles: float,
