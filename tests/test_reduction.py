@@ -103,3 +103,16 @@ def test_the_engines_containers_are_group_normals_and_take_their_metadata_along(
     _taken_along(M)
     assert M.take([1]).q.shape == (1, 3)
     np.testing.assert_allclose(M.sse(M.P.reshape(-1, 3), np.ones(3)), gn.rss(np.ones(3)), rtol=1e-10)
+
+
+def test_new_columns_enter_through_their_cross_products(problem):
+    # the closed loop's candidate columns C join the reduced design X: the normal equations of the
+    # stacked columns [X, C] of each group are [[G_X, X^T C], [C^T X, G_C]], exactly
+    from gearspec.core.reduction import group_cross
+    X, y, gn = problem
+    C = np.random.default_rng(6).normal(size=(12, 2))
+    xc = group_cross(X, C, STARTS, STOPS)
+    both = GroupNormals.of(np.hstack([X, C]), y, STARTS, STOPS)
+    assert xc.shape == (3, 3, 2)
+    np.testing.assert_allclose(xc, both.G[:, :3, 3:], rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(GroupNormals.of(C, y, STARTS, STOPS).G, both.G[:, 3:, 3:], rtol=1e-13, atol=1e-13)

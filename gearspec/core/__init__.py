@@ -3,7 +3,7 @@
 
 from .crossval import (HeldOut, critical_z, deal_folds, group_summary, held_out, n_params, row_folds, splits,
                        z_statistic)
-from .reduction import harmonic_columns
+from .reduction import GroupNormals, group_cross, harmonic_columns
 
 __all__ = ["HeldOut", "critical_z", "deal_folds", "group_summary", "held_out", "n_params", "row_folds", "splits",
-           "z_statistic", "harmonic_columns"]
+           "z_statistic", "GroupNormals", "group_cross", "harmonic_columns"]

@@ -12,7 +12,7 @@ from typing import ClassVar
 
 import numpy as np
 
-__all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations"]
+__all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations", "group_cross"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -35,6 +35,15 @@ def group_normal_equations(X, y, starts, stops) -> tuple[np.ndarray, np.ndarray,
     for g, (a, z) in enumerate(zip(starts, stops)):
         G[g], b[g], yy[g] = normal_equations(X[a:z], y[a:z])
     return G, b, yy
+
+
+def group_cross(X, C, starts, stops) -> np.ndarray:
+    """Per-group cross products ``X_g^T C_g`` (groups, p, q) of two column sets over the same rows:
+    how new columns ``C`` enter normal equations already reduced for ``X``."""
+    out = np.empty((len(starts), X.shape[1], C.shape[1]))
+    for g, (a, z) in enumerate(zip(starts, stops)):
+        out[g] = X[a:z].T @ C[a:z]
+    return out
 
 
 @dataclass

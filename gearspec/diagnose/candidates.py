@@ -15,13 +15,13 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 from scipy import stats
 
-from ..core.reduction import group_normal_equations
+from ..core.reduction import GroupNormals, group_cross
 from ..gears import integer_hint
 from ..spectrum import LombScargle
 from ..terms import amplitude_law
 from .context import Round
 from .coverage import measurable, segment_span
-from .design import Grams, HarmonicBlock, TermBlock, solve_normal
+from .design import HarmonicBlock, TermBlock, solve_normal
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
            "LagCandidate", "LaggedHarmonicBlock", "SidebandCandidate", "SidebandBlock", "choose_amplitude_law",
@@ -60,8 +60,8 @@ class Proposal:
 def cross_grams(rnd: Round, C: np.ndarray):
     """Per-group X^T C, C^T C and C^T y of new columns ``C`` against the round's design."""
     dd = rnd.dd
-    ctc, cty, _ = group_normal_equations(C, dd.y, dd.starts, dd.stops)
-    return Grams.cross(rnd.X, C, dd), ctc, cty
+    c = GroupNormals.of(C, dd.y, dd.starts, dd.stops)
+    return group_cross(rnd.X, C, dd.starts, dd.stops), c.G, c.b
 
 
 def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):

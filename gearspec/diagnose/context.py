@@ -11,7 +11,8 @@ import numpy as np
 
 from ..core.crossval import held_out
 from .data import DiagnoseData
-from .design import FittedState, Grams, HarmonicBlock, State, fit_state, solve_normal
+from ..core.reduction import GroupNormals
+from .design import FittedState, HarmonicBlock, State, fit_state, solve_normal
 from .nonlinear import nonlinear_standard_errors
 
 __all__ = ["Round"]
@@ -31,7 +32,7 @@ class Round:
     fold: np.ndarray = field(repr=False)
     fitted: FittedState = field(init=False, repr=False)
     X: np.ndarray = field(init=False, repr=False)
-    grams: Grams = field(init=False, repr=False)
+    grams: GroupNormals = field(init=False, repr=False)
     ref_diag: np.ndarray = field(init=False, repr=False)
     K: int = field(init=False)
     keys: frozenset = field(init=False, repr=False)
@@ -44,8 +45,8 @@ class Round:
         state = fitted.state = self.state.refreshed(fitted.coef)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         X = state.design(dd, taylor=True)
-        grams = Grams.of(X, dd.y, dd)
-        G_all = grams.G.sum(0)
+        grams = GroupNormals.of(X, dd.y, dd.starts, dd.stops)
+        G_all = grams.sum()[0]
         fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
         for name, value in (("state", state), ("fitted", fitted), ("X", X), ("grams", grams),
                             ("ref_diag", np.diag(G_all).copy()), ("K", int(self.fold.max()) + 1),
@@ -60,8 +61,7 @@ class Round:
         """``(X^T X, X^T y, y^T y)`` summed over the groups where ``train`` is true."""
         k = self.key(train)
         if k not in self._sums:
-            g = self.grams
-            self._sums[k] = (g.G[train].sum(0), g.b[train].sum(0), float(g.yy[train].sum()))
+            self._sums[k] = self.grams.sum(train)
         return self._sums[k]
 
     def beta(self, train: np.ndarray) -> np.ndarray:

@@ -19,14 +19,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.reduction import group_normal_equations
 from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
 from .data import DiagnoseData
 
-__all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "Grams", "FittedState", "fit_state",
+__all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "FittedState", "fit_state",
            "state_from_model", "LINEAR", "solve_normal", "predict_model", "nonlinear_parameters"]
 
 _TWO_PI = 2.0 * math.pi
@@ -415,29 +414,6 @@ class State:
 
     def block(self, uid: int) -> Block | None:
         return next((b for b in self.blocks if b.uid == uid), None)
-
-
-@dataclass
-class Grams:
-    """Per-group normal equations of columns ``X`` and observations ``y`` (groups of ``dd``)."""
-
-    G: np.ndarray    # (ng, p, p)
-    b: np.ndarray    # (ng, p)
-    yy: np.ndarray   # (ng,)
-    n: np.ndarray    # (ng,)
-
-    @classmethod
-    def of(cls, X: np.ndarray, y: np.ndarray, dd: DiagnoseData) -> "Grams":
-        G, b, yy = group_normal_equations(X, y, dd.starts, dd.stops)
-        return cls(G, b, yy, (dd.stops - dd.starts).astype(float))
-
-    @staticmethod
-    def cross(X: np.ndarray, C: np.ndarray, dd: DiagnoseData) -> np.ndarray:
-        """Per-group ``X_g^T C_g``: (ng, p, q)."""
-        out = np.empty((dd.n_groups, X.shape[1], C.shape[1]))
-        for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
-            out[g] = X[a:z].T @ C[a:z]
-        return out
 
 
 def solve_normal(G: np.ndarray, b: np.ndarray, rcond: float = 1e-10, reference: np.ndarray | None = None
