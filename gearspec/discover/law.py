@@ -113,23 +113,33 @@ def _layout(parts, m: Moments) -> _Layout:
     return _Layout(cols, nl, np.array(lo), np.array(hi))
 
 
-def _multipliers(parts, lay: _Layout, m: Moments, z: np.ndarray, deriv: bool = False):
-    """(S, p) per-segment multipliers of the law's columns for nonlinear parameters exp(z); with
-    ``deriv`` also their derivatives with respect to each z (a list of (columns, (S, n)) pairs)."""
-    A = np.empty((m.S, len(lay.cols)))
-    dA = [[] for _ in lay.nl]
+def _slots(parts, lay: _Layout, m: Moments) -> list:
+    """Per (part, slot) of a law: its columns, magnitude function, per-segment sign, index of its
+    nonlinear parameter in ``z`` (None: fixed) and fixed value; what :func:`_multipliers` needs,
+    computed once per fit rather than at every evaluation of the optimiser."""
     zpos = {key: k for k, key in enumerate(lay.nl)}
     d = m.direction.astype(float)
+    out = []
     for key in dict.fromkeys((i, sl) for i, sl, _ in lay.cols):
         i, sl = key
-        p, k = parts[i], zpos.get(key)
-        pv = p.param0 if k is None else math.exp(z[k])
+        p = parts[i]
         sgn = np.ones(m.S) if p.fam.basis == "acc" else (d if sl == 0 else sl * (m.direction == sl))
         cols = [j for j, (ii, ss, _) in enumerate(lay.cols) if (ii, ss) == key]
-        A[:, cols] = (sgn * p.fam.magnitude(m.speed, pv))[:, None]
+        out.append((cols, p.fam.magnitude, sgn, zpos.get(key), p.param0))
+    return out
+
+
+def _multipliers(parts, lay: _Layout, m: Moments, z: np.ndarray, deriv: bool = False, slots=None):
+    """(S, p) per-segment multipliers of the law's columns for nonlinear parameters exp(z); with
+    ``deriv`` also their derivatives with respect to each z (a list of (columns, (S, n)) pairs).
+    ``slots``: :func:`_slots` of these parts, layout and moments (computed when not given)."""
+    A = np.empty((m.S, len(lay.cols)))
+    dA = [[] for _ in lay.nl]
+    for cols, mag, sgn, k, p0 in (slots if slots is not None else _slots(parts, lay, m)):
+        pv = p0 if k is None else math.exp(z[k])
+        A[:, cols] = (sgn * mag(m.speed, pv))[:, None]
         if deriv and k is not None:
             h = 1e-6
-            mag = p.fam.magnitude
             dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
             dA[k] = [(j, dcol) for j in cols]
     return (A, dA) if deriv else A
@@ -242,13 +252,14 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     kidx = _basis_index(lay, m)
     Pk = m.P[:, :, kidx]                     # (S, K, p)
     ncol = len(lay.cols)
+    slots = _slots(parts, lay, m)
     cache = {}
 
     def state(zz):
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
-            A, dA = _multipliers(parts, lay, m, zz, deriv=True)
+            A, dA = _multipliers(parts, lay, m, zz, deriv=True, slots=slots)
             X = (A[:, None, :] * Pk).reshape(-1, ncol)
             w, U = _solve(X, q)
             cache[key] = (X, w, U, dA)
@@ -259,7 +270,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         return q - X @ w
 
     def sse_at(zz):
-        A = _multipliers(parts, lay, m, zz)
+        A = _multipliers(parts, lay, m, zz, slots=slots)
         X = (A[:, None, :] * Pk).reshape(-1, ncol)
         r = q - X @ _solve(X, q)[0]
         return float(r @ r)
