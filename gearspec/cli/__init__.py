@@ -25,9 +25,17 @@ COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gea
 MAX_MESSAGE = 600
 
 
+_SHOWN: set = set()
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """One line a warning; the same sentence once per command (a finding about the data, such as
+    an inverted torque sign, reached by each of the models a command fits)."""
     prefix = "gearspec: warning" if issubclass(category, GearspecWarning) else f"warning: {category.__name__}"
-    print(f"{prefix}: {_one_line(message)}", file=sys.stderr if file is None else file)
+    text = f"{prefix}: {_one_line(message)}"
+    if text not in _SHOWN:
+        _SHOWN.add(text)
+        print(text, file=sys.stderr if file is None else file)
 
 
 def _one_line(message) -> str:
@@ -258,6 +266,7 @@ def main(argv=None) -> int:
     import numpy as np
 
     with warnings.catch_warnings(), np.errstate(all="ignore"):
+        _SHOWN.clear()
         warnings.showwarning = _show_warning
         warnings.simplefilter("always", GearspecWarning)
         # numerical noise of runs that succeed (empty means, 0/0 already handled) is not the

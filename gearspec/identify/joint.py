@@ -40,7 +40,7 @@ from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, p
 from .stats import speed_ranges
 from .validate import _safe_rmse, holdout
 
-__all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous"]
+__all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous", "inverted_sign"]
 
 
 # ---------------------------------------------------------------------- the joint fit of one direction
@@ -255,6 +255,34 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
     return P
 
 
+def _flag(model: FrictionModel, key: str, msg: str) -> None:
+    """One sentence into ``model.meta["flags"][key]`` and ``model.notes`` (``warning: ...``)."""
+    model.meta.setdefault("flags", {})[key] = msg
+    if "warning: " + msg not in model.notes:
+        model.notes.append("warning: " + msg)
+
+
+def inverted_sign(model: FrictionModel, data: FitData) -> list[str]:
+    """Flag friction opposite to the velocity in most segments: a segment whose mean friction
+    magnitude (``level`` of :meth:`FitData.plateaus`) lies more than two standard errors below 0
+    counts, and more than half of the segments counting is no friction a drive can have (it
+    dissipates: the torque it needs has the sign of the motion) but a torque channel logged with
+    the opposite sign convention.  One sentence with the fix, flagged as :func:`negative_viscous`
+    does (``"sign"``); returns it in a list (empty when the data look right)."""
+    pl = data.plateaus()
+    if pl.empty:
+        return []
+    wrong = int(np.sum(pl["level"] + 2 * pl["level_se"].fillna(np.inf) < 0))
+    if not wrong > len(pl) / 2:
+        return []
+    tu = "Nm" if data.unit == "rad" else "N"
+    msg = (f"friction opposes the velocity in {wrong} of {len(pl)} segments (median level "
+           f"{float(np.median(pl['level'])):.3g} {tu}): the torque's sign is likely inverted relative to the "
+           f"velocity; rerun with --scale torque=-1")
+    _flag(model, "sign", msg)
+    return [msg]
+
+
 def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
     """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard errors
     below 0) of each direction: friction that falls with speed over the whole measured range is
@@ -263,7 +291,7 @@ def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[
     sentence, added to ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]``
     (``"direction.parameter" -> sentence``); returns the sentences."""
     out = []
-    flags = model.meta.setdefault("flags", {})
+    model.meta.setdefault("flags", {})
     su = "rad/s" if model.unit == "rad" else "m/s"
     for dname, p in model.directions.items():
         for k in ("viscous", "b"):
@@ -283,10 +311,7 @@ def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[
             msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
                    f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
                    f"tell viscous from Stribeck friction")
-            flags[f"{dname}.{k}"] = msg
-            note = "warning: " + msg
-            if note not in model.notes:
-                model.notes.append(note)
+            _flag(model, f"{dname}.{k}", msg)
             out.append(msg)
     return out
 
@@ -532,7 +557,7 @@ class JointFit:
                               not_identified=not_identified, notes=notes, name=self.name or law,
                               meta={"fit": settings})
         model.rmse = _safe_rmse(model, data)
-        flags = negative_viscous(model, data)
+        flags = inverted_sign(model, data) + negative_viscous(model, data)
         if self.check:
             for msg in flags:
                 _warn(msg)
