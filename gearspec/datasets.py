@@ -1,8 +1,10 @@
 """The registry of real, measured data sets (:data:`REGISTRY`): files with their SHA-256 checksums,
 source, licence, download URL where one exists, and how to load each.  The files are never part of
-the package.  A set lives in a folder of its name under ``$GEARSPEC_DATA`` (if set), then the user
-cache ``pooch.os_cache("gearspec")`` (where :func:`fetch` downloads); the first holding all its
-files is used, and every file is checked against its checksum before it is read.
+the package.  A set lives in a folder of its name under ``$GEARSPEC_DATA`` (if set), then
+``../shared/datasets`` from the folder gearspec runs in (the data beside a project checkout, when
+that folder exists), then the user cache ``pooch.os_cache("gearspec")`` (where :func:`fetch`
+downloads); the first holding all its files is used, and every file is checked against its
+checksum before it is read.  Nothing is downloaded unless asked (``fetch``, ``download=True``).
 
 >>> rec = datasets.load("kinova_gen3_joint7", part=["0.3", "0.5"])   # doctest: +SKIP
 >>> datasets.commanded_velocity(rec)               # {0: 0.3, 1: 0.5}  # doctest: +SKIP
@@ -240,15 +242,27 @@ def _env_dir() -> Path | None:
     return Path(value).expanduser() if value else None
 
 
+#: the default folder of the data sets beside a project checkout, from the working folder
+SHARED = Path("..") / "shared" / "datasets"
+
+
+def shared_dir() -> Path | None:
+    """``../shared/datasets`` from the working folder, resolved, when it exists (else None)."""
+    p = (Path.cwd() / SHARED).resolve()
+    return p if p.is_dir() else None
+
+
 def data_dir() -> Path:
-    """The first folder searched: ``$GEARSPEC_DATA`` if set, else the user cache."""
-    return _env_dir() or cache_dir()
+    """The first folder searched (see :func:`search_path`)."""
+    return search_path()[0][0]
 
 
 def search_path() -> list[tuple[Path, str]]:
-    """The folders searched for data sets, in order, each with what it is."""
-    env = _env_dir()
-    return ([] if env is None else [(env, ENV_VAR)]) + [(cache_dir(), "user cache")]
+    """The folders searched for data sets, in order, each with what it is: ``$GEARSPEC_DATA`` (if
+    set), ``../shared/datasets`` (if it exists), the user cache."""
+    env, shared = _env_dir(), shared_dir()
+    return ([] if env is None else [(env, ENV_VAR)]) + ([] if shared is None else [(shared, str(SHARED))]) \
+        + [(cache_dir(), "user cache")]
 
 
 def _locate(ds: DataSet) -> tuple[Path | None, list[tuple[Path, str, list[str]]]]:

@@ -25,11 +25,16 @@ needs_real = pytest.mark.skipif(not HAVE_REAL, reason=f"real data sets not found
                                 "(set GEARSPEC_DATA to the folder holding emps/, kinova_gen3_joint7/, ...)")
 
 
+#: the module's own search of ../shared/datasets (every test but these sees none: see isolated)
+REAL_SHARED_DIR = datasets.shared_dir
+
+
 @pytest.fixture(autouse=True)
 def isolated(tmp_path, monkeypatch):
     """Every test gets its own empty user cache and no network: pooch.retrieve fails if called."""
     cache = tmp_path / "user-cache"
     monkeypatch.setattr(datasets, "cache_dir", lambda: cache)
+    monkeypatch.setattr(datasets, "shared_dir", lambda: None)     # no ../shared/datasets either
     monkeypatch.delenv("GEARSPEC_DATA", raising=False)
 
     def no_network(*args, **kwargs):
@@ -86,9 +91,37 @@ def test_describe():
     assert "no source URL" in datasets.describe("harmonic_drive_catalog")
 
 
-def test_module_reads_no_shared_folder():
+def test_module_holds_no_machine_path_only_the_documented_relative_default():
     source = Path(datasets.__file__).read_text()
-    assert "/work/" not in source and "shared" not in source
+    assert "/work/" not in source
+    assert datasets.SHARED == Path("..") / "shared" / "datasets"
+
+
+def test_the_data_beside_a_checkout_are_found_without_configuration(monkeypatch, tmp_path, isolated, capsys):
+    # a project checkout with the data sets beside it: tmp/project and tmp/shared/datasets
+    project, shared = tmp_path / "project", tmp_path / "shared" / "datasets"
+    project.mkdir()
+    monkeypatch.chdir(project)
+    monkeypatch.setattr(datasets, "shared_dir", REAL_SHARED_DIR)
+    assert [w for _, w in datasets.search_path()] == ["user cache"]          # no such folder: not searched
+    from gearspec.cli import main
+    assert main(["data", "list"]) == 0                                        # nothing found: a hint, no network
+    out = capsys.readouterr().out
+    assert "No data set found" in out and "GEARSPEC_DATA" in out and "gearspec data fetch" in out
+    shared.mkdir(parents=True)
+    assert datasets.search_path() == [(shared.resolve(), str(datasets.SHARED)), (isolated, "user cache")]
+    monkeypatch.setenv("GEARSPEC_DATA", str(tmp_path / "mine"))              # the variable comes first
+    assert [p for p, _ in datasets.search_path()] == [tmp_path / "mine", shared.resolve(), isolated]
+    assert datasets.data_dir() == tmp_path / "mine"
+
+
+def test_shared_dir_is_the_relative_default_when_it_exists(monkeypatch, tmp_path):
+    (tmp_path / "shared" / "datasets").mkdir(parents=True)
+    (tmp_path / "project").mkdir()
+    monkeypatch.chdir(tmp_path / "project")
+    assert REAL_SHARED_DIR() == (tmp_path / "shared" / "datasets").resolve()
+    monkeypatch.chdir(tmp_path)
+    assert REAL_SHARED_DIR() is None
 
 
 def test_locations(monkeypatch, tmp_path, isolated):

@@ -19,7 +19,12 @@ def run(args) -> int:
     from .. import datasets
 
     if args.action == "list":
-        print(datasets.list_datasets().to_string(index=False))
+        table = datasets.list_datasets()
+        print(table.to_string(index=False))
+        if not table["present"].any():
+            print("\nNo data set found; searched: " + ", ".join(f"{p} ({w})" for p, w in datasets.search_path())
+                  + f". Set {datasets.ENV_VAR} to the folder holding emps/, kinova_gen3_joint7/, ..., or run "
+                  "`gearspec data fetch NAME` to download one (the only command that uses the network).")
     elif args.action == "describe":
         print(datasets.describe(args.name))
     elif args.action == "fetch":
