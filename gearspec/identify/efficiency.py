@@ -66,7 +66,7 @@ def fit_efficiency(data: FitData, law: str = "lola8", *, ratio: float, init: Fri
         except InputError:
             src = None
     if src is not None:
-        x0 = np.array([src.params("positive")[k] for k in names], float)
+        x0 = np.array([src.params("positive").values[k] for k in names], float)
     else:
         guess = {"t_f0": float(np.median(tau_implied)), "mu": 1e-3, "b": 1e-4, "gamma": 0.0,
                  "t_fs": float(np.median(tau_implied)), "v_s": float(np.median(v))}

@@ -295,10 +295,10 @@ def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[
     su = "rad/s" if model.unit == "rad" else "m/s"
     for dname, p in model.directions.items():
         for k in ("viscous", "b"):
-            val = p.get(k)
+            val = p.values.get(k)
             if k not in model.law_spec.params or val is None or not val < 0:
                 continue
-            se = p.get(k + "_se")
+            se = p.se.get(k)
             # a value within two standard errors of 0 is no finding (and none without an error)
             if se is None or not np.isfinite(se) or not val < -2 * se:
                 continue
