@@ -11,11 +11,11 @@ import pandas as pd
 
 from .errors import InputError
 from .recording import Recording
-from .segment import Segmentation, derivatives, find_segments
+from .segment import Segmentation, derivatives, find_segments, free_motion
 
 __all__ = ["FitData"]
 
-_ARRAYS = ("theta", "v", "y", "acc", "load", "temperature", "t", "run", "segment", "direction")
+_ARRAYS = ("theta", "v", "y", "acc", "load", "temperature", "t", "run", "segment", "direction", "group")
 
 
 @dataclass
@@ -23,9 +23,11 @@ class FitData:
     """Samples for identification, arrays of one length (optional channels None): ``theta`` rad (m);
     ``v`` the laws' velocity, rad/s (segment mean or measured); ``y`` friction torque, Nm (N), with
     the sign of the motion (``J thetadd`` removed when the gear gives ``J``); ``acc`` rad/s^2;
-    ``load`` Nm, ``temperature`` degC, ``t`` s; ``run``, ``segment`` ids; ``direction`` +1 / -1.
-    ``segments``: one row per segment (``segment, run, direction, speed, velocity, n``, and ``t0, t1,
-    kind``: "plateau" or "quasi_static")."""
+    ``load`` Nm, ``temperature`` degC, ``t`` s; ``run``, ``segment`` ids; ``direction`` +1 / -1;
+    ``group``: the held-out unit of "segment" cross-validation (the segment, or for blocks of free
+    motion their whole stretch of motion; None: the segment).  ``segments``: one row per segment
+    (``segment, run, direction, speed, velocity, n``, and ``t0, t1, kind``: "plateau",
+    "quasi_static" or "free").  ``inertia``: the ``J`` removed from ``y`` (None: none removed)."""
 
     theta: np.ndarray | None
     v: np.ndarray
@@ -37,7 +39,9 @@ class FitData:
     run: np.ndarray | None = None
     segment: np.ndarray | None = None
     direction: np.ndarray | None = None
+    group: np.ndarray | None = None
     unit: str = "rad"
+    inertia: float | None = None
     segments: pd.DataFrame = field(default_factory=pd.DataFrame)
     notes: list = field(default_factory=list)
     #: per-segment results computed once (keyed by what), shared with subsets (segments keep their ids)
@@ -62,9 +66,12 @@ class FitData:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, velocity: str = "segment",
-                       inertia: bool = True, load_ratio: float | None = None, **segment_options) -> "FitData":
-        """Samples inside the constant-speed segments of ``rec`` (``segmentation`` default:
-        :func:`~gearspec.segment.find_segments` with ``segment_options``).
+                       inertia: bool = True, load_ratio: float | None = None, motion: str = "plateaus",
+                       **segment_options) -> "FitData":
+        """Samples inside the segments of ``rec`` (``segmentation`` default:
+        :func:`~gearspec.segment.find_segments` with ``segment_options``, then free-motion blocks by
+        :func:`~gearspec.segment.free_motion` with ``motion``: "plateaus", "auto" or "free").
+        A free-motion block's velocity is its mean, its acceleration sample by sample.
 
         ``velocity``: ``"segment"`` (each segment's mean: robust to speed ripple and encoder noise,
         as the papers do) or ``"measured"`` (the ``velocity`` channel, else a Savitzky-Golay
@@ -74,15 +81,20 @@ class FitData:
         """
         if velocity not in ("segment", "measured"):
             raise InputError(f"velocity must be 'segment' or 'measured', got '{velocity}'")
-        seg = segmentation if segmentation is not None else find_segments(rec, **segment_options)
+        seg = segmentation if segmentation is not None else \
+            free_motion(rec, find_segments(rec, **segment_options), motion=motion)
         if len(seg) == 0:
-            raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found (rows: {dict(seg.excluded)})")
+            raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment or free motion found "
+                             f"(rows: {dict(seg.excluded)})")
         vel, acc = derivatives(rec)
         J = rec.gear.inertia if (inertia and rec.gear is not None and rec.gear.inertia) else None
         tau = rec.tau
         idx = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
         sid = np.concatenate([np.full(s.n, i) for i, s in enumerate(seg.segments)])
         d = np.concatenate([np.full(s.n, s.direction, np.int8) for s in seg.segments])
+        # held-out unit: the segment; a block of free motion: its stretch (numbered after the segments)
+        S = len(seg.segments)
+        group = np.concatenate([np.full(s.n, i if s.unit < 0 else S + s.unit) for i, s in enumerate(seg.segments)])
         # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
         # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
         qs = np.concatenate([np.full(s.n, s.kind == "quasi_static") for s in seg.segments])
@@ -104,6 +116,12 @@ class FitData:
                  "n": s.n, "t0": float(rec.t[s.start]), "t1": float(rec.t[s.stop - 1]), "kind": s.kind}
                 for i, s in enumerate(seg.segments)]
         notes.insert(0, f"{len(idx)} samples in {len(seg)} segments; velocity: {velocity}")
+        n_free = sum(s.kind == "free" for s in seg.segments)
+        if n_free:
+            stretches = len({s.unit for s in seg.segments if s.kind == "free"})
+            notes.append(f"free motion: {n_free} blocks of nearly constant speed in {stretches} stretches of motion "
+                         f"({sum(s.n for s in seg.segments if s.kind == 'free')} rows; each law evaluated at a "
+                         f"block's mean speed, positions and accelerations sample by sample)")
         n_qs = sum(s.kind == "quasi_static" for s in seg.segments)
         if n_qs:
             notes.append(f"{n_qs} quasi-static sweep(s) ({int(qs.sum())} rows taken at rest): torque against "
@@ -114,8 +132,8 @@ class FitData:
         if J:
             notes.append(f"inertia removed: tau - {J:g} x thetadd" + (" (plateaus only)" if n_qs else ""))
         return cls(theta=rec.theta[idx], v=v, y=y, acc=a, load=get("load"), temperature=get("temperature"),
-                   t=rec.t[idx], run=rec.run[idx], segment=sid, direction=d, unit=rec.unit,
-                   segments=pd.DataFrame(rows), notes=notes)
+                   t=rec.t[idx], run=rec.run[idx], segment=sid, direction=d, group=group, unit=rec.unit,
+                   segments=pd.DataFrame(rows), notes=notes, inertia=J)
 
     @classmethod
     def from_points(cls, v, y, *, load=None, temperature=None, theta=None, unit: str = "rad") -> "FitData":
@@ -139,6 +157,11 @@ class FitData:
     def n_segments(self) -> int:
         return int(len(np.unique(self.segment)))
 
+    @property
+    def free_motion(self) -> bool:
+        """Whether the data hold blocks of free motion (segments of kind "free")."""
+        return bool(len(self.segments)) and "kind" in self.segments and bool((self.segments["kind"] == "free").any())
+
     def inputs(self) -> dict:
         """Keyword inputs of :meth:`gearspec.model.FrictionModel.evaluate`."""
         return {"theta": self.theta, "v": self.v, "load": self.load, "temperature": self.temperature,
@@ -157,9 +180,13 @@ class FitData:
         return self.subset(self.direction == direction)
 
     def groups(self, by: str = "segment") -> np.ndarray:
-        """Group id per sample for held-out folds: ``"segment"`` or ``"run"``."""
-        if by in ("segment", "run"):
-            return getattr(self, by)
+        """Group id per sample for held-out folds: ``"segment"`` (blocks of free motion: their whole
+        stretch of motion) or ``"run"``."""
+        if by == "segment":
+            group = getattr(self, "group", None)  # (discover's Moments borrow this rule: no blocks there)
+            return self.segment if group is None else group
+        if by == "run":
+            return self.run
         raise InputError(f"held-out groups must be 'segment' or 'run', got '{by}'")
 
     def plateaus(self, blocks: int = 8) -> pd.DataFrame:

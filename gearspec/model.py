@@ -344,12 +344,17 @@ class FrictionModel:
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict:
-        """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready."""
-        return plain({"law": self.law, "name": self.name, "unit": self.unit,
-                      "directions": {d: p.to_dict() for d, p in self.directions.items()}, "terms": self.terms,
-                      "rmse": self.rmse, "rmse_holdout": self.rmse_holdout,
-                      "rmse_holdout_reason": self.rmse_holdout_reason,
-                      "not_identified": self.not_identified, "notes": self.notes, "meta": self.meta})
+        """The ``gearspec fit --json`` form (CONTRACTS.md section 4), JSON-ready; an identified
+        inertia (one ``inertia`` term for both directions, with its ``inertia_se``) also as
+        ``inertia``, ``inertia_se``."""
+        d = {"law": self.law, "name": self.name, "unit": self.unit,
+             "directions": {d: p.to_dict() for d, p in self.directions.items()}, "terms": self.terms,
+             "rmse": self.rmse, "rmse_holdout": self.rmse_holdout, "rmse_holdout_reason": self.rmse_holdout_reason,
+             "not_identified": self.not_identified, "notes": self.notes, "meta": self.meta}
+        inertia = [t for t in self.terms if t.get("kind") == "inertia" and not t.get("direction") and "inertia_se" in t]
+        if len(inertia) == 1:
+            d["inertia"], d["inertia_se"] = inertia[0]["inertia"], inertia[0].get("inertia_se")
+        return plain(d)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "FrictionModel":

@@ -32,7 +32,7 @@ def test_get_params_round_trip_and_set_params():
     est = JointFit("stribeck", **SETTINGS)
     p = est.get_params()
     assert list(p) == ["law", "harmonics", "gear", "weights", "se", "bootstrap", "min_cycles", "holdout", "folds",
-                       "init", "seed", "name", "check"]
+                       "init", "seed", "name", "check", "inertia"]
     assert p["law"] == "stribeck" and p["weights"] == "uniform" and p["min_cycles"] == 2.0 and p["se"] == "covariance"
     assert JointFit(**p).get_params() == p
     assert est.set_params(folds=3, seed=7) is est
@@ -58,7 +58,7 @@ def test_fit_recovers_the_truth_and_records_its_settings(data):
         assert p["v_s"] == pytest.approx(TRUTH["v_s"], rel=0.05)
         assert p["harmonics"][0]["amplitude"] == pytest.approx(0.01, rel=0.03)
     assert m.meta["fit"] == {"law": "silo4", "harmonics": [LINE], "weights": "uniform", "se": "covariance",
-                             "min_cycles": 2.0, "bootstrap": 200}
+                             "min_cycles": 2.0, "bootstrap": 200, "inertia": "auto"}
     rebuilt = JointFit.from_model(m).get_params()
     assert rebuilt == {**JointFit().get_params(), "law": "silo4", "harmonics": [LINE], "weights": "uniform",
                        "min_cycles": 2.0, "name": "twin fit"}
@@ -85,7 +85,7 @@ def test_refit_equals_a_fresh_fit_with_the_same_settings(data):
 
 
 def test_unknown_setting_and_missing_settings_are_one_sentence_errors(data):
-    with pytest.raises(InputError, match=r"^JointFit has no setting 'lines' \(settings: law, harmonics, .*check\)$"):
+    with pytest.raises(InputError, match=r"^JointFit has no setting 'lines' \(settings: law, harmonics, .*check, inertia\)$"):
         JointFit().set_params(lines=[1.0])
     m = identify.fit(data, "stribeck", holdout=None)
     with pytest.raises(InputError, match="no setting 'lines'"):

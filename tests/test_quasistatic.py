@@ -166,9 +166,10 @@ def test_fit_cli_gives_levels_and_lines_and_no_speed_law(tmp_path, capsys):
     # auto-detection and --quasi-static give the same
     rc2, d2 = _fit_cli(tmp_path, csv, "--quasi-static")
     assert rc2 == 0 and d2["directions"] == d["directions"]
-    # and without quasi-static segments there is nothing to fit: one sentence, exit 2
+    # and without quasi-static segments (and free motion: rows stored at rest are not a motion)
+    # there is nothing to fit: one sentence, exit 2
     capsys.readouterr()
-    rc3, _ = _fit_cli(tmp_path, csv, "--no-quasi-static")
+    rc3, _ = _fit_cli(tmp_path, csv, "--no-quasi-static", "--motion", "plateaus")
     assert rc3 == 2 and _one_sentence(capsys.readouterr().err)
 
 

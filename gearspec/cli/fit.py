@@ -32,8 +32,8 @@ def law_choices(*first: str) -> tuple[str, ...]:
 
 def register(sub) -> None:
     p = analysis_parser(sub, "fit", run, help="identify a friction law (SILO4 eq. 11, eq. 3, Lola laws 8 and 11)",
-                        description="Identify a friction law per direction from the constant-speed segments of a "
-                                    "recording: the joint weighted least-squares fit beside the published procedure "
+                        description="Identify a friction law per direction from the constant-speed segments and "
+                                    "the free motion (ramps, moves, chirps) of a recording: the joint weighted least-squares fit beside the published procedure "
                                     "and simpler laws, with standard errors and held-out errors.")
     g = p.add_argument_group("fit")
     g.add_argument("--law", default="silo4", choices=law_choices("silo4", "stribeck", "lola8", "lola11"),
@@ -46,6 +46,10 @@ def register(sub) -> None:
     g.add_argument("--folds", type=number(2, 100, integer=True), default=5, help="cross-validation folds (default 5)")
     g.add_argument("--se", default="covariance", choices=("covariance", "bootstrap"),
                    help="standard errors from the fit's covariance (default) or a bootstrap over segments")
+    g.add_argument("--motion", default="auto", choices=("auto", "plateaus", "free"),
+                   help="what to fit: auto (default: plateaus and sweeps, plus free motion -- ramps, moves, chirps -- "
+                        "when it holds most of the moving rows; the inertia is then identified unless the "
+                        "gear spec gives it), plateaus (plateaus and sweeps only), free (every moving row)")
     g.add_argument("--no-published", action="store_true", help="skip the SILO4 published procedure")
     g.add_argument("--load-ratio", type=POSITIVE, metavar="N",
                    help="subtract |load|/N from the torque (default for lola laws: the gear's total ratio)")
@@ -61,7 +65,7 @@ def run(args) -> int:
     harmonics = parse_lines(args.lines)
     result = identify_recording(rec, args.law, segmentation=seg, harmonics=harmonics,
                                 published=False if args.no_published else None, holdout=args.holdout,
-                                folds=args.folds, se=args.se, load_ratio=args.load_ratio)
+                                folds=args.folds, se=args.se, load_ratio=args.load_ratio, motion=args.motion)
     stages(args).done(f"fitted {args.law}")
     if args.json:
         write_json(args.json, result.to_dict(), rec, json.dumps)

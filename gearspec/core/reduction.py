@@ -26,14 +26,41 @@ def normal_equations(X, y) -> tuple[np.ndarray, np.ndarray, float]:
     return X.T @ X, X.T @ y, float(y @ y)
 
 
+#: groups of at least this many rows are reduced one by one (BLAS); smaller ones together
+_BATCH_BELOW = 4096
+#: rows x p^2 products held at once when small groups are reduced together
+_BATCH_CELLS = 4_000_000
+
+
 def group_normal_equations(X, y, starts, stops) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`normal_equations` of every contiguous group ``[starts[g], stops[g])`` of the rows:
-    ``G`` (groups, p, p), ``b`` (groups, p), ``yy`` (groups,)."""
+    ``G`` (groups, p, p), ``b`` (groups, p), ``yy`` (groups,).  Large groups one by one, small ones
+    (free-motion blocks: thousands of a few rows each) summed together, a bounded number of rows
+    at a time; empty groups give zeros."""
     X = np.asarray(X, dtype=float)
+    y = np.asarray(y, dtype=float)
+    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
     ng, p = len(starts), X.shape[1]
-    G, b, yy = np.empty((ng, p, p)), np.empty((ng, p)), np.empty(ng)
-    for g, (a, z) in enumerate(zip(starts, stops)):
+    G, b, yy = np.zeros((ng, p, p)), np.zeros((ng, p)), np.zeros(ng)
+    size = stops - starts
+    for g in np.flatnonzero(size >= _BATCH_BELOW):
+        a, z = starts[g], stops[g]
         G[g], b[g], yy[g] = normal_equations(X[a:z], y[a:z])
+    small = np.flatnonzero((size > 0) & (size < _BATCH_BELOW))
+    rows_per = max(_BATCH_CELLS // max(p * p, 1), _BATCH_BELOW)
+    i = 0
+    while i < len(small):
+        # a run of small groups holding at most rows_per rows (at least one group)
+        cum = np.cumsum(size[small[i:]])
+        j = i + max(int(np.searchsorted(cum, rows_per, side="right")), 1)
+        grp = small[i:j]
+        idx = np.concatenate([np.arange(starts[g], stops[g]) for g in grp])
+        at = np.concatenate(([0], np.cumsum(size[grp])[:-1]))
+        Xg, yg = X[idx], y[idx]
+        G[grp] = np.add.reduceat(Xg[:, :, None] * Xg[:, None, :], at, axis=0)
+        b[grp] = np.add.reduceat(Xg * yg[:, None], at, axis=0)
+        yy[grp] = np.add.reduceat(yg * yg, at)
+        i = j
     return G, b, yy
 
 
@@ -121,9 +148,9 @@ class GroupNormals:
         return P, q, np.maximum(self.yy - np.sum(q * q, axis=1), 0.0)
 
 
-def harmonic_columns(theta, frequencies) -> tuple[np.ndarray, np.ndarray]:
+def harmonic_columns(theta, frequencies, center=None) -> tuple[np.ndarray, np.ndarray]:
     """``sin`` and ``cos`` of ``2 pi f theta`` for the positions of one group, phases about the
-    group's mean position.
+    group's mean position (``center``: that position per sample, for many groups at once).
 
     The phase is computed from positions centred on the group (``theta - m``, exact in double
     precision even far from the origin) and rotated back to ``theta = 0``:
@@ -136,6 +163,8 @@ def harmonic_columns(theta, frequencies) -> tuple[np.ndarray, np.ndarray]:
         Positions of the group's samples (rad or m).
     frequencies : array_like, (K,)
         Frequencies in cycles per unit of ``theta``.
+    center : array_like, (n,), optional
+        The centre of each sample's group (default: the mean of ``theta``, one group).
 
     Returns
     -------
@@ -143,8 +172,8 @@ def harmonic_columns(theta, frequencies) -> tuple[np.ndarray, np.ndarray]:
     """
     th = np.asarray(theta, dtype=float)
     freqs = np.asarray(frequencies, dtype=float)
-    m = th.mean()
-    ph = _TWO_PI * np.outer(th - m, freqs)
+    m = th.mean() if center is None else np.asarray(center, dtype=float)[:, None]
+    ph = _TWO_PI * (np.outer(th - m, freqs) if center is None else (th[:, None] - m) * freqs)
     sn, cs = np.sin(ph), np.cos(ph)
     rot = _TWO_PI * freqs * m
     c, s = np.cos(rot), np.sin(rot)

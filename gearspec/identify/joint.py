@@ -24,7 +24,7 @@ import inspect
 import math
 import sys
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import numpy as np
@@ -67,12 +67,15 @@ class _Problem:
                                 for k, law in enumerate(self.amp_law)]) if self.K else np.ones((len(sp), 0))
 
     def design(self, nonlin_base, decays):
-        """M (S, P, L): local coefficients = M @ lin, lin = [base lin..., a_1, c_1, ...]."""
+        """M (S, P, L): local coefficients = M @ lin, lin = [base lin..., a_1, c_1, ..., (J)]: the
+        inertia J, when identified, is the coefficient of the last local column in every segment."""
         st = self.stats
         S, P = st.g.shape
         nb = len(self.basis.lin)
-        L = nb + 2 * self.K
+        L = nb + 2 * self.K + int(st.acc)
         M = np.zeros((S, P, L))
+        if st.acc:
+            M[:, P - 1, L - 1] = 1.0
         if nb:
             M[:, 0, :nb] = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
         fac = self.factors(decays) * st.sampled
@@ -317,11 +320,12 @@ def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[
 
 
 def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
-                       bootstrap, seed):
-    """One direction's fit: ``(parameters, not_identified, notes)``."""
+                       bootstrap, seed, acc: bool = False):
+    """One direction's fit: ``(parameters, not_identified, notes, inertia)``; ``acc``: the inertia
+    is identified with the friction (``inertia``: its ``(value, se)``, else None)."""
     notes: list[str] = []
     ni: dict[str, str] = {}
-    stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
+    stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles, acc=acc)
     # harmonics that the segments do not cover by one cycle together cannot be identified: left out
     total = np.where(stats.active, stats.cycles, 0.0).sum(axis=0) if len(specs) else np.zeros(0)
     keep = [k for k in range(len(specs)) if total[k] >= 1.0]
@@ -333,17 +337,22 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
                                     f"{1 / specs[k]['frequency']:.4g} {sub.unit} of travel")
     if len(keep) < len(specs):
         specs = [specs[k] for k in keep]
-        stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles)
+        stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles, acc=acc)
     # a decay needs the line measured on its own (a whole cycle in a segment) at two speeds or
     # more: a line seen only in partial cycles shifts segment levels, which the speed law could
     # trade against a speed-dependent amplitude; it keeps a constant amplitude (SILO4 eq. 6)
     specs = [dict(h) for h in specs]
     if len(sub.segments) and "kind" in sub.segments and bool((sub.segments["kind"] == "quasi_static").all()):
-        return _quasi_static_direction(sub, stats, law, specs, dname, ni, notes, weights)
+        return (*_quasi_static_direction(sub, segment_stats(sub, [h["frequency"] for h in specs],
+                                                            min_cycles=min_cycles), law, specs, dname, ni, notes,
+                                         weights), None)
+    ranges = speed_ranges(stats)
     for k, h in enumerate(specs):
         whole = stats.sampled[:, k] & (stats.cycles[:, k] >= 1.0)
         speeds = np.unique(np.round(stats.speed[whole], 9))
-        if len(speeds) < 2 and h.get("decay", True) is not False and h.get("law", "exp") != "const":
+        # free motion: a cycle of the line at each end of a range of speeds is two speeds
+        pooled = stats.free is not None and np.isfinite(ranges[k, 1]) and ranges[k, 1] > ranges[k, 0]
+        if len(speeds) < 2 and not pooled and h.get("decay", True) is not False and h.get("law", "exp") != "const":
             h["decay"] = False
             lab = h.get("label") or f"{h['frequency']:.6g}"
             ni[f"{dname}.{lab}.decay"] = (f"the line completes a cycle within a segment at {len(speeds)} speed(s) "
@@ -391,14 +400,17 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
                    f"{V['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
                    f"{hump:.3g} +- {P.se[top]:.2g}); record slower plateaus")
             reduced = LAWS[law].degraded_for("v_s")
-            prob2 = _make_problem(stats, reduced.name, specs, weights)
-            P = _direction_params(prob2, _fit_direction(prob2, init=init))
+            prob = _make_problem(stats, reduced.name, specs, weights)
+            sol = _fit_direction(prob, init=init)
+            P = _direction_params(prob, sol)
             for k in reduced.dropped:
                 P.set(k, None, None)
                 ni[f"{dname}.{k}"] = why
             notes.append(f"{dname}: Stribeck part of law {law} not identified; Coulomb + viscous part fitted alone")
     P.n_segments, P.n_samples = int(len(stats.speed)), int(np.sum(stats.n))
-    return P, ni, notes
+    j = len(sol["lin"]) - 1
+    inertia = (float(sol["lin"][j]), float(sol["se"][j])) if acc else None
+    return P, ni, notes, inertia
 
 
 def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: list[dict], dname: str,
@@ -473,6 +485,9 @@ class JointFit:
       modelled with the partial cycles of slow lines it contains.
     - ``holdout`` ("segment", "run" or None: skip): ``rmse_holdout`` by ``folds``-fold
       cross-validation over whole segments or runs, each fold refitted with :func:`refit`.
+    - ``inertia`` ("auto", "fit" or "none"): identify the inertia ``J`` with the friction (the
+      torque is modelled as friction + ``J thetadd``; an ``inertia`` term of the model, one value for
+      both directions): "auto" when the data hold free motion and no inertia was removed from them.
     - ``init``: a model of starting values; ``name``: the model's (default: the law); ``check``:
       warn (:class:`~gearspec.errors.GearspecWarning`) about a negative viscous coefficient
       (:func:`negative_viscous`; flagged in the model either way).
@@ -485,10 +500,10 @@ class JointFit:
     def __init__(self, law: str = "silo4", *, harmonics=None, gear=None, weights: str = "segment",
                  se: str = "covariance", bootstrap: int = 200, min_cycles: float = MIN_CYCLES,
                  holdout: str | None = "segment", folds: int = 5, init: FrictionModel | None = None, seed: int = 0,
-                 name: str | None = None, check: bool = True):
+                 name: str | None = None, check: bool = True, inertia: str = "auto"):
         self.law, self.harmonics, self.gear, self.weights, self.se = law, harmonics, gear, weights, se
         self.bootstrap, self.min_cycles, self.holdout, self.folds = bootstrap, min_cycles, holdout, folds
-        self.init, self.seed, self.name, self.check = init, seed, name, check
+        self.init, self.seed, self.name, self.check, self.inertia = init, seed, name, check, inertia
 
     def get_params(self, deep: bool = False) -> dict:
         """The settings by name (``deep`` as in scikit-learn; no setting is itself an estimator)."""
@@ -513,7 +528,8 @@ class JointFit:
         # the lines are recorded as fitted: none recorded means none (not the gear's declared lines)
         lines = s.get("harmonics") or ([] if s["law"] == "silo4" else None)
         return cls(s["law"], harmonics=lines, weights=s.get("weights", "segment"), se=s.get("se", "covariance"),
-                   bootstrap=s.get("bootstrap", 200), min_cycles=s.get("min_cycles", 1.0), name=model.name)
+                   bootstrap=s.get("bootstrap", 200), min_cycles=s.get("min_cycles", 1.0), name=model.name,
+                   inertia=s.get("inertia", "auto"))
 
     def fit(self, data: FitData) -> "JointFit":
         """Fit the law to ``data`` (samples in constant-speed segments, ``velocity="segment"``, or
@@ -531,29 +547,24 @@ class JointFit:
                 _warn("law silo4 without a gear spec or harmonics: fitting eq. 3 only")
         else:
             specs = harmonic_specs(self.harmonics, self.gear) if self.harmonics is not None else []
-        directions: dict[str, Direction] = {}
-        not_identified: dict[str, str] = {}
-        notes: list[str] = []
-        for d, dname in ((1, "positive"), (-1, "negative")):
-            sub = data.direction_subset(d)
-            if len(sub) == 0:
-                directions[dname] = Direction.of(LAWS[law], {})
-                for k in list(LAWS[law].params) + [h.get("label") or h["frequency"] for h in specs]:
-                    not_identified[f"{dname}.{k}"] = f"no segment in the {dname} direction"
-                continue
-            try:
-                directions[dname], ni, nt = _fit_one_direction(
-                    sub, law, specs, dname, weights=self.weights, min_cycles=self.min_cycles, se=self.se,
-                    init=None if self.init is None else self.init.params(dname), bootstrap=self.bootstrap,
-                    seed=self.seed)
-            except np.linalg.LinAlgError as exc:  # an SVD or eigen-solver that does not converge: one sentence
-                raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
-                                       f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
-            not_identified.update(ni)
-            notes += nt
+        acc = self._identifies_inertia(data)
+        directions, not_identified, notes, inertias = self._directions(data, law, specs, acc)
+        terms = []
+        if acc:
+            # one inertia for both directions (the mean of the two, weighted by their errors); the
+            # friction refitted with it held; its standard errors are those of the fit with the
+            # inertia free, so that they carry its uncertainty
+            J, J_se, note = _common_inertia(inertias, data.unit)
+            held = replace(data, y=data.y - J * np.nan_to_num(data.acc), inertia=J, notes=list(data.notes), cache={})
+            free_fit = directions
+            directions, not_identified, notes, _ = self._directions(held, law, specs, False)
+            for dname, P in directions.items():
+                _carry_se(free_fit[dname], P)
+            notes.append(note)
+            terms = [{"kind": "inertia", "inertia": J, "inertia_se": J_se}]
         settings = {"law": law, "harmonics": specs, "weights": self.weights, "se": self.se,
-                    "min_cycles": self.min_cycles, "bootstrap": self.bootstrap}
-        model = FrictionModel(law, directions["positive"], directions["negative"], unit=data.unit,
+                    "min_cycles": self.min_cycles, "bootstrap": self.bootstrap, "inertia": self.inertia}
+        model = FrictionModel(law, directions["positive"], directions["negative"], unit=data.unit, terms=terms,
                               not_identified=not_identified, notes=notes, name=self.name or law,
                               meta={"fit": settings})
         model.rmse = _safe_rmse(model, data)
@@ -566,6 +577,85 @@ class JointFit:
                 lambda tr: refit(model, tr, holdout=None), data, by=self.holdout, folds=self.folds)
         self.harmonics_, self.model_ = specs, model
         return self
+
+
+    def _identifies_inertia(self, data: FitData) -> bool:
+        """Whether the inertia is identified with the friction: ``inertia="auto"`` when the data
+        hold free motion (blocks whose acceleration varies) and no inertia was removed from them."""
+        if self.inertia not in ("auto", "fit", "none"):
+            raise InputError(f"inertia must be 'auto', 'fit' or 'none', got '{self.inertia}'")
+        if self.inertia == "none" or data.acc is None:
+            return False
+        if self.inertia == "fit":
+            return True
+        return data.free_motion and data.inertia is None
+
+    def _directions(self, data: FitData, law: str, specs: list[dict], acc: bool):
+        """Both directions fitted: ``(directions, not_identified, notes, inertias)``."""
+        directions: dict[str, Direction] = {}
+        not_identified: dict[str, str] = {}
+        notes: list[str] = []
+        inertias: dict[str, tuple] = {}
+        # blocks of free motion are too short for their own residual variance to weight them
+        weights = "uniform" if data.free_motion and self.weights == "segment" else self.weights
+        for d, dname in ((1, "positive"), (-1, "negative")):
+            sub = data.direction_subset(d)
+            if len(sub) == 0:
+                directions[dname] = Direction.of(LAWS[law], {})
+                for k in list(LAWS[law].params) + [h.get("label") or h["frequency"] for h in specs]:
+                    not_identified[f"{dname}.{k}"] = f"no segment in the {dname} direction"
+                continue
+            try:
+                directions[dname], ni, nt, J = _fit_one_direction(
+                    sub, law, specs, dname, weights=weights, min_cycles=self.min_cycles, se=self.se,
+                    init=None if self.init is None else self.init.params(dname), bootstrap=self.bootstrap,
+                    seed=self.seed, acc=acc)
+            except np.linalg.LinAlgError as exc:  # an SVD or eigen-solver that does not converge: one sentence
+                raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}) with "
+                                       f"{len(specs)} lines; fit fewer lines (--lines) or a simpler law") from exc
+            not_identified.update(ni)
+            notes += nt
+            if J is not None:
+                inertias[dname] = J
+        return directions, not_identified, notes, inertias
+
+
+def _common_inertia(inertias: dict, unit: str) -> tuple[float, float, str]:
+    """One inertia from the two directions' estimates ``{direction: (J, se)}``: their mean weighted
+    by the inverse variances, its standard error, and a note (that says when they disagree by more
+    than three standard errors of their difference: a torque or inertia that is not the same both
+    ways, e.g. gravity or a direction-dependent efficiency)."""
+    ok = {d: (J, se) for d, (J, se) in inertias.items() if np.isfinite(J) and np.isfinite(se) and se > 0}
+    if not ok:
+        raise ConvergenceError("the inertia could not be identified from the free motion (no finite estimate); "
+                               "give it in the gear spec (inertia = ...) or record faster changes of speed")
+    w = {d: 1.0 / se ** 2 for d, (_, se) in ok.items()}
+    J = sum(w[d] * ok[d][0] for d in ok) / sum(w.values())
+    J_se = math.sqrt(1.0 / sum(w.values()))
+    unit_J = "kg m^2" if unit == "rad" else "kg"
+    each = ", ".join(f"{d} {ok[d][0]:.4g} +- {ok[d][1]:.2g}" for d in ok)
+    note = (f"inertia identified with the friction from the free motion: {J:.4g} +- {J_se:.2g} {unit_J} "
+            f"({each}); the friction refitted with it held")
+    if len(ok) == 2:
+        (Ja, sa), (Jb, sb) = ok.values()
+        z = abs(Ja - Jb) / math.hypot(sa, sb)
+        if z > 3:
+            note += (f"; warning: the two directions disagree by {z:.1f} standard errors (a torque that is not the "
+                     f"same both ways, such as gravity, or a lag between torque and position?)")
+    return J, J_se, note
+
+
+def _carry_se(free: Direction, held: Direction) -> None:
+    """Standard errors of the fit with the inertia free onto the same parameters of the fit with it
+    held (where both fitted the same parameters and lines)."""
+    for k, se in free.se.items():
+        if held.values.get(k) is not None and free.values.get(k) is not None and se is not None:
+            held.set(k, held.values[k], max(se, held.se.get(k) or 0.0))
+    if len(free.harmonics) == len(held.harmonics):
+        for hf, hh in zip(free.harmonics, held.harmonics):
+            for key, se in hf.se.items():
+                if se is not None and np.isfinite(se):
+                    hh.se[key] = max(se, hh.se.get(key) or 0.0)
 
 
 #: the settings of :class:`JointFit`, in the order of its ``__init__``

@@ -18,7 +18,7 @@ from ..fitdata import FitData
 from ..gears import load_gear
 from ..jsonsafe import plain
 from ..model import FrictionModel
-from ..segment import find_segments
+from ..segment import find_segments, free_motion
 from .joint import fit, refit
 from .published import line_amplitudes, silo4_published
 from .stats import harmonic_specs
@@ -85,10 +85,25 @@ _COMPARE_WITH = {"silo4": (("stribeck", False), ("coulomb_viscous", True)), "str
                  "lola11": (("lola8", False),), "lola8": (("lola11", False),), "coulomb_viscous": (), "none": ()}
 
 
+def _motion_note(seg) -> str:
+    """What each kind of segment contributes, in one sentence."""
+    names = {"plateau": "plateaus", "quasi_static": "quasi-static sweeps", "free": "free-motion blocks"}
+    parts = []
+    for kind, label in names.items():
+        segs = [s for s in seg.segments if s.kind == kind]
+        if segs:
+            parts.append(f"{len(segs)} {label} ({sum(s.n for s in segs):,} rows)")
+    share = seg.settings.get("free_share")
+    how = (f"free motion is {100 * share:.0f} % of the moving rows" if share is not None
+           else "free motion forced (--motion free)")
+    return (f"fitted from {', '.join(parts)}: {how}; each block's law at its mean speed, positions and accelerations "
+            f"sample by sample; held out by whole stretches of motion")
+
+
 def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None, harmonics=None,
                        published: bool | None = None, holdout: str = "segment", folds: int = 5,
                        se: str = "covariance", load_ratio: float | None = None,
-                       compare_with=None) -> FitResult:
+                       compare_with=None, motion: str = "auto") -> FitResult:
     """Identify ``law`` (a key of :data:`gearspec.model.LAWS`) from a recording ``rec``, beside the
     published procedure and simpler laws.
 
@@ -98,11 +113,13 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     ``folds``, ``se``: as in :func:`fit`; ``load_ratio``: subtract ``|load| / load_ratio`` (the load
     seen at the motor, eq. 12) from the torque (default for the Lola laws: the gear's total ratio
     when the recording has a load); ``compare_with``: other laws fitted to the same data (default:
-    the simpler ones).
+    the simpler ones); ``motion``: what the fit uses (:func:`~gearspec.segment.free_motion`:
+    "auto" adds free motion -- ramps, moves, chirps -- where it is a large part of the recording,
+    and then identifies the inertia with the friction unless the gear spec gives it).
     """
     gear = load_gear(gear) if gear is not None else rec.gear
-    seg = segmentation if segmentation is not None else find_segments(rec)
-    notes = []
+    seg = free_motion(rec, segmentation if segmentation is not None else find_segments(rec), motion=motion)
+    notes = [_motion_note(seg)] if any(s.kind == "free" for s in seg.segments) else []
     if law in ("lola8", "lola11") and load_ratio is None and "load" in rec.data and gear is not None and gear.stages:
         load_ratio = gear.total_ratio
         notes.append(f"friction = drive torque - |load| / {load_ratio:g} (Lola eq. 12; the load opposes the motion)")
@@ -110,10 +127,14 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     if published is None:
         published = law in ("silo4", "stribeck")
     lines = harmonic_specs(harmonics, gear) if law == "silo4" else (harmonic_specs(harmonics) if harmonics else [])
-    amplitudes = line_amplitudes(data, lines) if lines else None
+    amplitudes = line_amplitudes(data, lines) if lines and not data.free_motion else None
     model = fit(data, law, harmonics=harmonics, gear=gear, holdout=holdout, folds=folds, se=se,
                 name=f"{law} (joint fit)")
     models = {model.name: model}
+    if published and data.free_motion:
+        published = False
+        notes.append("published procedure (SILO4 sections 3-4) not run: it reads plateaus, and this recording is "
+                     "fitted from free motion")
     if published:
         pm = silo4_published(data, amplitudes, harmonics=lines, holdout=holdout, folds=folds)
         if law == "stribeck":

@@ -13,11 +13,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core.reduction import GroupNormals, harmonic_columns, normal_equations
+from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
-from ..spectrum import MEASURABLE_FRACTION, position_nyquist
+from ..spectrum import MEASURABLE_FRACTION
+from ..spectrum.analysis import group_position_nyquist
 
 __all__ = ["MIN_CYCLES", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges",
            "pair_se"]
@@ -25,6 +26,11 @@ __all__ = ["MIN_CYCLES", "ConvergenceError", "harmonic_specs", "SegmentStats", "
 #: a segment counts towards a line where it covers at least this fraction of a cycle (the default
 #: of :func:`fit`; the closed loop uses the same rule for the speed range of an amplitude law)
 MIN_CYCLES = 0.1
+
+
+#: the speed range of an amplitude law over free motion reaches the speeds below (above) which the
+#: blocks together cover this many cycles of the line
+FREE_RANGE_CYCLES = 1.0
 
 
 class ConvergenceError(InputError):
@@ -84,9 +90,11 @@ class SegmentStats(GroupNormals):
     beta_hat: np.ndarray = None   # (S, P)
     rss_hat: np.ndarray = None    # (S,)
     frequencies: np.ndarray = None
+    acc: bool = False             # the last local column is direction x acceleration (inertia identified)
+    free: np.ndarray | None = None  # (S,) bool: a block of free motion
 
     per_group = GroupNormals.per_group + ("segment", "speed", "load", "active", "sampled", "cycles", "sigma2",
-                                          "beta_hat", "rss_hat")
+                                          "beta_hat", "rss_hat", "free")
 
     @property
     def g(self) -> np.ndarray:
@@ -95,26 +103,32 @@ class SegmentStats(GroupNormals):
 
 
 def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: float = 1.0,
-                  nyquist_fraction: float = MEASURABLE_FRACTION) -> SegmentStats:
+                  nyquist_fraction: float = MEASURABLE_FRACTION, acc: bool = False) -> SegmentStats:
     """One pass over the samples of ``data`` (one direction): see :class:`SegmentStats`.
+    ``acc``: the local model has a last column ``direction x acceleration`` too, whose coefficient
+    is the inertia when it is identified with the friction (the torque still holds ``J thetadd``).
 
     Results are cached per segment on ``data`` (and shared with its whole-segment subsets), so
     that cross-validation and refits do not pass over the samples again.
     """
     freqs = np.asarray(list(frequencies), dtype=float)
-    key = (tuple(freqs.tolist()), float(min_cycles), float(nyquist_fraction))
+    if acc and data.acc is None:
+        raise InputError("the inertia cannot be identified: the fit data have no acceleration")
+    key = (tuple(freqs.tolist()), float(min_cycles), float(nyquist_fraction), bool(acc))
     cache = data.cache.setdefault(("segment_stats",) + key, {})
     order = np.argsort(data.segment, kind="stable")
     sids, starts = np.unique(data.segment[order], return_index=True)
     bounds = np.append(starts, len(order))
-    rows = []
-    for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
-        ii = order[a:b]
-        tag = (int(sid), len(ii), float(data.y[ii[0]]), float(data.y[ii[-1]]))
-        if tag not in cache:
-            cache[tag] = _one_segment_stats(data, ii, freqs, min_cycles, nyquist_fraction)
-        rows.append(cache[tag])
-    K, P = len(freqs), 1 + 2 * len(freqs)
+    tags = [(int(sid), int(b - a), float(data.y[order[a]]), float(data.y[order[b - 1]]))
+            for sid, a, b in zip(sids, bounds[:-1], bounds[1:])]
+    missing = [j for j, tag in enumerate(tags) if tag not in cache]
+    if missing:
+        new = _segments_stats(data, [order[bounds[j]:bounds[j + 1]] for j in missing], freqs, min_cycles,
+                              nyquist_fraction, acc)
+        for j, r in zip(missing, new):
+            cache[tags[j]] = r
+    rows = [cache[tag] for tag in tags]
+    K, P = len(freqs), 1 + 2 * len(freqs) + int(acc)
     shape = {"G": (0, P, P), "g": (0, P), "beta_hat": (0, P), "active": (0, K), "sampled": (0, K), "cycles": (0, K)}
 
     def stack(name):
@@ -123,40 +137,59 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
     return SegmentStats(stack("G"), stack("g"), stack("yy"), stack("n").astype(int), segment=sids, speed=stack("speed"),
                         load=stack("load") if data.load is not None else None, active=stack("active").astype(bool),
                         sampled=stack("sampled").astype(bool), cycles=stack("cycles"), sigma2=stack("sigma2"),
-                        beta_hat=stack("beta_hat"), rss_hat=stack("rss_hat"), frequencies=freqs)
+                        beta_hat=stack("beta_hat"), rss_hat=stack("rss_hat"), frequencies=freqs, acc=bool(acc),
+                        free=_free_flags(data, sids))
 
 
-def _one_segment_stats(data: FitData, ii: np.ndarray, freqs: np.ndarray, min_cycles: float,
-                       nyquist_fraction: float) -> dict:
+def _free_flags(data: FitData, sids: np.ndarray) -> np.ndarray | None:
+    """Per segment id: a block of free motion (None when the data hold none)."""
+    if not data.free_motion:
+        return None
+    free = set(data.segments.loc[data.segments["kind"] == "free", "segment"].tolist())
+    return np.array([int(s) in free for s in sids], bool)
+
+
+def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, min_cycles: float, nyquist_fraction: float,
+                    acc: bool) -> list[dict]:
+    """The statistics of the segments whose rows (in time order) are ``groups``, all at once: one
+    dict per segment (the cached unit)."""
     K = len(freqs)
-    P = 1 + 2 * K
+    P = 1 + 2 * K + int(acc)
+    ii = np.concatenate(groups)
+    n = np.array([len(g) for g in groups], dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(n)[:-1]))
+    stops = starts + n
     y = data.direction[ii] * data.y[ii]
-    out = {"n": len(ii), "speed": float(np.mean(np.abs(data.v[ii]))),
-           "load": float(np.mean(np.abs(data.load[ii]))) if data.load is not None else 0.0,
-           "active": np.zeros(K, bool), "sampled": np.zeros(K, bool), "cycles": np.zeros(K)}
+    speed = np.add.reduceat(np.abs(data.v[ii]), starts) / n
+    load = np.add.reduceat(np.abs(data.load[ii]), starts) / n if data.load is not None else np.zeros(len(n))
+    sampled = np.zeros((len(n), K), bool)
+    cycles = np.zeros((len(n), K))
     X = np.ones((len(ii), P))
     if K:
         if data.theta is None:
             raise InputError("harmonics need positions (theta) in the fit data")
         th = data.theta[ii]
-        span = float(np.ptp(th)) if len(th) > 1 else 0.0
-        out["cycles"] = freqs * span
+        cycles = freqs * (np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts))[:, None]
         # THE position-Nyquist rule (gearspec.spectrum.position_nyquist), on the samples in time order
-        nyq = position_nyquist(th) if len(th) > 1 else 0.0
-        out["sampled"] = freqs < nyquist_fraction * nyq
-        out["active"] = (out["cycles"] >= min_cycles) & out["sampled"]
-        X[:, 1::2], X[:, 2::2] = harmonic_columns(th, freqs)   # phases about the segment's mean position
-        X[:, 1:][:, np.repeat(~out["sampled"], 2)] = 0.0
-    G, g, yy = normal_equations(X, y)
+        sampled = freqs < nyquist_fraction * group_position_nyquist(th, starts, stops)[:, None]
+        center = np.repeat(np.add.reduceat(th, starts) / n, n)
+        X[:, 1:1 + 2 * K:2], X[:, 2:2 + 2 * K:2] = harmonic_columns(th, freqs, center)  # phases about each mean
+        X[:, 1:1 + 2 * K] *= np.repeat(np.repeat(sampled, 2, axis=1), n, axis=0)
+    if acc:
+        X[:, -1] = data.direction[ii] * data.acc[ii]
+    G, g, yy = group_normal_equations(X, y, starts, stops)
     try:
-        beta = np.linalg.pinv(G, rcond=1e-12, hermitian=True) @ g
+        beta = np.einsum("spq,sq->sp", np.linalg.pinv(G, rcond=1e-12, hermitian=True), g)
     except np.linalg.LinAlgError as exc:
         raise ConvergenceError(f"the local fit of a segment did not converge ({exc}) with {K} lines; fit fewer "
                                f"lines (--lines)") from exc
-    rss = max(yy - beta @ g, 0.0)
-    dof = len(ii) - (1 + 2 * int(out["sampled"].sum()))
-    out.update(G=G, g=g, yy=yy, beta_hat=beta, rss_hat=rss, sigma2=rss / dof if dof >= 3 else np.nan)
-    return out
+    rss = np.maximum(yy - np.einsum("sp,sp->s", beta, g), 0.0)
+    dof = n - (1 + 2 * sampled.sum(axis=1) + int(acc))
+    sigma2 = np.where(dof >= 3, rss / np.maximum(dof, 1), np.nan)
+    active = (cycles >= min_cycles) & sampled
+    return [{"n": int(n[s]), "speed": float(speed[s]), "load": float(load[s]), "active": active[s],
+             "sampled": sampled[s], "cycles": cycles[s], "G": G[s], "g": g[s], "yy": float(yy[s]),
+             "beta_hat": beta[s], "rss_hat": float(rss[s]), "sigma2": float(sigma2[s])} for s in range(len(n))]
 
 
 def speed_ranges(stats: SegmentStats) -> np.ndarray:
@@ -171,6 +204,17 @@ def speed_ranges(stats: SegmentStats) -> np.ndarray:
         m = stats.active[:, k]
         if m.any():
             out[k] = float(np.min(stats.speed[m])), float(np.max(stats.speed[m]))
+        # blocks of free motion are short: each edge is the speed below (above) which the sampled
+        # blocks together cover one cycle of the line (:data:`FREE_RANGE_CYCLES`)
+        f = stats.free & stats.sampled[:, k] if stats.free is not None else None
+        if f is not None and f.any():
+            sp, cyc = stats.speed[f], stats.cycles[f, k]
+            o = np.argsort(sp, kind="stable")
+            up, down = np.cumsum(cyc[o]), np.cumsum(cyc[o][::-1])
+            if up[-1] >= FREE_RANGE_CYCLES:
+                lo = float(sp[o][np.searchsorted(up, FREE_RANGE_CYCLES)])
+                hi = float(sp[o][::-1][np.searchsorted(down, FREE_RANGE_CYCLES)])
+                out[k] = (lo, hi) if not m.any() else (min(out[k, 0], lo), max(out[k, 1], hi))
     return out
 
 

@@ -75,10 +75,12 @@ def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
     """Model error per segment, as SILO4 validates its model (eqs. 12-13, Table 3): the mean
     error ``e`` and its standard deviation ``s_e`` of ``model - data`` (friction magnitudes, so that
     a model above the data is positive in both directions), the rmse, the mean friction and ``e``
-    in percent of it.  Segments of a direction the model cannot predict are left out."""
+    in percent of it.  Segments of a direction the model cannot predict are left out.  Blocks of
+    free motion count by their stretch of motion (its first block's id in ``segment``)."""
     rows = []
-    for sid in np.unique(data.segment):
-        sub = data.subset(data.segment == sid)
+    group = data.groups("segment")
+    for sid in np.unique(group):
+        sub = data.subset(group == sid)
         d = int(sub.direction[0])
         try:
             pred = model.evaluate(**sub.inputs())

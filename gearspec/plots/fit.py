@@ -23,7 +23,8 @@ def _units(unit):
     return ("speed (rpm)", 1 / RPM, "Nm") if unit == "rad" else (f"speed ({unit}/s)", 1.0, "N")
 
 
-def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path, unit: str = "rad") -> Path:
+def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path, unit: str = "rad",
+                  points: str = "plateau averages") -> Path:
     """Plateau friction against speed per direction (error bars: 2 se) with each model's
     position-averaged friction (SILO4 Fig. 4)."""
     xl, xs, tu = _units(unit)
@@ -36,7 +37,7 @@ def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path
             ax.set_title(f"{name} direction")
             continue
         ax.errorbar(pl["speed"] * xs, pl["level"], yerr=2 * pl["level_se"].fillna(0), fmt=mk, color=color, ms=4,
-                    mfc="none", label="plateau averages")
+                    mfc="none", label=points)
         grid = np.geomspace(max(pl["speed"].min() / 2, 1e-9), pl["speed"].max() * 1.2, 300)
         for (label, m), ls in zip(models.items(), _STYLES):
             try:

@@ -3,6 +3,8 @@ and the models beside it predict held-out data, and the figures."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +36,18 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
     unit = data.unit
     tu = "Nm" if unit == "rad" else "N"
     plate = data.plateaus()
-    figs = {"stribeck": fplots.plot_stribeck(plate, result.models, out / "stribeck.png", unit=unit)}
+    points = "plateau averages"
+    if data.free_motion:
+        # blocks of free motion are short: their means hold the inertia torque and partial cycles of
+        # the lines, so the points are the base law plus the residual (the fitted inertia and lines removed)
+        base = m.copy()
+        base.terms = []
+        for p in base.directions.values():
+            p.harmonics = []
+        partial = replace(data, y=base.evaluate(data.theta, data.v) + m.residual(data), cache={})
+        plate = partial.plateaus()
+        points = "block means, fitted inertia and lines removed"
+    figs = {"stribeck": fplots.plot_stribeck(plate, result.models, out / "stribeck.png", unit=unit, points=points)}
     if result.amplitudes is not None and len(result.amplitudes):
         figs["amplitude"] = fplots.plot_amplitude_fit(result.amplitudes, result.models, out / "amplitude_fit.png",
                                                       unit=unit)
@@ -49,8 +62,10 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
 
     md = header("gearspec fit report", command, recording_summary)
     n_qs = int((data.segments["kind"] == "quasi_static").sum()) if "kind" in data.segments else 0
-    md += [f"{len(data)} samples in {data.n_segments} " + (f"segments ({n_qs} quasi-static sweeps taken at rest) "
-                                                            if n_qs else "constant-speed segments ")
+    n_free = int((data.segments["kind"] == "free").sum()) if "kind" in data.segments else 0
+    kinds = ", ".join(x for x in (f"{n_qs} quasi-static sweeps taken at rest" if n_qs else "",
+                                  f"{n_free} blocks of free motion" if n_free else "") if x)
+    md += [f"{len(data)} samples in {data.n_segments} " + (f"segments ({kinds}) " if kinds else "constant-speed segments ")
            + f"({int((data.segments['direction'] > 0).sum())} positive, {int((data.segments['direction'] < 0).sum())} "
            f"negative). " + " ".join(data.notes), ""]
     md += [f"## Model: {m.name}", "", f"Law: {m.law_spec.description}.", "",

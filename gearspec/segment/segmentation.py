@@ -11,7 +11,8 @@ __all__ = ["Segment", "Segmentation"]
 
 @dataclass(frozen=True)
 class Segment:
-    """A constant-speed stretch of one run in one direction, or a quasi-static sweep (``kind``).
+    """A constant-speed stretch of one run in one direction, a quasi-static sweep, or a block of free
+    motion (``kind``; :mod:`gearspec.segment.freemotion`).
 
     ``start``/``stop`` index rows of ``Recording.data`` (stop exclusive); ``speed``: travel over
     duration (>= 0, unit/s; nominal for a sweep at rest); ``direction``: +1 or -1.
@@ -24,7 +25,8 @@ class Segment:
     speed: float
     speed_ripple: float = 0.0  # relative std of the window speed inside the segment
     window: float = 0.0        # the speed window (s) used to find it
-    kind: str = "plateau"      # "plateau" (constant speed) or "quasi_static" (a sweep at rest)
+    kind: str = "plateau"      # "plateau" (constant speed), "quasi_static" (a sweep at rest) or "free"
+    unit: int = -1             # held-out unit of a free-motion block (its stretch of motion); -1: itself
 
     @property
     def n(self) -> int:
@@ -42,7 +44,7 @@ class Segment:
     def to_dict(self) -> dict:
         return {"run": self.run, "start": self.start, "stop": self.stop, "direction": self.direction,
                 "speed": self.speed, "n": self.n, "speed_ripple": self.speed_ripple, "window": self.window,
-                "kind": self.kind}
+                "kind": self.kind, "unit": self.unit}
 
 
 @dataclass

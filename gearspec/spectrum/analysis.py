@@ -321,5 +321,35 @@ def position_nyquist(theta: np.ndarray) -> float:
     return 0.5 / (a + (b - a) * frac)
 
 
+def group_position_nyquist(theta: np.ndarray, starts, stops) -> np.ndarray:
+    """:func:`position_nyquist` of every contiguous group ``[starts[g], stops[g])`` of the samples at
+    once (the same rule and numbers; 0 for a group without a nonzero spacing)."""
+    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
+    ng = len(starts)
+    out = np.zeros(ng)
+    if ng == 0:
+        return out
+    sp = np.abs((theta[1:] - theta[:-1]).astype(np.float32))
+    nd = np.maximum(stops - starts - 1, 0)                      # spacings inside each group
+    gid = np.repeat(np.arange(ng), nd)
+    idx = np.concatenate([np.arange(a, a + k) for a, k in zip(starts, nd)]) if nd.sum() else np.zeros(0, np.int64)
+    vals = sp[idx]
+    order = np.lexsort((vals, gid))
+    vals = vals[order]
+    off = np.concatenate(([0], np.cumsum(nd)[:-1]))
+    n_zero = np.bincount(gid, weights=(vals == 0), minlength=ng).astype(np.int64) if len(gid) else np.zeros(ng, int)
+    m = nd - n_zero
+    ok = m > 0
+    pos = 0.95 * (m - 1)
+    i = np.floor(pos).astype(np.int64)
+    frac = pos - i
+    k = off + n_zero + i
+    a = np.where(ok, vals[np.clip(k, 0, max(len(vals) - 1, 0))] if len(vals) else 0.0, 0.0).astype(float)
+    has_b = ok & (frac > 0) & (i + 1 < m)
+    b = np.where(has_b, vals[np.clip(k + 1, 0, max(len(vals) - 1, 0))] if len(vals) else 0.0, a).astype(float)
+    out[ok] = 0.5 / (a[ok] + (b[ok] - a[ok]) * frac[ok])
+    return out
+
+
 # the whole-recording analysis lives in .pipeline, which calls analyze_segment: imported last
 from .pipeline import _n_workers, analyze, relabel_aliases  # noqa: E402,F401  (_n_workers: benchmarks)
