@@ -199,24 +199,56 @@ def test_other_topic_mapped_to_a_column(bags):
         load_recording(bags["sqlite3 folder"], joint="elbow", map="temperature=/nope.temperature")
 
 
-def test_rows_outside_a_mapped_topic_are_excluded(tmp_path):
+def _small_bag(path, joint="a", n=1000, swap=None, empty_effort=None, temp_span=None):
+    """One joint of the shoulder twin on /joint_states (no velocity arrays): messages ``swap`` and
+    ``swap + 1`` logged in each other's place, message ``empty_effort`` with an empty effort array,
+    and a /temp topic (40 degC) from ``temp_span[0]`` to ``temp_span[1]`` s."""
     tw = _twin()
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    path = tmp_path / "late_temperature"
+    c = tw["cols"]["shoulder"]
+    logs = tw["stamp"][:n].copy()
+    if swap is not None:
+        logs[[swap, swap + 1]] = logs[[swap + 1, swap]]
     with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         cj = w.add_connection("/joint_states", JS, typestore=ts)
-        ct = w.add_connection("/temp", TEMP, typestore=ts)
-        c = tw["cols"]["shoulder"]
-        for i, ns in enumerate(tw["stamp"][:1000]):
-            w.write(cj, int(ns), ts.serialize_cdr(_js(ts, ns, False, ["a"], [c["theta"][i]], [], [c["torque"][i]]), JS))
-        for k in (20, 30):   # the temperature topic covers 2 s to 3 s only
-            ns = T0_NS + k * 100_000_000
-            w.write(ct, ns, ts.serialize_cdr(ts.types[TEMP](header=_header(ts, ns, False), temperature=40.0,
-                                                            variance=0.0), TEMP))
-    rec = load_recording(path, map="temperature=/temp.temperature")
-    # rows at 4 ms from 0 to 3.996 s: 2 s to 3 s inclusive is 251 rows, the other 749 are outside
-    assert len(rec) == 251 and rec.excluded["outside_mapped_topic"] == 749
+        msgs = []
+        for i, ns in enumerate(tw["stamp"][:n]):
+            eff = [] if i == empty_effort else [c["torque"][i]]
+            msgs.append((int(logs[i]), cj, _js(ts, ns, False, [joint], [c["theta"][i]], [], eff)))
+        if temp_span:
+            ct = w.add_connection("/temp", TEMP, typestore=ts)
+            for k in (round(10 * temp_span[0]), round(10 * temp_span[1])):
+                ns = T0_NS + k * 100_000_000
+                msgs.append((ns, ct, ts.types[TEMP](header=_header(ts, ns, False), temperature=40.0, variance=0.0)))
+        for log, conn, msg in sorted(msgs, key=lambda m: m[0]):
+            w.write(conn, log, ts.serialize_cdr(msg, msg.__msgtype__))
+    return path
+
+
+def test_rows_outside_a_mapped_topic_are_excluded(tmp_path):
+    rec = load_recording(_small_bag(tmp_path / "late", temp_span=(2, 3), empty_effort=10),
+                         map="temperature=/temp.temperature")
+    # rows at 4 ms from 0 to 3.996 s: 2 s to 3 s inclusive is 251 rows, the other 748 are outside, and
+    # the message without effort (at 40 ms, outside too) is counted under its own reason first
+    assert len(rec) == 251 and rec.excluded == Counter(outside_mapped_topic=748, array_length_mismatch=1)
     assert "velocity" not in rec.data   # empty velocity arrays: the topic does not carry velocity
+    # a message without effort among messages with effort: excluded, not a NaN torque
+    rec = load_recording(_small_bag(tmp_path / "empty", empty_effort=500))
+    assert rec.excluded == Counter(array_length_mismatch=1) and len(rec) == 999
+
+
+def test_messages_logged_out_of_stamp_order_are_sorted_by_stamp(tmp_path):
+    rec = load_recording(_small_bag(tmp_path / "swapped", swap=500))
+    assert len(rec) == 1000 and not rec.excluded and np.all(np.diff(rec.t) > 0)
+    assert any("logged out of the order of their stamps; sorted by stamp" in n for n in rec.notes)
+
+
+def test_bags_of_different_joints_are_not_joined(tmp_path, bags):
+    a, b = _small_bag(tmp_path / "a", "a", n=300), _small_bag(tmp_path / "b", "b", n=300)
+    with pytest.raises(InputError, match=r"a \(joint a\) and .*b \(joint b\) are different joints; choose one"):
+        load_recording([a, b])
+    with pytest.raises(InputError, match=r"shoulder\.csv: --joint all makes one recording per joint of a ROS bag"):
+        load_recording([a, bags["dir"] / "shoulder.csv"], joint="all")
 
 
 def test_several_joints_need_joint_and_all_gives_one_recording_each(bags):

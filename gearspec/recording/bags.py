@@ -64,7 +64,8 @@ class _Bag:
             self.reader = AnyReader([self.path])
             self.reader.open()
         except Exception as exc:  # rosbags raises many types for a damaged file
-            raise InputError(f"{self.path}: cannot be read as a ROS bag ({_first_line(exc)})") from None
+            raise InputError(f"{self.path}: cannot be read as a ROS bag; it is damaged or cut short "
+                             f"({_first_line(exc)})") from None
         return self
 
     def __exit__(self, *exc):
