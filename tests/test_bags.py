@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import shutil
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -195,14 +194,16 @@ def test_other_topic_mapped_to_a_column(bags):
     assert rec.n_read == len(rec) + sum(rec.excluded.values()) and "outside_mapped_topic" not in rec.excluded
     with pytest.raises(InputError, match=r"no field 'temp'.*fields: header, temperature, variance"):
         load_recording(bags["sqlite3 folder"], joint="elbow", map="temperature=/motor_temperature.temp")
-    with pytest.raises(InputError, match=r"no topic '/nope'.*/motor_temperature \(sensor_msgs/msg/Temperature\)"):
+    with pytest.raises(InputError, match=r"no topic '/nope' \(given by --map temperature=/nope\.temperature\).*"
+                                         r"/motor_temperature \(sensor_msgs/msg/Temperature\)"):
         load_recording(bags["sqlite3 folder"], joint="elbow", map="temperature=/nope.temperature")
 
 
-def _small_bag(path, joint="a", n=1000, swap=None, empty_effort=None, temp_span=None):
+def _small_bag(path, joint="a", n=1000, swap=None, empty_effort=None, temp_span=None, zero_stamp=None):
     """One joint of the shoulder twin on /joint_states (no velocity arrays): messages ``swap`` and
     ``swap + 1`` logged in each other's place, message ``empty_effort`` with an empty effort array,
-    and a /temp topic (40 degC) from ``temp_span[0]`` to ``temp_span[1]`` s."""
+    a /temp topic (40 degC) from ``temp_span[0]`` to ``temp_span[1]`` s, and message ``zero_stamp``
+    stamped 0."""
     tw = _twin()
     ts = get_typestore(Stores.ROS2_HUMBLE)
     c = tw["cols"]["shoulder"]
@@ -214,7 +215,8 @@ def _small_bag(path, joint="a", n=1000, swap=None, empty_effort=None, temp_span=
         msgs = []
         for i, ns in enumerate(tw["stamp"][:n]):
             eff = [] if i == empty_effort else [c["torque"][i]]
-            msgs.append((int(logs[i]), cj, _js(ts, ns, False, [joint], [c["theta"][i]], [], eff)))
+            stamp = 0 if i == zero_stamp else ns
+            msgs.append((int(logs[i]), cj, _js(ts, stamp, False, [joint], [c["theta"][i]], [], eff)))
         if temp_span:
             ct = w.add_connection("/temp", TEMP, typestore=ts)
             for k in (round(10 * temp_span[0]), round(10 * temp_span[1])):
@@ -235,6 +237,14 @@ def test_rows_outside_a_mapped_topic_are_excluded(tmp_path):
     # a message without effort among messages with effort: excluded, not a NaN torque
     rec = load_recording(_small_bag(tmp_path / "empty", empty_effort=500))
     assert rec.excluded == Counter(array_length_mismatch=1) and len(rec) == 999
+
+
+def test_one_zero_stamp_among_real_ones_is_excluded(tmp_path):
+    rec = load_recording(_small_bag(tmp_path / "zero_one", zero_stamp=300))
+    assert rec.excluded == Counter(zero_stamp=1) and len(rec) == 999 and rec.t[0] == 0.0
+    with pytest.raises(InputError, match=r"--map temperature=/joint_states\.name: field 'name' of '/joint_states' "
+                                         r"is not a number \(list\)"):
+        load_recording(tmp_path / "zero_one", map="temperature=/joint_states.name")
 
 
 def test_messages_logged_out_of_stamp_order_are_sorted_by_stamp(tmp_path):

@@ -152,8 +152,9 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
                         "or folders; one experiment (run) per file")
     g.add_argument("--gear", metavar="SPEC_OR_PRESET",
                    help="gear spec TOML file or preset name (see `gearspec gears`)")
-    g.add_argument("--map", metavar="CANON=NAME,...", help="source column for canonical columns, e.g. theta=qm,torque=vir; "
-                   "in a ROS bag another topic's field: temperature=/motor_temperature.temperature")
+    g.add_argument("--map", metavar="CANON=NAME,...",
+                   help="source column for canonical columns, e.g. theta=qm,torque=vir; "
+                        "in a ROS bag another topic's field: temperature=/motor_temperature.temperature")
     g.add_argument("--scale", metavar="COL=FACTOR,...",
                    help="multiply columns after mapping, e.g. torque=35.15 (a factor may name a scalar in a .mat file)")
     g.add_argument("--fs", type=POSITIVE, metavar="HZ", help="sample rate when the files have no time column")

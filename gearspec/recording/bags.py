@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -199,44 +199,45 @@ def _joint_frame(path: Path, name: str, names, values, keep: np.ndarray, exclude
     return {c: cols[c] for a, c in _ARRAYS if present[a]}
 
 
-def _field(path: Path, source: str, msg):
+def _field(path: Path, source: str, msg, option: str):
     topic, _, field = source.partition(".")
     value = msg
     for part in field.split("."):
         if not hasattr(value, part):
             have = [k for k in getattr(value, "__dataclass_fields__", {}) if not k.startswith("_")]
-            raise InputError(f"{path}: --map ...={source}: the message on '{topic}' has no field '{part}' "
+            raise InputError(f"{path}: {option}: the message on '{topic}' has no field '{part}' "
                              f"(fields: {', '.join(have) or 'none'})")
         value = getattr(value, part)
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise InputError(f"{path}: --map ...={source}: field '{field}' of '{topic}' is not a number "
+        raise InputError(f"{path}: {option}: field '{field}' of '{topic}' is not a number "
                          f"({type(value).__name__})")
     return float(value)
 
 
-def _mapped_topics(bag: _Bag, sources: Sequence[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """For each ``/topic.field`` in ``sources``: message times (ns; header stamp, else log time) and
-    values, sorted by time."""
+def _mapped_topics(bag: _Bag, sources: Sequence[str] | Mapping[str, str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """For each ``/topic.field`` in ``sources`` (a mapping: to the column named in ``--map``):
+    message times (ns; header stamp, else log time) and values, sorted by time."""
     out = {}
     for source in sources:
+        option = f"--map {sources[source] if isinstance(sources, Mapping) else 'COL'}={source}"
         topic, dot, field = source.partition(".")
         if not dot or not field:
-            raise InputError(f"--map ...={source}: a bag topic is mapped as /topic.field (e.g. "
+            raise InputError(f"{option}: a bag topic is mapped as /topic.field (e.g. "
                              "temperature=/motor_temperature.temperature)")
-        bag.check_topic(topic, None, why=f"--map ...={source}")
+        bag.check_topic(topic, None, why=option)
         times, vals = [], []
         for log_ns, msg in bag.messages(topic):
             times.append(_stamp_ns(msg) or log_ns)
-            vals.append(_field(bag.path, source, msg))
+            vals.append(_field(bag.path, source, msg, option))
         if not times:
-            raise InputError(f"{bag.path}: topic '{topic}' (given in --map ...={source}) holds no messages")
+            raise InputError(f"{bag.path}: topic '{topic}' (given in {option}) holds no messages")
         order = np.argsort(np.array(times, np.int64), kind="stable")
         out[source] = (np.array(times, np.int64)[order], np.array(vals)[order])
     return out
 
 
 def read_bag(path: str | Path, *, topic: str = DEFAULT_TOPIC, joint: str | None = None,
-             sources: Sequence[str] = ()) -> list[tuple[str, pd.DataFrame, dict]]:
+             sources: Sequence[str] | Mapping[str, str] = ()) -> list[tuple[str, pd.DataFrame, dict]]:
     """The recording tables of the joints chosen from one bag.
 
     Parameters
@@ -247,10 +248,11 @@ def read_bag(path: str | Path, *, topic: str = DEFAULT_TOPIC, joint: str | None 
         The ``sensor_msgs/msg/JointState`` topic (default ``/joint_states``).
     joint : str or None
         The joint's name; None when the topic carries one joint only; ``"all"``: every joint.
-    sources : sequence of str
-        Other topics' fields wanted as columns, ``/topic.field[.field...]``: each becomes a column of
-        that name (renamed by ``--map``), linearly interpolated at the joint's times; rows outside
-        the topic's time span are excluded (``outside_mapped_topic``).
+    sources : sequence of str, or mapping of str to str
+        Other topics' fields wanted as columns, ``/topic.field[.field...]`` (a mapping: to the column
+        named in ``--map``, for messages): each becomes a column of that name (renamed by ``--map``),
+        linearly interpolated at the joint's times; rows outside the topic's time span are excluded
+        (``outside_mapped_topic``).
 
     Returns
     -------

@@ -124,7 +124,7 @@ def _expand(paths) -> list[Path]:
 def _read_parts(files, mapping: dict, scaling: dict, sep, header, names, topic: str, joint: str | None) -> dict:
     """The mapped and scaled tables ``(source, frame, meta)`` of ``files``, in order, grouped by joint
     (the key is None for files that are not bags unless ``joint`` names one)."""
-    sources = [s for s in mapping.values() if str(s).startswith("/")]
+    sources = {s: c for c, s in mapping.items() if str(s).startswith("/")}
     tagged = []
     for path in files:
         if is_bag(path):
