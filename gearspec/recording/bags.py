@@ -114,7 +114,7 @@ def _scan(bag: _Bag, topic: str):
     for log_ns, msg in bag.messages(topic):
         stamps.append(_stamp_ns(msg))
         logs.append(log_ns)
-        names.append(tuple(str(n) for n in msg.name))
+        names.append(tuple(msg.name))
         for a, _ in _ARRAYS:
             values[a].append(np.asarray(getattr(msg, a), dtype=float))
     if not stamps:
