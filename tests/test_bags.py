@@ -261,6 +261,19 @@ def test_bags_of_different_joints_are_not_joined(tmp_path, bags):
         load_recording([a, bags["dir"] / "shoulder.csv"], joint="all")
 
 
+def test_bag_without_message_definitions_is_read_with_the_standard_ones(bags, tmp_path):
+    # rosbag2 files written before ROS 2 Iron hold no message definitions
+    import sqlite3
+
+    old = tmp_path / "foxy.db3"
+    shutil.copy(bags["db3 file"], old)
+    with sqlite3.connect(old) as db:
+        db.execute("DELETE FROM message_definitions")
+    rec = load_recording(old, joint="elbow")
+    pd.testing.assert_frame_equal(rec.data[COLS], load_recording(bags["db3 file"], joint="elbow").data[COLS],
+                                  check_exact=True)
+
+
 def test_several_joints_need_joint_and_all_gives_one_recording_each(bags):
     with pytest.raises(InputError, match=r"run\.bag: topic '/joint_states' carries 2 joints \(shoulder, elbow\); "
                                          r"choose one with --joint NAME"):

@@ -55,13 +55,16 @@ class _Bag:
 
     def __enter__(self):
         from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
 
         if not self.path.exists():
             raise InputError(f"{self.path}: no such file")
         if self.path.is_file() and self.path.stat().st_size == 0:
             raise InputError(f"{self.path}: the file is empty")
         try:
-            self.reader = AnyReader([self.path])
+            # bags of ROS 2 distributions before Iron store no message definitions: the standard
+            # messages' (JointState, Temperature, ...) are the same in every distribution since Foxy
+            self.reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
             self.reader.open()
         except Exception as exc:  # rosbags raises many types for a damaged file
             raise InputError(f"{self.path}: cannot be read as a ROS bag; it is damaged or cut short "
