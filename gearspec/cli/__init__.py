@@ -148,10 +148,13 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     """RECORDING... --gear and the column options of CONTRACTS.md section 1."""
     g = p.add_argument_group("recording (CONTRACTS.md section 1)")
     g.add_argument("recordings", nargs="+", metavar="RECORDING",
-                   help="recording files (.csv, .parquet, .mat, .npz) or folders; one experiment (run) per file")
+                   help="recording files (.csv, .parquet, .mat, .npz), ROS bags (.bag, .mcap, .db3, rosbag2 folder) "
+                        "or folders; one experiment (run) per file")
     g.add_argument("--gear", metavar="SPEC_OR_PRESET",
                    help="gear spec TOML file or preset name (see `gearspec gears`)")
-    g.add_argument("--map", metavar="CANON=NAME,...", help="source column for canonical columns, e.g. theta=qm,torque=vir")
+    g.add_argument("--map", metavar="CANON=NAME,...",
+                   help="source column for canonical columns, e.g. theta=qm,torque=vir; "
+                        "in a ROS bag another topic's field: temperature=/motor_temperature.temperature")
     g.add_argument("--scale", metavar="COL=FACTOR,...",
                    help="multiply columns after mapping, e.g. torque=35.15 (a factor may name a scalar in a .mat file)")
     g.add_argument("--fs", type=POSITIVE, metavar="HZ", help="sample rate when the files have no time column")
@@ -162,6 +165,12 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-header", action="store_true", help="csv files have no header row (give --names)")
     g.add_argument("--names", metavar="A,B,...", help="column names for --no-header files")
     g.add_argument("--signal", choices=("torque", "current"), help="channel to analyse when both are present")
+    g.add_argument("--topic", default="/joint_states", help="ROS bags: the sensor_msgs/msg/JointState topic "
+                   "(default /joint_states); position -> theta, velocity -> velocity, effort -> torque")
+    g.add_argument("--joint", metavar="NAME", help="ROS bags: the joint to analyse (needed when the topic carries "
+                   "several), e.g. --joint elbow; also the joint looked up in --urdf")
+    g.add_argument("--urdf", metavar="FILE", help="robot URDF: without --gear, the joint's <transmission> reduction "
+                   "(classic or ros2_control form) is the gear ratio, e.g. robot.urdf --joint elbow")
     g.add_argument("--lag", metavar="SECONDS|auto", help="torque (current) logged this long behind position: shifted "
                    "back; 'auto': estimated from the declared lines' phases across speeds, reported and applied")
 
@@ -192,14 +201,28 @@ def load_from_args(args, paths=None):
     from ..recording import load_recording
 
     paths = args.recordings if paths is None else paths
+    if getattr(args, "joint", None) == "all":
+        _refuse_all_joints(args, paths)
     st = stages(args)
     st.start(f"loading {len(paths)} path(s)")
     rec = load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
                          header=not args.no_header, names=args.names, signal=args.signal,
-                         max_gap=getattr(args, "max_gap", None))
+                         max_gap=getattr(args, "max_gap", None), topic=getattr(args, "topic", "/joint_states"),
+                         joint=getattr(args, "joint", None), urdf=getattr(args, "urdf", None))
     st.done(f"loaded {rec.n_read:,} rows from {len(rec.sources)} file(s), {len(rec):,} usable")
     return lag_option(rec, getattr(args, "lag", None), say=lambda s: getattr(args, "quiet", False) or print(s),
                       **{k: getattr(args, k, None) for k in ("window", "rel_tol", "min_speed", "min_duration")})
+
+
+def _refuse_all_joints(args, paths) -> None:
+    """``--joint all`` on a command that analyses one recording: refused, naming the joints."""
+    from ..recording.bags import bag_joints, is_bag
+
+    bags = [p for p in paths if is_bag(p)]
+    joints = list(dict.fromkeys(j for p in bags for j in bag_joints(p, args.topic))) if bags else []
+    raise InputError(f"--joint all: `gearspec {args.command}` analyses one joint at a time; give --joint NAME "
+                     f"(joints on {args.topic}: {', '.join(joints) or 'none, no ROS bag given'}) and run it once "
+                     "per joint")
 
 
 def parse_lines(text: str | None) -> list[float] | None:

@@ -16,8 +16,10 @@ from ..errors import InputError, warn
 from ..gears import GearTrain, load_gear
 from .checks import _check_motion, _check_signal, _check_time_unit, _check_units
 from .cleaning import _clean_rows
+from .bags import DEFAULT_TOPIC, is_bag, read_bag
 from .readers import _SUFFIXES, _names, _read_file
 from .record import GAP_FACTOR, GAP_QUANTILE, Recording, _logged_gap_limits
+from .urdf import gear_from_urdf, urdf_reduction
 
 __all__ = ["load_recording", "CANONICAL", "parse_assignments"]
 
@@ -52,34 +54,28 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
                    map: Mapping[str, str] | str | None = None, scale: Mapping[str, float | str] | str | None = None,
                    fs: float | None = None, sep: str | None = None, header: bool = True,
                    names: Sequence[str] | str | None = None, signal: str | None = None,
-                   max_bad_fraction: float = 0.05, max_gap: float | None = None) -> Recording:
+                   max_bad_fraction: float = 0.05, max_gap: float | None = None, topic: str = DEFAULT_TOPIC,
+                   joint: str | None = None, urdf: str | Path | None = None) -> "Recording | list[Recording]":
     """Load recording files (or folders of them) into a validated :class:`Recording`.
 
     ``paths``: ``.csv`` (``.txt``, ``.dat``, ``.tsv``), ``.parquet``, ``.mat`` (v5/v7) or ``.npz``
-    files or folders; each file is one run unless it has a ``run`` column.  ``gear`` (GearTrain,
+    files, ROS bags (``.bag``, ``.mcap``, ``.db3``, a rosbag2 folder; :mod:`.bags`) or folders of
+    them; each file is one run unless it has a ``run`` column.  ``gear`` (GearTrain,
     preset or TOML path): unit of ``theta``, torque constant for ``current``.  ``map``: source
-    columns of canonical ones (``{"theta": "qm"}`` or ``"theta=qm,..."``); ``scale``: factors applied
+    columns of canonical ones (``{"theta": "qm"}`` or ``"theta=qm,..."``; a bag's other topics as
+    ``/topic.field``); ``scale``: factors applied
     after mapping, a number or a scalar stored in the file (``torque=gtau``).  ``fs``: sample rate,
     Hz, for files without a time column.  ``sep`` (sniffed when None; "whitespace"), ``header`` and
     ``names``: for csv.  ``signal``: "torque" (default) or "current".  ``max_bad_fraction``: rows
     with NaN/inf or duplicate or backward times are excluded and counted, or the file refused if
     more than this fraction are.  ``max_gap``: a longer time step (s) splits a run (default per run,
-    :func:`auto_max_gap`, said in ``notes``).
+    :func:`auto_max_gap`, said in ``notes``).  ``topic``: the bags' ``sensor_msgs/msg/JointState``
+    topic; ``joint``: the joint read from bags (needed when a topic carries several) and looked up in
+    ``urdf``; ``"all"``: a list of recordings, one per joint of the bags.  ``urdf``: a URDF file
+    whose transmission gives the gear ratio when ``gear`` is None (:func:`.urdf.gear_from_urdf`,
+    said in ``notes``).
     """
-    if isinstance(paths, (str, Path)):
-        paths = [paths]
-    files: list[Path] = []
-    for p in paths:
-        p = Path(p)
-        if p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() in _SUFFIXES)
-            if not found:
-                raise InputError(f"{p}: the folder holds no recording files (.csv, .parquet, .mat, .npz)")
-            files += found
-        else:
-            files.append(p)
-    if not files:
-        raise InputError("no recording files given")
+    files = _expand(paths)
     gear = load_gear(gear)
     mapping = parse_assignments(map, "--map") if isinstance(map, str) or map is None else dict(map)
     scaling = parse_assignments(scale, "--scale", numeric=True) if isinstance(scale, str) or scale is None else dict(scale)
@@ -94,13 +90,77 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
             raise InputError(f"--map: column '{src}' is given for both {by_source[src]} and {canon}; "
                              "each source column can be mapped to one canonical column only")
         by_source[src] = canon
-    parts = []
+    recs = []
+    for name, parts in _read_parts(files, mapping, scaling, sep, header, names, topic, joint).items():
+        this_gear, note = _gear_for(gear, urdf, name)
+        rec = _assemble(parts, gear=this_gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction,
+                        max_gap=max_gap)
+        if note:
+            rec.notes.append(note)
+        recs.append(rec)
+    return recs if joint == "all" else recs[0]
+
+
+def _expand(paths) -> list[Path]:
+    """The files (and rosbag2 folders) named by ``paths``, folders expanded."""
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    files: list[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir() and not is_bag(p):
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in _SUFFIXES or is_bag(q))
+            if not found:
+                raise InputError(f"{p}: the folder holds no recording files (.csv, .parquet, .mat, .npz) "
+                                 "and no ROS bags")
+            files += found
+        else:
+            files.append(p)
+    if not files:
+        raise InputError("no recording files given")
+    return files
+
+
+def _read_parts(files, mapping: dict, scaling: dict, sep, header, names, topic: str, joint: str | None) -> dict:
+    """The mapped and scaled tables ``(source, frame, meta)`` of ``files``, in order, grouped by joint
+    (the key is None for files that are not bags unless ``joint`` names one)."""
+    sources = {s: c for c, s in mapping.items() if str(s).startswith("/")}
+    tagged = []
     for path in files:
-        frame, meta = _read_file(path, sep, header, names)
-        frame = _map_and_scale(path, frame, meta, mapping, scaling)
-        parts.append((str(path), frame, meta))
-    return _assemble(parts, gear=gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction,
-                     max_gap=max_gap)
+        if is_bag(path):
+            for source, frame, meta in read_bag(path, topic=topic, joint=joint, sources=sources):
+                tagged.append((meta["joint"], (source, _map_and_scale(source, frame, meta, mapping, scaling), meta)))
+        else:
+            if joint == "all":
+                raise InputError(f"{path}: --joint all makes one recording per joint of a ROS bag, and this file "
+                                 "is not a bag; give --joint NAME or no --joint")
+            frame, meta = _read_file(path, sep, header, names)
+            tagged.append((None, (str(path), _map_and_scale(path, frame, meta, mapping, scaling), meta)))
+    if joint == "all":
+        groups: dict = {}
+        for name, part in tagged:
+            groups.setdefault(name, []).append(part)
+        return groups
+    joints = list(dict.fromkeys(name for name, _ in tagged if name is not None))
+    if len(joints) > 1:
+        first = {name: part[0] for name, part in reversed(tagged)}
+        raise InputError(f"{first[joints[0]]} and {first[joints[1]]} are different joints; choose one with "
+                         "--joint NAME")
+    return {joints[0] if joints else joint: [part for _, part in tagged]}
+
+
+def _gear_for(gear: GearTrain | None, urdf, joint: str | None) -> tuple[GearTrain | None, str | None]:
+    """The gear train of ``joint``: ``gear`` when given (a URDF reduction that differs is warned
+    about), else the URDF's (with the sentence that says so), else None."""
+    if urdf is None:
+        return gear, None
+    if gear is None:
+        return gear_from_urdf(urdf, joint)
+    name, value = urdf_reduction(urdf, joint)
+    if not math.isclose(gear.total_ratio, abs(value), rel_tol=1e-9):
+        warn(f"--gear {gear.name} has a total ratio of {gear.total_ratio:g} but the URDF {urdf} gives {abs(value):g} "
+             f"for joint {name}; the gear spec is used")
+    return gear, None
 
 
 def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, scaling: dict) -> pd.DataFrame:
@@ -170,7 +230,11 @@ def _assemble(parts, *, gear: GearTrain | None, unit: str | None, signal: str | 
     auto_gaps: dict = {}
     for path, frame, meta in parts:
         frame = frame.reset_index(drop=True)  # index = data row - 1, kept through exclusions for messages
-        n_read += len(frame)
+        meta = dict(meta)
+        early = Counter(meta.pop("_excluded", {}))  # rows a reader excluded before the table (bags: messages)
+        notes += meta.pop("_notes", [])
+        excluded.update(early)
+        n_read += len(frame) + sum(early.values())
         meta_all.update(meta)
         sig_used = _analysed_signal(path, frame, signal, sig_used, gear, fs)
         frame = _numeric_frame(path, frame, fs, notes)

@@ -57,7 +57,8 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
         raise InputError(f"{path}: the file is empty")
     kind = _SUFFIXES.get(path.suffix.lower())
     if kind is None:
-        raise InputError(f"{path}: unknown file type '{path.suffix}' (accepted: .csv, .parquet, .mat, .npz)")
+        raise InputError(f"{path}: unknown file type '{path.suffix}' (accepted: .csv, .parquet, .mat, .npz); "
+                         "ROS bags: .bag, .mcap, .db3 or a rosbag2 folder with metadata.yaml")
     meta: dict = {}
     if kind == "csv":
         if sep == "":
