@@ -19,7 +19,7 @@ import yaml
 from gearspec.errors import InputError
 from gearspec.export import export, read_model
 from gearspec.export.c import C_LAWS, C_TERMS
-from gearspec.export.table import position_locked
+from gearspec.export.table import locked_parts, position_locked
 from gearspec.model import LAWS, FrictionModel
 from gearspec.terms import TERMS, evaluate_term
 
@@ -230,3 +230,207 @@ def test_smoothing_below_the_stated_velocity(tmp_path):
     assert np.allclose(fr0(theta, v, 0.0, 20.0), want, rtol=1e-12, atol=0)
     frd = _build(model, tmp_path / "defined", define=V)[0]
     assert np.array_equal(frd(theta, v, 0.0, 20.0), got)
+
+
+# ------------------------------------------------------------------ YAML
+def test_yaml_reads_back_the_same_numbers(tmp_path):
+    terms = [_term(k) for k in sorted(TERMS) if k not in STATEFUL] + [_term("periodic", direction=1)]
+    model = _law_model("silo4", seed=7).with_terms(*terms)
+    model.directions["positive"].set("tau_s", 1e-05)      # a number PyYAML reads as a string if written 1e-05
+    (path,) = model.export("yaml", tmp_path, joint="arm_joint3")
+    text = path.read_text()
+    assert "# Nm, se 0.001" in text and "# rad/s" in text           # units and errors in comments
+    fr = yaml.safe_load(text)["joints"]["arm_joint3"]["friction"]
+    assert fr["law"] == "silo4" and fr["unit"] == "rad"
+    for d, p in model.directions.items():
+        for k in LAWS["silo4"].params:
+            assert fr[d][k] == p.values[k] and isinstance(fr[d][k], float)
+        assert len(fr[d]["harmonics"]) == len(p.harmonics)
+        for got, h in zip(fr[d]["harmonics"], p.harmonics):
+            for k in ("frequency", "amplitude", "decay", "phase", "load_coefficient", "speed_range"):
+                assert got.get(k) == getattr(h, k), (d, k)
+            assert got["law"] == h.amplitude_law
+    assert len(fr["terms"]) == len(model.terms)
+    for got, t in zip(fr["terms"], model.terms):
+        assert got == {k: val for k, val in t.items()}, t["kind"]
+    with pytest.raises(InputError, match="joint name"):
+        model.export("yaml", tmp_path, joint="3 arm")
+
+
+# ------------------------------------------------------------------ tables
+def _locked_model():
+    """Lines of 1 and 3 cycles per revolution and one of 0.0714 (not periodic), a periodic term of 7
+    cycles 4e-6 off a whole number (a fitted frequency), and cogging of 5 cycles."""
+    m = _law_model("stribeck", seed=11)
+    for d, p in m.directions.items():
+        p.harmonics = p.harmonics[:3]           # 1, 0.0714 and 3 cycles per revolution
+    return m.with_terms(_term("periodic", frequency=7.000004 / (2 * math.pi), speed_range=None, law="exp"),
+                        _term("cogging", frequency=5 / (2 * math.pi)))
+
+
+def test_position_locked_part_is_the_model_minus_its_position_free_part():
+    m = _locked_model()
+    free = m.copy()
+    for p in free.directions.values():
+        p.harmonics = []
+    free.terms = [t for t in free.terms if "theta" not in TERMS[t["kind"]].needs]
+    theta = np.linspace(-20, 20, 501)
+    for d in (1, -1):
+        for speed in (0.7, 5.0, 300.0):
+            v = np.full(theta.shape, d * speed)
+            want = m.evaluate(theta, v, load=2.0, acc=0.0) - free.evaluate(theta, v, load=2.0, acc=0.0)
+            got = position_locked(m, theta, d, speed, load=2.0)
+            # the same terms summed in another order: rounding of the ~0.5 Nm total only
+            assert np.max(np.abs(got - want)) <= 1e-14
+
+
+def _read_table(path):
+    lines = path.read_text().splitlines()
+    head = [x for x in lines if x.startswith("#")]
+    rows = np.array([[float(y) for y in x.split(",")] for x in lines[len(head) + 1:]])
+    return head, lines[len(head)], rows
+
+
+def test_one_revolution_table_reproduces_the_position_locked_part(tmp_path):
+    m = _locked_model()
+    written = m.export("table", tmp_path, entries=720, speed=2.0, load=1.0)
+    head, cols, rows = _read_table(tmp_path / "cogging_table.csv")
+    assert cols == "index,theta_rad,positive_Nm,negative_Nm" and rows.shape == (720, 4)
+    stated = float(head[1].split("exact model ")[1].split(" Nm")[0])
+    assert any(head[1][2:] == n for n in written.notes)            # the error printed is the one in the file
+    # the line of 0.0714 cycles per revolution is left out, named, in both directions; nothing else is
+    left = [x for x in head if "left out" in x]
+    assert len(left) == 2 and all("line line const" in x and "0.0714" in x for x in left)
+    rng = np.random.default_rng(4)
+    theta = rng.uniform(0, 2 * math.pi, 20000)
+    for j, d in ((2, 1), (3, -1)):
+        kept = [p for p in locked_parts(m, d) if "const" not in p[0]]
+        exact = position_locked(m, theta, d, 2.0, load=1.0, parts=kept)
+        interp = np.interp(theta, np.append(rows[:, 1], 2 * math.pi), np.append(rows[:, j], rows[0, j]))
+        # the stated error is measured at 16 points per interval (the midpoint, where linear
+        # interpolation of a sinusoid errs most, among them): random points stay within 1 % of it
+        assert np.max(np.abs(interp - exact)) <= 1.01 * stated
+    # and it is no more than linear interpolation of these lines must give: A (2 pi c / N)^2 / 8 per
+    # line of c cycles (amplitude laws <= 1, load term 1e-4 x 1 Nm^2) plus the 7-cycle term's phase
+    # drift, 2 pi 4e-6 of its amplitude at the end of the revolution (it is tabulated at 7 cycles)
+    amp = max(h.amplitude for p in m.directions.values() for h in p.harmonics) * (1 + 1e-4)
+    bound = sum(a * (2 * math.pi * c / 720) ** 2 / 8 for a, c in ((amp, 1), (amp, 3), (0.02, 7), (0.004, 5)))
+    assert 0 < stated <= bound + 0.02 * 2 * math.pi * 4e-6
+
+
+def test_friction_grid_holds_the_model_at_its_rows_and_columns(tmp_path):
+    m = _locked_model()
+    w = m.export("table", tmp_path, positions=(0.0, 6.0, 7), speeds=(-3.0, 3.0, 5), load=1.0)
+    head, cols, rows = _read_table(tmp_path / "friction_grid.csv")
+    speeds = [float(x) for x in cols.split(",")[1:]]
+    assert speeds == [-3.0, -1.5, 0.0, 1.5, 3.0] and list(rows[:, 0]) == list(np.linspace(0, 6, 7))
+    for i, th in enumerate(rows[:, 0]):
+        assert np.array_equal(rows[i, 1:], m.friction(np.full(5, th), np.array(speeds), load=1.0))
+    assert not any("velocities" in n for n in w.notes)     # given, not defaulted
+
+
+def test_default_table_ranges_come_from_the_model(tmp_path):
+    m = _law_model("silo4", seed=2)
+    w = m.export("table", tmp_path)
+    vmax = max(h.speed_range[1] for p in m.directions.values() for h in p.harmonics if h.speed_range)
+    _, cols, rows = _read_table(tmp_path / "friction_grid.csv")
+    speeds = [float(x) for x in cols.split(",")[1:]]
+    assert speeds[0] == -vmax and speeds[-1] == vmax and len(speeds) == 41 and rows.shape == (360, 42)
+    assert rows[:, 0].max() < 2 * math.pi and any("fastest speed a line was fitted on" in n for n in w.notes)
+    assert _read_table(tmp_path / "cogging_table.csv")[2].shape == (3600, 4)
+
+
+# ------------------------------------------------------------------ JSON, model files and refusals
+GOLDEN = json.loads((__import__("pathlib").Path(__file__).parent / "data" / "models_0.4.1.json").read_text())
+
+
+def _file(tmp_path, d, name="model.json"):
+    path = tmp_path / name
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_json_export_is_the_model_at_this_version_and_reads_back(tmp_path):
+    d = GOLDEN["models"]["every term kind"]["model"]
+    (path,) = export(_file(tmp_path, d), "json", tmp_path / "out")
+    back = json.loads(path.read_text())
+    assert back["meta"]["gearspec_version"] == __import__("gearspec").__version__
+    model, _ = read_model(path)
+    x = _points(model, n=300)
+    kw = dict(load=x["load"], temperature=x["temperature"], acc=x["acc"], t=x["acc"] * 0 + 11.0)
+    assert np.array_equal(model.evaluate(x["theta"], x["v"], **kw),
+                          FrictionModel.from_dict(d).evaluate(x["theta"], x["v"], **kw))
+    # a gearspec diagnose --json file is read through its final model
+    wrapped, _ = read_model({"baseline": {}, "final": {"friction_model": d}})
+    assert wrapped.to_dict() == FrictionModel.from_dict(d).to_dict()
+
+
+def _main(argv, capsys):
+    from gearspec.cli import main
+
+    code = main(argv)
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def _bad_models():
+    good = GOLDEN["models"]["stribeck"]["model"]
+    old = copy.deepcopy(good)
+    del old["rmse_holdout_reason"]
+    yield "older", old, "older than 0.4.0"
+    yield "old stamp", {**good, "meta": {"gearspec_version": "0.3.9"}}, "older than 0.4.0"
+    yield "newer", {**good, "meta": {"gearspec_version": "9.1.0"}}, "newer than this gearspec"
+    top = {**good, "friction_offset": 0.1}
+    yield "top key", top, "unknown key 'friction_offset' at the top level"
+    dkey = copy.deepcopy(good)
+    dkey["directions"]["negative"]["tau_c_scale"] = 2.0
+    yield "direction key", dkey, "unknown key 'tau_c_scale' in the negative direction"
+    hkey = copy.deepcopy(GOLDEN["models"]["silo4 joint fit, harmonics with speed_range"]["model"])
+    hkey["directions"]["positive"]["harmonics"][0]["direction"] = -1
+    yield "line key", hkey, "line output shaft: unknown key 'direction'"
+    tkey = copy.deepcopy(GOLDEN["models"]["every term kind"]["model"])
+    tkey["terms"] = [{"kind": "offset", "offset": 0.1, "ramp": 2.0}]
+    yield "term key", tkey, "term 1 \\(offset\\): unknown key 'ramp'"
+    hyst = copy.deepcopy(GOLDEN["models"]["every term kind"]["model"])
+    yield "stateful", hyst, "term 8 \\(drift\\): cannot be exported: it needs the time"
+    missing = copy.deepcopy(good)
+    missing["directions"]["negative"]["tau_c"] = None
+    yield "not identified", missing, "negative direction has no value for tau_c"
+    nan = copy.deepcopy(good)
+    nan["directions"]["positive"]["viscous"] = "fast"
+    yield "not a number", nan, "positive viscous is 'fast', not a finite number"
+
+
+@pytest.mark.parametrize("case,d,message", list(_bad_models()), ids=[c for c, _, _ in _bad_models()])
+def test_cli_refuses_a_bad_model_file_with_one_sentence(case, d, message, tmp_path, capsys):
+    import re
+
+    path = _file(tmp_path, d)
+    code, out, err = _main(["export", str(path), "--format", "c", "--out", str(tmp_path / "c")], capsys)
+    assert code == 2 and out == ""
+    assert err.startswith("gearspec: error: model.json") and err.count("\n") == 1 and re.search(message, err), err
+    assert not (tmp_path / "c").exists()          # never C that compiles but computes something else
+
+
+def test_cli_refuses_a_file_that_is_not_json_or_not_a_model(tmp_path, capsys):
+    bad = tmp_path / "model.json"
+    bad.write_text('{"law": "stribeck", ')
+    code, _, err = _main(["export", str(bad), "--format", "yaml", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "model.json: not a friction model JSON file" in err and err.count("\n") == 1
+    code, _, err = _main(["export", str(_file(tmp_path, {"segments": []})), "--format", "yaml", "--out",
+                          str(tmp_path / "o")], capsys)
+    assert code == 2 and "not a friction model" in err
+    code, _, err = _main(["export", str(_file(tmp_path, GOLDEN["models"]["stribeck"]["model"])), "--format", "c",
+                          "--out", str(tmp_path / "o"), "--entries", "100"], capsys)
+    assert code == 2 and "--entries applies to --format table, not c" in err
+
+
+def test_cli_writes_and_prints_the_files_and_the_table_error(tmp_path, capsys):
+    path = _file(tmp_path, GOLDEN["models"]["silo4 joint fit, harmonics with speed_range"]["model"])
+    for fmt, names in (("c", ["gearspec_model.h", "gearspec_model.c"]), ("yaml", ["friction_params.yaml"]),
+                       ("json", ["friction_model.json"]), ("table", ["friction_grid.csv", "cogging_table.csv"])):
+        code, out, err = _main(["export", str(path), "--format", fmt, "--out", str(tmp_path / fmt)], capsys)
+        assert code == 0, err
+        assert [ln.split("/")[-1] for ln in out.splitlines() if ln.startswith("wrote ")] == names
+    assert "largest linear-interpolation error against the exact model" in out
+    assert "from model.json" in (tmp_path / "c" / "gearspec_model.h").read_text()

@@ -224,8 +224,8 @@ _HELPERS = {
     return x < lo ? lo : (x > hi ? hi : x);
 }
 """,
-    "gs_sin_cycles_f(": """/* sin(2 pi f theta + phase) in float, f = f_hi + f_lo: f theta reduced to a fraction of a cycle
-   with the exact rounding error of the product (fmaf), so a line keeps its phase far from theta = 0 */
+    "gs_sin_cycles_f(": """/* sin(2 pi f theta + phase) in float, f = f_hi + f_lo: f theta reduced to a fraction of a
+   cycle with the exact rounding error of the product (fmaf): a line keeps its phase far from 0 */
 static float gs_sin_cycles_f(float theta, float f_hi, float f_lo, float phase)
 {
     const float p = f_hi * theta;

@@ -124,7 +124,8 @@ def check_exportable(model: FrictionModel, name: str = "the model", *, stateless
         if stateless and kind in STATEFUL:
             raise InputError(f"{where}: cannot be exported: {STATEFUL[kind]}")
         tk = TERMS[kind]
-        allowed = {"kind", "direction", *tk.params, *DESCRIPTIVE, *(("law", "speed_range") if kind == "periodic" else ())}
+        allowed = {"kind", "direction", *tk.params, *DESCRIPTIVE}
+        allowed |= {"law", "speed_range"} if kind == "periodic" else set()
         bad = [k for k in t if k not in allowed and not (k.endswith("_se") and k[:-3] in allowed)]
         if bad:
             raise InputError(f"{where}: unknown key '{bad[0]}'; this gearspec would ignore it, so the export "

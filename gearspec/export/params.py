@@ -133,7 +133,8 @@ def write_yaml(model: FrictionModel, out: Path, *, source: str = "a FrictionMode
                 items.append(f"          speed_range: [{_scalar(val[0])}, {_scalar(val[1])}]  # |v| the law was "
                              f"fitted on")
             else:
-                items.append(_item("          ", k, val, (axis_unit(units.get(k, ""), model) + _se(se, k)).lstrip(", ")))
+                unit = axis_unit(units.get(k, ""), model)
+                items.append(_item("          ", k, val, (unit + _se(se, k)).lstrip(", ")))
         lines += ["        - " + items[0].lstrip()] + items[1:]
     out.mkdir(parents=True, exist_ok=True)
     path = out / "friction_params.yaml"

@@ -70,7 +70,8 @@ def _defaults(model: FrictionModel, speeds, load, temperature, notes) -> tuple:
                else "no speed range recorded")
         notes.append(f"friction grid: velocities -{vmax:.4g}..{vmax:.4g} {su} ({why}; --speeds to change)")
         speeds = (-vmax, vmax, 41)
-    needs = {n for t in model.terms for n in TERMS[t["kind"]].needs} | ({"load"} if model.law_spec.needs_load else set())
+    needs = {n for t in model.terms for n in TERMS[t["kind"]].needs}
+    needs |= {"load"} if model.law_spec.needs_load else set()
     needs |= {"load"} if any(h.load_coefficient for p in model.directions.values() for h in p.harmonics) else set()
     if "load" in needs and load is None:
         load = 0.0
@@ -145,7 +146,8 @@ def _write_cogging(model, out, source, entries, speed, load, period, notes) -> P
             f"\"{model.name}\", exported by gearspec {__version__} from {source}", "# " + msg,
             *("# " + x for x in head_notes),
             f"index,theta_{model.unit},positive_{tu},negative_{tu}"]
-    rows = [f"{i},{theta[i]!r},{cols['positive'][i]!r},{cols['negative'][i]!r}" for i in range(n)]
+    rows = [f"{i},{float(theta[i])!r},{float(p)!r},{float(q)!r}"
+            for i, (p, q) in enumerate(zip(cols["positive"], cols["negative"]))]
     path = out / "cogging_table.csv"
     path.write_text("\n".join(head + rows) + "\n")
     return path
