@@ -426,11 +426,13 @@ def test_cli_refuses_a_file_that_is_not_json_or_not_a_model(tmp_path, capsys):
 
 
 def test_cli_writes_and_prints_the_files_and_the_table_error(tmp_path, capsys):
-    path = _file(tmp_path, GOLDEN["models"]["silo4 joint fit, harmonics with speed_range"]["model"])
+    fit_json = {**GOLDEN["models"]["silo4 joint fit, harmonics with speed_range"]["model"], "inertia": 3.1e-6}
+    path = _file(tmp_path, fit_json)
     for fmt, names in (("c", ["gearspec_model.h", "gearspec_model.c"]), ("yaml", ["friction_params.yaml"]),
                        ("json", ["friction_model.json"]), ("table", ["friction_grid.csv", "cogging_table.csv"])):
         code, out, err = _main(["export", str(path), "--format", fmt, "--out", str(tmp_path / fmt)], capsys)
         assert code == 0, err
         assert [ln.split("/")[-1] for ln in out.splitlines() if ln.startswith("wrote ")] == names
     assert "largest linear-interpolation error against the exact model" in out
+    assert "'inertia' = 3.1e-06 (kg m^2), found beside the model by the fit, is not part of the friction model" in out
     assert "from model.json" in (tmp_path / "c" / "gearspec_model.h").read_text()

@@ -39,6 +39,19 @@ def _write_json(model: FrictionModel, out: Path, **_) -> list[Path]:
     return [path]
 
 
+def _notes(model: FrictionModel, raw: dict, name: str) -> list[str]:
+    """What the files leave out or extrapolate, one sentence each."""
+    out = [f"{name}: '{k}' = {raw[k]:.6g} ({'kg m^2' if k == 'inertia' else 's'}), found beside the model by the "
+           f"fit, is not part of the friction model and is not exported"
+           for k in ("inertia", "lag") if isinstance(raw.get(k), (int, float))]
+    for dname, p in model.directions.items():
+        for i, h in enumerate(p.harmonics):
+            if h.amplitude is not None and h.speed_range is None and h.amplitude_law != "const":
+                out.append(f"{dname} line {h.label or i + 1}: no speed range recorded, so its {h.amplitude_law} "
+                           f"amplitude law is evaluated at every speed, as FrictionModel.evaluate does")
+    return out
+
+
 def _formats():
     from .c import write_c
     from .params import write_yaml
@@ -78,12 +91,13 @@ def export(model, format: str, out, **options) -> Written:
     if format not in FORMATS:
         raise InputError(f"unknown export format '{format}' (known: {', '.join(FORMATS)})")
     source = options.pop("source", None)
+    raw: dict = {}
     if not isinstance(model, FrictionModel):
         if source is None and isinstance(model, (str, Path)):
             source = Path(model).name
-        model, _ = read_model(model, source or "the model")
+        model, raw = read_model(model, source or "the model")
     name = source or f"model '{model.name}'"
     check_exportable(model, name, stateless=format != "json")
-    notes: list[str] = []
+    notes = _notes(model, raw, name)
     paths = _formats()[format](model, Path(out), source=name, notes=notes, **options)
     return Written(paths, notes)

@@ -74,8 +74,8 @@ def parameter_lines(model: FrictionModel) -> list[str]:
         side = {1: " (v > 0 only)", -1: " (v < 0 only)"}.get(int(t.get("direction") or 0), "")
         extra = f"; {line_text(t, model)}" if t["kind"] == "periodic" else ""
         out.append(f"term {i + 1}: {t['kind']}{side}: {vals}{extra}")
-    for k, why in model.not_identified.items():
-        out.append(f"not identified: {k}: {why}")
+    shown = {f"{d}.{k}" for d in model.directions for k in law.params}
+    out += [f"not identified: {k}: {why}" for k, why in model.not_identified.items() if k not in shown]
     if model.rmse is not None or model.rmse_holdout is not None:
         out.append(f"fit error: rmse {_num(model.rmse)}, held-out rmse {_num(model.rmse_holdout)} {torque_unit(model)}")
     return out
