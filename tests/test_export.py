@@ -198,6 +198,12 @@ def test_terms_that_need_state_are_refused(kind, fmt, tmp_path):
     assert model.export("json", tmp_path)        # the model's own JSON can hold it
 
 
+def test_a_parameter_beyond_float_range_is_refused(tmp_path):
+    model = _law_model("stribeck").with_terms(_term("offset", offset=3e38), _term("offset", offset=-4e38))
+    with pytest.raises(InputError, match="-4e\\+38, does not fit a float"):
+        model.export("c", tmp_path)
+
+
 @needs_cc
 def test_c_of_a_fitted_silo4_model_file(tmp_path):
     """The 0.4.1 SILO4 joint fit file (lines with speed ranges, negative Stribeck part not identified)."""

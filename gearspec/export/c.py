@@ -42,7 +42,12 @@ class _Real:
         self.s = "" if double else "f"
 
     def lit(self, x) -> str:
-        x = float(x) if self.double else float(np.float32(x))
+        x = float(x)
+        if not self.double:
+            if abs(x) > float(np.finfo(np.float32).max):
+                raise InputError(f"a parameter of the model, {x:g}, does not fit a float (the _f functions); "
+                                 f"check the model's units")
+            x = float(np.float32(x))
         text = repr(x) + self.s
         return f"({text})" if x < 0 else text
 
