@@ -211,6 +211,22 @@ def test_c_of_a_fitted_silo4_model_file(tmp_path):
     d = golden["models"]["silo4 joint fit, harmonics with speed_range"]["model"]
     model, _ = read_model(d)
     assert max(_compare(model, tmp_path)) <= 1.0
+    h, c = (tmp_path / "c" / "gearspec_model.h").read_text(), (tmp_path / "c" / "gearspec_model.c").read_text()
+    import re
+
+    # C99 with <math.h> only, no allocation, no state kept between calls
+    assert re.findall(r"#include\s*(\S+)", h + c) == ["<math.h>", '"gearspec_model.h"']
+    assert not re.search(r"malloc|calloc|free\(|^static (?!double|float)|^(?:static )?(?:double|float) \w+ *[=;]",
+                         c, re.M)
+    # the header names the model, law, version, source; every parameter with its unit and error
+    assert f"gearspec {__import__('gearspec').__version__}" in h and '"silo4" (law silo4)' in h
+    for dname, p in model.directions.items():
+        for k, u in zip(LAWS["silo4"].params, LAWS["silo4"].units):
+            if p.values[k] is not None:
+                assert f"{k} = {p.values[k]:.6g} {u}, se {p.se[k]:.6g}" in h
+    flat = re.sub(r"\n \*\s+", " ", h)         # the comment's lines joined
+    assert flat.count("fitted on |v| 20.9442..314.158 rad/s, held at the edges outside") == 3     # positive lines
+    assert flat.count("held at the edges outside") == 6
 
 
 @needs_cc
