@@ -443,6 +443,14 @@ class FrictionModel:
         return "\n".join(lines)
 
 
+    # ------------------------------------------------------------------ export
+    def export(self, format: str, out, **options):
+        """Write the model for a controller: ``format`` ``"c"``, ``"yaml"``, ``"table"`` or ``"json"``
+        into the folder ``out`` (:func:`gearspec.export.export`; options there); returns the paths."""
+        from .export import export
+
+        return export(self, format, out, **options)
+
 def _speed_range(r) -> list:
     """``[min, max]`` of a harmonic's speed range, checked (InputError otherwise)."""
     try:
