@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import base64
 import html
+import re
 import xml.etree.ElementTree as etree
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 import markdown
 from markdown.extensions import Extension
+from markdown.preprocessors import Preprocessor
 from markdown.treeprocessors import Treeprocessor
 
 __all__ = ["write_html", "render_html"]
@@ -153,6 +155,19 @@ class _Embed(Treeprocessor):
             parent.insert(at, wrap)
 
 
+class _TableStars(Preprocessor):
+    """A lone ``*`` in a table row is a product (``sign(v)*[0.002*|v|^0.5]``, a law printed by a report),
+    not emphasis: escaped outside code spans, so the page shows the formula as written in the Markdown.
+    ``**bold**`` and already escaped stars are left alone."""
+
+    STAR = re.compile(r"(?<![\\*])\*(?!\*)")
+
+    def run(self, lines):
+        return ["`".join(self.STAR.sub(r"\\*", part) if i % 2 == 0 else part
+                         for i, part in enumerate(line.split("`")))
+                if line.lstrip().startswith("|") else line for line in lines]
+
+
 class _EmbedExtension(Extension):
     def __init__(self, folder: Path):
         super().__init__()
@@ -162,6 +177,7 @@ class _EmbedExtension(Extension):
     def extendMarkdown(self, md):  # noqa: N802 (the markdown library's name)
         self.processor = _Embed(md, self.folder)
         md.treeprocessors.register(self.processor, "gearspec_embed", 1)
+        md.preprocessors.register(_TableStars(md), "gearspec_table_stars", 20)   # after fenced code (25)
 
 
 def _toc(tokens: list[dict]) -> str:
