@@ -260,10 +260,20 @@ def write_json(path, out: dict, rec, dumps) -> None:
     Path(path).write_text(dumps(out, indent=1))
 
 
+def print_html(report) -> None:
+    """Name the HTML page written beside the Markdown ``report`` (when it was), as ``html: PATH``."""
+    report = str(report)
+    page = (report[:-3] if report.endswith(".md") else report) + ".html"
+    if Path(page).is_file():
+        print(f"html: {page}")
+
+
 def print_outputs(args, as_path: bool = False) -> None:
     """Say which files were written (``as_path``: the report's path as pathlib prints it)."""
     if args.out:
-        print(f"report: {Path(args.out) / 'report.md' if as_path else args.out + '/report.md'}")
+        report = str(Path(args.out) / "report.md") if as_path else args.out + "/report.md"
+        print(f"report: {report}")
+        print_html(report)
     if args.json:
         print(f"json: {args.json}")
 

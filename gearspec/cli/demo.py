@@ -3,6 +3,7 @@ reproduction in a small configuration (:mod:`paper_repro.demo`)."""
 
 from __future__ import annotations
 
+from . import print_html
 from .repro import reproductions
 
 
@@ -18,4 +19,5 @@ def run(args) -> int:
 
     report = run_demo(args.out)
     print(f"demo report: {report}")
+    print_html(report)
     return 0

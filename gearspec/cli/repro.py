@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 
 from ..errors import InputError
+from . import print_html
 
 
 def register(sub) -> None:
@@ -40,4 +41,5 @@ def run(args) -> int:
     t0 = time.perf_counter()
     report = paper_repro.run(args.name, args.out, seed=args.seed)
     print(f"report: {report}  ({time.perf_counter() - t0:.0f} s)")
+    print_html(report)
     return 0

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["write_spectrum_report", "markdown_table"]
+__all__ = ["write_spectrum_report", "markdown_table", "write_report", "write_html"]
 
 
 def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -64,10 +64,16 @@ def model_table(m, paper: bool = False) -> pd.DataFrame:
 
 
 def write_report(out: Path, md: list[str]) -> Path:
-    """Write the Markdown lines ``md`` as ``out/report.md``; returns its path."""
+    """Write the Markdown lines ``md`` as ``out/report.md`` and the same content as the self-contained page
+    ``out/report.html`` (figures embedded: :func:`gearspec.report.html.write_html`); returns the
+    Markdown's path."""
+    out = Path(out)
     path = out / "report.md"
-    path.write_text("\n".join(md))
+    text = "\n".join(md)
+    path.write_text(text)
+    write_html(text, out)
     return path
 
 
+from .html import write_html  # noqa: E402
 from .spectrum import write_spectrum_report  # noqa: E402

@@ -34,7 +34,7 @@ import pandas as pd
 import gearspec.datasets as ds
 from gearspec import diagnose as dg
 from gearspec.plots.diagnose import plot_time_series
-from gearspec.report import markdown_table
+from gearspec.report import markdown_table, write_report
 from gearspec.report.diagnose import write_diagnose_report
 
 from ..tables import comparison_table, write_table
@@ -231,9 +231,7 @@ def run(out, seed: int = 0, *, max_rounds: int = 8, progress=None) -> Path:
            "- `idim_symmetric.json`, `idim_asymmetric.json`, `final_model.json` (FrictionModel JSON)",
            "- `loop/` -- the loop's report, figures and `diagnose.json` (CONTRACTS.md section 4)", "",
            f"Run time {time.perf_counter() - t0:.0f} s.", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md)   # report.md and the same content as report.html
 
 
 def _json(o):

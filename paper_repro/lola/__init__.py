@@ -36,7 +36,7 @@ from gearspec.errors import InputError
 from gearspec.fitdata import FitData
 from gearspec.model import RPM
 from gearspec.recording import load_recording
-from gearspec.report import markdown_table
+from gearspec.report import markdown_table, write_report
 from gearspec.simulate.lola import (MODULES, PAPER_TABLE3, PAPER_TABLE4, TESTBED, lola_twin, table3_model,
                                     table4_model)
 
@@ -374,9 +374,7 @@ def _report(out: Path, v: dict) -> Path:
            _stray_text(res), ""]
     md += ["## Run", "", f"`gearspec repro lola --out {out} --seed {v['seed']}`; times (s): "
            + ", ".join(f"{k} {t:.1f}" for k, t in v["timings"].items()) + ".", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md)   # report.md and the same content as report.html
 
 
 def _table3_text(res) -> str:

@@ -34,7 +34,7 @@ from gearspec import identify
 from gearspec.fitdata import FitData
 from gearspec.model import RPM
 from gearspec.recording import load_recording
-from gearspec.report import markdown_table
+from gearspec.report import markdown_table, write_report
 from gearspec.report.fit import write_fit_report
 from gearspec.segment import find_segments
 from gearspec.simulate.silo4 import (DEFAULT_SPEEDS_RPM, PAPER_TABLE2, PLANT, RATIO, silo4_twin, stick_slip_run,
@@ -486,9 +486,7 @@ def _report(out: Path, v: dict) -> Path:
            "position (the bench returns home), so the repetitions look alike.", ""]
     md += ["## Run", "", f"`gearspec repro silo4 --out {out} --seed {v['seed']}`; times (s): "
            + ", ".join(f"{k} {t:.1f}" for k, t in v["timings"].items()) + ".", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(md))
-    return path
+    return write_report(out, md)   # report.md and the same content as report.html
 
 
 def _b3_text(v) -> str:
