@@ -213,3 +213,16 @@ def test_fit_cli_on_bell_moves_reports_the_inertia_and_what_each_kind_gave(tmp_p
     assert rc == 0
     d = json.loads((tmp_path / "p.json").read_text())
     assert "inertia" not in d and not any(t["kind"] == "inertia" for t in d["terms"])
+
+
+def test_free_motion_is_weighted_uniformly(bells):
+    """Blocks of free motion are too short for their own residual variance to weight them: the
+    default segment weights give the same fit as uniform weights (blocks of 8 rows or more here,
+    so that no undefined variance forces it)."""
+    _, data = bells
+    counts = np.bincount(data.segment)
+    long = data.subset(counts[data.segment] >= 8)
+    a = identify.fit(long, "coulomb_viscous", holdout=None, weights="segment")
+    b = identify.fit(long, "coulomb_viscous", holdout=None, weights="uniform")
+    for name in ("positive", "negative"):
+        assert a.params(name).values == b.params(name).values
