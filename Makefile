@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/gearspec demo --out demo-out
-	@echo "open demo-out/report.md"
+	@echo "open demo-out/report.html"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
