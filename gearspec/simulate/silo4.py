@@ -60,9 +60,10 @@ from ..recording import Recording
 from ..terms import TERMS
 from .effects import Effect, apply_effects, effect_channels, effects_truth
 from .friction import _LoopFriction
+from .profiles import Reference, reference, tracking
 
 __all__ = ["PAPER_TABLE2", "table2_model", "twin_gear", "silo4_twin", "stick_slip_run", "TwinTruth",
-           "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold"]
+           "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold", "PROFILE_DURATION"]
 
 #: planetary and worm ratios, and the total (Table 1)
 RATIO_PLANETARY = 14.0
@@ -95,6 +96,9 @@ PLANT = {
 #: motor speeds (rpm) of the default twin, each in both directions: the Stribeck region of
 #: Fig. 4, Table 3's 280 / 560 / 3000 rpm and Fig. 5's 2000 / 4500 / 6500 rpm
 DEFAULT_SPEEDS_RPM = (2, 5, 10, 20, 30, 50, 75, 100, 150, 200, 280, 400, 560, 800, 1000, 1500, 2000, 3000, 4500, 6500)
+
+#: seconds of a motion profile per run (ten runs: 400 s, against 3790 s of the default plateaus)
+PROFILE_DURATION = 40.0
 
 _PI = math.pi
 
@@ -228,8 +232,10 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                effects: Iterable[Effect] = (), duration: float | Sequence[float] | Callable | None = None,
                seed: int | None = 0, load=None, theta0: float | str = "auto", record_velocity: bool = False,
                sample_interval: float | None = None, current_noise: float | None = None,
-               repeatability: float | None = None, plant: dict | None = None) -> tuple[Recording, TwinTruth]:
-    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition).
+               repeatability: float | None = None, plant: dict | None = None, profile: str = "plateaus",
+               profile_options: dict | None = None, top_speed_rpm: float | None = None) -> tuple[Recording, TwinTruth]:
+    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition), or per
+    repetition of a whole motion ``profile``.
 
     Parameters
     ----------
@@ -244,7 +250,8 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         Injected into ``truth``; the channels they supply (temperature, load) are fed to the model
         and recorded.
     duration : float, sequence (one per speed) or callable(speed rad/s) -> s, optional
-        Seconds held at speed (default :func:`default_hold`).
+        Seconds held at speed (default :func:`default_hold`); with a ``profile``: seconds of the
+        profile (default :data:`PROFILE_DURATION`).
     seed : int or None
         Noise and repetition-to-repetition variation.
     load : float, sequence (per repetition, cycled) or callable(t, run), optional
@@ -262,6 +269,15 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         Override :data:`PLANT`'s 4 ms, 4 mA and 1 %.
     plant : dict, optional
         Override any other entry of :data:`PLANT`.
+    profile : str
+        ``"plateaus"`` (the schedule above) or a velocity profile of
+        :mod:`gearspec.simulate.profiles` (``ramp``, ``chirp``, ``bell``, ``sine``): the speed loop
+        follows it from rest to rest (``speeds_rpm`` not used), the same in every repetition, then
+        ``settle`` s at rest; everything else (motor, PID, encoder, filter, sampling) unchanged.
+    profile_options : dict, optional
+        The profile's own options (e.g. ``{"f1": 0.5}`` for a chirp; ``seed``: the sine's phases).
+    top_speed_rpm : float, optional
+        The profile's top motor speed, both directions (default 6500 rpm, the plateaus' top).
 
     Returns
     -------
@@ -275,6 +291,10 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         ``scale`` (the repetition's friction factor), ``level`` (``scale`` times the truth's
         :meth:`~FrictionModel.mean_level` at the speed), ``friction_mean`` (mean true friction
         magnitude over the held samples, ripple included), ``velocity_mean``, ``stuck_fraction``.
+        With a profile, ``runs`` has ``run, repetition, profile, theta_start, t_start, t_stop, t0, t1``
+        (the motion), ``scale``, ``top_speed`` (rad/s), ``velocity_max`` (largest true speed) and
+        ``tracking_rms``, ``tracking_max`` (true minus reference velocity over the motion, rad/s);
+        ``settings["profile"]`` records the profile, its top speed, duration and options.
     """
     P = {**PLANT, **(plant or {})}
     for k, v in (("sample_interval", sample_interval), ("current_noise", current_noise),
@@ -282,6 +302,14 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         if v is not None:
             P[k] = float(v)
     rng = np.random.default_rng(seed)
+    prof = None
+    if profile != "plateaus":
+        if speeds_rpm is not None:
+            raise InputError(f"silo4_twin: the {profile} profile sets its own speeds; give top_speed_rpm, not speeds")
+        prof = _reference(profile, top_speed_rpm, duration, profile_options, P)
+        speeds_rpm = [prof.top_speed / RPM]
+    elif profile_options or top_speed_rpm is not None:
+        raise InputError("silo4_twin: profile_options and top_speed_rpm apply to a motion profile, not to plateaus")
     if speeds_rpm is None:
         speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
     speeds_rpm = [float(s) for s in np.atleast_1d(speeds_rpm)]
@@ -294,7 +322,8 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     base = truth if truth is not None else table2_model()
     model = apply_effects(base, effects)
     lf = _LoopFriction(model)
-    runs = _schedule(speeds_rpm, repetitions, duration, P, rng)
+    runs = _schedule(speeds_rpm, repetitions, duration, P, rng) if prof is None else _profile_schedule(prof, repetitions,
+                                                                                                        P, rng)
     bench = _Bench(P, lf.extra_inertia, runs.dt)
     channels = _Channels(effects, load, runs.t_start, runs.rep)
     ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
@@ -307,7 +336,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     if isinstance(theta0, str):
         if theta0 != "auto":
             raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
-        starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc)
+        starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc) if prof is None else np.zeros(runs.n)
     else:
         starts = np.full(runs.n, float(theta0))
     out = _closed_loop(runs, bench, lf, channels, ch0, starts)
@@ -319,9 +348,11 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     gear = twin_gear(bench.kM, float(P["inertia"]))
     rec = Recording.from_arrays(gear=gear, source="silo4 twin", **data)
     settings = {**P, "Kp": bench.Kp, "Ki": bench.Ki, "Kd": bench.Kd, "electrical_damping": bench.b_emf,
-                "inertia_total": bench.J, "seed": seed, "repetitions": repetitions, "speeds_rpm": speeds_rpm,
+                "inertia_total": bench.J, "seed": seed, "repetitions": repetitions,
+                "speeds_rpm": speeds_rpm if prof is None else None,
                 "theta0": theta0 if not isinstance(theta0, str) else "auto",
-                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist())}
+                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist()),
+                "profile": {"kind": "plateaus"} if prof is None else prof.record()}
     truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
     return rec, truth_info
 
@@ -353,6 +384,14 @@ def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Ge
     t_hold_end = t_acc + holds
     t_end = t_hold_end + t_acc
     t_stop = t_end + float(P["settle"])
+    return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
+                           t_end=t_end, t_stop=t_stop, **_clock(t_stop, P, rng))
+
+
+def _clock(t_stop: np.ndarray, P: dict, rng: np.random.Generator) -> dict:
+    """The clock of runs recorded until ``t_stop`` (s from each start): control ``rate`` and step
+    ``dt``, ``n_sub`` steps per sample interval ``dt_s``, ``n_samp`` samples and ``t_start`` per run
+    (a pause between runs), and the friction factor ``scale`` of each repetition."""
     dt_s = float(P["sample_interval"])
     rate = float(P["control_rate"])
     dt = 1.0 / rate
@@ -360,10 +399,33 @@ def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Ge
     dt_s = n_sub * dt
     n_samp = np.floor(t_stop / dt_s).astype(int) + 1
     t_start = np.concatenate(([0.0], np.cumsum(n_samp * dt_s + float(P["pause"]))[:-1]))
-    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(w_cmd))
-    return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
-                           t_end=t_end, t_stop=t_stop, rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp,
-                           t_start=t_start, scale=scale)
+    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(t_stop))
+    return dict(rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp, t_start=t_start, scale=scale)
+
+
+def _reference(kind: str, top_speed_rpm, duration, options, P: dict) -> Reference:
+    """The twin's motion profile at the control rate (default top 6500 rpm, :data:`PROFILE_DURATION`
+    s), refused at or beyond the motor's no-load speed at the supply voltage."""
+    top_rpm = float(DEFAULT_SPEEDS_RPM[-1] if top_speed_rpm is None else top_speed_rpm)
+    no_load = float(P["supply_voltage"]) / float(P["torque_constant"]) / RPM
+    if not 0 < top_rpm < no_load:
+        raise InputError(f"silo4_twin: top speed {top_rpm:g} rpm is not between 0 and the motor's no-load speed "
+                         f"{no_load:.0f} rpm at {P['supply_voltage']:g} V")
+    return reference(kind, top_speed=top_rpm * RPM, duration=PROFILE_DURATION if duration is None else duration,
+                     fs=float(P["control_rate"]), options=options, who="silo4_twin")
+
+
+def _profile_schedule(prof: Reference, repetitions: int, P: dict, rng: np.random.Generator) -> SimpleNamespace:
+    """The runs of a profile twin, one per repetition, with the fields of :func:`_schedule`, the
+    profile ``prof`` and ``ref``: its position (rad from the start) per control step up to the stop."""
+    n, t_end = repetitions, prof.duration
+    t_stop = np.full(n, t_end + float(P["settle"]))
+    ref = prof.position()
+    ref = np.concatenate([ref, np.full(int(round(t_stop[0] * prof.fs)) + 2 - len(ref), ref[-1])])
+    zeros = np.zeros(n)
+    return SimpleNamespace(n=n, w_cmd=zeros, rep=np.arange(n), holds=zeros + t_end, acc=float(P["acceleration"]),
+                           t_acc=zeros, t_hold_end=zeros + t_end, t_end=zeros + t_end, t_stop=t_stop, prof=prof,
+                           ref=ref, **_clock(t_stop, P, rng))
 
 
 class _Bench:
@@ -432,7 +494,7 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
     needs_t = any("t" in TERMS[t["kind"]].needs for t in lf.model.terms)
     needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in lf.model.terms)
     sw, Wa = np.sign(W), np.abs(W)
-    half_a = 0.5 * runs.acc
+    half_a, profile_ref = 0.5 * runs.acc, getattr(runs, "ref", None)
     # state per slot; f_acc: the friction summed over the current sample interval
     theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
     vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
@@ -448,10 +510,13 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
         # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
         tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
         a = slice(0, n_act)
-        t1 = np.minimum(tl_c, TA[a])
-        t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
-        t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
-        ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+        if profile_ref is not None:  # a motion profile, the same for every run
+            ref_c = TH0[a] + profile_ref[k0:k0 + len(tl_c), None]
+        else:
+            t1 = np.minimum(tl_c, TA[a])
+            t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
+            t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
+            ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
         for kk_ in range(len(tl_c)):
             k = k0 + kk_
             tl = k * dt
@@ -536,6 +601,15 @@ def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionMo
             "run": np.repeat(np.arange(runs.n, dtype=np.int64), runs.n_samp), "velocity": column(out.out_v),
             **{k: column(v) for k, v in out_ch.items()}}
     rows = []
+    if getattr(runs, "prof", None) is not None:  # a motion profile: how well each run followed it
+        prof, n_m = runs.prof, int(np.floor(runs.prof.duration / dt_s)) + 1  # samples of the motion
+        for r, (n, s) in enumerate(per_run):
+            t0 = runs.t_start[r]
+            rows.append({"run": r, "repetition": r, "profile": prof.kind, "theta_start": starts[r], "t_start": t0,
+                         "t_stop": t0 + (n - 1) * dt_s, "t0": t0, "t1": t0 + (n_m - 1) * dt_s, "scale": runs.scale[r],
+                         "top_speed": prof.top_speed,
+                         **tracking(out.out_v[:n_m, s], prof.v[::runs.n_sub][:n_m])})
+        return cols, rows
     for r, (n, s) in enumerate(per_run):
         tl = np.arange(n) * dt_s
         held = (tl >= runs.t_acc[r] + 0.25 * min(1.0, runs.holds[r])) & (tl <= runs.t_hold_end[r])
