@@ -269,15 +269,11 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         Override :data:`PLANT`'s 4 ms, 4 mA and 1 %.
     plant : dict, optional
         Override any other entry of :data:`PLANT`.
-    profile : str
-        ``"plateaus"`` (the schedule above) or a velocity profile of
-        :mod:`gearspec.simulate.profiles` (``ramp``, ``chirp``, ``bell``, ``sine``): the speed loop
-        follows it from rest to rest (``speeds_rpm`` not used), the same in every repetition, then
-        ``settle`` s at rest; everything else (motor, PID, encoder, filter, sampling) unchanged.
-    profile_options : dict, optional
-        The profile's own options (e.g. ``{"f1": 0.5}`` for a chirp; ``seed``: the sine's phases).
-    top_speed_rpm : float, optional
-        The profile's top motor speed, both directions (default 6500 rpm, the plateaus' top).
+    profile, profile_options, top_speed_rpm : str, dict, float, optional
+        ``"plateaus"`` (the above) or a :mod:`~gearspec.simulate.profiles` profile (``ramp``,
+        ``chirp``, ``bell``, ``sine``; its ``profile_options``, ``seed`` the sine's phases) up to
+        ``top_speed_rpm`` (default 6500): the loop follows it from rest to rest in every run (starting
+        at ``theta0``, "auto": 0), then ``settle`` s at rest; all else unchanged.
 
     Returns
     -------
@@ -291,10 +287,8 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         ``scale`` (the repetition's friction factor), ``level`` (``scale`` times the truth's
         :meth:`~FrictionModel.mean_level` at the speed), ``friction_mean`` (mean true friction
         magnitude over the held samples, ripple included), ``velocity_mean``, ``stuck_fraction``.
-        With a profile, ``runs`` has ``run, repetition, profile, theta_start, t_start, t_stop, t0, t1``
-        (the motion), ``scale``, ``top_speed`` (rad/s), ``velocity_max`` (largest true speed) and
-        ``tracking_rms``, ``tracking_max`` (true minus reference velocity over the motion, rad/s);
-        ``settings["profile"]`` records the profile, its top speed, duration and options.
+        A profile's ``runs``: ``run, repetition, profile, theta_start, t_start, t_stop, t0, t1`` (the
+        motion), ``scale, top_speed`` and :func:`~.profiles.tracking`'s; ``settings["profile"]`` its record.
     """
     P = {**PLANT, **(plant or {})}
     for k, v in (("sample_interval", sample_interval), ("current_noise", current_noise),
@@ -302,28 +296,14 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         if v is not None:
             P[k] = float(v)
     rng = np.random.default_rng(seed)
-    prof = None
-    if profile != "plateaus":
-        if speeds_rpm is not None:
-            raise InputError(f"silo4_twin: the {profile} profile sets its own speeds; give top_speed_rpm, not speeds")
-        prof = _reference(profile, top_speed_rpm, duration, profile_options, P)
-        speeds_rpm = [prof.top_speed / RPM]
-    elif profile_options or top_speed_rpm is not None:
-        raise InputError("silo4_twin: profile_options and top_speed_rpm apply to a motion profile, not to plateaus")
-    if speeds_rpm is None:
-        speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
-    speeds_rpm = [float(s) for s in np.atleast_1d(speeds_rpm)]
-    if not speeds_rpm or any(s == 0 or not math.isfinite(s) for s in speeds_rpm):
-        raise InputError("silo4_twin: speeds must be nonzero finite motor speeds in rpm")
     if int(repetitions) < 1:
         raise InputError("silo4_twin: repetitions must be at least 1")
     repetitions = int(repetitions)
+    runs, speeds_rpm, prof = _runs(speeds_rpm, repetitions, duration, profile, profile_options, top_speed_rpm, P, rng)
     effects = list(effects or ())
     base = truth if truth is not None else table2_model()
     model = apply_effects(base, effects)
     lf = _LoopFriction(model)
-    runs = _schedule(speeds_rpm, repetitions, duration, P, rng) if prof is None else _profile_schedule(prof, repetitions,
-                                                                                                        P, rng)
     bench = _Bench(P, lf.extra_inertia, runs.dt)
     channels = _Channels(effects, load, runs.t_start, runs.rep)
     ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
@@ -384,14 +364,6 @@ def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Ge
     t_hold_end = t_acc + holds
     t_end = t_hold_end + t_acc
     t_stop = t_end + float(P["settle"])
-    return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
-                           t_end=t_end, t_stop=t_stop, **_clock(t_stop, P, rng))
-
-
-def _clock(t_stop: np.ndarray, P: dict, rng: np.random.Generator) -> dict:
-    """The clock of runs recorded until ``t_stop`` (s from each start): control ``rate`` and step
-    ``dt``, ``n_sub`` steps per sample interval ``dt_s``, ``n_samp`` samples and ``t_start`` per run
-    (a pause between runs), and the friction factor ``scale`` of each repetition."""
     dt_s = float(P["sample_interval"])
     rate = float(P["control_rate"])
     dt = 1.0 / rate
@@ -399,33 +371,33 @@ def _clock(t_stop: np.ndarray, P: dict, rng: np.random.Generator) -> dict:
     dt_s = n_sub * dt
     n_samp = np.floor(t_stop / dt_s).astype(int) + 1
     t_start = np.concatenate(([0.0], np.cumsum(n_samp * dt_s + float(P["pause"]))[:-1]))
-    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(t_stop))
-    return dict(rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp, t_start=t_start, scale=scale)
+    scale = 1.0 + float(P["repeatability"]) * rng.standard_normal(len(w_cmd))
+    return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
+                           t_end=t_end, t_stop=t_stop, rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp,
+                           t_start=t_start, scale=scale)
 
 
-def _reference(kind: str, top_speed_rpm, duration, options, P: dict) -> Reference:
-    """The twin's motion profile at the control rate (default top 6500 rpm, :data:`PROFILE_DURATION`
-    s), refused at or beyond the motor's no-load speed at the supply voltage."""
-    top_rpm = float(DEFAULT_SPEEDS_RPM[-1] if top_speed_rpm is None else top_speed_rpm)
-    no_load = float(P["supply_voltage"]) / float(P["torque_constant"]) / RPM
-    if not 0 < top_rpm < no_load:
-        raise InputError(f"silo4_twin: top speed {top_rpm:g} rpm is not between 0 and the motor's no-load speed "
-                         f"{no_load:.0f} rpm at {P['supply_voltage']:g} V")
-    return reference(kind, top_speed=top_rpm * RPM, duration=PROFILE_DURATION if duration is None else duration,
-                     fs=float(P["control_rate"]), options=options, who="silo4_twin")
-
-
-def _profile_schedule(prof: Reference, repetitions: int, P: dict, rng: np.random.Generator) -> SimpleNamespace:
-    """The runs of a profile twin, one per repetition, with the fields of :func:`_schedule`, the
-    profile ``prof`` and ``ref``: its position (rad from the start) per control step up to the stop."""
-    n, t_end = repetitions, prof.duration
-    t_stop = np.full(n, t_end + float(P["settle"]))
-    ref = prof.position()
-    ref = np.concatenate([ref, np.full(int(round(t_stop[0] * prof.fs)) + 2 - len(ref), ref[-1])])
-    zeros = np.zeros(n)
-    return SimpleNamespace(n=n, w_cmd=zeros, rep=np.arange(n), holds=zeros + t_end, acc=float(P["acceleration"]),
-                           t_acc=zeros, t_hold_end=zeros + t_end, t_end=zeros + t_end, t_stop=t_stop, prof=prof,
-                           ref=ref, **_clock(t_stop, P, rng))
+def _runs(speeds_rpm, repetitions: int, duration, profile: str, options, top_speed_rpm, P: dict,
+          rng: np.random.Generator) -> tuple[SimpleNamespace, list, Reference | None]:
+    """The runs (:func:`_schedule`, plus the motion profile ``prof`` and its position ``ref``), the
+    speeds (rpm) and the profile: a profile is one "speed" 0 (no ramps) held for its duration."""
+    if (speeds_rpm is not None) if profile != "plateaus" else (options or top_speed_rpm is not None):
+        raise InputError("silo4_twin: speeds_rpm is for plateaus, top_speed_rpm and profile_options for a profile")
+    prof, top = None, float(DEFAULT_SPEEDS_RPM[-1] if top_speed_rpm is None else top_speed_rpm)
+    if profile != "plateaus":  # at the control rate, below the motor's no-load speed
+        if not 0 < top < P["supply_voltage"] / P["torque_constant"] / RPM:
+            raise InputError(f"silo4_twin: top speed {top:g} rpm is not between 0 and the motor's no-load speed "
+                             f"{P['supply_voltage'] / P['torque_constant'] / RPM:.0f} rpm")
+        prof = reference(profile, top_speed=top * RPM, duration=PROFILE_DURATION if duration is None else duration,
+                         fs=float(P["control_rate"]), options=options, who="silo4_twin")
+    if speeds_rpm is None:
+        speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
+    speeds_rpm = [float(s) for s in np.atleast_1d(speeds_rpm)]
+    if not speeds_rpm or any(s == 0 or not math.isfinite(s) for s in speeds_rpm):
+        raise InputError("silo4_twin: speeds must be nonzero finite motor speeds in rpm")
+    runs = _schedule([0.0] if prof else speeds_rpm, repetitions, prof.duration if prof else duration, P, rng)
+    runs.prof, runs.ref = prof, prof.position() if prof else None
+    return runs, speeds_rpm, prof
 
 
 class _Bench:
@@ -494,7 +466,7 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
     needs_t = any("t" in TERMS[t["kind"]].needs for t in lf.model.terms)
     needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in lf.model.terms)
     sw, Wa = np.sign(W), np.abs(W)
-    half_a, profile_ref = 0.5 * runs.acc, getattr(runs, "ref", None)
+    half_a, profile_ref = 0.5 * runs.acc, runs.ref
     # state per slot; f_acc: the friction summed over the current sample interval
     theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
     vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
@@ -511,7 +483,7 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
         tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
         a = slice(0, n_act)
         if profile_ref is not None:  # a motion profile, the same for every run
-            ref_c = TH0[a] + profile_ref[k0:k0 + len(tl_c), None]
+            ref_c = TH0[a] + profile_ref[np.minimum(k0 + np.arange(len(tl_c)), len(profile_ref) - 1), None]
         else:
             t1 = np.minimum(tl_c, TA[a])
             t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
@@ -601,16 +573,13 @@ def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionMo
             "run": np.repeat(np.arange(runs.n, dtype=np.int64), runs.n_samp), "velocity": column(out.out_v),
             **{k: column(v) for k, v in out_ch.items()}}
     rows = []
-    if getattr(runs, "prof", None) is not None:  # a motion profile: how well each run followed it
-        prof, n_m = runs.prof, int(np.floor(runs.prof.duration / dt_s)) + 1  # samples of the motion
-        for r, (n, s) in enumerate(per_run):
-            t0 = runs.t_start[r]
-            rows.append({"run": r, "repetition": r, "profile": prof.kind, "theta_start": starts[r], "t_start": t0,
-                         "t_stop": t0 + (n - 1) * dt_s, "t0": t0, "t1": t0 + (n_m - 1) * dt_s, "scale": runs.scale[r],
-                         "top_speed": prof.top_speed,
-                         **tracking(out.out_v[:n_m, s], prof.v[::runs.n_sub][:n_m])})
-        return cols, rows
-    for r, (n, s) in enumerate(per_run):
+    prof = runs.prof
+    for r, (n, s) in enumerate(per_run if prof else ()):  # a motion profile: how well each run followed it
+        n_m, t0 = int(np.floor(prof.duration / dt_s)) + 1, runs.t_start[r]  # samples of the motion
+        rows.append({"run": r, "repetition": r, "profile": prof.kind, "theta_start": starts[r], "t_start": t0,
+                     "t_stop": t0 + (n - 1) * dt_s, "t0": t0, "t1": t0 + (n_m - 1) * dt_s, "scale": runs.scale[r],
+                     "top_speed": prof.top_speed, **tracking(out.out_v[:n_m, s], prof.v[::runs.n_sub][:n_m])})
+    for r, (n, s) in enumerate(() if prof else per_run):
         tl = np.arange(n) * dt_s
         held = (tl >= runs.t_acc[r] + 0.25 * min(1.0, runs.holds[r])) & (tl <= runs.t_hold_end[r])
         if not held.any():
