@@ -46,11 +46,12 @@ PROFILES = ("plateaus", "ramp", "chirp", "bell", "sine")
 
 #: one line per profile: its shape
 SHAPES = {
-    "plateaus": "held speeds from top/30 to top, each forwards then backwards (the twins: their plateau schedule)",
+    "plateaus": "held speeds from top/30 to top, each forwards then backwards (in a twin: its own plateau grid)",
     "ramp": "slow linear ramps rest -> +top -> rest -> -top -> rest",
-    "chirp": "top x sin of a phase whose frequency sweeps from f0 to f1 (linear or log), through zero speed",
-    "bell": "minimum-jerk point-to-point moves of several peak speeds and durations, there and back, rests between",
-    "sine": "sum of sines windowed to rest (a Fourier excitation trajectory), then the same motion reversed",
+    "chirp": "top x sin of a phase whose frequency sweeps linearly from 1/duration to 10/duration Hz",
+    "bell": "minimum-jerk point-to-point moves peaking at 1, 0.5, 0.25, 0.1 and 0.04 x top, each there and back, "
+            "rests between",
+    "sine": "5 harmonics of 4/duration Hz (Schroeder phases) windowed to rest, then the same motion reversed",
 }
 
 #: fewest samples of a move (a ramp leg, a bell move, a plateau slot): a sampled peak within 1 % of the top

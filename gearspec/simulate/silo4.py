@@ -526,7 +526,7 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
             v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
             F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
             # record the state at the start of the step (filter output up to the previous step)
-            if k % n_sub == 0:
+            if k % n_sub == 0 and k // n_sub < shape[0]:  # (a stop on a sample edge rounded up)
                 i = k // n_sub
                 cols_ = np.flatnonzero(i < NS[a])
                 out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
