@@ -72,6 +72,9 @@ def test_chirp_crosses_zero_as_often_as_its_sweep_says():
     # log sweep from 0.05 to 0.5 Hz: 2 pi f0 T / ln 10 (10 - 1) rad = 7.82 cycles -> 15.6 -> 16 half cycles
     _, v = velocity_profile("chirp", top_speed=TOP, duration=DUR, fs=1000.0, f0=0.05, f1=0.5, method="log")
     assert np.count_nonzero(np.diff(np.sign(v[1:-1])) != 0) == 15 and abs(v[-1]) < 1e-12
+    # ... reached smoothly: the last step is at most the steepest slope, top x 2 pi f1 / fs (x 1.05:
+    # f1 scaled by up to 16 / 15.6)
+    assert abs(v[-2]) < 1.05 * TOP * 2 * np.pi * 0.5 / 1000.0
 
 
 def test_bell_moves_peak_where_declared_and_travel_their_amplitude():

@@ -30,7 +30,8 @@ def register(sub) -> None:
     s4.add_argument("--speeds-rpm", metavar="LIST", help="signed motor speeds in rpm, e.g. 280,-280,3000 "
                     "(default: 20 speeds from 2 to 6500 rpm, both directions)")
     s4.add_argument("--speeds", metavar="LIST", help="signed motor speeds in rad/s (instead of --speeds-rpm)")
-    s4.add_argument("--repetitions", type=int, default=10, help="runs per speed, or of the --profile (default 10, as in the paper)")
+    s4.add_argument("--repetitions", type=int, default=10,
+                    help="runs per speed, or of the --profile (default 10, as in the paper)")
     s4.add_argument("--duration", type=float, help="seconds held at each speed (default: one output revolution, "
                     "3-10 s); with --profile: seconds of the profile per run (default 40)")
     _profile_option(s4)

@@ -310,7 +310,8 @@ def _profile(key: str, profile: str, speeds, hold, top_speed, duration, options,
     """The motion profile of a profile twin at the testbed's rate (None: the plateau grid)."""
     if profile == "plateaus":
         if options or top_speed is not None or duration is not None:
-            raise InputError("lola_twin: top_speed, duration and profile_options are for a motion profile, not the grid")
+            raise InputError("lola_twin: top_speed, duration and profile_options are for a motion profile, "
+                             "not the grid")
         return None
     if speeds is not None or hold is not None:
         raise InputError(f"lola_twin: speeds and hold are for the plateau grid; the {profile} profile takes top_speed "
