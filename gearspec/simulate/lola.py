@@ -187,13 +187,17 @@ def _brake_loop(cmd: np.ndarray, T_init: np.ndarray, kb: float, P: dict, rng: np
 
 
 # ---------------------------------------------------------------------- the twin
+#: the columns of the points a grid twin's truth keeps
+_TRUTH_COLUMNS = ["point", "campaign", "speed_cmd", "load_cmd", "t0", "t1", "friction_true", "load_true",
+                  "efficiency_true", "level_true"]
+
+
 def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: Sequence[float] | None = None, *,
               hold: float | None = None, truth: FrictionModel | None = None, effects: Iterable[Effect] = (),
               seed: int | None = 0, fs: float | None = None, testbed: dict | None = None, profile: str = "plateaus",
               profile_options: dict | None = None, top_speed: float | None = None, duration: float | None = None
               ) -> tuple[Recording, pd.DataFrame]:
-    """Simulate the testbed's automatic mode for module A, B or C, or the drive following a whole
-    motion ``profile`` once per load.
+    """Simulate the testbed's automatic mode for module A, B or C, or a motion ``profile`` per load.
 
     Parameters
     ----------
@@ -213,11 +217,9 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     seed, fs, testbed
         Seed of the noise; sample rate (default 1 kHz); overrides of :data:`TESTBED`.
     profile, profile_options, top_speed, duration : str, dict, float, float, optional
-        ``"plateaus"`` (the grid above) or a :mod:`~gearspec.simulate.profiles` profile (``ramp``,
-        ``chirp``, ``bell``, ``sine``; its ``profile_options``, ``seed`` the sine's phases) up to
-        ``top_speed`` rad/s (default: the module's top speed) over ``duration`` s (default
-        :data:`PROFILE_DURATION`): the drive follows it from rest to rest once per load, the brake
-        set to that load (one run each, ``speeds`` and ``hold`` not used).
+        ``"plateaus"`` (the grid) or a :mod:`~gearspec.simulate.profiles` profile with its options (``seed``:
+        the sine's phases) up to ``top_speed`` rad/s (default: the module's top) over ``duration`` s
+        (default 20), followed from rest to rest once per load (one run each), the brake settled at it.
 
     Returns
     -------
@@ -232,10 +234,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
         velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth over
         the window: ``friction_true``, ``load_true``, ``efficiency_true``, and ``level_true``
         (``truth`` without effects, position-averaged, at the commanded speed and load).
-        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth`.  With a
-        profile, one row per run: ``point`` (= run), ``campaign``, ``load_cmd``, ``t0, t1`` (the run),
-        ``n``, ``top_speed``, ``speed_max`` (rad/s) and the mean brake torque ``load_true`` (Nm);
-        ``settings["profile"]`` records the profile.
+        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth`.  A profile:
+        one row per run (:func:`_profile_rows`); ``settings["profile"]`` records the profile.
     """
     P = {**TESTBED, **(testbed or {})}
     for k, v in (("fs", fs), ("hold", hold)):
@@ -254,16 +254,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     J = mod["inertia"] + float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
     model_eval = model.copy()
     model_eval.terms = [t for t in model.terms if t["kind"] != "inertia"]
-
-    fs_ = P["fs"]
-    dt = 1.0 / fs_
-    n_hold = int(round(P["hold"] * fs_))
-    n_ramp = int(round(P["ramp"] * fs_))
-    n_avg = min(int(round(P["average"] * fs_)), int(0.6 * n_hold))
-    if n_hold < 10:
-        raise InputError("lola_twin: hold must be at least 10 samples")
-    pieces, point_rows = (_operating_points(speeds, loads, P, n_hold, n_ramp, rng) if prof is None else
-                          _profile_runs(prof, loads, P, rng))
+    dt = 1.0 / P["fs"]
+    pieces, point_rows, n_avg = _schedule(speeds, loads, prof, P, rng)
     v, T_act, T_meas, run = (np.concatenate(c) for c in zip(*pieces))
     run = run.astype(np.int64)
     n = len(v)
@@ -286,12 +278,9 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     theta_meas = np.floor(theta / q) * q
     starts = np.concatenate(([0], np.cumsum([len(p[0]) for p in pieces])))
     sim = {"t": t, "theta_meas": theta_meas, "current": current, "load_meas": load_meas, "load_true": load_true,
-           "friction": friction, "run": run, "temperature": ch.get("temperature")}
+           "friction": friction, "run": run, "temperature": ch.get("temperature"), "v": v, "brake": T_act}
     points = pd.DataFrame(_point_rows(point_rows, sim, starts, base, P, n_avg, N, km) if prof is None else
-                          [{"point": i, "run": i, **r, "t0": float(t[a]), "t1": float(t[b - 1]), "n": int(b - a),
-                            "top_speed": prof.top_speed, "speed_max": float(np.abs(v[a:b]).max()),
-                            "load_true": float(T_act[a:b].mean())}
-                           for i, (r, a, b) in enumerate(zip(point_rows, starts[:-1], starts[1:]))])
+                          _profile_rows(point_rows, sim, starts, prof))
     data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run,
             **{k: ch[k] for k in recorded}}
     rec = Recording.from_arrays(gear=gear, source=f"lola twin {key}", **data)
@@ -299,11 +288,32 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
                 "speeds": None if prof else speeds, "loads": loads, "inertia_total": J,
                 "profile": prof.record() if prof else {"kind": "plateaus"}}
     truth_info = TwinTruth(f"lola-{key}", model, gear, effects_truth(effects, gear),
-                           points[["point", "campaign", "speed_cmd", "load_cmd", "t0", "t1", "friction_true",
-                                   "load_true", "efficiency_true", "level_true"] if prof is None else
-                                  list(points.columns)].copy(), plain(settings))
+                           points[list(points.columns) if prof else _TRUTH_COLUMNS].copy(), plain(settings))
     points.attrs["truth"] = truth_info
     return rec, points
+
+
+def _schedule(speeds, loads, prof: Reference | None, P: dict, rng: np.random.Generator):
+    """The pieces and point rows of :func:`_operating_points` (the grid) or :func:`_profile_runs`,
+    and the samples averaged per point."""
+    n_hold = int(round(P["hold"] * P["fs"]))
+    n_ramp = int(round(P["ramp"] * P["fs"]))
+    n_avg = min(int(round(P["average"] * P["fs"])), int(0.6 * n_hold))
+    if n_hold < 10:
+        raise InputError("lola_twin: hold must be at least 10 samples")
+    if prof is not None:
+        return (*_profile_runs(prof, loads, P, rng), n_avg)
+    return (*_operating_points(speeds, loads, P, n_hold, n_ramp, rng), n_avg)
+
+
+def _profile_rows(point_rows: list[dict], sim: dict, starts: np.ndarray, prof: Reference) -> list[dict]:
+    """One row per run of a profile: ``point`` (= ``run``), ``campaign``, ``load_cmd``, ``t0, t1``
+    (the run), ``n``, ``top_speed`` and ``speed_max`` (true, rad/s), ``load_true`` (mean brake torque, Nm)."""
+    t, v = sim["t"], sim["v"]
+    return [{"point": i, "run": i, **r, "t0": float(t[a]), "t1": float(t[b - 1]), "n": int(b - a),
+             "top_speed": prof.top_speed, "speed_max": float(np.abs(v[a:b]).max()),
+             "load_true": float(sim["brake"][a:b].mean())}
+            for i, (r, a, b) in enumerate(zip(point_rows, starts[:-1], starts[1:]))]
 
 
 def _profile(key: str, profile: str, speeds, hold, top_speed, duration, options, P: dict) -> Reference | None:

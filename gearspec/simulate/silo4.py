@@ -202,6 +202,15 @@ def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
     return Ad, Bd[:, 0], Cd[0], float(Dd[0, 0])
 
 
+def _starts(theta0, base: FrictionModel, runs: SimpleNamespace) -> np.ndarray:
+    """Start position of every run (rad): ``theta0``, or "auto" (:func:`_auto_starts`; 0 for a profile)."""
+    if not isinstance(theta0, str):
+        return np.full(runs.n, float(theta0))
+    if theta0 != "auto":
+        raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
+    return _auto_starts(base, runs.w_cmd, runs.holds, runs.acc) if runs.prof is None else np.zeros(runs.n)
+
+
 def _auto_starts(model: FrictionModel, w_cmd, holds, acc, step: float = 0.05) -> np.ndarray:
     """Start positions that centre each run's held travel where the model's position ripple
     (friction minus its position average, at the run's speed) averages to about zero over the
@@ -234,8 +243,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                sample_interval: float | None = None, current_noise: float | None = None,
                repeatability: float | None = None, plant: dict | None = None, profile: str = "plateaus",
                profile_options: dict | None = None, top_speed_rpm: float | None = None) -> tuple[Recording, TwinTruth]:
-    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition), or per
-    repetition of a whole motion ``profile``.
+    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition) or of a ``profile``.
 
     Parameters
     ----------
@@ -270,10 +278,9 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     plant : dict, optional
         Override any other entry of :data:`PLANT`.
     profile, profile_options, top_speed_rpm : str, dict, float, optional
-        ``"plateaus"`` (the above) or a :mod:`~gearspec.simulate.profiles` profile (``ramp``,
-        ``chirp``, ``bell``, ``sine``; its ``profile_options``, ``seed`` the sine's phases) up to
-        ``top_speed_rpm`` (default 6500): the loop follows it from rest to rest in every run (starting
-        at ``theta0``, "auto": 0), then ``settle`` s at rest; all else unchanged.
+        ``"plateaus"`` (the above) or a :mod:`~gearspec.simulate.profiles` profile (``ramp, chirp,
+        bell, sine``; its ``profile_options``, ``seed`` the sine's phases) up to ``top_speed_rpm``
+        (default 6500): followed from rest to rest in every run (from ``theta0``, "auto": 0).
 
     Returns
     -------
@@ -313,12 +320,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                          "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
     if model.law_spec.needs_load and "load" not in ch0:
         raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
-    if isinstance(theta0, str):
-        if theta0 != "auto":
-            raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
-        starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc) if prof is None else np.zeros(runs.n)
-    else:
-        starts = np.full(runs.n, float(theta0))
+    starts = _starts(theta0, base, runs)
     out = _closed_loop(runs, bench, lf, channels, ch0, starts)
     cols, rows = _twin_columns(runs, out, model, P, rng, speeds_rpm, repetitions, starts)
     data = {k: cols[k] for k in ("t", "theta", "current", "run")}
