@@ -129,6 +129,8 @@ def test_sine_phases_from_the_seed():
     ("chirp", {"method": "cubic"}, "'linear' or 'log'"),
     ("bell", {"peaks": (0.5, 0.25), "shares": (1, 1)}, "largest peak must be 1"),
     ("sine", {"harmonics": 0}, "harmonics >= 1"),
+    ("chirp", {"f1": "fast"}, "option f1 must be a finite number"),
+    ("bell", {"peaks": (1.0, float("nan")), "shares": (1, 1)}, "option peaks must be a finite number"),
 ])
 def test_bad_profile_arguments_are_refused_in_one_sentence(kind, kw, says):
     args = {"top_speed": TOP, "duration": DUR, "fs": 250.0, **kw}
@@ -297,9 +299,16 @@ def test_cli_simulate_profile_writes_files_and_refuses_nonsense(tmp_path, capsys
     assert {"t", "theta", "current", "run"} <= set(rec.columns) and len(rec) == 825   # 0 to 3.296 s at 4 ms
     FrictionModel.from_dict(truth["model"])
     assert main(["simulate", "lola", "--module", "B", "--out", str(out), "--profile", "bell", "--duration", "3",
-                 "--top-speed", "100", "--loads", "5", "--quiet"]) == 0
+                 "--top-speed", "100", "--loads", "5", "--quiet", "--profile-options", "peaks=1;0.3,shares=1;2"]) == 0
     pts = pd.read_csv(out / "lola_B_twin_points.csv")
     assert list(pts["load_cmd"]) == [5.0] and pts["speed_max"].iloc[0] == pytest.approx(100.0, rel=0.01)
+    truth = json.loads((out / "lola_B_twin_truth.json").read_text())
+    assert truth["settings"]["profile"]["options"] == {"peaks": [1, 0.3], "shares": [1, 2]}
+    # the options reach the profile: the second move peaks at 0.3 x 100 rad/s over twice the time
+    rec = pd.read_csv(out / "lola_B_twin.csv")
+    v = np.gradient(rec["theta"].to_numpy(), rec["t"].to_numpy())
+    assert np.sort(np.abs(v))[-30:].min() > 90                   # the first move reaches ~100 rad/s
+    assert np.abs(v[rec["t"].to_numpy() > 1.6]).max() == pytest.approx(30.0, rel=0.05)  # the second: 30
     capsys.readouterr()
     for argv, says in [
         (["silo4", "--profile", "wobble"], "invalid choice: 'wobble'"),
@@ -310,6 +319,10 @@ def test_cli_simulate_profile_writes_files_and_refuses_nonsense(tmp_path, capsys
         (["lola", "--profile", "ramp", "--hold", "3"], "sets its own speeds"),
         (["lola", "--duration", "3"], "apply to a motion --profile"),
         (["lola", "--profile", "sine", "--top-speed", "-3"], "must be above 0"),
+        (["lola", "--profile-options", "f1=2"], "--profile-options applies to a motion --profile"),
+        (["lola", "--profile", "chirp", "--profile-options", "f1"], "'f1' is not KEY=VALUE"),
+        (["lola", "--profile", "chirp", "--profile-options", "f1=fast"], "option f1 must be a finite number"),
+        (["silo4", "--profile", "chirp", "--profile-options", "wobble=1"], "no option wobble"),
     ]:
         assert main(["simulate", *argv, "--out", str(out), "--quiet"]) == 2, argv
         err = capsys.readouterr().err

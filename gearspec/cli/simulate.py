@@ -66,6 +66,10 @@ def _profile_option(p) -> None:
     p.add_argument("--profile", choices=PROFILES, default="plateaus",
                    help=f"motion of each run: plateaus (default: the twin's speed grid), or {shapes}. Every profile "
                         f"starts and ends at rest and reaches the top speed in both directions")
+    p.add_argument("--profile-options", metavar="K=V,...",
+                   help="the profile's own options, e.g. f0=0.05,f1=1,method=log (chirp, Hz); peaks=1;0.3,shares=1;1 "
+                        "(bell, ';' between values); rest=2 (ramp, bell, s); harmonics=3,base=0.2,taper=0.3,seed=4 "
+                        "(sine)")
 
 
 def _common(p, default_name: str) -> None:
@@ -78,6 +82,32 @@ def _common(p, default_name: str) -> None:
                         "nonlinear_viscous, asymmetry, hysteresis, backlash, extra_inertia")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no summary on stdout")
+
+
+def _options(args) -> dict | None:
+    """``--profile-options k=v,...``: numbers where they parse (``;`` between the values of a list),
+    else words; refused with a motion profile absent or a pair without ``=``."""
+    if args.profile_options is None:
+        return None
+    if args.profile == "plateaus":
+        raise InputError("--profile-options applies to a motion --profile (ramp, chirp, bell, sine), not to plateaus")
+    out = {}
+    for pair in filter(None, (x.strip() for x in args.profile_options.split(","))):
+        key, eq, text = pair.partition("=")
+        if not eq or not key.strip():
+            raise InputError(f"--profile-options: '{pair}' is not KEY=VALUE (e.g. f1=0.5)")
+        vals = [_word(x) for x in text.split(";")]
+        out[key.strip()] = vals[0] if len(vals) == 1 else vals
+    return out
+
+
+def _word(text: str):
+    text = text.strip()
+    try:
+        value = float(text)
+    except ValueError:
+        return text
+    return int(value) if value.is_integer() and "." not in text and "e" not in text.lower() else value
 
 
 def _floats(text: str | None, option: str):
@@ -140,12 +170,13 @@ def run_silo4(args) -> int:
     if args.profile != "plateaus" and (speeds is not None or args.stick_slip):
         raise InputError(f"--profile {args.profile} sets its own speeds: give --top-speed-rpm, not --speeds, "
                          "--speeds-rpm or --stick-slip")
-    effects = _effects(args)
+    effects, options = _effects(args), _options(args)
     t0 = time.perf_counter()
     if args.stick_slip:
         rec, truth = stick_slip_run(duration=args.duration or 30.0, seed=args.seed, effects=effects)
     else:
-        extra = {} if args.profile == "plateaus" else {"profile": args.profile, "top_speed_rpm": args.top_speed_rpm}
+        extra = {} if args.profile == "plateaus" else {"profile": args.profile, "top_speed_rpm": args.top_speed_rpm,
+                                                       "profile_options": options}
         rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
                                 seed=args.seed, **extra)
     _write(args, args.name, rec, truth, time.perf_counter() - t0)
@@ -163,10 +194,10 @@ def run_lola(args) -> int:
     if args.profile != "plateaus" and (args.speeds is not None or args.hold is not None):
         raise InputError(f"--profile {args.profile} sets its own speeds: give --top-speed and --duration, not --speeds "
                          "or --hold")
-    effects = _effects(args)
+    effects, options = _effects(args), _options(args)
     name = args.name.format(module=args.module)
     extra = {} if args.profile == "plateaus" else {"profile": args.profile, "top_speed": args.top_speed,
-                                                   "duration": args.duration}
+                                                   "duration": args.duration, "profile_options": options}
     t0 = time.perf_counter()
     rec, points = lola_twin(args.module, _floats(args.speeds, "--speeds"), _floats(args.loads, "--loads"),
                             hold=args.hold, effects=effects, seed=args.seed, **extra)

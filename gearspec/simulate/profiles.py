@@ -253,6 +253,13 @@ def velocity_profile(kind: str, *, top_speed: float, duration: float, fs: float,
     unknown = sorted(set(options) - set(_OPTIONS[kind]))
     if unknown:
         raise InputError(f"{kind} profile: no option {', '.join(unknown)} (options: {', '.join(_OPTIONS[kind])})")
+    for key, value in options.items():
+        try:
+            ok = key == "method" or bool(np.all(np.isfinite(np.asarray(value, dtype=float))))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise InputError(f"{kind} profile: option {key} must be a finite number (or numbers), got {value!r}")
     if kind == "sine":
         options["seed"] = seed
     return _FUNCTIONS[kind](top_speed, duration, fs, **options)
