@@ -108,6 +108,8 @@ def test_sine_phases_from_the_seed():
     b = velocity_profile("sine", top_speed=TOP, duration=DUR, fs=100.0, seed=4)[1]
     c = velocity_profile("sine", top_speed=TOP, duration=DUR, fs=100.0, seed=4)[1]
     assert np.array_equal(b, c) and not np.allclose(a, b)
+    with pytest.raises(InputError, match="must be an integer >= 0"):
+        velocity_profile("sine", top_speed=TOP, duration=DUR, fs=100.0, seed="four")
     # the second half is the first reversed in time and sign
     n = len(a)
     assert np.allclose(a[n // 2 + 1:], -a[:n // 2][::-1], atol=1e-12 * TOP)

@@ -261,6 +261,8 @@ def velocity_profile(kind: str, *, top_speed: float, duration: float, fs: float,
         if not ok:
             raise InputError(f"{kind} profile: option {key} must be a finite number (or numbers), got {value!r}")
     if kind == "sine":
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+            raise InputError(f"sine profile: the seed of its phases must be an integer >= 0, got {seed!r}")
         options["seed"] = seed
     return _FUNCTIONS[kind](top_speed, duration, fs, **options)
 
