@@ -1,7 +1,8 @@
 """``gearspec simulate silo4|lola --out DIR``: a twin's recording (``<name>.csv``, or by ``--format``),
 the gear spec to read it with (``<name>_gear.toml``), the truth (``<name>_truth.json``: the model
 simulated, the effects injected, every setting) and, for the testbed, its operating points
-(``<name>_points.csv``, eqs. 12-13), so that ``gearspec spectrum`` reads them back."""
+(``<name>_points.csv``, eqs. 12-13), so that ``gearspec spectrum`` reads them back.  ``--profile`` drives
+either twin through a whole motion (``gearspec.simulate.profiles``) instead of its plateaus."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from ..simulate.profiles import PROFILES, SHAPES
+from . import number
 
 _FORMATS = ("csv", "parquet", "npz")
 
@@ -27,9 +30,13 @@ def register(sub) -> None:
     s4.add_argument("--speeds-rpm", metavar="LIST", help="signed motor speeds in rpm, e.g. 280,-280,3000 "
                     "(default: 20 speeds from 2 to 6500 rpm, both directions)")
     s4.add_argument("--speeds", metavar="LIST", help="signed motor speeds in rad/s (instead of --speeds-rpm)")
-    s4.add_argument("--repetitions", type=int, default=10, help="runs per speed (default 10, as in the paper)")
+    s4.add_argument("--repetitions", type=int, default=10,
+                    help="runs per speed, or of the --profile (default 10, as in the paper)")
     s4.add_argument("--duration", type=float, help="seconds held at each speed (default: one output revolution, "
-                    "3-10 s)")
+                    "3-10 s); with --profile: seconds of the profile per run (default 40)")
+    _profile_option(s4)
+    s4.add_argument("--top-speed-rpm", type=number(0, low_open=True), metavar="RPM",
+                    help="with --profile: top motor speed, both directions (default 6500 rpm)")
     s4.add_argument("--stick-slip", action="store_true",
                     help="instead, one creeping run at 1e-4 rad/s of the joint (the paper's Fig. 3), 30 s, "
                          "with the true velocity")
@@ -45,7 +52,24 @@ def register(sub) -> None:
     lo.add_argument("--loads", metavar="LIST", help="load torques in Nm at the output (default: 8 from 5 %% to 80 %% "
                     "of the nominal output torque)")
     lo.add_argument("--hold", type=float, help="seconds per operating point (default 5)")
+    _profile_option(lo)
+    lo.add_argument("--top-speed", type=number(0, low_open=True), metavar="RAD_S",
+                    help="with --profile: top motor speed in rad/s, both directions (default: the module's top, "
+                         "400 rad/s for A and C, 290 for B)")
+    lo.add_argument("--duration", type=number(0, low_open=True), metavar="S",
+                    help="with --profile: seconds of the profile per load (default 20)")
     lo.set_defaults(func=run_lola)
+
+
+def _profile_option(p) -> None:
+    shapes = "; ".join(f"{k}: {v}" for k, v in SHAPES.items() if k != "plateaus")
+    p.add_argument("--profile", choices=PROFILES, default="plateaus",
+                   help=f"motion of each run: plateaus (default: the twin's speed grid), or {shapes}. Every profile "
+                        f"starts and ends at rest and reaches the top speed in both directions")
+    p.add_argument("--profile-options", metavar="K=V,...",
+                   help="the profile's own options, e.g. f0=0.05,f1=1,method=log (chirp, Hz); peaks=1;0.3,shares=1;1 "
+                        "(bell, ';' between values); rest=2 (ramp, bell, s); harmonics=3,base=0.2,taper=0.3,seed=4 "
+                        "(sine)")
 
 
 def _common(p, default_name: str) -> None:
@@ -58,6 +82,32 @@ def _common(p, default_name: str) -> None:
                         "nonlinear_viscous, asymmetry, hysteresis, backlash, extra_inertia")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no summary on stdout")
+
+
+def _options(args) -> dict | None:
+    """``--profile-options k=v,...``: numbers where they parse (``;`` between the values of a list),
+    else words; refused with a motion profile absent or a pair without ``=``."""
+    if args.profile_options is None:
+        return None
+    if args.profile == "plateaus":
+        raise InputError("--profile-options applies to a motion --profile (ramp, chirp, bell, sine), not to plateaus")
+    out = {}
+    for pair in filter(None, (x.strip() for x in args.profile_options.split(","))):
+        key, eq, text = pair.partition("=")
+        if not eq or not key.strip():
+            raise InputError(f"--profile-options: '{pair}' is not KEY=VALUE (e.g. f1=0.5)")
+        vals = [_word(x) for x in text.split(";")]
+        out[key.strip()] = vals[0] if len(vals) == 1 else vals
+    return out
+
+
+def _word(text: str):
+    text = text.strip()
+    try:
+        value = float(text)
+    except ValueError:
+        return text
+    return int(value) if value.is_integer() and "." not in text and "e" not in text.lower() else value
 
 
 def _floats(text: str | None, option: str):
@@ -115,13 +165,20 @@ def run_silo4(args) -> int:
         raise InputError("--speeds: a speed of 0 is no experiment; give nonzero signed speeds")
     if args.duration is not None and not args.duration > 0:
         raise InputError("--duration must be positive (seconds)")
-    effects = _effects(args)
+    if args.profile == "plateaus" and args.top_speed_rpm is not None:
+        raise InputError("--top-speed-rpm applies to a motion --profile (ramp, chirp, bell, sine), not to plateaus")
+    if args.profile != "plateaus" and (speeds is not None or args.stick_slip):
+        raise InputError(f"--profile {args.profile} sets its own speeds: give --top-speed-rpm, not --speeds, "
+                         "--speeds-rpm or --stick-slip")
+    effects, options = _effects(args), _options(args)
     t0 = time.perf_counter()
     if args.stick_slip:
         rec, truth = stick_slip_run(duration=args.duration or 30.0, seed=args.seed, effects=effects)
     else:
+        extra = {} if args.profile == "plateaus" else {"profile": args.profile, "top_speed_rpm": args.top_speed_rpm,
+                                                       "profile_options": options}
         rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
-                                seed=args.seed)
+                                seed=args.seed, **extra)
     _write(args, args.name, rec, truth, time.perf_counter() - t0)
     return 0
 
@@ -131,10 +188,18 @@ def run_lola(args) -> int:
 
     if args.hold is not None and not args.hold > 0:
         raise InputError("--hold must be positive (seconds)")
-    effects = _effects(args)
+    if args.profile == "plateaus" and (args.top_speed is not None or args.duration is not None):
+        raise InputError("--top-speed and --duration apply to a motion --profile (ramp, chirp, bell, sine), not to "
+                         "the plateau grid (use --speeds and --hold)")
+    if args.profile != "plateaus" and (args.speeds is not None or args.hold is not None):
+        raise InputError(f"--profile {args.profile} sets its own speeds: give --top-speed and --duration, not --speeds "
+                         "or --hold")
+    effects, options = _effects(args), _options(args)
     name = args.name.format(module=args.module)
+    extra = {} if args.profile == "plateaus" else {"profile": args.profile, "top_speed": args.top_speed,
+                                                   "duration": args.duration, "profile_options": options}
     t0 = time.perf_counter()
     rec, points = lola_twin(args.module, _floats(args.speeds, "--speeds"), _floats(args.loads, "--loads"),
-                            hold=args.hold, effects=effects, seed=args.seed)
+                            hold=args.hold, effects=effects, seed=args.seed, **extra)
     _write(args, name, rec, points.attrs["truth"], time.perf_counter() - t0, {"points": ("points.csv", points)})
     return 0

@@ -42,10 +42,11 @@ from ..model import FrictionModel
 from ..recording import Recording
 from .effects import Effect, apply_effects, effect_channels, effects_truth
 from ..jsonsafe import plain
+from .profiles import Reference, reference
 from .silo4 import TwinTruth
 
 __all__ = ["MODULES", "PAPER_TABLE3", "PAPER_TABLE4", "TESTBED", "table3_model", "table4_model", "lola_twin",
-           "default_speeds", "default_loads", "module_gear"]
+           "default_speeds", "default_loads", "module_gear", "PROFILE_DURATION"]
 
 #: Table II, with the ratio from the gear's name and the choices of the twin (see the docstring)
 MODULES = {
@@ -72,6 +73,9 @@ PAPER_TABLE4 = {
     "B": {"t_f0": 0.479, "mu": 1.20e-2, "b": 4.275e-4, "t_fs": 0.078, "v_s": 31.525, "rms": 1.20e-2},
     "C": {"t_f0": 0.112, "mu": 4.4e-3, "b": 9.06e-5, "t_fs": 0.057, "v_s": 99.985, "rms": 3.0e-3},
 }
+
+#: seconds of a motion profile per load (eight loads: 160 s, against 656 s of the default grid)
+PROFILE_DURATION = 20.0
 
 #: the testbed's settings, as chosen (see the module docstring)
 TESTBED = {
@@ -153,12 +157,19 @@ def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, k
     """PI-controlled hysteresis brake for a batch of blocks (same load schedule, one per speed):
     ``n_ramp`` samples at the first of ``commands`` (Nm; the speed ramp), then ``n_hold`` per level.
     Returns the actual and the measured (sensor noise) brake torque magnitude, (n_samples, n_blocks)."""
+    cmd = np.concatenate([np.full(n_ramp, commands[0])] + [np.full(n_hold, c) for c in commands])
+    return _brake_loop(cmd, T_init, kb, P, rng, sensor_sd, t_min)
+
+
+def _brake_loop(cmd: np.ndarray, T_init: np.ndarray, kb: float, P: dict, rng: np.random.Generator, sensor_sd: float,
+                t_min: float) -> tuple[np.ndarray, np.ndarray]:
+    """The brake's PI loop from torques ``T_init`` (Nm, settled) following the load command ``cmd``
+    (Nm, one per sample, or (n_samples, n_blocks)): actual and measured torque, (n_samples, n_blocks)."""
     dt = 1.0 / P["fs"]
     tau_c = P["brake_time_constant"]
     ki = 1.0 / (kb * P["brake_closed_loop"])
     kp = tau_c * ki
     alpha = math.exp(-dt / tau_c)
-    cmd = np.concatenate([np.full(n_ramp, commands[0])] + [np.full(n_hold, c) for c in commands])
     n, B = len(cmd), len(T_init)
     T = np.asarray(T_init, dtype=float).copy()
     integ = T / (kb * ki)  # steady state at the initial torque
@@ -176,11 +187,17 @@ def _brake(commands: np.ndarray, n_hold: int, n_ramp: int, T_init: np.ndarray, k
 
 
 # ---------------------------------------------------------------------- the twin
+#: the columns of the points a grid twin's truth keeps
+_TRUTH_COLUMNS = ["point", "campaign", "speed_cmd", "load_cmd", "t0", "t1", "friction_true", "load_true",
+                  "efficiency_true", "level_true"]
+
+
 def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: Sequence[float] | None = None, *,
               hold: float | None = None, truth: FrictionModel | None = None, effects: Iterable[Effect] = (),
-              seed: int | None = 0, fs: float | None = None, testbed: dict | None = None
+              seed: int | None = 0, fs: float | None = None, testbed: dict | None = None, profile: str = "plateaus",
+              profile_options: dict | None = None, top_speed: float | None = None, duration: float | None = None
               ) -> tuple[Recording, pd.DataFrame]:
-    """Simulate the testbed's automatic mode for module A, B or C.
+    """Simulate the testbed's automatic mode for module A, B or C, or a motion ``profile`` per load.
 
     Parameters
     ----------
@@ -199,6 +216,10 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
         ``load_meshing`` uses the brake's load (leave its ``loads`` empty).
     seed, fs, testbed
         Seed of the noise; sample rate (default 1 kHz); overrides of :data:`TESTBED`.
+    profile, profile_options, top_speed, duration : str, dict, float, float, optional
+        ``"plateaus"`` (the grid) or a :mod:`~gearspec.simulate.profiles` profile with its options (``seed``:
+        the sine's phases) up to ``top_speed`` rad/s (default: the module's top) over ``duration`` s
+        (default 20), followed from rest to rest once per load (one run each), the brake settled at it.
 
     Returns
     -------
@@ -213,7 +234,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
         velocity), ``efficiency`` (eq. 13), ``t0, t1`` (the averaged window), ``n``; the truth over
         the window: ``friction_true``, ``load_true``, ``efficiency_true``, and ``level_true``
         (``truth`` without effects, position-averaged, at the commanded speed and load).
-        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth`.
+        ``points.attrs["truth"]`` is the :class:`~gearspec.simulate.silo4.TwinTruth`.  A profile:
+        one row per run (:func:`_profile_rows`); ``settings["profile"]`` records the profile.
     """
     P = {**TESTBED, **(testbed or {})}
     for k, v in (("fs", fs), ("hold", hold)):
@@ -223,6 +245,7 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     mod = MODULES[key]
     N, km = mod["ratio"], mod["torque_constant"]
     rng = np.random.default_rng(seed)
+    prof = _profile(key, profile, speeds, hold, top_speed, duration, profile_options, P)
     speeds, loads = _grid(key, speeds, loads, P)
     effects = list(effects or ())
     base = truth if truth is not None else table4_model(key)
@@ -231,15 +254,8 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     J = mod["inertia"] + float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
     model_eval = model.copy()
     model_eval.terms = [t for t in model.terms if t["kind"] != "inertia"]
-
-    fs_ = P["fs"]
-    dt = 1.0 / fs_
-    n_hold = int(round(P["hold"] * fs_))
-    n_ramp = int(round(P["ramp"] * fs_))
-    n_avg = min(int(round(P["average"] * fs_)), int(0.6 * n_hold))
-    if n_hold < 10:
-        raise InputError("lola_twin: hold must be at least 10 samples")
-    pieces, point_rows = _operating_points(speeds, loads, P, n_hold, n_ramp, rng)
+    dt = 1.0 / P["fs"]
+    pieces, point_rows, n_avg = _schedule(speeds, loads, prof, P, rng)
     v, T_act, T_meas, run = (np.concatenate(c) for c in zip(*pieces))
     run = run.astype(np.int64)
     n = len(v)
@@ -262,18 +278,79 @@ def lola_twin(module: str = "A", speeds: Sequence[float] | None = None, loads: S
     theta_meas = np.floor(theta / q) * q
     starts = np.concatenate(([0], np.cumsum([len(p[0]) for p in pieces])))
     sim = {"t": t, "theta_meas": theta_meas, "current": current, "load_meas": load_meas, "load_true": load_true,
-           "friction": friction, "run": run, "temperature": ch.get("temperature")}
-    points = pd.DataFrame(_point_rows(point_rows, sim, starts, base, P, n_avg, N, km))
+           "friction": friction, "run": run, "temperature": ch.get("temperature"), "v": v, "brake": T_act}
+    points = pd.DataFrame(_point_rows(point_rows, sim, starts, base, P, n_avg, N, km) if prof is None else
+                          _profile_rows(point_rows, sim, starts, prof))
     data = {"t": t, "theta": theta_meas, "current": current, "load": load_meas, "run": run,
             **{k: ch[k] for k in recorded}}
     rec = Recording.from_arrays(gear=gear, source=f"lola twin {key}", **data)
     settings = {**P, "module": key, **{f"module_{k}": v for k, v in mod.items()}, "seed": seed,
-                "speeds": speeds, "loads": loads, "inertia_total": J}
+                "speeds": None if prof else speeds, "loads": loads, "inertia_total": J,
+                "profile": prof.record() if prof else {"kind": "plateaus"}}
     truth_info = TwinTruth(f"lola-{key}", model, gear, effects_truth(effects, gear),
-                           points[["point", "campaign", "speed_cmd", "load_cmd", "t0", "t1", "friction_true",
-                                   "load_true", "efficiency_true", "level_true"]].copy(), plain(settings))
+                           points[list(points.columns) if prof else _TRUTH_COLUMNS].copy(), plain(settings))
     points.attrs["truth"] = truth_info
     return rec, points
+
+
+def _schedule(speeds, loads, prof: Reference | None, P: dict, rng: np.random.Generator):
+    """The pieces and point rows of :func:`_operating_points` (the grid) or :func:`_profile_runs`,
+    and the samples averaged per point."""
+    n_hold = int(round(P["hold"] * P["fs"]))
+    n_ramp = int(round(P["ramp"] * P["fs"]))
+    n_avg = min(int(round(P["average"] * P["fs"])), int(0.6 * n_hold))
+    if n_hold < 10:
+        raise InputError("lola_twin: hold must be at least 10 samples")
+    if prof is not None:
+        return (*_profile_runs(prof, loads, P, rng), n_avg)
+    return (*_operating_points(speeds, loads, P, n_hold, n_ramp, rng), n_avg)
+
+
+def _profile_rows(point_rows: list[dict], sim: dict, starts: np.ndarray, prof: Reference) -> list[dict]:
+    """One row per run of a profile: ``point`` (= ``run``), ``campaign``, ``load_cmd``, ``t0, t1``
+    (the run), ``n``, ``top_speed`` and ``speed_max`` (true, rad/s), ``load_true`` (mean brake torque, Nm)."""
+    t, v = sim["t"], sim["v"]
+    return [{"point": i, "run": i, **r, "t0": float(t[a]), "t1": float(t[b - 1]), "n": int(b - a),
+             "top_speed": prof.top_speed, "speed_max": float(np.abs(v[a:b]).max()),
+             "load_true": float(sim["brake"][a:b].mean())}
+            for i, (r, a, b) in enumerate(zip(point_rows, starts[:-1], starts[1:]))]
+
+
+def _profile(key: str, profile: str, speeds, hold, top_speed, duration, options, P: dict) -> Reference | None:
+    """The motion profile of a profile twin at the testbed's rate (None: the plateau grid)."""
+    if profile == "plateaus":
+        if options or top_speed is not None or duration is not None:
+            raise InputError("lola_twin: top_speed, duration and profile_options are for a motion profile, "
+                             "not the grid")
+        return None
+    if speeds is not None or hold is not None:
+        raise InputError(f"lola_twin: speeds and hold are for the plateau grid; the {profile} profile takes top_speed "
+                         "and duration")
+    return reference(profile, top_speed=MODULES[key]["speed_range"][1] if top_speed is None else top_speed,
+                     duration=PROFILE_DURATION if duration is None else duration, fs=P["fs"], options=options,
+                     who="lola_twin")
+
+
+def _profile_runs(prof: Reference, loads, P: dict, rng: np.random.Generator):
+    """One run of the profile per load (increasing), the brake of each campaign's runs at once,
+    settled at its load from the start: ``pieces`` and rows as :func:`_operating_points`'."""
+    pieces, rows, n = [], [], len(prof.v)
+    for camp, levels, gear_ratio, rng_sensor in _campaigns(loads, P):
+        act, meas = _brake_loop(np.broadcast_to(np.asarray(levels), (n, len(levels))), np.asarray(levels),
+                                P["brake_max"] * gear_ratio / P["brake_voltage"], P, rng,
+                                P["sensor_noise"] * rng_sensor, P["brake_min"] * gear_ratio)
+        for b, lv in enumerate(levels):
+            pieces.append((prof.v, act[:, b], meas[:, b], np.full(n, len(rows))))
+            rows.append({"campaign": camp, "load_cmd": lv})
+    return pieces, rows
+
+
+def _campaigns(loads, P: dict) -> list[tuple]:
+    """The brake's campaigns: (1, loads up to 17 Nm, gear 1, small sensor range), then (2, those
+    above, the testbed gear, the large range); only those with loads."""
+    campaigns = [(1, [x for x in loads if x <= P["brake_max"]], 1.0, P["sensor_ranges"][0]),
+                 (2, [x for x in loads if x > P["brake_max"]], P["testbed_gear"], P["sensor_ranges"][1])]
+    return [c for c in campaigns if c[1]]
 
 
 def _grid(key: str, speeds, loads, P: dict) -> tuple[list[float], list[float]]:
@@ -296,9 +373,7 @@ def _operating_points(speeds, loads, P: dict, n_hold: int, n_ramp: int, rng: np.
     with the testbed gear) the brake of every speed block at once, then the blocks one after
     another.  Returns ``pieces`` (per block: velocity, actual and measured brake torque, point
     index per sample) and one row per point (``campaign, speed_cmd, load_cmd``)."""
-    campaigns = [(1, [x for x in loads if x <= P["brake_max"]], 1.0, P["sensor_ranges"][0]),
-                 (2, [x for x in loads if x > P["brake_max"]], P["testbed_gear"], P["sensor_ranges"][1])]
-    campaigns = [c for c in campaigns if c[1]]
+    campaigns = _campaigns(loads, P)
     pieces = []  # (v, T_actual, T_meas, point index per sample)
     point_rows = []
     v_prev = 0.0

@@ -60,9 +60,10 @@ from ..recording import Recording
 from ..terms import TERMS
 from .effects import Effect, apply_effects, effect_channels, effects_truth
 from .friction import _LoopFriction
+from .profiles import Reference, reference, tracking
 
 __all__ = ["PAPER_TABLE2", "table2_model", "twin_gear", "silo4_twin", "stick_slip_run", "TwinTruth",
-           "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold"]
+           "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold", "PROFILE_DURATION"]
 
 #: planetary and worm ratios, and the total (Table 1)
 RATIO_PLANETARY = 14.0
@@ -95,6 +96,9 @@ PLANT = {
 #: motor speeds (rpm) of the default twin, each in both directions: the Stribeck region of
 #: Fig. 4, Table 3's 280 / 560 / 3000 rpm and Fig. 5's 2000 / 4500 / 6500 rpm
 DEFAULT_SPEEDS_RPM = (2, 5, 10, 20, 30, 50, 75, 100, 150, 200, 280, 400, 560, 800, 1000, 1500, 2000, 3000, 4500, 6500)
+
+#: seconds of a motion profile per run (ten runs: 400 s, against 3790 s of the default plateaus)
+PROFILE_DURATION = 40.0
 
 _PI = math.pi
 
@@ -198,6 +202,15 @@ def _bessel_zoh(order: int, cutoff_hz: float, dt: float):
     return Ad, Bd[:, 0], Cd[0], float(Dd[0, 0])
 
 
+def _starts(theta0, base: FrictionModel, runs: SimpleNamespace) -> np.ndarray:
+    """Start position of every run (rad): ``theta0``, or "auto" (:func:`_auto_starts`; 0 for a profile)."""
+    if not isinstance(theta0, str):
+        return np.full(runs.n, float(theta0))
+    if theta0 != "auto":
+        raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
+    return _auto_starts(base, runs.w_cmd, runs.holds, runs.acc) if runs.prof is None else np.zeros(runs.n)
+
+
 def _auto_starts(model: FrictionModel, w_cmd, holds, acc, step: float = 0.05) -> np.ndarray:
     """Start positions that centre each run's held travel where the model's position ripple
     (friction minus its position average, at the run's speed) averages to about zero over the
@@ -228,8 +241,9 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                effects: Iterable[Effect] = (), duration: float | Sequence[float] | Callable | None = None,
                seed: int | None = 0, load=None, theta0: float | str = "auto", record_velocity: bool = False,
                sample_interval: float | None = None, current_noise: float | None = None,
-               repeatability: float | None = None, plant: dict | None = None) -> tuple[Recording, TwinTruth]:
-    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition).
+               repeatability: float | None = None, plant: dict | None = None, profile: str = "plateaus",
+               profile_options: dict | None = None, top_speed_rpm: float | None = None) -> tuple[Recording, TwinTruth]:
+    """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition) or of a ``profile``.
 
     Parameters
     ----------
@@ -244,7 +258,8 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         Injected into ``truth``; the channels they supply (temperature, load) are fed to the model
         and recorded.
     duration : float, sequence (one per speed) or callable(speed rad/s) -> s, optional
-        Seconds held at speed (default :func:`default_hold`).
+        Seconds held at speed (default :func:`default_hold`); with a ``profile``: seconds of the
+        profile (default :data:`PROFILE_DURATION`).
     seed : int or None
         Noise and repetition-to-repetition variation.
     load : float, sequence (per repetition, cycled) or callable(t, run), optional
@@ -262,6 +277,10 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         Override :data:`PLANT`'s 4 ms, 4 mA and 1 %.
     plant : dict, optional
         Override any other entry of :data:`PLANT`.
+    profile, profile_options, top_speed_rpm : str, dict, float, optional
+        ``"plateaus"`` (the above) or a :mod:`~gearspec.simulate.profiles` profile (``ramp, chirp,
+        bell, sine``; its ``profile_options``, ``seed`` the sine's phases) up to ``top_speed_rpm``
+        (default 6500): followed from rest to rest in every run (from ``theta0``, "auto": 0).
 
     Returns
     -------
@@ -275,6 +294,8 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         ``scale`` (the repetition's friction factor), ``level`` (``scale`` times the truth's
         :meth:`~FrictionModel.mean_level` at the speed), ``friction_mean`` (mean true friction
         magnitude over the held samples, ripple included), ``velocity_mean``, ``stuck_fraction``.
+        A profile's ``runs``: ``run, repetition, profile, theta_start, t_start, t_stop, t0, t1`` (the
+        motion), ``scale, top_speed`` and :func:`~.profiles.tracking`'s; ``settings["profile"]`` its record.
     """
     P = {**PLANT, **(plant or {})}
     for k, v in (("sample_interval", sample_interval), ("current_noise", current_noise),
@@ -282,19 +303,14 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         if v is not None:
             P[k] = float(v)
     rng = np.random.default_rng(seed)
-    if speeds_rpm is None:
-        speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
-    speeds_rpm = [float(s) for s in np.atleast_1d(speeds_rpm)]
-    if not speeds_rpm or any(s == 0 or not math.isfinite(s) for s in speeds_rpm):
-        raise InputError("silo4_twin: speeds must be nonzero finite motor speeds in rpm")
     if int(repetitions) < 1:
         raise InputError("silo4_twin: repetitions must be at least 1")
     repetitions = int(repetitions)
+    runs, speeds_rpm, prof = _runs(speeds_rpm, repetitions, duration, profile, profile_options, top_speed_rpm, P, rng)
     effects = list(effects or ())
     base = truth if truth is not None else table2_model()
     model = apply_effects(base, effects)
     lf = _LoopFriction(model)
-    runs = _schedule(speeds_rpm, repetitions, duration, P, rng)
     bench = _Bench(P, lf.extra_inertia, runs.dt)
     channels = _Channels(effects, load, runs.t_start, runs.rep)
     ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
@@ -304,12 +320,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                          "does not have (SILO4 was measured without load): give load=... or the effect's loads=...")
     if model.law_spec.needs_load and "load" not in ch0:
         raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
-    if isinstance(theta0, str):
-        if theta0 != "auto":
-            raise InputError(f"silo4_twin: theta0 must be a number or 'auto', got '{theta0}'")
-        starts = _auto_starts(base, runs.w_cmd, runs.holds, runs.acc)
-    else:
-        starts = np.full(runs.n, float(theta0))
+    starts = _starts(theta0, base, runs)
     out = _closed_loop(runs, bench, lf, channels, ch0, starts)
     cols, rows = _twin_columns(runs, out, model, P, rng, speeds_rpm, repetitions, starts)
     data = {k: cols[k] for k in ("t", "theta", "current", "run")}
@@ -319,9 +330,11 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     gear = twin_gear(bench.kM, float(P["inertia"]))
     rec = Recording.from_arrays(gear=gear, source="silo4 twin", **data)
     settings = {**P, "Kp": bench.Kp, "Ki": bench.Ki, "Kd": bench.Kd, "electrical_damping": bench.b_emf,
-                "inertia_total": bench.J, "seed": seed, "repetitions": repetitions, "speeds_rpm": speeds_rpm,
+                "inertia_total": bench.J, "seed": seed, "repetitions": repetitions,
+                "speeds_rpm": speeds_rpm if prof is None else None,
                 "theta0": theta0 if not isinstance(theta0, str) else "auto",
-                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist())}
+                "load": None if load is None or callable(load) else plain(np.asarray(load).tolist()),
+                "profile": {"kind": "plateaus"} if prof is None else prof.record()}
     truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
     return rec, truth_info
 
@@ -364,6 +377,29 @@ def _schedule(speeds_rpm, repetitions: int, duration, P: dict, rng: np.random.Ge
     return SimpleNamespace(n=len(w_cmd), w_cmd=w_cmd, rep=rep, holds=holds, acc=acc, t_acc=t_acc, t_hold_end=t_hold_end,
                            t_end=t_end, t_stop=t_stop, rate=rate, dt=dt, n_sub=n_sub, dt_s=dt_s, n_samp=n_samp,
                            t_start=t_start, scale=scale)
+
+
+def _runs(speeds_rpm, repetitions: int, duration, profile: str, options, top_speed_rpm, P: dict,
+          rng: np.random.Generator) -> tuple[SimpleNamespace, list, Reference | None]:
+    """The runs (:func:`_schedule`, plus the motion profile ``prof`` and its position ``ref``), the
+    speeds (rpm) and the profile: a profile is one "speed" 0 (no ramps) held for its duration."""
+    if (speeds_rpm is not None) if profile != "plateaus" else (options or top_speed_rpm is not None):
+        raise InputError("silo4_twin: speeds_rpm is for plateaus, top_speed_rpm and profile_options for a profile")
+    prof, top = None, float(DEFAULT_SPEEDS_RPM[-1] if top_speed_rpm is None else top_speed_rpm)
+    if profile != "plateaus":  # at the control rate, below the motor's no-load speed
+        if not 0 < top < P["supply_voltage"] / P["torque_constant"] / RPM:
+            raise InputError(f"silo4_twin: top speed {top:g} rpm is not between 0 and the motor's no-load speed "
+                             f"{P['supply_voltage'] / P['torque_constant'] / RPM:.0f} rpm")
+        prof = reference(profile, top_speed=top * RPM, duration=PROFILE_DURATION if duration is None else duration,
+                         fs=float(P["control_rate"]), options=options, who="silo4_twin")
+    if speeds_rpm is None:
+        speeds_rpm = [s * d for s in DEFAULT_SPEEDS_RPM for d in (1, -1)]
+    speeds_rpm = [float(s) for s in np.atleast_1d(speeds_rpm)]
+    if not speeds_rpm or any(s == 0 or not math.isfinite(s) for s in speeds_rpm):
+        raise InputError("silo4_twin: speeds must be nonzero finite motor speeds in rpm")
+    runs = _schedule([0.0] if prof else speeds_rpm, repetitions, prof.duration if prof else duration, P, rng)
+    runs.prof, runs.ref = prof, prof.position() if prof else None
+    return runs, speeds_rpm, prof
 
 
 class _Bench:
@@ -432,7 +468,7 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
     needs_t = any("t" in TERMS[t["kind"]].needs for t in lf.model.terms)
     needs_run = bool(lf.history) or any("run" in TERMS[t["kind"]].needs for t in lf.model.terms)
     sw, Wa = np.sign(W), np.abs(W)
-    half_a = 0.5 * runs.acc
+    half_a, profile_ref = 0.5 * runs.acc, runs.ref
     # state per slot; f_acc: the friction summed over the current sample interval
     theta, turn_theta = TH0.copy(), np.full(R_, np.nan)
     vel, integ, last_sign, f_acc = (np.zeros(R_) for _ in range(4))
@@ -448,10 +484,13 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
         # reference trajectory of the chunk: acceleration-limited ramp, hold, ramp down
         tl_c = (k0 + np.arange(min(chunk, n_steps - k0)))[:, None] * dt
         a = slice(0, n_act)
-        t1 = np.minimum(tl_c, TA[a])
-        t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
-        t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
-        ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+        if profile_ref is not None:  # a motion profile, the same for every run
+            ref_c = TH0[a] + profile_ref[np.minimum(k0 + np.arange(len(tl_c)), len(profile_ref) - 1), None]
+        else:
+            t1 = np.minimum(tl_c, TA[a])
+            t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
+            t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
+            ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
         for kk_ in range(len(tl_c)):
             k = k0 + kk_
             tl = k * dt
@@ -489,7 +528,7 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
             v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
             F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
             # record the state at the start of the step (filter output up to the previous step)
-            if k % n_sub == 0:
+            if k % n_sub == 0 and k // n_sub < shape[0]:  # (a stop on a sample edge rounded up)
                 i = k // n_sub
                 cols_ = np.flatnonzero(i < NS[a])
                 out_th[i, cols_] = (np.floor(th / q) * q)[cols_]
@@ -536,7 +575,13 @@ def _twin_columns(runs: SimpleNamespace, out: SimpleNamespace, model: FrictionMo
             "run": np.repeat(np.arange(runs.n, dtype=np.int64), runs.n_samp), "velocity": column(out.out_v),
             **{k: column(v) for k, v in out_ch.items()}}
     rows = []
-    for r, (n, s) in enumerate(per_run):
+    prof = runs.prof
+    for r, (n, s) in enumerate(per_run if prof else ()):  # a motion profile: how well each run followed it
+        n_m, t0 = int(np.floor(prof.duration / dt_s)) + 1, runs.t_start[r]  # samples of the motion
+        rows.append({"run": r, "repetition": r, "profile": prof.kind, "theta_start": starts[r], "t_start": t0,
+                     "t_stop": t0 + (n - 1) * dt_s, "t0": t0, "t1": t0 + (n_m - 1) * dt_s, "scale": runs.scale[r],
+                     "top_speed": prof.top_speed, **tracking(out.out_v[:n_m, s], prof.v[::runs.n_sub][:n_m])})
+    for r, (n, s) in enumerate(() if prof else per_run):
         tl = np.arange(n) * dt_s
         held = (tl >= runs.t_acc[r] + 0.25 * min(1.0, runs.holds[r])) & (tl <= runs.t_hold_end[r])
         if not held.any():

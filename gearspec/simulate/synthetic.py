@@ -1,7 +1,7 @@
 """Synthetic recordings with known truth: constant-speed plateaus with position-locked ripple of
 known amplitude and phase (:func:`plateau_recording`, SILO4 eq. 11's shape), plateaus whose friction
-is any :class:`~gearspec.model.FrictionModel` (:func:`model_recording`), quasi-static stepped maps
-and excitation trajectories.
+is any :class:`~gearspec.model.FrictionModel` (:func:`model_recording`), quasi-static stepped maps,
+excitation trajectories, and any model driven open loop by a velocity profile (:func:`motion_recording`).
 """
 
 from __future__ import annotations
@@ -12,10 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import laws
+from ..errors import InputError
 from ..model import FrictionModel
 from ..recording import Recording
+from .profiles import position, velocity_profile
 
-__all__ = ["Ripple", "plateau_recording", "model_recording", "quasi_static_recording", "excitation_recording"]
+__all__ = ["Ripple", "plateau_recording", "model_recording", "quasi_static_recording", "excitation_recording",
+           "motion_recording"]
 
 
 @dataclass(frozen=True)
@@ -341,3 +344,61 @@ def excitation_recording(*, fs=250.0, move=10.0, amplitude=2.0, cruise_speed=1.5
     meas = theta + rng.normal(0.0, position_noise, n)
     rec = Recording.from_arrays(t=t, theta=meas, torque=torque, gear=gear, unit=unit, source="synthetic-excitation")
     return rec, {"velocity": v, "acceleration": acc, "cruise": cruise, "tails": tails}
+
+
+# ---------------------------------------------------------------------- any motion, open loop
+def motion_recording(model: FrictionModel, profile: str = "bell", *, top_speed: float, duration: float,
+                     fs: float = 1000.0, inertia: float = 0.0, noise: float = 0.0, position_noise: float = 0.0,
+                     gear=None, load=None, seed=None, **profile_options):
+    """A shaft moved open loop along a velocity profile, its torque from ``model``: exact and fast.
+
+    ``theta`` is the trapezoid integral of the profile's velocity ``v``
+    (:func:`~gearspec.simulate.profiles.velocity_profile`; ``profile_options`` its keywords, ``seed``
+    also the sine's phases), ``acc = np.gradient(v, 1 / fs)``, and the torque
+    ``model.evaluate(theta, v, load=..., t=..., acc=acc, run=0) + inertia * acc`` plus white noise.
+
+    Parameters
+    ----------
+    model : FrictionModel
+        The friction (SI, at the shaft ``theta`` measures).
+    profile : str
+        ``plateaus``, ``ramp``, ``chirp``, ``bell`` or ``sine``.
+    top_speed, duration, fs : float
+        rad/s (both directions), s, Hz.
+    inertia : float
+        kg m^2 at the shaft; its torque ``inertia * acc`` is added (undeclared unless ``gear`` says it).
+    noise, position_noise : float
+        Standard deviations of white noise on the torque (Nm) and on the recorded position (rad).
+    gear, load, seed
+        The recording's gear spec; the load (Nm: a number, one per sample or ``load(t)``), recorded
+        and passed to the model; the noise's seed.
+
+    Returns
+    -------
+    recording : Recording
+        ``t, theta, torque, run`` (0) and ``load`` when given.
+    truth : dict
+        ``profile`` (kind, top_speed, duration, fs, options, seed), ``theta`` (true), ``velocity``,
+        ``acceleration``, ``friction`` (the model's part of the torque), ``inertia``, ``noise``,
+        ``position_noise``.
+    """
+    t, v = velocity_profile(profile, top_speed=top_speed, duration=duration, fs=fs, seed=seed, **profile_options)
+    n = len(t)
+    theta = position(v, fs)
+    acc = np.gradient(v, 1.0 / fs)
+    if load is not None:
+        load = np.asarray(load(t) if callable(load) else load, dtype=float)
+        load = np.full(n, float(load)) if load.ndim == 0 else load
+        if load.shape != (n,):
+            raise InputError(f"motion_recording: load must be a number, {n} values (one per sample) or load(t)")
+    run = np.zeros(n, np.int64)
+    friction = model.evaluate(theta, v, load=load, t=t, acc=acc, run=run)
+    rng = np.random.default_rng(seed)
+    torque = friction + inertia * acc + (rng.normal(0.0, noise, n) if noise else 0.0)
+    meas = theta + (rng.normal(0.0, position_noise, n) if position_noise else 0.0)
+    rec = Recording.from_arrays(t=t, theta=meas, torque=torque, run=run, load=load, gear=gear,
+                                source=f"synthetic-{profile}")
+    record = {"kind": profile, "top_speed": float(top_speed), "duration": float(duration), "fs": float(fs),
+              "options": dict(profile_options), "seed": seed}
+    return rec, {"profile": record, "theta": theta, "velocity": v, "acceleration": acc, "friction": friction,
+                 "inertia": float(inertia), "noise": float(noise), "position_noise": float(position_noise)}
