@@ -1,0 +1,98 @@
+"""Figures of the order analysis over varying speed: the order map (order x speed, colour =
+amplitude) and the order tracks (amplitude against speed with its band, one panel per direction)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from . import DIRS, plt, save as _save
+
+__all__ = ["plot_order_map", "plot_order_tracks"]
+
+
+def _scale(values, unit: str) -> tuple[float, str]:
+    """A factor and unit that read best: m-units below 1."""
+    finite = np.asarray(values, dtype=float)
+    finite = finite[np.isfinite(finite)]
+    top = float(finite.max()) if len(finite) else 1.0
+    return (1e3, f"m{unit}") if top < 1.0 else (1.0, unit)
+
+
+def plot_order_map(maps, path, lines=None) -> Path:
+    """One panel per direction: amplitude over speed (x) and frequency (y), cells not measurable
+    left blank (hatched background), the highest measurable frequency of each speed bin as a
+    curve; ``lines``: ``[(frequency, label)]`` marked at the right edge."""
+    maps = [m for m in maps if m is not None]
+    fig, axes = plt.subplots(1, max(len(maps), 1), figsize=(6.2 * max(len(maps), 1), 4.8), squeeze=False)
+    if not maps:
+        axes[0, 0].text(0.5, 0.5, "no direction has enough motion for an order map", ha="center",
+                        transform=axes[0, 0].transAxes)
+        return _save(fig, path)
+    factor, tu = _scale(np.concatenate([m.amplitude.ravel() for m in maps]), maps[0].torque_unit)
+    vmax = max(float(np.nanpercentile(m.amplitude, 99.5)) if np.isfinite(m.amplitude).any() else 0 for m in maps)
+    vmax = vmax * factor or 1.0
+    for ax, m in zip(axes[0], maps):
+        name = {1: "positive", -1: "negative"}[m.direction]
+        ax.set_facecolor("0.93")
+        ax.patch.set_hatch("////")
+        ax.patch.set_edgecolor("0.8")
+        df = m.frequency[1] - m.frequency[0] if len(m.frequency) > 1 else m.frequency[0]
+        f_edges = np.concatenate([m.frequency - df / 2, [m.frequency[-1] + df / 2]])
+        amp = np.ma.masked_invalid(m.amplitude * factor)
+        mesh = ax.pcolormesh(m.speed_edges, f_edges, amp.T, cmap="viridis", vmin=0, vmax=vmax, shading="flat")
+        ok = np.isfinite(m.limit)
+        centres = 0.5 * (m.speed_edges[1:] + m.speed_edges[:-1])
+        ax.step(np.r_[m.speed_edges[:-1][ok], m.speed_edges[1:][ok][-1:]] if ok.any() else [],
+                np.r_[m.limit[ok], m.limit[ok][-1:]] if ok.any() else [], where="post", color="w", lw=1.6,
+                label="highest measurable frequency (0.8 x position Nyquist)")
+        for f, lab in (lines or []):
+            if f <= f_edges[-1]:
+                ax.axhline(f, color="w", lw=0.6, ls=":")
+                ax.annotate(lab, (m.speed_edges[-1], f), xytext=(3, 0), textcoords="offset points", fontsize=7,
+                            va="center", annotation_clip=False)
+        ax.set_xlim(m.speed_edges[0], m.speed_edges[-1])
+        ax.set_ylim(0, f_edges[-1])
+        ax.set_xlabel(f"speed |v| ({m.unit}/s)")
+        ax.set_ylabel(f"frequency (cycles/{m.unit})")
+        ax.set_title(f"{name} direction ({int(np.sum(m.samples)):,} samples, {np.isfinite(centres).sum()} speed bins)",
+                     fontsize=9)
+        ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
+        fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows)")
+    fig.suptitle("Order map: amplitude over speed and frequency (hatched: not measurable)", fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_order_tracks(tracks, path) -> Path:
+    """Amplitude against speed with its band, one line per tracked frequency, one panel per direction."""
+    dirs = [(d, name) for d, name, _, _ in DIRS]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
+    allv = [t.upper for t in tracks] or [np.zeros(1)]
+    factor, tu = _scale(np.concatenate(allv), tracks[0].torque_unit if tracks else "Nm")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    labels = sorted({(t.frequency, t.label) for t in tracks}, key=lambda x: x[0])
+    colour = {fl: colours[i % len(colours)] for i, fl in enumerate(labels)}
+    for ax, (d, name) in zip(axes, dirs):
+        mine = [t for t in tracks if t.direction == d]
+        for t in mine:
+            c = colour[(t.frequency, t.label)]
+            lab = (t.label.split(" = ")[0] if t.label else "") + f" ({t.frequency:.4g} cycles/{t.unit})"
+            ax.fill_between(t.speed, t.lower * factor, t.upper * factor, color=c, alpha=0.25, lw=0)
+            ax.plot(t.speed, t.amplitude * factor, color=c, lw=1.4, label=lab.strip())
+        if not mine:
+            ax.text(0.5, 0.5, f"no line tracked in the {name} direction\n(too little motion below the position "
+                    "Nyquist frequency)", ha="center", va="center", transform=ax.transAxes, fontsize=9)
+        else:
+            ax.legend(fontsize=7, loc="best")
+        unit = mine[0].unit if mine else (tracks[0].unit if tracks else "rad")
+        ax.set_xlabel(f"speed |v| ({unit}/s)")
+        ax.set_title(f"{name} direction", fontsize=10)
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel(f"amplitude ({tu})")
+    level = tracks[0].level if tracks else 0.95
+    fig.suptitle(f"Order tracks: amplitude against speed, {level:.0%} pointwise band", fontsize=11)
+    fig.tight_layout()
+    return _save(fig, path)
