@@ -22,7 +22,7 @@ def _scale(values, unit: str) -> tuple[float, str]:
 
 def plot_order_map(maps, path, lines=None) -> Path:
     """One panel per direction: amplitude over speed (x) and frequency (y), cells not measurable
-    left blank (hatched background), the highest measurable frequency of each speed bin as a
+    left blank (grey), the highest measurable frequency of each speed bin as a
     curve; ``lines``: ``[(frequency, label)]`` marked at the right edge."""
     maps = [m for m in maps if m is not None]
     fig, axes = plt.subplots(1, max(len(maps), 1), figsize=(6.2 * max(len(maps), 1), 4.8), squeeze=False)
@@ -35,13 +35,14 @@ def plot_order_map(maps, path, lines=None) -> Path:
     vmax = vmax * factor or 1.0
     for ax, m in zip(axes[0], maps):
         name = {1: "positive", -1: "negative"}[m.direction]
-        ax.set_facecolor("0.93")
-        ax.patch.set_hatch("////")
-        ax.patch.set_edgecolor("0.8")
+        ax.set_facecolor("0.88")
         df = m.frequency[1] - m.frequency[0] if len(m.frequency) > 1 else m.frequency[0]
         f_edges = np.concatenate([m.frequency - df / 2, [m.frequency[-1] + df / 2]])
         amp = np.ma.masked_invalid(m.amplitude * factor)
-        mesh = ax.pcolormesh(m.speed_edges, f_edges, amp.T, cmap="viridis", vmin=0, vmax=vmax, shading="flat")
+        cmap = plt.get_cmap("viridis").copy()
+        cmap.set_bad("0.88")  # masked cells grey, like the background outside the measured speeds
+        mesh = ax.pcolormesh(m.speed_edges, f_edges, amp.T, cmap=cmap, vmin=0, vmax=vmax, shading="flat",
+                             edgecolors="none", antialiased=False)
         ok = np.isfinite(m.limit)
         centres = 0.5 * (m.speed_edges[1:] + m.speed_edges[:-1])
         ax.step(np.r_[m.speed_edges[:-1][ok], m.speed_edges[1:][ok][-1:]] if ok.any() else [],
@@ -50,8 +51,8 @@ def plot_order_map(maps, path, lines=None) -> Path:
         for f, lab in (lines or []):
             if f <= f_edges[-1]:
                 ax.axhline(f, color="w", lw=0.6, ls=":")
-                ax.annotate(lab, (m.speed_edges[-1], f), xytext=(3, 0), textcoords="offset points", fontsize=7,
-                            va="center", annotation_clip=False)
+                ax.annotate(lab, (m.speed_edges[0], f), xytext=(3, 2), textcoords="offset points", fontsize=7,
+                            va="bottom", color="k", bbox={"fc": "w", "ec": "none", "alpha": 0.7, "pad": 1})
         ax.set_xlim(m.speed_edges[0], m.speed_edges[-1])
         ax.set_ylim(0, f_edges[-1])
         ax.set_xlabel(f"speed |v| ({m.unit}/s)")
@@ -60,7 +61,7 @@ def plot_order_map(maps, path, lines=None) -> Path:
                      fontsize=9)
         ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
         fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows)")
-    fig.suptitle("Order map: amplitude over speed and frequency (hatched: not measurable)", fontsize=11)
+    fig.suptitle("Order map: amplitude over speed and frequency (grey: not measurable)", fontsize=11)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -78,7 +79,8 @@ def plot_order_tracks(tracks, path) -> Path:
         mine = [t for t in tracks if t.direction == d]
         for t in mine:
             c = colour[(t.frequency, t.label)]
-            lab = (t.label.split(" = ")[0] if t.label else "") + f" ({t.frequency:.4g} cycles/{t.unit})"
+            lab = f"{t.frequency:.4g} cycles/{t.unit}"
+            lab = f"{t.label.split(' = ')[0]} ({lab})" if t.label else lab
             ax.fill_between(t.speed, t.lower * factor, t.upper * factor, color=c, alpha=0.25, lw=0)
             ax.plot(t.speed, t.amplitude * factor, color=c, lw=1.4, label=lab.strip())
         if not mine:

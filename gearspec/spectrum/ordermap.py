@@ -279,11 +279,9 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
         proj = (hann[:, None] * np.exp(-2j * np.pi * k[:, None] * freq[None, :])) * gain
     speeds, nyqs, counts, powers = [], [], [], []
     for s, e in m.bounds:
-        th = m.theta[s:e]
-        if m.direction < 0:
-            th = -th[::-1]
-        y = m.y[s:e] if m.direction > 0 else m.y[s:e][::-1]
-        tt = m.t[s:e] if m.direction > 0 else m.t[s:e][::-1]
+        # position along the direction of motion (increasing in both directions); time order kept
+        th = m.theta[s:e] if m.direction > 0 else -m.theta[s:e]
+        y, tt = m.y[s:e], m.t[s:e]
         g0 = math.ceil(th[0] / spacing)
         g1 = math.floor(th[-1] / spacing)
         n_grid = g1 - g0 + 1
@@ -297,7 +295,7 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
         th_a, th_b = starts * spacing, (starts + window - 1) * spacing
         half = np.searchsorted(th, np.append(starts, starts[-1] + step) * spacing, side="right") - 1
         half = np.clip(half, 0, len(th) - 1)
-        nq = m.nyquist[s:e] if m.direction > 0 else m.nyquist[s:e][::-1]
+        nq = m.nyquist[s:e]
         h_min = np.minimum.reduceat(nq, half)  # [half_j, half_j+1), the last one to the end
         h_min = np.append(h_min[:n_win], nq[half[-1]:].min())
         nyqs.append(np.minimum(h_min[:-1], h_min[1:]))
