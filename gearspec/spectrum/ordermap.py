@@ -12,7 +12,8 @@ below ``MEASURABLE_FRACTION`` times that sample's position Nyquist frequency.
 
 Order map (method, chosen for cost): each piece's friction magnitude ``direction * (torque - J
 thetadd)`` is resampled linearly onto one position grid (spacing ``1 / (2 f_grid)``, the same for
-every piece, so every window has the same order bins), cut into windows of ``window`` grid points
+every piece, so every window has the same order bins; the interpolation's response sinc^2(f ds) at the
+window's sample spacing ds divided out), cut into windows of ``window`` grid points
 with 50 % overlap, Hann-windowed and transformed (amplitude-calibrated: a sinusoid of amplitude A
 reads A at its bin).  Each window gets its speed (travel / duration) and the position Nyquist of the
 samples inside it (the lowest of their blocks).  A cell (speed bin, order) is the root-mean-square
@@ -158,7 +159,7 @@ class OrderMap:
     ``speed_edges`` (B + 1, unit/s), ``speed`` (B, mean window speed, NaN when empty), ``amplitude``
     (B x K, torque units, NaN where not measurable), ``windows`` (B x K, windows averaged per cell),
     ``limit`` (B, the highest frequency measured in the bin: ``MEASURABLE_FRACTION`` x the highest
-    window Nyquist), ``noise`` (B, median cell amplitude), ``samples`` (B)."""
+    window Nyquist), ``noise`` (B, median cell amplitude; NaN for fewer than 16 frequencies), ``samples`` (B)."""
 
     direction: int
     unit: str
@@ -304,6 +305,9 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
         dur = np.interp(th_b, th, tt) - np.interp(th_a, th, tt)
         speeds.append((th_b - th_a) / np.abs(dur))
         counts.append(i_b - i_a)
+        # linear interpolation between samples spaced ds reads a line at f low by sinc^2(f ds)
+        # (the triangle kernel's response): divided out per window at its mean sample spacing
+        ds = (th_b - th_a) / np.maximum(i_b - i_a - 1, 1)
         grid = np.interp(np.arange(g0, g1 + 1) * spacing, th, y)
         view = sliding_window_view(grid, window)[::step][:n_win]
         for j in range(0, n_win, _WINDOW_BATCH):
@@ -313,7 +317,9 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
                 X = np.fft.rfft(blk * hann, axis=1)[:, 1:window // 2 + 1] * gain
             else:
                 X = blk @ proj
-            powers.append((X.real ** 2 + X.imag ** 2).astype(np.float64))
+            f_k = freq if freq is not None else np.arange(1, window // 2 + 1) / (window * spacing)
+            resp = np.maximum(np.sinc(ds[j:j + _WINDOW_BATCH, None] * f_k[None, :]) ** 2, 0.1)
+            powers.append((X.real ** 2 + X.imag ** 2) / resp**2)
     if not speeds:
         z = np.zeros(0)
         return z, z, np.zeros(0, int), np.zeros((0, window // 2 if freq is None else len(freq)))
@@ -343,8 +349,8 @@ def _bin_windows(m: Motion, wins, edges, freq, gear, window, length, method) -> 
             speed[i] = float(speeds[sel].mean())
             limit[i] = MEASURABLE_FRACTION * float(nyqs[sel].max())
             samples[i] = int(counts[sel].sum() // 2)  # windows overlap by half
-    with np.errstate(all="ignore"):
-        noise = np.array([np.nanmedian(r) if np.isfinite(r).any() else np.nan for r in amp])
+    with np.errstate(all="ignore"):  # a few given frequencies have no "median cell": no noise level
+        noise = np.array([np.nanmedian(r) if np.isfinite(r).any() and k >= 16 else np.nan for r in amp])
     order = None if gear is None or gear.output_frequency is None else freq / gear.output_frequency
     order_ref = freq * 2 * math.pi if m.unit == "rad" else None
     notes = [f"velocity from the {m.velocity_source}; samples slower than {m.min_speed:.3g} {m.unit}/s left out"]
