@@ -194,3 +194,20 @@ def test_bad_input_is_one_sentence():
         order_track(rec, F, knots=50)
     with pytest.raises(InputError, match="position Nyquist"):
         order_track(rec, 40.0, direction=1, inertia=0)  # above the Nyquist of every sample
+
+
+def test_samples_near_rest_belong_to_no_direction():
+    # a measured velocity with 0.5 rad/s of noise: near a reversal its sign is a coin toss. Samples
+    # slower than 2 % of the 99th-percentile speed (2 rad/s, 4 noise sd: a wrong sign once in ~30000)
+    # are left out, so no sample truly moving the other way enters a direction's pieces
+    from gearspec.spectrum import motion
+
+    rec = _recording("chirp", T=30.0, seed=11, velocity=True)
+    t, v_true = _velocity("chirp", 30.0)
+    rng = np.random.default_rng(0)
+    rec.data["velocity"] = v_true + 0.5 * rng.standard_normal(len(v_true))
+    for d in (1, -1):
+        m = motion(rec, d)
+        assert 1.9 < m.min_speed < 2.1 and m.speed.min() > m.min_speed
+        true_v = np.interp(m.t, t, v_true)
+        assert np.all(d * true_v > 0)
