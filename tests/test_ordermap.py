@@ -197,13 +197,15 @@ def test_bad_input_is_one_sentence():
 
 
 def test_samples_near_rest_belong_to_no_direction():
-    # a measured velocity with 0.5 rad/s of noise: near a reversal its sign is a coin toss. Samples
-    # slower than 2 % of the 99th-percentile speed (2 rad/s, 4 noise sd: a wrong sign once in ~30000)
-    # are left out, so no sample truly moving the other way enters a direction's pieces
+    # a measured velocity with 0.5 rad/s of noise: near a reversal its sign is a coin toss.  Samples
+    # slower than min_speed (default 2 % of the 99th-percentile speed: 2 rad/s, 4 noise sd) are rest
+    # or reversal and left out; together with the shortest piece (16 samples) no sample truly moving
+    # the other way enters a direction's pieces
     from gearspec.spectrum import motion
 
-    rec = _recording("chirp", T=30.0, seed=11, velocity=True)
-    t, v_true = _velocity("chirp", 30.0)
+    # (the ramp crosses zero at 10 rad/s^2: the noise blurs the sign over ~50 samples there)
+    rec = _recording("ramp", T=40.0, seed=11, velocity=True)
+    t, v_true = _velocity("ramp", 40.0)
     rng = np.random.default_rng(0)
     rec.data["velocity"] = v_true + 0.5 * rng.standard_normal(len(v_true))
     for d in (1, -1):
