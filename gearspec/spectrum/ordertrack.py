@@ -38,6 +38,7 @@ __all__ = ["OrderTrack", "order_track", "resolve_line", "OrderAnalysis", "order_
 #: speeds at which a track is evaluated
 SPEED_GRID = 64
 _CHUNK = 1 << 16
+_SUB = 4096
 _DEGREE = 3
 
 
@@ -202,9 +203,33 @@ def _inertia_choice(inertia, gear) -> tuple[float | None, str]:
     return (J, "given") if J > 0 else (None, "none")
 
 
+def _bspline_basis(x: np.ndarray, tk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The four nonzero cubic B-splines (knots ``tk``, clamped) at ``x`` (within the knots) and the
+    index of the first: ``(N (4 x n), first (n,))`` (de Boor's recurrence, vectorised)."""
+    p = _DEGREE
+    j = np.clip(np.searchsorted(tk, x, side="right") - 1, p, len(tk) - p - 2)
+    N = np.empty((p + 1, len(x)))
+    N[0] = 1.0
+    left = [None] + [x - tk[j + 1 - r] for r in range(1, p + 1)]
+    right = [None] + [tk[j + r] - x for r in range(1, p + 1)]
+    temp = np.empty(len(x))
+    for r in range(1, p + 1):
+        saved = np.zeros(len(x))
+        for s in range(r):
+            np.divide(N[s], right[s + 1] + left[r - s], out=temp)
+            np.multiply(right[s + 1], temp, out=N[s])
+            N[s] += saved
+            np.multiply(left[r - s], temp, out=saved)
+        N[r] = saved
+    return N, j - p
+
+
 def _normal_equations(m: Motion, use: np.ndarray, f: float, tk: np.ndarray, fit_j: bool):
     """``X'X``, ``X'y`` and ``y'y`` of the track's design, chunk by chunk (the columns: B-splines of
-    the level, of a (sine), of c (cosine), then the acceleration when J is fitted)."""
+    the level, of a (sine), of c (cosine), then the acceleration when J is fitted).  A sample touches
+    4 B-splines of each group: per knot span the 12 (13) columns it touches are reduced together,
+    over runs of consecutive samples in one span, in single precision within runs of at most
+    ``_SUB`` samples (phases reduced to one cycle in double first) and double across them."""
     nb = len(tk) - _DEGREE - 1
     q = 3 * nb + fit_j
     A = np.zeros((q, q))
@@ -212,20 +237,33 @@ def _normal_equations(m: Motion, use: np.ndarray, f: float, tk: np.ndarray, fit_
     yy = 0.0
     idx = np.flatnonzero(use)
     lo, hi = tk[0], tk[-1]
+    w = 3 * (_DEGREE + 1) + fit_j
     for i in range(0, len(idx), _CHUNK):
         r = idx[i:i + _CHUNK]
-        B = BSpline.design_matrix(np.clip(m.speed[r], lo, hi), tk, _DEGREE).toarray()
-        ph = 2 * np.pi * f * m.theta[r]
-        X = np.empty((len(r), q))
-        X[:, :nb] = B
-        np.multiply(B, np.sin(ph)[:, None], out=X[:, nb:2 * nb])
-        np.multiply(B, np.cos(ph)[:, None], out=X[:, 2 * nb:3 * nb])
-        if fit_j:
-            X[:, -1] = m.acc[r]
+        N, first = _bspline_basis(np.clip(m.speed[r], lo, hi), tk)
+        ph = np.mod(f * m.theta[r], 1.0).astype(np.float32)
+        ph *= np.float32(2 * np.pi)
         y = m.y[r]
-        A += X.T @ X
-        b += X.T @ y
+        Z = np.empty((w + 1, len(r)), np.float32)  # one row per column: contiguous writes
+        Z[0:4] = N
+        np.multiply(Z[0:4], np.sin(ph), out=Z[4:8])
+        np.multiply(Z[0:4], np.cos(ph), out=Z[8:12])
+        if fit_j:
+            Z[12] = m.acc[r]
+        Z[w] = y
         yy += float(y @ y)
+        # runs of samples in one knot span (the speed changes slowly: long runs, slices not copies)
+        cuts = np.flatnonzero(np.diff(first)) + 1
+        cuts = np.unique(np.concatenate(([0], cuts, np.arange(0, len(r), _SUB), [len(r)])))
+        gram = {}
+        for a, e in zip(cuts[:-1], cuts[1:]):
+            Zg = Z[:, a:e]
+            j0 = int(first[a])
+            gram[j0] = gram.get(j0, 0.0) + (Zg @ Zg.T).astype(np.float64)
+        for j0, G in gram.items():
+            cols = np.concatenate([np.arange(j0, j0 + 4) + k * nb for k in range(3)] + ([[q - 1]] if fit_j else []))
+            A[np.ix_(cols, cols)] += G[:w, :w]
+            b[cols] += G[:w, w]
     return A, b, yy
 
 
