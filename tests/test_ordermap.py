@@ -27,6 +27,8 @@ def _velocity(kind: str, T: float, top: float = TOP):
         v = top * np.interp(t, [0, T / 4, T / 2, 3 * T / 4, T], [0, 1, 0, -1, 0])
     elif kind == "chirp":  # a velocity sine sweeping 0.05 -> 0.3 Hz: many reversals, both directions
         v = top * np.sin(2 * np.pi * (0.05 * t + 0.5 * (0.25 / T) * t**2))
+    elif kind == "triangle":  # +-top in 0.25 s (240 rad/s^2 at 60 rad/s): never a constant speed
+        v = top * (2 / np.pi) * np.arcsin(np.sin(2 * np.pi * t))
     elif kind == "gap":  # ramps over 2..40 and 60..100 rad/s only (a speed step between them)
         v = np.where(t < T / 2, np.interp(t, [0, T / 2], [2, 40]), np.interp(t, [T / 2, T], [60, 100]))
     else:
@@ -35,11 +37,11 @@ def _velocity(kind: str, T: float, top: float = TOP):
 
 
 def _recording(kind="ramp", T=40.0, seed=0, lines=((F, A_POS, A_NEG, 0.3),), inertia=0.0, sigma=SIGMA,
-               velocity=False):
+               velocity=False, top=TOP):
     """A synthetic recording (lines: (f, A0 positive, A0 negative, phase); ``velocity``: with the true
     velocity as its ``velocity`` channel)."""
     rng = np.random.default_rng(seed)
-    t, v = _velocity(kind, T)
+    t, v = _velocity(kind, T, top)
     theta = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) / FS)])
     acc = np.gradient(v, 1 / FS)
     tau = np.sign(v) * (0.3 + 0.002 * np.abs(v)) + inertia * acc + sigma * rng.standard_normal(len(t))
@@ -213,3 +215,36 @@ def test_samples_near_rest_belong_to_no_direction():
         true_v = np.interp(m.t, t, v_true)
         assert np.all(d * true_v > 0)
         assert 1.9 < m.min_speed < 2.1 and m.speed.min() > m.min_speed
+
+
+# ---------------------------------------------------------------------- command line
+def test_cli_recording_without_plateaus_is_analysed_by_its_order_map(tmp_path, capsys):
+    from gearspec.cli import main
+
+    path = tmp_path / "triangle.csv"
+    _recording("triangle", T=20.0, seed=12, top=60.0).save(path)
+    out, js = tmp_path / "out", tmp_path / "r.json"
+    assert main(["spectrum", str(path), "--track", "1.5", "--out", str(out), "--json", str(js)]) == 0
+    text = capsys.readouterr().out
+    assert "order map over varying speed was used instead" in text
+    for name in ("order_map.png", "order_tracks.png", "order_map.json", "report.md"):
+        assert (out / name).exists()
+    assert "the order map over varying speed was used instead" in (out / "report.md").read_text().lower()
+    d = json.loads(js.read_text())
+    assert d["segments"] == [] and d["order_map"]["maps"]["positive"]["amplitude"]
+    tracks = d["order_map"]["tracks"]
+    assert {t["direction"] for t in tracks} == {1, -1}
+    # the track's amplitude at its middle speed: the truth within 3 standard errors
+    t = tracks[0]
+    i = len(t["speed"]) // 2
+    assert abs(t["amplitude"][i] - _truth(t["speed"][i], t["direction"])) < 3 * t["amplitude_se"][i]
+
+
+def test_cli_track_that_is_no_line_is_refused_in_one_sentence(tmp_path, capsys):
+    from gearspec.cli import main
+
+    path = tmp_path / "ramp.csv"
+    _recording(T=10.0, seed=13).save(path)
+    assert main(["spectrum", str(path), "--order-map", "--track", "mesh", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gearspec: error:") and "track 'mesh'" in err and len(err.strip().splitlines()) == 1

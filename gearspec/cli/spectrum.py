@@ -105,7 +105,7 @@ def _orders_only(rec, seg, orders, args, t0) -> int:
     """No constant-speed segment: the order map stands in for the segment spectra (and says so)."""
     from ..report.spectrum import write_order_report
 
-    if all(m is None for m in orders.maps.values()):
+    if all(m is None for m in orders.maps.values()) and not orders.tracks:
         raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found (rows: {dict(seg.excluded)}) "
                          "and too little motion for an order map; try a larger --rel-tol or a fixed --window")
     note = ("no constant-speed segment found (rows: " + ", ".join(f"{k} {v}" for k, v in sorted(seg.excluded.items()))

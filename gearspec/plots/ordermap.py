@@ -43,21 +43,21 @@ def plot_order_map(maps, path, lines=None) -> Path:
         cmap.set_bad("0.88")  # masked cells grey, like the background outside the measured speeds
         mesh = ax.pcolormesh(m.speed_edges, f_edges, amp.T, cmap=cmap, vmin=0, vmax=vmax, shading="flat",
                              edgecolors="none", antialiased=False)
-        ok = np.isfinite(m.limit)
-        centres = 0.5 * (m.speed_edges[1:] + m.speed_edges[:-1])
-        ax.step(np.r_[m.speed_edges[:-1][ok], m.speed_edges[1:][ok][-1:]] if ok.any() else [],
-                np.r_[m.limit[ok], m.limit[ok][-1:]] if ok.any() else [], where="post", color="w", lw=1.6,
-                label="highest measurable frequency (0.8 x position Nyquist)")
+        ok = np.flatnonzero(np.isfinite(m.limit))
+        ax.hlines(m.limit[ok], m.speed_edges[ok], m.speed_edges[ok + 1], color="w", lw=1.6,
+                  label="highest measurable frequency (0.8 x position Nyquist)")
         for f, lab in (lines or []):
             if f <= f_edges[-1]:
                 ax.axhline(f, color="w", lw=0.6, ls=":")
                 ax.annotate(lab, (m.speed_edges[0], f), xytext=(3, 2), textcoords="offset points", fontsize=7,
                             va="bottom", color="k", bbox={"fc": "w", "ec": "none", "alpha": 0.7, "pad": 1})
         ax.set_xlim(m.speed_edges[0], m.speed_edges[-1])
-        ax.set_ylim(0, f_edges[-1])
+        top = float(np.nanmax(m.limit)) * 1.25 if np.isfinite(m.limit).any() else f_edges[-1]
+        ax.set_ylim(0, min(f_edges[-1], top))
         ax.set_xlabel(f"speed |v| ({m.unit}/s)")
         ax.set_ylabel(f"frequency (cycles/{m.unit})")
-        ax.set_title(f"{name} direction ({int(np.sum(m.samples)):,} samples, {np.isfinite(centres).sum()} speed bins)",
+        ax.set_title(f"{name} direction ({int(np.sum(m.samples)):,} samples, "
+                     f"{np.isfinite(m.speed).sum()} of {len(m.speed)} speed bins)",
                      fontsize=9)
         ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
         fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows)")

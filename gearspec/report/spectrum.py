@@ -149,7 +149,7 @@ def order_section(orders, out: Path) -> list[str]:
           "Whole motions, per direction (samples slower than the minimum speed are rest or reversal). Each piece "
           "of one direction is resampled over position and cut into windows (Hann, 50 % overlap); a cell is the "
           "root-mean-square amplitude of the windows of its speed bin that measure its frequency: below 0.8 x "
-          "the position Nyquist frequency of the window's samples. Cells no window measures are blank, never a "
+          "the position Nyquist frequency of the window's samples. Cells no window measures are grey, never a "
           "number (the white curve is the highest frequency measured in each bin). A cell reads "
           "sqrt(A^2 + noise^2): compare with the bin's noise (median cell) in `order_map.json`.", "",
           f"![order map]({f_map.name})", ""]
@@ -171,6 +171,7 @@ def order_section(orders, out: Path) -> list[str]:
            "where the line lies below 0.8 x their position Nyquist frequency; band: "
            f"{orders.tracks[0].level if orders.tracks else 0.95:.0%} pointwise (delta method, white noise). "
            "A band reaching 0 means the line is not distinguished from none at that speed.", "",
-           f"![order tracks]({f_tr.name})", "", markdown_table(pd.DataFrame(rows)) if rows else "_No line tracked._", ""]
+           f"![order tracks]({f_tr.name})", "",
+           markdown_table(pd.DataFrame(rows)) if rows else "_No line tracked._", ""]
     md += bullets([f"{s['what']}: {s['reason']}" for s in orders.skipped], "Not analysed:")
     return md

@@ -1,6 +1,6 @@
 """Spectra of friction over position: ``analyze`` runs the per-segment analysis of a recording;
-its building blocks (resampling, order spectrum, Lomb-Scargle, harmonic fit) work on any signal; ``order_map`` and ``order_track`` analyse motion at
-varying speed."""
+its building blocks (resampling, order spectrum, Lomb-Scargle, harmonic fit) work on any signal;
+``order_map`` and ``order_track`` analyse motion at varying speed."""
 
 from .analysis import Peak, SegmentSpectrum, SpectrumResult, analyze, analyze_segment, position_nyquist, MEASURABLE_FRACTION
 from .fft import order_spectrum

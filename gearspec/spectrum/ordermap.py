@@ -49,6 +49,8 @@ NYQUIST_BLOCK = 256
 MIN_SPEED_FRACTION = 0.02
 #: pieces of one direction shorter than this many samples are left out (counted in ``excluded``)
 MIN_PIECE = 16
+#: window lengths (grid points) ``window="auto"`` chooses from
+AUTO_WINDOWS = (32, 64, 128, 256)
 #: windows transformed at once (memory: this x window points)
 _WINDOW_BATCH = 2048
 
@@ -201,7 +203,7 @@ class OrderMap:
 
 
 def order_map(rec: Recording, *, direction: int = 1, orders=None, speed_bins: int | np.ndarray = 16,
-              max_frequency: float | None = None, window: int = 256, min_speed: float | None = None,
+              max_frequency: float | None = None, window: int | str = "auto", min_speed: float | None = None,
               inertia: float | None = None, gear=None, mot: Motion | None = None) -> OrderMap:
     """The order map of ``rec`` in ``direction`` (+1 or -1).
 
@@ -216,8 +218,9 @@ def order_map(rec: Recording, *, direction: int = 1, orders=None, speed_bins: in
         Highest frequency of the position grid (cycles/unit); default the Nyquist frequency of the
         mean position spacing (the grid then has about as many points as samples), raised to cover
         ``orders`` (at most four grid points per sample).
-    window : int
+    window : int or "auto"
         Grid points per window (>= 16); the order resolution is ``2 max_frequency / window``.
+        "auto": the longest of 32, 64, 128, 256 that the median piece holds four times.
     min_speed, inertia
         As :func:`motion`; ``inertia`` defaults to the gear spec's (kg m^2 or kg).
     gear : GearTrain, optional
@@ -231,10 +234,10 @@ def order_map(rec: Recording, *, direction: int = 1, orders=None, speed_bins: in
     gear = gear if gear is not None else rec.gear
     if inertia is None and gear is not None:
         inertia = gear.inertia
-    if not (isinstance(window, (int, np.integer)) and window >= 16):
-        raise InputError(f"window must be an integer number of grid points >= 16, got {window!r}")
+    if not (window == "auto" or (isinstance(window, (int, np.integer)) and window >= 16)):
+        raise InputError(f"window must be 'auto' or an integer number of grid points >= 16, got {window!r}")
     m = mot if mot is not None else motion(rec, d, min_speed=min_speed, inertia=inertia)
-    if len(m) < window:
+    if len(m) < (window if window != "auto" else AUTO_WINDOWS[0]):
         raise InputError(f"{', '.join(rec.sources) or 'recording'}: {len(m)} samples move in the "
                          f"{'positive' if d > 0 else 'negative'} direction faster than {m.min_speed:.3g} "
                          f"{rec.unit}/s; an order map needs at least {window}")
@@ -248,12 +251,28 @@ def order_map(rec: Recording, *, direction: int = 1, orders=None, speed_bins: in
         f_grid = max(f_grid, float(orders.max()) / MEASURABLE_FRACTION)
     f_grid = min(f_grid, 2.0 * len(m) / max(travel, 1e-300))  # at most four grid points per sample
     spacing = 0.5 / f_grid
+    if window == "auto":
+        window = _auto_window(m, spacing)
     length = window * spacing
     freq = orders if given else np.arange(1, window // 2 + 1) / length
     wins = _window_spectra(m, spacing, window, freq if given else None)
+    if not len(wins[0]):
+        name = "positive" if d > 0 else "negative"
+        raise InputError(f"{', '.join(rec.sources) or 'recording'}: no piece of the {name} "
+                         f"direction travels one window ({window} points at {spacing:.3g} {rec.unit}: "
+                         f"{window * spacing:.3g} {rec.unit}) without stopping; give a smaller window")
     edges = _speed_edges(speed_bins, m.min_speed, wins[0])
     return _bin_windows(m, wins, edges, freq, gear, window, length, "projection on given frequencies" if given
                         else "Hann FFT of windows resampled over position")
+
+
+def _auto_window(m: Motion, spacing: float) -> int:
+    """The longest of ``AUTO_WINDOWS`` grid points that the median piece (by travel) holds at
+    least four times (short moves: short windows, so that each covers a narrow range of speeds)."""
+    travel = np.array([abs(m.theta[e - 1] - m.theta[s]) for s, e in m.bounds])
+    median = float(np.median(travel)) / spacing if len(travel) else 0.0
+    fits = [w for w in AUTO_WINDOWS if 4 * w <= median]
+    return max(fits) if fits else AUTO_WINDOWS[0]
 
 
 def _speed_edges(speed_bins, lo: float, speeds: np.ndarray) -> np.ndarray:
