@@ -248,3 +248,13 @@ def test_cli_track_that_is_no_line_is_refused_in_one_sentence(tmp_path, capsys):
     assert main(["spectrum", str(path), "--order-map", "--track", "mesh", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("gearspec: error:") and "track 'mesh'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_short_moves_get_short_windows():
+    # triangle moves of 19 rad each way: the longest window of 32..256 grid points that a move holds
+    # four times (grid spacing 1 / (2 x the mean-spacing Nyquist) ~ 0.038 rad: 500 points a move: 64),
+    # so that a window spans a quarter of the speeds of a move rather than all of them
+    m = order_map(_recording("triangle", T=10.0, seed=14, top=60.0), direction=1)
+    assert m.window == 64
+    # each window's speed is close to the truth it spans: cells fill at least 8 of the 16 speed bins
+    assert np.isfinite(m.speed).sum() >= 8
