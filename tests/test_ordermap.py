@@ -240,6 +240,24 @@ def test_cli_recording_without_plateaus_is_analysed_by_its_order_map(tmp_path, c
     assert abs(t["amplitude"][i] - _truth(t["speed"][i], t["direction"])) < 3 * t["amplitude_se"][i]
 
 
+def test_cli_without_plateaus_uses_the_order_map_when_the_gear_declares_lines(tmp_path, capsys):
+    # a gear spec: its declared lines are tracked and the order map stands in for the segments; no
+    # gear spec and no --order-map: the refusal of today, now saying how to get the order map
+    from gearspec.cli import main
+
+    path = tmp_path / "triangle.csv"
+    _recording("triangle", T=10.0, seed=15, top=60.0).save(path)
+    spec = tmp_path / "g.toml"
+    spec.write_text('name = "spur drive"\n[[stages]]\nname = "spur"\nkind = "spur"\nratio = 3.0\nteeth = 28\n')
+    assert main(["spectrum", str(path), "--gear", str(spec), "--quiet", "--json", str(tmp_path / "r.json")]) == 0
+    tracks = json.loads((tmp_path / "r.json").read_text())["order_map"]["tracks"]
+    assert any("spur tooth mesh" in (t["label"] or "") for t in tracks)
+    capsys.readouterr()
+    assert main(["spectrum", str(path), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no constant-speed segment" in err and "--order-map" in err
+
+
 def test_cli_track_that_is_no_line_is_refused_in_one_sentence(tmp_path, capsys):
     from gearspec.cli import main
 

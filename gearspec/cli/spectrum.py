@@ -47,7 +47,8 @@ def register(sub) -> None:
     o.add_argument("--order-map", action="store_true",
                    help="also analyse whole motions per direction: amplitude over order and speed (order_map.png, "
                         "order_map.json) and the declared lines of --gear tracked against speed with 95 %% bands "
-                        "(order_tracks.png); used automatically when no constant-speed segment is found")
+                        "(order_tracks.png); used automatically when no constant-speed segment is found and "
+                        "--gear declares lines")
     o.add_argument("--track", action="append", metavar="FREQ|LABEL", default=None,
                    help="a line to track against speed: a frequency in cycles per unit of theta or a declared "
                         "line's label (repeatable; default with --order-map: every declared line of --gear)")
@@ -63,8 +64,15 @@ def run(args) -> int:
     t0 = time.perf_counter()
     rec = load_from_args(args)
     seg = segments_from_args(rec, args)
-    orders = _order_analysis(rec, args) if (args.order_map or args.track or len(seg) == 0) else None
-    if len(seg) == 0:
+    # without constant-speed segments the order map stands in when asked for or when the gear spec
+    # declares lines to track; otherwise the refusal says how to ask for it
+    no_seg = len(seg) == 0
+    if no_seg and not (args.order_map or args.track or rec.gear is not None):
+        raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found (rows: {dict(seg.excluded)}); "
+                         "try a larger --rel-tol or a fixed --window, or --order-map to analyse the motion at "
+                         "varying speed")
+    orders = _order_analysis(rec, args) if (args.order_map or args.track or no_seg) else None
+    if no_seg:
         return _orders_only(rec, seg, orders, args, t0)
     result = analyze(rec, segmentation=seg, inertia=not args.no_inertia, max_frequency=args.max_frequency,
                      min_cycles=args.min_cycles, harmonics=args.harmonics, fap_threshold=args.fap,
