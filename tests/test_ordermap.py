@@ -276,3 +276,27 @@ def test_short_moves_get_short_windows():
     assert m.window == 64
     # each window's speed is close to the truth it spans: cells fill at least 8 of the 16 speed bins
     assert np.isfinite(m.speed).sum() >= 8
+
+
+def test_track_normal_equations_equal_the_dense_design():
+    # the per-span moments reproduce X'X and X'y of the dense design (B-splines x [1, sin, cos],
+    # acceleration) built with scipy's BSpline: 1e-9 relative (sines in single precision: 1e-7 per
+    # sample, averaging down over thousands of samples; the moments themselves are double)
+    from scipy.interpolate import BSpline
+
+    from gearspec.spectrum import motion
+    from gearspec.spectrum.ordertrack import _normal_equations
+
+    m = motion(_recording(seed=16, inertia=0.002), 1, need_acc=True)
+    use = np.ones(len(m), bool)
+    use[::7] = False
+    lo, hi = m.speed[use].min(), m.speed[use].max()
+    tk = np.concatenate([[lo] * 4, np.linspace(lo, hi, 6)[1:-1], [hi] * 4])
+    A, b, yy = _normal_equations(m, use, F, tk, True)
+    r = np.flatnonzero(use)
+    B = BSpline.design_matrix(m.speed[r], tk, 3).toarray()
+    ph = 2 * np.pi * F * m.theta[r]
+    X = np.hstack([B, B * np.sin(ph)[:, None], B * np.cos(ph)[:, None], m.acc[r][:, None]])
+    assert np.abs(A - X.T @ X).max() <= 1e-9 * np.abs(X.T @ X).max()
+    assert np.abs(b - X.T @ m.y[r]).max() <= 1e-8 * np.abs(X.T @ m.y[r]).max()
+    assert yy == pytest.approx(m.y[r] @ m.y[r], rel=1e-12)

@@ -38,7 +38,6 @@ __all__ = ["OrderTrack", "order_track", "resolve_line", "OrderAnalysis", "order_
 #: speeds at which a track is evaluated
 SPEED_GRID = 64
 _CHUNK = 1 << 16
-_SUB = 4096
 _DEGREE = 3
 
 
@@ -224,47 +223,101 @@ def _bspline_basis(x: np.ndarray, tk: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return N, j - p
 
 
+def _span_polynomials(tk: np.ndarray) -> dict:
+    """Per knot span j (``tk[j] < tk[j+1]``): ``C`` (4 x 4) with the four nonzero B-splines on it as
+    cubics in the span's own coordinate ``u = (v - tk[j]) / (tk[j+1] - tk[j])``: ``N_(j-3+a)(v) =
+    sum_s C[a, s] u^s`` (from the basis at four points of the span: exact for cubics)."""
+    p = _DEGREE
+    out = {}
+    pts = np.array([0.1, 0.4, 0.7, 0.95])
+    V = np.vander(pts, p + 1, increasing=True)
+    for j in range(p, len(tk) - p - 1):
+        h = tk[j + 1] - tk[j]
+        if h <= 0:
+            continue
+        N, first = _bspline_basis(tk[j] + pts * h, tk)
+        assert np.all(first == j - p)
+        out[j] = np.linalg.solve(V, N.T).T  # N.T[i, a] = sum_s V[i, s] C[a, s]
+    return out
+
+
 def _normal_equations(m: Motion, use: np.ndarray, f: float, tk: np.ndarray, fit_j: bool):
-    """``X'X``, ``X'y`` and ``y'y`` of the track's design, chunk by chunk (the columns: B-splines of
-    the level, of a (sine), of c (cosine), then the acceleration when J is fitted).  A sample touches
-    4 B-splines of each group: per knot span the 12 (13) columns it touches are reduced together,
-    over runs of consecutive samples in one span, in single precision within runs of at most
-    ``_SUB`` samples (phases reduced to one cycle in double first) and double across them."""
+    """``X'X``, ``X'y`` and ``y'y`` of the track's design (the columns: B-splines of the level, of a
+    (sine), of c (cosine), then the acceleration when J is fitted), exactly, without forming it.
+
+    On a knot span the four B-splines a sample touches are cubics in the span coordinate u, so every
+    entry of ``X'X`` is a combination of the moments ``sum u^s g_k g_l`` (s = 0..6; g = 1, sin, cos)
+    and ``X'y`` of ``sum u^s g_k y`` (s = 0..3): a 7 x 6 and a 4 x 3 product per run of samples in
+    one span, accumulated in double precision, then combined with the spans' polynomials."""
     nb = len(tk) - _DEGREE - 1
     q = 3 * nb + fit_j
-    A = np.zeros((q, q))
-    b = np.zeros(q)
+    polys = _span_polynomials(tk)
+    mom = {j: [np.zeros((7, 6)), np.zeros((4, 3)), np.zeros((4, 3)), 0.0, 0.0] for j in polys}
     yy = 0.0
     idx = np.flatnonzero(use)
     lo, hi = tk[0], tk[-1]
-    w = 3 * (_DEGREE + 1) + fit_j
+    p = _DEGREE
     for i in range(0, len(idx), _CHUNK):
         r = idx[i:i + _CHUNK]
-        N, first = _bspline_basis(np.clip(m.speed[r], lo, hi), tk)
+        x = np.clip(m.speed[r], lo, hi)
+        j = np.clip(np.searchsorted(tk, x, side="right") - 1, p, len(tk) - p - 2)
+        u = (x - tk[j]) / (tk[j + 1] - tk[j])
+        U = np.empty((7, len(r)))
+        U[0] = 1.0
+        for k in range(1, 7):
+            np.multiply(U[k - 1], u, out=U[k])
         ph = np.mod(f * m.theta[r], 1.0).astype(np.float32)
         ph *= np.float32(2 * np.pi)
         y = m.y[r]
-        Z = np.empty((w + 1, len(r)), np.float32)  # one row per column: contiguous writes
-        Z[0:4] = N
-        np.multiply(Z[0:4], np.sin(ph), out=Z[4:8])
-        np.multiply(Z[0:4], np.cos(ph), out=Z[8:12])
-        if fit_j:
-            Z[12] = m.acc[r]
-        Z[w] = y
+        G = np.empty((6, len(r)))  # 1, s, c, s^2, s c, c^2
+        G[0] = 1.0
+        G[1] = np.sin(ph)
+        G[2] = np.cos(ph)
+        np.multiply(G[1], G[1], out=G[3])
+        np.multiply(G[1], G[2], out=G[4])
+        np.multiply(G[2], G[2], out=G[5])
+        Gy = G[:3] * y
+        Ga = G[:3] * m.acc[r] if fit_j else None
         yy += float(y @ y)
-        # runs of samples in one knot span (the speed changes slowly: long runs, slices not copies)
-        cuts = np.flatnonzero(np.diff(first)) + 1
-        cuts = np.unique(np.concatenate(([0], cuts, np.arange(0, len(r), _SUB), [len(r)])))
-        gram = {}
+        cuts = np.concatenate(([0], np.flatnonzero(np.diff(j)) + 1, [len(r)]))
         for a, e in zip(cuts[:-1], cuts[1:]):
-            Zg = Z[:, a:e]
-            j0 = int(first[a])
-            gram[j0] = gram.get(j0, 0.0) + (Zg @ Zg.T).astype(np.float64)
-        for j0, G in gram.items():
-            cols = np.concatenate([np.arange(j0, j0 + 4) + k * nb for k in range(3)] + ([[q - 1]] if fit_j else []))
-            A[np.ix_(cols, cols)] += G[:w, :w]
-            b[cols] += G[:w, w]
-    return A, b, yy
+            acc = mom[int(j[a])]
+            acc[0] += U[:, a:e] @ G[:, a:e].T
+            acc[1] += U[:4, a:e] @ Gy[:, a:e].T
+            if fit_j:
+                acc[2] += U[:4, a:e] @ Ga[:, a:e].T
+                acc[3] += float(Ga[0, a:e] @ m.acc[r][a:e])
+                acc[4] += float(Ga[0, a:e] @ y[a:e])
+    return _assemble(mom, polys, nb, q, fit_j) + (yy,)
+
+
+#: the moment column of g_k g_l (g = 1, sin, cos)
+_PAIR = {(0, 0): 0, (0, 1): 1, (0, 2): 2, (1, 1): 3, (1, 2): 4, (2, 2): 5}
+
+
+def _assemble(mom: dict, polys: dict, nb: int, q: int, fit_j: bool):
+    """``X'X`` and ``X'y`` from the moments of every span (see :func:`_normal_equations`)."""
+    A = np.zeros((q, q))
+    b = np.zeros(q)
+    hankel = np.add.outer(np.arange(4), np.arange(4))
+    for jj, C in polys.items():
+        M, Y, Ya, aa, ay = mom[jj]
+        j0 = jj - _DEGREE
+        rows = [np.arange(j0, j0 + 4) + k * nb for k in range(3)]
+        for k in range(3):
+            for l in range(k, 3):
+                blk = C @ M[hankel, _PAIR[(k, l)]] @ C.T
+                A[np.ix_(rows[k], rows[l])] += blk
+                if l != k:
+                    A[np.ix_(rows[l], rows[k])] += blk.T
+            b[rows[k]] += C @ Y[:, k]
+            if fit_j:
+                A[rows[k], q - 1] += C @ Ya[:, k]
+                A[q - 1, rows[k]] += C @ Ya[:, k]
+        if fit_j:
+            A[q - 1, q - 1] += aa
+            b[q - 1] += ay
+    return A, b
 
 
 def _solve(A, b, yy, n):
