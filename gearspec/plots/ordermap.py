@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.colors import LogNorm
 
 from . import DIRS, plt, save as _save
 
@@ -31,8 +32,13 @@ def plot_order_map(maps, path, lines=None) -> Path:
                         transform=axes[0, 0].transAxes)
         return _save(fig, path)
     factor, tu = _scale(np.concatenate([m.amplitude.ravel() for m in maps]), maps[0].torque_unit)
-    vmax = max(float(np.nanpercentile(m.amplitude, 99.5)) if np.isfinite(m.amplitude).any() else 0 for m in maps)
-    vmax = vmax * factor or 1.0
+    # a logarithmic colour scale (as order maps are read in dB): from a third of the lowest noise
+    # level (median cell) to the largest cell, so that lines stand out of the noise at every speed
+    cells = np.concatenate([m.amplitude[np.isfinite(m.amplitude)] for m in maps]) * factor
+    floor = [np.nanmin(m.noise) for m in maps if np.isfinite(m.noise).any()]
+    vmax = float(cells.max()) if len(cells) and cells.max() > 0 else 1.0
+    vmin = min(vmax / 10, (min(floor) * factor / 3) if floor else vmax / 1e3)
+    norm = LogNorm(vmin=max(vmin, vmax * 1e-6), vmax=vmax)
     for ax, m in zip(axes[0], maps):
         name = {1: "positive", -1: "negative"}[m.direction]
         ax.set_facecolor("0.88")
@@ -41,7 +47,7 @@ def plot_order_map(maps, path, lines=None) -> Path:
         amp = np.ma.masked_invalid(m.amplitude * factor)
         cmap = plt.get_cmap("viridis").copy()
         cmap.set_bad("0.88")  # masked cells grey, like the background outside the measured speeds
-        mesh = ax.pcolormesh(m.speed_edges, f_edges, amp.T, cmap=cmap, vmin=0, vmax=vmax, shading="flat",
+        mesh = ax.pcolormesh(m.speed_edges, f_edges, amp.T, cmap=cmap, norm=norm, shading="flat",
                              edgecolors="none", antialiased=False)
         ok = np.flatnonzero(np.isfinite(m.limit))
         ax.hlines(m.limit[ok], m.speed_edges[ok], m.speed_edges[ok + 1], color="w", lw=1.6,
@@ -60,7 +66,7 @@ def plot_order_map(maps, path, lines=None) -> Path:
                      f"{np.isfinite(m.speed).sum()} of {len(m.speed)} speed bins)",
                      fontsize=9)
         ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
-        fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows)")
+        fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows, log scale)")
     fig.suptitle("Order map: amplitude over speed and frequency (grey: not measurable)", fontsize=11)
     fig.tight_layout()
     return _save(fig, path)

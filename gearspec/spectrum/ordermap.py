@@ -13,9 +13,9 @@ below ``MEASURABLE_FRACTION`` times that sample's position Nyquist frequency.
 Order map (method, chosen for cost): each piece's friction magnitude ``direction * (torque - J
 thetadd)`` is resampled linearly onto one position grid (spacing ``1 / (2 f_grid)``, the same for
 every piece, so every window has the same order bins; the interpolation's response sinc^2(f ds) at the
-window's sample spacing ds divided out), cut into windows of ``window`` grid points
-with 50 % overlap, Hann-windowed and transformed (amplitude-calibrated: a sinusoid of amplitude A
-reads A at its bin).  Each window gets its speed (travel / duration) and the position Nyquist of the
+window's sample spacing ds divided out), cut into windows of ``window`` grid points with 50 %
+overlap, detrended (a line per window), Hann-windowed and transformed (amplitude-calibrated: a
+sinusoid of amplitude A reads A at its bin).  Each window gets its speed (travel / duration) and the position Nyquist of the
 samples inside it (the lowest of their blocks).  A cell (speed bin, order) is the root-mean-square
 amplitude of the windows of that bin where the order is measurable; where no window of the bin
 measures it the cell is NaN, never a number.  Cost: about one FFT of the samples (the grid has
@@ -294,6 +294,8 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
     hann = np.hanning(window + 2)[1:-1]
     gain = 2.0 / hann.sum()
     step = window // 2
+    ramp = np.arange(window) - 0.5 * (window - 1)
+    ramp /= np.sqrt(ramp @ ramp)
     if freq is not None:  # projection on exact frequencies (the window's grid from 0)
         k = np.arange(window) * spacing
         proj = (hann[:, None] * np.exp(-2j * np.pi * k[:, None] * freq[None, :])) * gain
@@ -331,7 +333,10 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
         view = sliding_window_view(grid, window)[::step][:n_win]
         for j in range(0, n_win, _WINDOW_BATCH):
             blk = view[j:j + _WINDOW_BATCH]
-            blk = (blk - blk.mean(axis=1, keepdims=True))
+            # a straight line per window taken out (the friction level and slow position-dependent
+            # forces, which a Hann window would leak into the lowest orders)
+            blk = blk - blk.mean(axis=1, keepdims=True)
+            blk = blk - np.outer(blk @ ramp, ramp)
             if freq is None:
                 X = np.fft.rfft(blk * hann, axis=1)[:, 1:window // 2 + 1] * gain
             else:
