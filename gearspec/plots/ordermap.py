@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.colors import LogNorm
+from matplotlib.ticker import FuncFormatter
 
 from . import DIRS, plt, save as _save
 
@@ -66,7 +67,10 @@ def plot_order_map(maps, path, lines=None) -> Path:
                      f"{np.isfinite(m.speed).sum()} of {len(m.speed)} speed bins)",
                      fontsize=9)
         ax.legend(loc="upper right", fontsize=7, framealpha=0.6)
-        fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows, log scale)")
+        cb = fig.colorbar(mesh, ax=ax, label=f"amplitude ({tu}, rms over windows, log scale)")
+        plain = FuncFormatter(lambda x, _: f"{x:.3g}")
+        cb.ax.yaxis.set_major_formatter(plain)
+        cb.ax.yaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:.2g}" if str(f"{x:.2g}")[0] in "25" else ""))
     fig.suptitle("Order map: amplitude over speed and frequency (grey: not measurable)", fontsize=11)
     fig.tight_layout()
     return _save(fig, path)

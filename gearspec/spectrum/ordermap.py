@@ -15,8 +15,8 @@ thetadd)`` is resampled linearly onto one position grid (spacing ``1 / (2 f_grid
 every piece, so every window has the same order bins; the interpolation's response sinc^2(f ds) at the
 window's sample spacing ds divided out), cut into windows of ``window`` grid points with 50 %
 overlap, detrended (a line per window), Hann-windowed and transformed (amplitude-calibrated: a
-sinusoid of amplitude A reads A at its bin).  Each window gets its speed (travel / duration) and the position Nyquist of the
-samples inside it (the lowest of their blocks).  A cell (speed bin, order) is the root-mean-square
+sinusoid of amplitude A reads A at its bin).  Each window gets its speed (travel / duration) and
+the position Nyquist of the samples inside it (the lowest of their blocks).  A cell (speed bin, order) is the root-mean-square
 amplitude of the windows of that bin where the order is measurable; where no window of the bin
 measures it the cell is NaN, never a number.  Cost: about one FFT of the samples (the grid has
 about as many points as samples), no matrix of samples x orders.  Given ``orders``, each window is
