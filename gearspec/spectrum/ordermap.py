@@ -12,17 +12,18 @@ below ``MEASURABLE_FRACTION`` times that sample's position Nyquist frequency.
 
 Order map (method, chosen for cost): each piece's friction magnitude ``direction * (torque - J
 thetadd)`` is resampled linearly onto one position grid (spacing ``1 / (2 f_grid)``, the same for
-every piece, so every window has the same order bins; the interpolation's response sinc^2(f ds) at the
-window's sample spacing ds divided out), cut into windows of ``window`` grid points with 50 %
+every piece, so every window has the same order bins; the interpolation's response sinc^2(f ds) at
+the window's sample spacing ds divided out), cut into windows of ``window`` grid points with 50 %
 overlap, detrended (a line per window), Hann-windowed and transformed (amplitude-calibrated: a
-sinusoid of amplitude A reads A at its bin).  Each window gets its speed (travel / duration) and
-the position Nyquist of the samples inside it (the lowest of their blocks).  A cell (speed bin,
-order) is the root-mean-square amplitude of the windows of that bin where the order is measurable; where no window of the bin
-measures it the cell is NaN, never a number.  Cost: about one FFT of the samples (the grid has
-about as many points as samples), no matrix of samples x orders.  Given ``orders``, each window is
-projected on exactly those frequencies instead (no scalloping; the FFT grid reads a line between
-two bins up to 15 % low).  The root-mean-square of windows reads ``sqrt(A^2 + noise^2)``: the
-bin's ``noise`` (median amplitude of its cells) says where a cell is indistinguishable from noise.
+sinusoid of amplitude A reads A at its bin). Each window gets its speed (travel / duration) and the
+position Nyquist of the samples inside it (the lowest of their blocks). A cell (speed bin, order) is
+the root-mean-square amplitude of the windows of that bin where the order is measurable; where no
+window of the bin measures it the cell is NaN, never a number. Cost: about one FFT of the samples
+(the grid has about as many points as samples), no matrix of samples x orders. Given ``orders``,
+each window is projected on exactly those frequencies instead (no scalloping; the FFT grid reads a
+line between two bins up to 15 % low). The root-mean-square of windows reads ``sqrt(A^2 +
+noise^2)``: the bin's ``noise`` (median amplitude of its cells) says where a cell is
+indistinguishable from noise.
 Amplitudes with standard errors and confidence bands come from :func:`order_track`'s regression.
 """
 
