@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import time
 
+from ..errors import InputError
+from ..jsonsafe import dumps
 from . import (
     POSITIVE,
     PROBABILITY,
@@ -15,6 +17,7 @@ from . import (
     print_outputs,
     segments_from_args,
     stages,
+    write_json,
 )
 
 #: highest harmonic of the declared lines: the line count (and the time of the harmonic fit, which
@@ -40,6 +43,17 @@ def register(sub) -> None:
                    help=f"most undeclared peaks per segment (default 8, at most {MAX_PEAKS})")
     g.add_argument("--method", default="auto", choices=("auto", "nifty", "astropy", "scipy"),
                    help="Lomb-Scargle implementation")
+    o = sp.add_argument_group("motion at varying speed (order map)")
+    o.add_argument("--order-map", action="store_true",
+                   help="also analyse whole motions per direction: amplitude over order and speed (order_map.png, "
+                        "order_map.json) and the declared lines of --gear tracked against speed with 95 %% bands "
+                        "(order_tracks.png); used automatically when no constant-speed segment is found and "
+                        "--gear declares lines")
+    o.add_argument("--track", action="append", metavar="FREQ|LABEL", default=None,
+                   help="a line to track against speed: a frequency in cycles per unit of theta or a declared "
+                        "line's label (repeatable; default with --order-map: every declared line of --gear)")
+    o.add_argument("--knots", type=number(0, 20, integer=True), default=4,
+                   help="interior knots of the B-splines in speed of a track (default 4)")
     add_output_options(sp)
 
 
@@ -50,18 +64,89 @@ def run(args) -> int:
     t0 = time.perf_counter()
     rec = load_from_args(args)
     seg = segments_from_args(rec, args)
+    # without constant-speed segments the order map stands in when asked for or when the gear spec
+    # declares lines to track; otherwise the refusal says how to ask for it
+    no_seg = len(seg) == 0
+    if no_seg and not (args.order_map or args.track or rec.gear is not None):
+        raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found (rows: {dict(seg.excluded)}); "
+                         "try a larger --rel-tol or a fixed --window, or --order-map to analyse the motion at "
+                         "varying speed")
+    orders = _order_analysis(rec, args) if (args.order_map or args.track or no_seg) else None
+    if no_seg:
+        return _orders_only(rec, seg, orders, args, t0)
     result = analyze(rec, segmentation=seg, inertia=not args.no_inertia, max_frequency=args.max_frequency,
                      min_cycles=args.min_cycles, harmonics=args.harmonics, fap_threshold=args.fap,
                      max_peaks=args.max_peaks, method=args.method, keep_spectra=bool(args.out),
                      progress=None if not args.quiet else False)
     stages(args).done(f"spectra of {len(result.segments)} segment(s)")
     if args.json:
-        result.to_json(args.json)
+        if orders is None:
+            result.to_json(args.json)
+        else:
+            write_json(args.json, {**result.to_dict(), "order_map": orders.to_dict()}, rec, dumps)
     if args.out:
-        write_spectrum_report(result, rec, seg, args.out, command=command_line())
+        write_spectrum_report(result, rec, seg, args.out, command=command_line(), orders=orders)
     if not args.quiet:
         _print_summary(result, time.perf_counter() - t0, args)
+        if orders is not None:
+            _print_orders(orders)
     return 0
+
+
+def _order_analysis(rec, args):
+    """The order maps and tracks of ``--order-map`` / ``--track`` (or of a recording without plateaus)."""
+    from ..spectrum import order_analysis
+
+    st = stages(args)
+    st.start("order map over varying speed")
+    gear = rec.gear
+    lines = args.track if args.track else ([ln.label for ln in gear.declared_lines(1)] if gear is not None else [])
+    inertia = 0 if args.no_inertia else None
+    res = order_analysis(rec, lines, gear=gear, inertia=inertia, min_speed=args.min_speed, knots=args.knots,
+                         map_options={"max_frequency": args.max_frequency} if args.max_frequency else None)
+    st.done(f"order maps of {sum(m is not None for m in res.maps.values())} direction(s), "
+            f"{len(res.tracks)} track(s)")
+    return res
+
+
+def _orders_only(rec, seg, orders, args, t0) -> int:
+    """No constant-speed segment: the order map stands in for the segment spectra (and says so)."""
+    from ..report.spectrum import write_order_report
+
+    if all(m is None for m in orders.maps.values()) and not orders.tracks:
+        raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment found (rows: {dict(seg.excluded)}) "
+                         "and too little motion for an order map; try a larger --rel-tol or a fixed --window")
+    note = ("no constant-speed segment found (rows: " + ", ".join(f"{k} {v}" for k, v in sorted(seg.excluded.items()))
+            + "): the order map over varying speed was used instead")
+    if not args.quiet:
+        print(f"gearspec: {note}")
+    if args.json:
+        write_json(args.json, {"segments": [], "excluded": dict(sorted(seg.excluded.items())), "notes": [note],
+                               "order_map": orders.to_dict()}, rec, dumps)
+    if args.out:
+        write_order_report(orders, rec, args.out, command=command_line(), note=note)
+    if not args.quiet:
+        print(f"({time.perf_counter() - t0:.1f} s)")
+        _print_orders(orders)
+        print_outputs(args, as_path=True)
+    return 0
+
+
+def _print_orders(orders) -> None:
+    import numpy as np
+
+    unit = orders.unit
+    tu = "Nm" if unit == "rad" else "N"
+    for t in orders.tracks:
+        ok = np.isfinite(t.amplitude)
+        if not ok.any():
+            continue
+        name = (t.label.split(" = ")[0] if t.label else f"{t.frequency:.4g} cycles/{unit}")
+        i = np.flatnonzero(ok)
+        print(f"track {name} ({'+' if t.direction > 0 else '-'}): amplitude {t.amplitude[i[0]]:.3g} {tu} at "
+              f"{t.speed[i[0]]:.3g} {unit}/s to {t.amplitude[i[-1]]:.3g} {tu} at {t.speed[i[-1]]:.3g} {unit}/s")
+    for s in orders.skipped:
+        print(f"not tracked: {s['what']}: {s['reason']}")
 
 
 def _print_summary(result, elapsed, args) -> None:

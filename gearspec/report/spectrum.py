@@ -5,6 +5,7 @@ from __future__ import annotations
 from itertools import groupby
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .. import plots
@@ -13,7 +14,7 @@ from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
 from . import _rpm, bullets, header, markdown_table, report_dir, write_report
 
-__all__ = ["write_spectrum_report"]
+__all__ = ["write_spectrum_report", "write_order_report", "order_section"]
 
 
 def _ranges(idx: list[int]) -> str:
@@ -23,8 +24,9 @@ def _ranges(idx: list[int]) -> str:
 
 
 def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentation, out: str | Path,
-                          command: str = "") -> Path:
-    """Write ``report.md``, the figures and ``peaks.csv`` of a spectrum analysis into ``out``."""
+                          command: str = "", orders=None) -> Path:
+    """Write ``report.md``, the figures and ``peaks.csv`` of a spectrum analysis into ``out``
+    (``orders``: an :class:`~gearspec.spectrum.OrderAnalysis`, its section and files added)."""
     out = report_dir(out)
     unit = result.unit
     tu = "Nm" if unit == "rad" else "N"
@@ -115,4 +117,61 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
            "probabilities against the local noise level (one frequency for declared lines, all searched frequencies "
            "for found peaks). "
            f"Frequencies in cycles/{unit}; amplitudes in {tu}; phases in rad of A sin(2 pi f theta + phi).", ""]
+    if orders is not None:
+        md += order_section(orders, out)
     return write_report(out, md + bullets(result.notes, "Notes:"))
+
+
+def write_order_report(orders, rec: Recording, out: str | Path, command: str = "", note: str = "") -> Path:
+    """The report of a recording analysed by its order map alone (no constant-speed segment)."""
+    out = report_dir(out)
+    md = header("gearspec spectrum report", command, rec.summary())
+    if note:
+        md += [f"**{note[0].upper() + note[1:]}.** The segment spectra need constant speed; the order map "
+               "analyses whole motions per direction instead.", ""]
+    return write_report(out, md + order_section(orders, out))
+
+
+def order_section(orders, out: Path) -> list[str]:
+    """The order-map section of a report; writes ``order_map.png``, ``order_tracks.png`` and
+    ``order_map.json`` into ``out``."""
+    from ..jsonsafe import dumps
+    from ..plots.ordermap import plot_order_map, plot_order_tracks
+
+    unit = orders.unit
+    tu = "Nm" if unit == "rad" else "N"
+    maps = [orders.maps.get(d) for d in (1, -1)]
+    lines = sorted({(t.frequency, (t.label or f"{t.frequency:.4g}").split(" = ")[0]) for t in orders.tracks})
+    f_map = plot_order_map(maps, out / "order_map.png", lines=lines)
+    f_tr = plot_order_tracks(orders.tracks, out / "order_tracks.png")
+    (out / "order_map.json").write_text(dumps(orders.to_dict(), indent=1))
+    md = ["## Order map over varying speed", "",
+          "Whole motions, per direction (samples slower than the minimum speed are rest or reversal). Each piece "
+          "of one direction is resampled over position and cut into windows (Hann, 50 % overlap); a cell is the "
+          "root-mean-square amplitude of the windows of its speed bin that measure its frequency: below 0.8 x "
+          "the position Nyquist frequency of the window's samples. Cells no window measures are grey, never a "
+          "number (the white curve is the highest frequency measured in each bin). A cell reads "
+          "sqrt(A^2 + noise^2): compare with the bin's noise (median cell) in `order_map.json`.", "",
+          f"![order map]({f_map.name})", ""]
+    rows = []
+    for t in orders.tracks:
+        ok = np.isfinite(t.amplitude)
+        if not ok.any():
+            continue
+        i = np.flatnonzero(ok)
+        rows.append({"line": (t.label or "").split(" = ")[0] or "-", f"frequency (cycles/{unit})": t.frequency,
+                     "dir": t.direction, f"speeds ({unit}/s)": f"{t.speed_range[0]:.4g} to {t.speed_range[1]:.4g}",
+                     "samples": t.n, "above Nyquist": t.n_above_nyquist,
+                     f"amplitude at slowest ({tu})": f"{t.amplitude[i[0]]:.3g} ± {t.amplitude_se[i[0]]:.2g}",
+                     f"amplitude at fastest ({tu})": f"{t.amplitude[i[-1]]:.3g} ± {t.amplitude_se[i[-1]]:.2g}",
+                     "inertia": f"{t.inertia:.3g} ({t.inertia_how})" if t.inertia is not None else t.inertia_how})
+    md += ["### Order tracks", "",
+           "Each line's amplitude against speed: a least-squares fit of direction x torque = level(v) + a(v) "
+           "sin(2 pi f theta) + c(v) cos(2 pi f theta) (+ J thetadd) with cubic B-splines in speed, on the samples "
+           "where the line lies below 0.8 x their position Nyquist frequency; band: "
+           f"{orders.tracks[0].level if orders.tracks else 0.95:.0%} pointwise (delta method, white noise). "
+           "A band reaching 0 means the line is not distinguished from none at that speed.", "",
+           f"![order tracks]({f_tr.name})", "",
+           markdown_table(pd.DataFrame(rows)) if rows else "_No line tracked._", ""]
+    md += bullets([f"{s['what']}: {s['reason']}" for s in orders.skipped], "Not analysed:")
+    return md

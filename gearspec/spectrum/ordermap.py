@@ -1,0 +1,385 @@
+"""Order analysis of motion at varying speed: the angle-domain view of whole motions per direction
+(:func:`motion`) and the order map (:func:`order_map`), amplitude over order and speed, the
+``rpmordermap`` view of MATLAB's order analysis.  One order tracked against speed with a confidence
+band is :func:`~gearspec.spectrum.ordertrack.order_track`.
+
+The samples of every run are split into pieces of one direction of motion (``direction * v`` above
+``min_speed``; ``v`` the recording's ``velocity`` channel, else the Savitzky-Golay derivative of
+:func:`gearspec.segment.derivatives`).  The position Nyquist frequency is known sample by sample:
+the package's rule (:func:`~gearspec.spectrum.analysis.position_nyquist`) applied to consecutive
+blocks of ``NYQUIST_BLOCK`` samples of each piece; a line is measurable on a sample when it lies
+below ``MEASURABLE_FRACTION`` times that sample's position Nyquist frequency.
+
+Order map (method, chosen for cost): each piece's friction magnitude ``direction * (torque - J
+thetadd)`` is resampled linearly onto one position grid (spacing ``1 / (2 f_grid)``, the same for
+every piece, so every window has the same order bins; the interpolation's response sinc^2(f ds) at
+the window's sample spacing ds divided out), cut into windows of ``window`` grid points with 50 %
+overlap, detrended (a line per window), Hann-windowed and transformed (amplitude-calibrated: a
+sinusoid of amplitude A reads A at its bin). Each window gets its speed (travel / duration) and the
+position Nyquist of the samples inside it (the lowest of their blocks). A cell (speed bin, order) is
+the root-mean-square amplitude of the windows of that bin where the order is measurable; where no
+window of the bin measures it the cell is NaN, never a number. Cost: about one FFT of the samples
+(the grid has about as many points as samples), no matrix of samples x orders. Given ``orders``,
+each window is projected on exactly those frequencies instead (no scalloping; the FFT grid reads a
+line between two bins up to 15 % low). The root-mean-square of windows reads ``sqrt(A^2 +
+noise^2)``: the bin's ``noise`` (median amplitude of its cells) says where a cell is
+indistinguishable from noise.
+Amplitudes with standard errors and confidence bands come from :func:`order_track`'s regression.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from ..errors import InputError
+from ..jsonsafe import plain
+from ..recording import Recording
+from .analysis import MEASURABLE_FRACTION, position_nyquist
+
+__all__ = ["Motion", "motion", "OrderMap", "order_map", "NYQUIST_BLOCK", "MIN_SPEED_FRACTION", "MIN_PIECE"]
+
+#: samples per block over which the position Nyquist frequency is computed (a few tenths of a
+#: second at 1 kHz: short against a speed change, long enough for the 95th percentile of spacings)
+NYQUIST_BLOCK = 256
+#: default ``min_speed``: this fraction of the 99th percentile of |v| (slower samples are rest or
+#: reversal: neither direction)
+MIN_SPEED_FRACTION = 0.02
+#: pieces of one direction shorter than this many samples are left out (counted in ``excluded``)
+MIN_PIECE = 16
+#: window lengths (grid points) ``window="auto"`` chooses from
+AUTO_WINDOWS = (32, 64, 128, 256)
+#: windows transformed at once (memory: this x window points)
+_WINDOW_BATCH = 2048
+
+
+@dataclass
+class Motion:
+    """The samples of a recording moving one way, concatenated piece by piece (SI units).
+
+    ``theta`` (rad or m), ``speed`` (|v|, unit/s), ``y`` the friction magnitude ``direction *
+    (torque - J thetadd)`` (Nm or N; J removed only when ``inertia`` is given), ``acc`` (unit/s^2, or
+    None when not computed), ``t`` (s), ``nyquist`` the position Nyquist frequency of each sample's
+    block (cycles per unit of theta), ``bounds`` the ``(start, stop)`` of every piece in these arrays,
+    ``excluded`` rows of the recording not in this direction's pieces, per reason."""
+
+    direction: int
+    unit: str
+    t: np.ndarray
+    theta: np.ndarray
+    speed: np.ndarray
+    y: np.ndarray
+    acc: np.ndarray | None
+    nyquist: np.ndarray
+    bounds: list
+    min_speed: float
+    inertia: float | None
+    velocity_source: str
+    excluded: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.theta)
+
+
+def _check_direction(direction) -> int:
+    if direction not in (1, -1):
+        raise InputError(f"direction must be +1 or -1, got {direction!r}")
+    return int(direction)
+
+
+def motion(rec: Recording, direction: int = 1, *, min_speed: float | None = None, inertia: float | None = None,
+           need_acc: bool = False, deriv_window: int | None = None) -> Motion:
+    """The pieces of ``rec`` moving in ``direction`` (+1 or -1) faster than ``min_speed`` (unit/s;
+    default ``MIN_SPEED_FRACTION`` x the 99th percentile of |v|), with the position Nyquist frequency
+    of every sample.  ``inertia`` (kg m^2 or kg): ``J * thetadd`` is subtracted from the torque;
+    ``need_acc``: keep the acceleration (unit/s^2) for a fit of J."""
+    from ..segment import derivatives
+
+    d = _check_direction(direction)
+    has_v = "velocity" in rec.data
+    acc = None
+    if not has_v or inertia or need_acc:
+        v_d, acc = derivatives(rec, deriv_window)
+    v = rec.channel("velocity").astype(float) if has_v else v_d
+    if min_speed is None:
+        finite = np.abs(v[np.isfinite(v)])
+        min_speed = MIN_SPEED_FRACTION * float(np.percentile(finite, 99)) if len(finite) else 0.0
+    if not (math.isfinite(min_speed) and min_speed >= 0):
+        raise InputError(f"min_speed must be a speed >= 0 in {rec.unit}/s, got {min_speed!r}")
+    moving = d * v > min_speed  # NaN compares False
+    if inertia and acc is not None:
+        ok_acc = np.isfinite(acc)
+        moving &= ok_acc
+    idx_parts, bounds, n = [], [], 0
+    for _, a, b in rec.pieces():
+        m = moving[a:b]
+        edges = np.flatnonzero(np.diff(np.concatenate(([False], m, [False])).astype(np.int8)))
+        for s, e in zip(edges[0::2], edges[1::2]):
+            if e - s >= MIN_PIECE:
+                idx_parts.append(np.arange(a + s, a + e))
+                bounds.append((n, n + e - s))
+                n += e - s
+    idx = np.concatenate(idx_parts) if idx_parts else np.zeros(0, int)
+    n_moving = int(np.count_nonzero(moving))
+    excluded = {"other direction or slower than min_speed": len(rec) - n_moving,
+                f"pieces shorter than {MIN_PIECE} samples": n_moving - len(idx)}
+    tau = rec.tau[idx]
+    if inertia and acc is not None:
+        tau = tau - inertia * acc[idx]
+    theta = rec.theta[idx]
+    nyq = np.empty(len(idx))
+    for s, e in bounds:
+        _block_nyquist(theta[s:e], nyq[s:e])
+    return Motion(d, rec.unit, rec.t[idx], theta, np.abs(v[idx]), d * tau,
+                  None if (acc is None or not need_acc) else acc[idx], nyq, bounds, float(min_speed),
+                  inertia if inertia else None, "velocity channel" if has_v else "Savitzky-Golay derivative of theta",
+                  excluded)
+
+
+def _block_nyquist(theta: np.ndarray, out: np.ndarray) -> None:
+    """The position Nyquist frequency of consecutive blocks of ``NYQUIST_BLOCK`` samples (the last
+    one joined to its neighbour when shorter than half a block) into ``out``."""
+    n = len(theta)
+    starts = list(range(0, n, NYQUIST_BLOCK))
+    if len(starts) > 1 and n - starts[-1] < NYQUIST_BLOCK // 2:
+        starts.pop()
+    for i, s in enumerate(starts):
+        e = starts[i + 1] if i + 1 < len(starts) else n
+        # a block of one sample has no spacing: the previous block's
+        out[s:e] = position_nyquist(theta[max(0, s - 1):e]) if e - s > 1 or s > 0 else np.inf
+
+
+# ---------------------------------------------------------------------- the order map
+@dataclass
+class OrderMap:
+    """Amplitude over order and speed for one direction (see the module's docstring).
+
+    ``frequency`` (K, cycles per unit of theta), ``order`` (K, per output turn; None without a gear
+    train), ``order_reference`` (K, per turn of the reference shaft; None on a linear axis),
+    ``speed_edges`` (B + 1, unit/s), ``speed`` (B, mean window speed, NaN when empty), ``amplitude``
+    (B x K, torque units, NaN where not measurable), ``windows`` (B x K, windows averaged per cell),
+    ``limit`` (B, the highest frequency measured in the bin: ``MEASURABLE_FRACTION`` x the highest
+    window Nyquist), ``noise`` (B, median cell amplitude; NaN for fewer than 16 frequencies), ``samples`` (B)."""
+
+    direction: int
+    unit: str
+    frequency: np.ndarray
+    order: np.ndarray | None
+    order_reference: np.ndarray | None
+    speed_edges: np.ndarray
+    speed: np.ndarray
+    amplitude: np.ndarray
+    windows: np.ndarray
+    limit: np.ndarray
+    noise: np.ndarray
+    samples: np.ndarray
+    resolution: float
+    window: int
+    method: str
+    min_speed: float
+    notes: list = field(default_factory=list)
+
+    @property
+    def torque_unit(self) -> str:
+        return "Nm" if self.unit == "rad" else "N"
+
+    def cell(self, frequency: float, speed: float) -> float:
+        """The amplitude (torque units) of the cell nearest ``frequency`` in the bin holding ``speed``."""
+        b = int(np.searchsorted(self.speed_edges, speed, side="right")) - 1
+        if not 0 <= b < len(self.speed):
+            return float("nan")
+        return float(self.amplitude[b, int(np.argmin(np.abs(self.frequency - frequency)))])
+
+    def to_dict(self) -> dict:
+        return plain({"direction": self.direction, "unit": self.unit, "torque_unit": self.torque_unit,
+                      "frequency_unit": f"cycles/{self.unit}", "speed_unit": f"{self.unit}/s",
+                      "method": self.method, "window": self.window, "resolution": self.resolution,
+                      "min_speed": self.min_speed, "frequency": self.frequency, "order": self.order,
+                      "order_reference": self.order_reference, "speed_edges": self.speed_edges,
+                      "speed": self.speed, "samples": self.samples, "limit": self.limit, "noise": self.noise,
+                      "amplitude": self.amplitude, "windows": self.windows, "notes": self.notes})
+
+
+def order_map(rec: Recording, *, direction: int = 1, orders=None, speed_bins: int | np.ndarray = 16,
+              max_frequency: float | None = None, window: int | str = "auto", min_speed: float | None = None,
+              inertia: float | None = None, gear=None, mot: Motion | None = None) -> OrderMap:
+    """The order map of ``rec`` in ``direction`` (+1 or -1).
+
+    Parameters
+    ----------
+    orders : array of float, optional
+        Frequencies (cycles per unit of theta) to read exactly; default the FFT bins of a window up
+        to ``max_frequency``.
+    speed_bins : int or array
+        Number of equal speed bins from ``min_speed`` to the fastest window, or their edges (unit/s).
+    max_frequency : float, optional
+        Highest frequency of the position grid (cycles/unit); default the Nyquist frequency of the
+        mean position spacing (the grid then has about as many points as samples), raised to cover
+        ``orders`` (at most four grid points per sample).
+    window : int or "auto"
+        Grid points per window (>= 16); the order resolution is ``2 max_frequency / window``.
+        "auto": the longest of 32, 64, 128, 256 that the median piece holds four times.
+    min_speed, inertia
+        As :func:`motion`; ``inertia`` defaults to the gear spec's (kg m^2 or kg).
+    gear : GearTrain, optional
+        For orders per output turn (default the recording's).
+
+    Returns
+    -------
+    OrderMap
+    """
+    d = _check_direction(direction)
+    gear = gear if gear is not None else rec.gear
+    if inertia is None and gear is not None:
+        inertia = gear.inertia
+    if not (window == "auto" or (isinstance(window, (int, np.integer)) and window >= 16)):
+        raise InputError(f"window must be 'auto' or an integer number of grid points >= 16, got {window!r}")
+    m = mot if mot is not None else motion(rec, d, min_speed=min_speed, inertia=inertia)
+    if len(m) < (window if window != "auto" else AUTO_WINDOWS[0]):
+        raise InputError(f"{', '.join(rec.sources) or 'recording'}: {len(m)} samples move in the "
+                         f"{'positive' if d > 0 else 'negative'} direction faster than {m.min_speed:.3g} "
+                         f"{rec.unit}/s; an order map needs at least {window}")
+    travel = sum(abs(m.theta[e - 1] - m.theta[s]) for s, e in m.bounds)
+    f_grid = float(max_frequency) if max_frequency is not None else 0.5 * len(m) / max(travel, 1e-300)
+    given = orders is not None
+    if given:
+        orders = np.atleast_1d(np.asarray(orders, dtype=float))
+        if not len(orders) or not np.all(np.isfinite(orders) & (orders > 0)):
+            raise InputError("orders must be positive frequencies in cycles per unit of theta")
+        f_grid = max(f_grid, float(orders.max()) / MEASURABLE_FRACTION)
+    f_grid = min(f_grid, 2.0 * len(m) / max(travel, 1e-300))  # at most four grid points per sample
+    spacing = 0.5 / f_grid
+    if window == "auto":
+        window = _auto_window(m, spacing)
+    length = window * spacing
+    freq = orders if given else np.arange(1, window // 2 + 1) / length
+    wins = _window_spectra(m, spacing, window, freq if given else None)
+    if not len(wins[0]):
+        name = "positive" if d > 0 else "negative"
+        raise InputError(f"{', '.join(rec.sources) or 'recording'}: no piece of the {name} "
+                         f"direction travels one window ({window} points at {spacing:.3g} {rec.unit}: "
+                         f"{window * spacing:.3g} {rec.unit}) without stopping; give a smaller window")
+    edges = _speed_edges(speed_bins, m.min_speed, wins[0])
+    return _bin_windows(m, wins, edges, freq, gear, window, length, "projection on given frequencies" if given
+                        else "Hann FFT of windows resampled over position")
+
+
+def _auto_window(m: Motion, spacing: float) -> int:
+    """The longest of ``AUTO_WINDOWS`` grid points that the median piece (by travel) holds at
+    least four times (short moves: short windows, so that each covers a narrow range of speeds)."""
+    travel = np.array([abs(m.theta[e - 1] - m.theta[s]) for s, e in m.bounds])
+    median = float(np.median(travel)) / spacing if len(travel) else 0.0
+    fits = [w for w in AUTO_WINDOWS if 4 * w <= median]
+    return max(fits) if fits else AUTO_WINDOWS[0]
+
+
+def _speed_edges(speed_bins, lo: float, speeds: np.ndarray) -> np.ndarray:
+    if np.ndim(speed_bins) == 0:
+        nb = int(speed_bins)
+        if nb < 1:
+            raise InputError(f"speed_bins must be a positive number of bins or their edges, got {speed_bins!r}")
+        hi = float(speeds.max()) if len(speeds) else lo + 1.0
+        return np.linspace(lo, hi * (1 + 1e-9), nb + 1)
+    edges = np.asarray(speed_bins, dtype=float)
+    if edges.ndim != 1 or len(edges) < 2 or not np.all(np.diff(edges) > 0):
+        raise InputError("speed_bins edges must be increasing speeds (unit/s), at least two")
+    return edges
+
+
+def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | None):
+    """Per window of every piece: speed (unit/s), position Nyquist (cycles/unit), samples, and the
+    squared calibrated amplitude at each frequency (FFT bins 1..window/2 or ``freq``)."""
+    hann = np.hanning(window + 2)[1:-1]
+    gain = 2.0 / hann.sum()
+    step = window // 2
+    ramp = np.arange(window) - 0.5 * (window - 1)
+    ramp /= np.sqrt(ramp @ ramp)
+    if freq is not None:  # projection on exact frequencies (the window's grid from 0)
+        k = np.arange(window) * spacing
+        proj = (hann[:, None] * np.exp(-2j * np.pi * k[:, None] * freq[None, :])) * gain
+    speeds, nyqs, counts, powers = [], [], [], []
+    for s, e in m.bounds:
+        # position along the direction of motion (increasing in both directions); time order kept
+        th = m.theta[s:e] if m.direction > 0 else -m.theta[s:e]
+        y, tt = m.y[s:e], m.t[s:e]
+        g0 = math.ceil(th[0] / spacing)
+        g1 = math.floor(th[-1] / spacing)
+        n_grid = g1 - g0 + 1
+        if n_grid < window:
+            continue
+        n_win = (n_grid - window) // step + 1
+        starts = g0 + np.arange(n_win) * step
+        # each window's edges in samples (for its Nyquist) and in time (for its speed); with 50 %
+        # overlap a window is two consecutive half windows: the lowest Nyquist of its samples is
+        # the lower of theirs (one reduceat over monotone edges)
+        th_a, th_b = starts * spacing, (starts + window - 1) * spacing
+        half = np.searchsorted(th, np.append(starts, starts[-1] + step) * spacing, side="right") - 1
+        half = np.clip(half, 0, len(th) - 1)
+        nq = m.nyquist[s:e]
+        h_min = np.minimum.reduceat(nq, half)  # [half_j, half_j+1), the last one to the end
+        h_min = np.append(h_min[:n_win], nq[half[-1]:].min())
+        nyqs.append(np.minimum(h_min[:-1], h_min[1:]))
+        i_a = half[:-1]
+        i_b = np.minimum(np.searchsorted(th, th_b, side="left") + 1, len(th))
+        dur = np.interp(th_b, th, tt) - np.interp(th_a, th, tt)
+        speeds.append((th_b - th_a) / np.abs(dur))
+        counts.append(i_b - i_a)
+        # linear interpolation between samples spaced ds reads a line at f low by sinc^2(f ds)
+        # (the triangle kernel's response): divided out per window at its mean sample spacing
+        ds = (th_b - th_a) / np.maximum(i_b - i_a - 1, 1)
+        grid = np.interp(np.arange(g0, g1 + 1) * spacing, th, y)
+        view = sliding_window_view(grid, window)[::step][:n_win]
+        for j in range(0, n_win, _WINDOW_BATCH):
+            blk = view[j:j + _WINDOW_BATCH]
+            # a straight line per window taken out (the friction level and slow position-dependent
+            # forces, which a Hann window would leak into the lowest orders)
+            blk = blk - blk.mean(axis=1, keepdims=True)
+            blk = blk - np.outer(blk @ ramp, ramp)
+            if freq is None:
+                X = np.fft.rfft(blk * hann, axis=1)[:, 1:window // 2 + 1] * gain
+            else:
+                X = blk @ proj
+            f_k = freq if freq is not None else np.arange(1, window // 2 + 1) / (window * spacing)
+            resp = np.maximum(np.sinc(ds[j:j + _WINDOW_BATCH, None] * f_k[None, :]) ** 2, 0.1)
+            powers.append((X.real ** 2 + X.imag ** 2) / resp**2)
+    if not speeds:
+        z = np.zeros(0)
+        return z, z, np.zeros(0, int), np.zeros((0, window // 2 if freq is None else len(freq)))
+    return np.concatenate(speeds), np.concatenate(nyqs), np.concatenate(counts), np.concatenate(powers)
+
+
+def _bin_windows(m: Motion, wins, edges, freq, gear, window, length, method) -> OrderMap:
+    """Windows into speed bins: root-mean-square amplitude of the windows measuring each cell."""
+    speeds, nyqs, counts, power = wins
+    nb, k = len(edges) - 1, len(freq)
+    b = np.searchsorted(edges, speeds, side="right") - 1
+    ok = (b >= 0) & (b < nb)
+    # a cell counts a window only where its frequency is measurable there (the Nyquist mask)
+    meas = freq[None, :] < MEASURABLE_FRACTION * nyqs[:, None]
+    p_sum = np.zeros((nb, k))
+    n_win = np.zeros((nb, k), int)
+    np.add.at(p_sum, b[ok], np.where(meas[ok], power[ok], 0.0))
+    np.add.at(n_win, b[ok], meas[ok].astype(int))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        amp = np.where(n_win > 0, np.sqrt(p_sum / np.maximum(n_win, 1)), np.nan)
+    speed = np.full(nb, np.nan)
+    limit = np.full(nb, np.nan)
+    samples = np.zeros(nb, int)
+    for i in range(nb):
+        sel = ok & (b == i)
+        if sel.any():
+            speed[i] = float(speeds[sel].mean())
+            limit[i] = MEASURABLE_FRACTION * float(nyqs[sel].max())
+            samples[i] = int(counts[sel].sum() // 2)  # windows overlap by half
+    with np.errstate(all="ignore"):  # a few given frequencies have no "median cell": no noise level
+        noise = np.array([np.nanmedian(r) if np.isfinite(r).any() and k >= 16 else np.nan for r in amp])
+    order = None if gear is None or gear.output_frequency is None else freq / gear.output_frequency
+    order_ref = freq * 2 * math.pi if m.unit == "rad" else None
+    notes = [f"velocity from the {m.velocity_source}; samples slower than {m.min_speed:.3g} {m.unit}/s left out"]
+    if m.inertia:
+        notes.append(f"inertia removed: torque - {m.inertia:g} x thetadd")
+    return OrderMap(m.direction, m.unit, np.asarray(freq, float), order, order_ref, edges, speed, amp, n_win, limit,
+                    noise, samples, 1.0 / length, window, method, m.min_speed, notes)

@@ -1,0 +1,315 @@
+"""Order map and order tracks over varying speed, against synthetic recordings with known answers:
+torque = sign(v) (c + b |v|) + A0 exp(-d |v|) sin(2 pi f theta + phi) [+ J thetadd] + white noise,
+theta integrated from a ramp or chirp velocity (every number below follows from these)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gearspec.errors import InputError
+from gearspec.recording import Recording
+from gearspec.spectrum import MEASURABLE_FRACTION, order_analysis, order_map, order_track
+
+FS = 1000.0      # Hz
+TOP = 100.0      # rad/s: spacing 0.1 rad at the top, position Nyquist 5 cycles/rad
+F = 1.5          # cycles/rad, below 0.8 x Nyquist at every speed
+DECAY = 0.01     # s/rad
+A_POS, A_NEG = 0.05, 0.03  # Nm: the two directions differ, so mixing them is seen
+SIGMA = 0.02     # Nm white noise
+
+
+def _velocity(kind: str, T: float, top: float = TOP):
+    t = np.arange(int(T * FS)) / FS
+    if kind == "ramp":  # 0 -> top -> 0 -> -top -> 0, linear
+        v = top * np.interp(t, [0, T / 4, T / 2, 3 * T / 4, T], [0, 1, 0, -1, 0])
+    elif kind == "chirp":  # a velocity sine sweeping 0.05 -> 0.3 Hz: many reversals, both directions
+        v = top * np.sin(2 * np.pi * (0.05 * t + 0.5 * (0.25 / T) * t**2))
+    elif kind == "triangle":  # +-top in 0.25 s (240 rad/s^2 at 60 rad/s): never a constant speed
+        v = top * (2 / np.pi) * np.arcsin(np.sin(2 * np.pi * t))
+    elif kind == "gap":  # ramps over 2..40 and 60..100 rad/s only (a speed step between them)
+        v = np.where(t < T / 2, np.interp(t, [0, T / 2], [2, 40]), np.interp(t, [T / 2, T], [60, 100]))
+    else:
+        raise ValueError(kind)
+    return t, v
+
+
+def _recording(kind="ramp", T=40.0, seed=0, lines=((F, A_POS, A_NEG, 0.3),), inertia=0.0, sigma=SIGMA,
+               velocity=False, top=TOP):
+    """A synthetic recording (lines: (f, A0 positive, A0 negative, phase); ``velocity``: with the true
+    velocity as its ``velocity`` channel)."""
+    rng = np.random.default_rng(seed)
+    t, v = _velocity(kind, T, top)
+    theta = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) / FS)])
+    acc = np.gradient(v, 1 / FS)
+    tau = np.sign(v) * (0.3 + 0.002 * np.abs(v)) + inertia * acc + sigma * rng.standard_normal(len(t))
+    for f, ap, an, phi in lines:
+        tau += np.where(v >= 0, ap, an) * np.exp(-DECAY * np.abs(v)) * np.sin(2 * np.pi * f * theta + phi)
+    return Recording.from_arrays(t=t, theta=theta, torque=tau, velocity=v if velocity else None)
+
+
+def _truth(speed, direction, a_pos=A_POS, a_neg=A_NEG):
+    return (a_pos if direction > 0 else a_neg) * np.exp(-DECAY * np.asarray(speed))
+
+
+# ---------------------------------------------------------------------- order track
+def test_track_matches_the_decaying_amplitude_within_its_band_in_both_directions():
+    # a pointwise 95 % band covers the truth at 95 % of speeds on average; the errors are smooth in
+    # speed (a few independent spline pieces), so one recording covers between ~75 and 100 %: over
+    # 6 seeds x 2 directions the mean must reach 90 % (a 2 % relative spline bias or a mixed
+    # direction, whose amplitude would be the two directions' blend, fails this by far)
+    cover = []
+    for seed in range(6):
+        rec = _recording(seed=seed)
+        for d in (1, -1):
+            tr = order_track(rec, F, direction=d, inertia=0)
+            ok = np.isfinite(tr.amplitude)
+            truth = _truth(tr.speed[ok], d)
+            cover.append(np.mean((tr.lower[ok] <= truth) & (truth <= tr.upper[ok])))
+            # the band is narrow enough to mean something: under 10 % of the amplitude in the middle
+            mid = (tr.speed > 20) & (tr.speed < 80)
+            assert np.all(tr.upper[mid] - tr.lower[mid] < 0.1 * _truth(tr.speed[mid], d) * 2)
+            assert tr.speed_range[0] < 3 and tr.speed_range[1] > 99
+    assert np.mean(cover) >= 0.9, cover
+    assert min(cover) >= 0.6, cover
+
+
+def test_track_from_one_chirp():
+    # one chirp (many short moves through zero speed): the amplitude at 50 rad/s within 3 standard
+    # errors of the truth and within 10 % (se about 2 % here), per direction
+    rec = _recording("chirp", T=60.0, seed=3)
+    for d in (1, -1):
+        tr = order_track(rec, F, direction=d, inertia=0)
+        i = int(np.argmin(np.abs(tr.speed - 50)))
+        truth = _truth(tr.speed[i], d)
+        assert abs(tr.amplitude[i] - truth) < 3 * tr.amplitude_se[i]
+        assert abs(tr.amplitude[i] - truth) < 0.1 * truth
+
+
+def test_band_width_shrinks_with_more_data():
+    # twice the samples at every speed: standard errors / sqrt(2) (0.707; 0.6-0.8 allows for the
+    # noise in the residual sd and the amplitude-dependent delta-method term)
+    se1 = order_track(_recording(T=40.0, seed=1), F, direction=1, inertia=0).amplitude_se
+    se2 = order_track(_recording(T=80.0, seed=2), F, direction=1, inertia=0).amplitude_se
+    ratio = float(np.nanmedian(se2 / se1))
+    assert 0.6 < ratio < 0.8, ratio
+
+
+def test_inertia_fitted_jointly():
+    # J = 0.002 kg m^2 in the torque; the acceleration of the ramp is +-10 rad/s^2 (0.02 Nm): J is
+    # found within 4 standard errors and 20 % (se about 2 % of J), and the line's amplitude is unbiased
+    rec = _recording(seed=4, inertia=0.002)
+    tr = order_track(rec, F, direction=1, inertia="fit")
+    assert tr.inertia_how == "fitted"
+    assert abs(tr.inertia - 0.002) < 4 * tr.inertia_se and abs(tr.inertia - 0.002) < 0.2 * 0.002
+    i = int(np.argmin(np.abs(tr.speed - 50)))
+    assert abs(tr.amplitude[i] - _truth(50, 1)) < 3 * tr.amplitude_se[i]
+
+
+def test_line_above_the_position_nyquist_is_not_tracked_there():
+    # f = 8 cycles/rad is below 0.8 x the Nyquist 0.5 / (v dt) only for v < 0.4 / (8 dt) = 50 rad/s:
+    # the track stops there (the block rule uses the 95th-percentile spacing of 256 samples, a
+    # little wider than the mean: the edge lies between 45 and 50 rad/s) and is NaN beyond
+    f_hi = 8.0
+    rec = _recording(seed=5, lines=((F, A_POS, A_NEG, 0.3), (f_hi, 0.04, 0.04, 1.0)))
+    tr = order_track(rec, f_hi, direction=1, inertia=0)
+    v_edge = MEASURABLE_FRACTION * 0.5 / (f_hi / FS)
+    assert 45 < tr.speed_range[1] <= v_edge
+    assert np.isnan(tr.at(70.0))
+    # the samples left out are those faster than the edge (half the ramp's speeds)
+    assert 0.4 < tr.n_above_nyquist / (tr.n + tr.n_above_nyquist) < 0.6
+    # where measured, it is right
+    i = int(np.argmin(np.abs(tr.speed - 25)))
+    assert abs(tr.amplitude[i] - 0.04 * np.exp(-DECAY * tr.speed[i])) < 3 * tr.amplitude_se[i]
+
+
+def test_speeds_without_samples_are_not_reported():
+    # the speeds 40..60 rad/s never occur (the recording's velocity channel steps over them): the
+    # grid points there are NaN, not an interpolation
+    tr = order_track(_recording("gap", seed=6, velocity=True), F, direction=1, inertia=0)
+    inside = (tr.speed > 41) & (tr.speed < 59)
+    assert inside.any() and np.all(np.isnan(tr.amplitude[inside])) and np.all(tr.counts[inside] == 0)
+    assert np.isfinite(tr.at(30.0)) and np.isfinite(tr.at(80.0))
+
+
+# ---------------------------------------------------------------------- order map
+def test_order_map_cell_holds_the_true_amplitude():
+    # windows projected at exactly F and at 3.5 cycles/rad (near the limit at 90 rad/s, where linear
+    # interpolation alone reads 30 % low: sinc^2(3.5 x 0.09)), root-mean-square over the windows of a
+    # 10 rad/s bin.  A^2 varies by +-10 % across a bin (rms = the value at the mean speed to 0.1 %);
+    # a cell reads sqrt(A^2 + noise^2) with the noise the bin's median cell of the FFT map; the mean of
+    # ~30 half-overlapping windows' A^2 scatters 2.5-3 % (measured over seeds 7, 11, 12): 8 % = 3 sd
+    f2 = 3.5
+    rec = _recording(T=80.0, seed=7, lines=((F, A_POS, A_NEG, 0.3), (f2, A_POS, A_NEG, 2.0)))
+    edges = np.arange(10.0, 101.0, 10.0)
+    for d in (1, -1):
+        m = order_map(rec, direction=d, orders=[F, f2], speed_bins=edges)
+        noise = order_map(rec, direction=d, speed_bins=edges).noise
+        expect = np.hypot(_truth(m.speed, d), noise)
+        for b in (1, 4, 7, 8):
+            assert m.amplitude[b, 0] == pytest.approx(expect[b], rel=0.08)
+            assert m.amplitude[b, 1] == pytest.approx(expect[b], rel=0.08)
+
+
+def test_order_map_masks_cells_above_the_position_nyquist_and_shows_noise_for_absent_lines():
+    rec = _recording(T=80.0, seed=8)
+    m = order_map(rec, direction=1, speed_bins=np.arange(10.0, 101.0, 10.0))
+    # the highest measurable frequency of each bin lies between 0.8 x the Nyquist 0.5 / (v dt) at the
+    # bin's fastest and slowest speeds (a window, ~13 rad long, and a 256-sample block of the rule
+    # span a range of speeds, and the lowest Nyquist of its samples counts: 10 % slack on the fast side)
+    nyq_at = MEASURABLE_FRACTION * 0.5 / (m.speed_edges / FS)
+    assert np.all(m.limit <= nyq_at[:-1]) and np.all(m.limit >= 0.9 * nyq_at[1:])
+    for b in range(len(m.speed)):
+        above = m.frequency >= m.limit[b] * 1.001
+        assert np.all(np.isnan(m.amplitude[b, above]))  # never a number above the limit
+        assert np.all(np.isfinite(m.amplitude[b, (m.frequency < 0.7 * m.limit[b]) & (m.frequency > 0.2)]))
+    # a line absent from the signal (2.7 cycles/rad) reads as noise: within 2 x the bin's median
+    # cell (the rms of ~60 windows of noise power scatters ~13 %), and far below the true line
+    j_abs = int(np.argmin(np.abs(m.frequency - 2.7)))
+    j_true = int(np.argmin(np.abs(m.frequency - F)))
+    for b in (1, 3, 5):
+        assert m.amplitude[b, j_abs] < 2 * m.noise[b]
+        assert m.amplitude[b, j_true] > 5 * m.noise[b]
+
+
+def test_to_dict_is_strict_json_with_masked_cells_as_null():
+    rec = _recording(seed=9)
+    res = order_analysis(rec, [F, 8.0], inertia=0)
+    d = res.to_dict()
+    text = json.dumps(d, allow_nan=False)
+    pos = d["maps"]["positive"]
+    assert pos["unit"] == "rad" and pos["torque_unit"] == "Nm"
+    assert any(x is None for row in pos["amplitude"] for x in row)  # masked cells
+    assert len(d["tracks"]) == 4 and "8" in text
+    assert pos["order_reference"][0] == pytest.approx(2 * np.pi * pos["frequency"][0])
+
+
+def test_bad_input_is_one_sentence():
+    rec = _recording(T=8.0, seed=10)
+    with pytest.raises(InputError, match="direction"):
+        order_map(rec, direction=0)
+    with pytest.raises(InputError, match="neither a frequency nor a declared line"):
+        order_track(rec, "mesh", direction=1)
+    with pytest.raises(InputError, match="knots"):
+        order_track(rec, F, knots=50)
+    with pytest.raises(InputError, match="position Nyquist"):
+        order_track(rec, 40.0, direction=1, inertia=0)  # above the Nyquist of every sample
+
+
+def test_samples_near_rest_belong_to_no_direction():
+    # a measured velocity with 0.5 rad/s of noise: near a reversal its sign is a coin toss.  Samples
+    # slower than min_speed (default 2 % of the 99th-percentile speed: 2 rad/s, 4 noise sd) are rest
+    # or reversal and left out; together with the shortest piece (16 samples) no sample truly moving
+    # the other way enters a direction's pieces
+    from gearspec.spectrum import motion
+
+    # (the ramp crosses zero at 10 rad/s^2: the noise blurs the sign over ~50 samples there)
+    rec = _recording("ramp", T=40.0, seed=11, velocity=True)
+    t, v_true = _velocity("ramp", 40.0)
+    rng = np.random.default_rng(0)
+    rec.data["velocity"] = v_true + 0.5 * rng.standard_normal(len(v_true))
+    for d in (1, -1):
+        m = motion(rec, d)
+        true_v = np.interp(m.t, t, v_true)
+        assert np.all(d * true_v > 0)
+        assert 1.9 < m.min_speed < 2.1 and m.speed.min() > m.min_speed
+
+
+# ---------------------------------------------------------------------- command line
+def test_cli_recording_without_plateaus_is_analysed_by_its_order_map(tmp_path, capsys):
+    from gearspec.cli import main
+
+    path = tmp_path / "triangle.csv"
+    _recording("triangle", T=20.0, seed=12, top=60.0).save(path)
+    out, js = tmp_path / "out", tmp_path / "r.json"
+    assert main(["spectrum", str(path), "--track", "1.5", "--out", str(out), "--json", str(js)]) == 0
+    text = capsys.readouterr().out
+    assert "order map over varying speed was used instead" in text
+    for name in ("order_map.png", "order_tracks.png", "order_map.json", "report.md"):
+        assert (out / name).exists()
+    assert "the order map over varying speed was used instead" in (out / "report.md").read_text().lower()
+    d = json.loads(js.read_text())
+    assert d["segments"] == [] and d["order_map"]["maps"]["positive"]["amplitude"]
+    tracks = d["order_map"]["tracks"]
+    assert {t["direction"] for t in tracks} == {1, -1}
+    # the track's amplitude at its middle speed: the truth within 3 standard errors
+    t = tracks[0]
+    i = len(t["speed"]) // 2
+    assert abs(t["amplitude"][i] - _truth(t["speed"][i], t["direction"])) < 3 * t["amplitude_se"][i]
+
+
+def test_cli_without_plateaus_uses_the_order_map_when_the_gear_declares_lines(tmp_path, capsys):
+    # a gear spec: its declared lines are tracked and the order map stands in for the segments; no
+    # gear spec and no --order-map: the refusal of today, now saying how to get the order map
+    from gearspec.cli import main
+
+    path = tmp_path / "triangle.csv"
+    _recording("triangle", T=10.0, seed=15, top=60.0).save(path)
+    spec = tmp_path / "g.toml"
+    spec.write_text('name = "spur drive"\n[[stages]]\nname = "spur"\nkind = "spur"\nratio = 3.0\nteeth = 28\n')
+    assert main(["spectrum", str(path), "--gear", str(spec), "--quiet", "--json", str(tmp_path / "r.json")]) == 0
+    tracks = json.loads((tmp_path / "r.json").read_text())["order_map"]["tracks"]
+    assert any("spur tooth mesh" in (t["label"] or "") for t in tracks)
+    capsys.readouterr()
+    assert main(["spectrum", str(path), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no constant-speed segment" in err and "--order-map" in err
+
+
+def test_cli_track_that_is_no_line_is_refused_in_one_sentence(tmp_path, capsys):
+    from gearspec.cli import main
+
+    path = tmp_path / "ramp.csv"
+    _recording(T=10.0, seed=13).save(path)
+    assert main(["spectrum", str(path), "--order-map", "--track", "mesh", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gearspec: error:") and "track 'mesh'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_short_moves_get_short_windows():
+    # triangle moves of 19 rad each way: the longest window of 32..256 grid points that a move holds
+    # four times (grid spacing 1 / (2 x the mean-spacing Nyquist) ~ 0.038 rad: 500 points a move: 64),
+    # so that a window spans a quarter of the speeds of a move rather than all of them
+    m = order_map(_recording("triangle", T=10.0, seed=14, top=60.0), direction=1)
+    assert m.window == 64
+    # each window's speed is close to the truth it spans: cells fill at least 8 of the 16 speed bins
+    assert np.isfinite(m.speed).sum() >= 8
+
+
+def test_track_normal_equations_equal_the_dense_design():
+    # the per-span moments reproduce X'X and X'y of the dense design (B-splines x [1, sin, cos],
+    # acceleration) built with scipy's BSpline: 1e-9 relative (sines in single precision: 1e-7 per
+    # sample, averaging down over thousands of samples; the moments themselves are double)
+    from scipy.interpolate import BSpline
+
+    from gearspec.spectrum import motion
+    from gearspec.spectrum.ordertrack import _normal_equations
+
+    m = motion(_recording(seed=16, inertia=0.002), 1, need_acc=True)
+    use = np.ones(len(m), bool)
+    use[::7] = False
+    lo, hi = m.speed[use].min(), m.speed[use].max()
+    tk = np.concatenate([[lo] * 4, np.linspace(lo, hi, 6)[1:-1], [hi] * 4])
+    A, b, yy = _normal_equations(m, use, F, tk, True)
+    r = np.flatnonzero(use)
+    B = BSpline.design_matrix(m.speed[r], tk, 3).toarray()
+    ph = 2 * np.pi * F * m.theta[r]
+    X = np.hstack([B, B * np.sin(ph)[:, None], B * np.cos(ph)[:, None], m.acc[r][:, None]])
+    assert np.abs(A - X.T @ X).max() <= 1e-9 * np.abs(X.T @ X).max()
+    assert np.abs(b - X.T @ m.y[r]).max() <= 1e-8 * np.abs(X.T @ m.y[r]).max()
+    assert yy == pytest.approx(m.y[r] @ m.y[r], rel=1e-12)
+
+
+def test_slow_position_dependent_force_does_not_leak_into_low_orders():
+    # a 2 Nm force varying slowly with position (period 400 rad, like gravity on a joint): over a
+    # 13 rad window it is a straight line, taken out per window, so the two lowest frequency bins
+    # (0.077 and 0.15 cycles/rad) read noise (within 2 x the bin's median cell; a Hann window alone
+    # leaks 0.05-0.09 Nm there: 20-35 x the noise)
+    rec = _recording(T=80.0, seed=8)
+    theta = rec.data["theta"].to_numpy()
+    rec = Recording.from_arrays(t=rec.t, theta=theta, torque=rec.tau + 2.0 * np.sin(2 * np.pi * theta / 400.0))
+    m = order_map(rec, direction=1, speed_bins=np.arange(10.0, 101.0, 10.0))
+    assert m.frequency[0] < 0.1
+    assert np.all(m.amplitude[:, :2] < 2 * m.noise[:, None])
