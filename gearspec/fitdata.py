@@ -15,7 +15,7 @@ from .segment import Segmentation, derivatives, find_segments, free_motion
 
 __all__ = ["FitData"]
 
-_ARRAYS = ("theta", "v", "y", "acc", "load", "temperature", "t", "run", "segment", "direction", "group")
+_ARRAYS = ("theta", "v", "y", "acc", "load", "temperature", "t", "run", "segment", "direction", "group", "speed")
 
 
 @dataclass
@@ -24,8 +24,9 @@ class FitData:
     ``v`` the laws' velocity, rad/s (segment mean or measured); ``y`` friction torque, Nm (N), with
     the sign of the motion (``J thetadd`` removed when the gear gives ``J``); ``acc`` rad/s^2;
     ``load`` Nm, ``temperature`` degC, ``t`` s; ``run``, ``segment`` ids; ``direction`` +1 / -1;
-    ``group``: the held-out unit of "segment" cross-validation (the segment, or for blocks of free
-    motion their whole stretch of motion; None: the segment).  ``segments``: one row per segment
+    ``speed``: |velocity| of each sample (the derivative; None when not derived), for the change of
+    speed within a block of free motion; ``group``: the held-out unit of "segment" cross-validation
+    (the segment, or for blocks of free motion their whole stretch of motion; None: the segment).  ``segments``: one row per segment
     (``segment, run, direction, speed, velocity, n``, and ``t0, t1, kind``: "plateau",
     "quasi_static" or "free").  ``inertia``: the ``J`` removed from ``y`` (None: none removed)."""
 
@@ -40,6 +41,7 @@ class FitData:
     segment: np.ndarray | None = None
     direction: np.ndarray | None = None
     group: np.ndarray | None = None
+    speed: np.ndarray | None = None
     unit: str = "rad"
     inertia: float | None = None
     segments: pd.DataFrame = field(default_factory=pd.DataFrame)
@@ -133,6 +135,7 @@ class FitData:
             notes.append(f"inertia removed: tau - {J:g} x thetadd" + (" (plateaus only)" if n_qs else ""))
         return cls(theta=rec.theta[idx], v=v, y=y, acc=a, load=get("load"), temperature=get("temperature"),
                    t=rec.t[idx], run=rec.run[idx], segment=sid, direction=d, group=group, unit=rec.unit,
+                   speed=np.where(qs | np.isnan(vel[idx]), np.abs(v), np.abs(vel[idx])),
                    segments=pd.DataFrame(rows), notes=notes, inertia=J)
 
     @classmethod
@@ -163,8 +166,11 @@ class FitData:
         return bool(len(self.segments)) and "kind" in self.segments and bool((self.segments["kind"] == "free").any())
 
     def inputs(self) -> dict:
-        """Keyword inputs of :meth:`gearspec.model.FrictionModel.evaluate`."""
-        return {"theta": self.theta, "v": self.v, "load": self.load, "temperature": self.temperature,
+        """Keyword inputs of :meth:`gearspec.model.FrictionModel.evaluate`: the laws' velocity ``v``
+        (a segment's mean), or in data that hold free motion each sample's own velocity (a model
+        of free motion is judged by the torque it predicts at the speed of every sample)."""
+        v = self.direction * self.speed if (self.speed is not None and self.free_motion) else self.v
+        return {"theta": self.theta, "v": v, "load": self.load, "temperature": self.temperature,
                 "t": self.t, "acc": self.acc, "run": self.run}
 
     def subset(self, mask) -> "FitData":

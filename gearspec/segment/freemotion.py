@@ -24,7 +24,7 @@ from .kinematics import _filter_params, derivatives
 from .plateaus import _position_noise
 from .segmentation import Segment, Segmentation
 
-__all__ = ["free_motion", "FREE_BAND", "FREE_SHARE", "MOTIONS", "free_share"]
+__all__ = ["free_motion", "FREE_BAND", "FREE_SHARE", "FREE_MIN_PLATEAU", "MOTIONS"]
 
 #: relative width of the speed band of a block (bins of constant width in log speed above the
 #: noise floor, of constant width in speed near it: see :func:`_speed_bins`)
@@ -35,6 +35,9 @@ FREE_FLOOR = 0.01
 #: them): a plateau experiment's ramps between plateaus are left out as before, a recording of
 #: moves, ramps or chirps is used whole
 FREE_SHARE = 0.5
+#: plateaus shorter than this (s) count as free motion in the share of ``motion="auto"``: a plateau
+#: experiment holds each speed for seconds, a slow ramp is found as a chain of short "plateaus"
+FREE_MIN_PLATEAU = 1.0
 #: what a segmentation may use: ``auto`` (plateaus and sweeps, plus free motion where it is a
 #: large part of the recording), ``plateaus`` (plateaus and sweeps only), ``free`` (every moving
 #: row as free motion, plateaus included)
@@ -73,7 +76,8 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
     ``motion`` (:data:`MOTIONS`): ``"plateaus"`` returns ``seg`` unchanged (as does a ``seg`` that
     already holds free blocks); ``"free"`` replaces
     its plateaus by free blocks (sweeps taken at rest are kept); ``"auto"`` adds the free blocks
-    when they hold at least :data:`FREE_SHARE` of the moving rows, else returns ``seg``.
+    when they (with plateaus shorter than :data:`FREE_MIN_PLATEAU`) hold at least :data:`FREE_SHARE`
+    of the moving rows, else returns ``seg``.
     ``band``: relative speed band of a block; ``min_speed`` (unit/s): standstill below (default ten
     times the derivative's speed noise); ``velocity``: per-row speed to cut by (default the
     Savitzky-Golay derivative of :func:`~gearspec.segment.derivatives`).  Rows whose derivative
@@ -97,7 +101,11 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
     n_free = sum(s.n for s in blocks)
     settings = {**seg.settings, "motion": motion, "free_band": band, "free_rows": n_free}
     if motion == "auto":
-        share = n_free / max(n_free + moving_plateau, 1)
+        # plateaus shorter than FREE_MIN_PLATEAU are pieces of a slow ramp or the tops of moves:
+        # they count as free motion in the share (they stay plateaus)
+        n_short = sum(s.n for s in keep
+                      if s.kind == "plateau" and rec.t[s.stop - 1] - rec.t[s.start] < FREE_MIN_PLATEAU)
+        share = (n_free + n_short) / max(n_free + moving_plateau, 1)
         settings["free_share"] = share
         if share < FREE_SHARE:
             return Segmentation(list(seg.segments), Counter(seg.excluded), seg.n_rows, settings)
@@ -150,12 +158,3 @@ def _blocks(rec: Recording, vel: np.ndarray, taken: np.ndarray, band: float, min
             blocks.append(Segment(int(run), int(a + s), int(a + e), int(sign[s]), float(np.mean(sp[s:e])),
                                   kind="free", unit=unit - 1))
     return blocks, moving_taken
-
-
-def free_share(seg: Segmentation) -> dict:
-    """Rows and segments of each kind in ``seg`` (``{"plateau": (segments, rows), ...}``), for reports."""
-    out: dict = {}
-    for s in seg.segments:
-        k, n = out.get(s.kind, (0, 0))
-        out[s.kind] = (k + 1, n + s.n)
-    return out
