@@ -148,7 +148,7 @@ def _refuse_decimal_commas(path: Path, frame: pd.DataFrame) -> None:
     """A text column whose cells are numbers with a decimal comma is refused with the fix (--decimal ,)."""
     for col in frame.columns:
         s = frame[col]
-        if s.dtype != object:
+        if pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
             continue
         cells = s.dropna().astype(str)
         cells = cells[cells.str.strip() != ""]
