@@ -229,3 +229,14 @@ def test_correct_recordings_raise_no_unit_doubt():
         said = [str(w.message) for w in caught if issubclass(w.category, GearspecWarning)]
         assert _unit_doubts(said) == [], (name, said)
         assert not any(n.startswith("warning: ") for n in rec.notes), (name, rec.notes)
+
+
+def test_decimal_commas_without_a_header_are_told_from_comma_separated(tmp_path):
+    # "0,002;0,01" first line: ';' separates, ',' is the decimal (a ',' separator would make 8 columns)
+    rec = _twin()
+    path = _decimal_comma_csv(tmp_path, rec)
+    path.write_text("\n".join(path.read_text().splitlines()[1:]) + "\n")
+    names = ["t", "theta", "torque", "run"]
+    with pytest.raises(InputError, match=r"column 't' holds numbers with a decimal comma"):
+        load_recording(path, header=False, names=names)
+    assert len(load_recording(path, header=False, names=names, decimal=",")) == len(rec)
