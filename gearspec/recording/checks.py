@@ -150,7 +150,8 @@ def _check_angle_unit(rec: Recording, v99: float, src: str) -> None:
             fix = f"if it is in encoder counts {counts_fix}"
         _doubt(rec, f"{src}: theta moves at up to {v99:.3g} rad/s ({rpm:.3g} rpm), faster than {shaft}; {fix}")
     elif counts:
-        _doubt(rec, f"{src}: theta holds whole numbers only (steps of {np.min(np.abs(np.diff(th)[np.diff(th) != 0])):g}), "
+        steps = np.abs(np.diff(th))
+        _doubt(rec, f"{src}: theta holds whole numbers only (steps of {np.min(steps[steps > 0]):g}), "
                     f"and no encoder is as coarse as 1 rad: it is likely in encoder counts; {counts_fix}")
 
 

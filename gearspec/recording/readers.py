@@ -153,8 +153,8 @@ def _refuse_decimal_commas(path: Path, frame: pd.DataFrame) -> None:
         cells = s.dropna().astype(str)
         cells = cells[cells.str.strip() != ""]
         if len(cells) and cells.str.match(_DECIMAL_COMMA).mean() > 0.5:
-            raise InputError(f"{path}: column '{col}' holds numbers with a decimal comma (e.g. '{cells.iloc[0].strip()}'); "
-                             "read the file with --decimal ,")
+            raise InputError(f"{path}: column '{col}' holds numbers with a decimal comma "
+                             f"(e.g. '{cells.iloc[0].strip()}'); read the file with --decimal ,")
 
 
 def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None, decimal: str = ".") -> pd.DataFrame:
