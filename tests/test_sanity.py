@@ -160,6 +160,16 @@ def test_a_velocity_column_off_by_a_factor_is_flagged_with_the_factor(factor, wh
     assert f"{factor:.4g} x d(theta)/dt ({what})" in said[0] and fix in said[0]
 
 
+def test_theta_in_degrees_beside_a_velocity_in_rad_s_names_theta_as_the_fix():
+    # motor side at 1 to 4 rad/s: 229 deg/s is no implausible speed, but the velocity column (rad/s)
+    # is pi/180 x d(theta)/dt: theta is what to scale, not the velocity
+    rec = _twin()
+    v = np.gradient(rec.theta, rec.t)
+    _, said = _reload(rec, theta=rec.theta * 180 / math.pi, velocity=v)
+    assert len(_unit_doubts(said)) == 1, said
+    assert "0.01745 x d(theta)/dt, as if theta were in degrees" in said[0] and "--scale theta=0.0174533" in said[0]
+
+
 def test_a_velocity_column_within_its_lag_is_not_flagged():
     # the right unit, 10 % low (a filter or lag shrinks it; Kinova's is 0.97 to 0.99): no doubt;
     # 1.3 x is beyond the 1.25 tolerance and is said

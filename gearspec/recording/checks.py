@@ -227,6 +227,11 @@ def _check_velocity_column(rec: Recording, src: str) -> None:
         factors[r if other == "motor" else 1 / r] = f"as if the {other}'s speed, gear ratio {r:g}"
     # a clean factor within 5 %: the ratio's scatter on a noisy or lagging column is a few %
     found = next((f for f in factors if abs(k / f - 1) < 0.05), None)
+    if found is None and rec.unit == "rad" and abs(k * 180 / math.pi - 1) < 0.05:
+        # the velocity in rad/s, theta in degrees: theta is what to scale
+        _doubt(rec, f"{src}: column 'velocity' is {k:.4g} x d(theta)/dt, as if theta were in degrees and "
+                    "the velocity in rad/s: use --scale theta=0.0174533")
+        return
     what = factors[found] if found is not None else "no usual unit"
     fix = 1 / (found if found is not None else k)
     _doubt(rec, f"{src}: column 'velocity' is {k:.4g} x d(theta)/dt ({what}); it is used as {unit}: "
