@@ -162,6 +162,8 @@ def add_recording_options(p: argparse.ArgumentParser) -> None:
                    help="a time step longer than this splits a run (default: per run, 5 x its 99th-percentile "
                         "step; reported)")
     g.add_argument("--sep", type=_separator, help="csv separator (default: sniffed; 'whitespace' for blanks)")
+    g.add_argument("--decimal", choices=(".", ","), help="csv decimal separator (default '.'); ',' for files "
+                   "written as 1,25;3,5 (columns then separated by ';' or tabs)")
     g.add_argument("--no-header", action="store_true", help="csv files have no header row (give --names)")
     g.add_argument("--names", metavar="A,B,...", help="column names for --no-header files")
     g.add_argument("--signal", choices=("torque", "current"), help="channel to analyse when both are present")
@@ -208,7 +210,8 @@ def load_from_args(args, paths=None):
     rec = load_recording(paths, args.gear, map=args.map, scale=args.scale, fs=args.fs, sep=args.sep,
                          header=not args.no_header, names=args.names, signal=args.signal,
                          max_gap=getattr(args, "max_gap", None), topic=getattr(args, "topic", "/joint_states"),
-                         joint=getattr(args, "joint", None), urdf=getattr(args, "urdf", None))
+                         joint=getattr(args, "joint", None), urdf=getattr(args, "urdf", None),
+                         decimal=getattr(args, "decimal", None))
     st.done(f"loaded {rec.n_read:,} rows from {len(rec.sources)} file(s), {len(rec):,} usable")
     return lag_option(rec, getattr(args, "lag", None), say=lambda s: getattr(args, "quiet", False) or print(s),
                       **{k: getattr(args, k, None) for k in ("window", "rel_tol", "min_speed", "min_duration")})

@@ -11,7 +11,8 @@ import numpy as np
 from ..errors import InputError, warn
 from .record import Recording
 
-__all__ = ["MIN_TIME_STEP", "MIN_POSITION_RANGE", "MIN_SIGNAL_CHANGE", "MAX_PLAUSIBLE_RAD_S", "MAX_PLAUSIBLE_M_S"]
+__all__ = ["MIN_TIME_STEP", "MIN_POSITION_RANGE", "MIN_SIGNAL_CHANGE", "MAX_PLAUSIBLE_RAD_S", "MAX_PLAUSIBLE_M_S",
+           "MAX_TORQUE_TO_CURRENT", "MAX_MOTOR_TORQUE", "VELOCITY_TOLERANCE", "plausible_speed"]
 
 #: largest plausible speed of a rotary reference shaft, rad/s (about 19 000 rpm)
 MAX_PLAUSIBLE_RAD_S = 2000.0
@@ -94,6 +95,7 @@ def _moves(th: np.ndarray) -> bool:
 
 
 def _check_units(rec: Recording) -> None:
+    """Doubts about the units of theta, torque and velocity, each one warning (and a note) with the fix."""
     theta, t = rec.theta, rec.t
     speeds = []
     for _, s, e in rec.pieces():
@@ -106,8 +108,131 @@ def _check_units(rec: Recording) -> None:
         return
     v99 = float(np.percentile(np.concatenate(speeds), 99))
     src = ", ".join(rec.sources)
-    if rec.unit == "rad" and v99 > MAX_PLAUSIBLE_RAD_S:
-        warn(f"{src}: theta moves at up to {v99:.3g} rad/s ({v99 * 60 / (2 * math.pi):.3g} rpm), faster than any robot "
-             "drive; if it is in degrees use --scale theta=0.0174533, if in encoder counts scale by 2*pi/counts")
+    if rec.unit == "rad":
+        _check_angle_unit(rec, v99, src)
     if rec.unit == "m" and v99 > MAX_PLAUSIBLE_M_S:
         warn(f"{src}: theta moves at up to {v99:.3g} m/s; if it is in mm use --scale theta=0.001")
+    _check_torque_unit(rec, src)
+    _check_velocity_column(rec, src)
+
+
+def _doubt(rec: Recording, msg: str) -> None:
+    """A doubt about the data: a warning, and a note so that reports show it (nothing is changed)."""
+    rec.notes.append("warning: " + msg)
+    warn(msg)
+
+
+def plausible_speed(gear) -> float:
+    """The largest plausible speed of the shaft ``theta`` measures, rad/s: :data:`MAX_PLAUSIBLE_RAD_S`
+    at a motor, that divided by the gear's total ratio at the output of a gear (an output turns no
+    faster than the fastest motor through the reduction)."""
+    if gear is not None and gear.reference == "output" and gear.stages and gear.total_ratio > 1:
+        return MAX_PLAUSIBLE_RAD_S / gear.total_ratio
+    return MAX_PLAUSIBLE_RAD_S
+
+
+def _check_angle_unit(rec: Recording, v99: float, src: str) -> None:
+    """theta in degrees (too fast for the reference shaft, plausible once scaled by pi/180) or in
+    encoder counts (whole numbers only: no encoder resolves as coarsely as 1 rad)."""
+    limit = plausible_speed(rec.gear)
+    th = rec.theta
+    counts = bool(np.all(th == np.round(th))) and np.ptp(th) >= 2
+    counts_fix = "scale by 2*pi/counts per turn (--scale theta=0.00153398 for 4096 counts)"
+    rpm = v99 * 60 / (2 * math.pi)
+    if v99 > limit:
+        shaft = ("any robot drive" if limit == MAX_PLAUSIBLE_RAD_S else
+                 f"the output of a gear of ratio {rec.gear.total_ratio:g} turns (at most {limit:.3g} rad/s)")
+        if counts:
+            fix = f"theta holds whole numbers only, likely encoder counts: {counts_fix}"
+        elif v99 * math.pi / 180 <= limit:
+            fix = f"if it is in degrees use --scale theta=0.0174533, if in encoder counts {counts_fix}"
+        else:
+            fix = f"if it is in encoder counts {counts_fix}"
+        _doubt(rec, f"{src}: theta moves at up to {v99:.3g} rad/s ({rpm:.3g} rpm), faster than {shaft}; {fix}")
+    elif counts:
+        steps = np.abs(np.diff(th))
+        _doubt(rec, f"{src}: theta holds whole numbers only (steps of {np.min(steps[steps > 0]):g}), "
+                    f"and no encoder is as coarse as 1 rad: it is likely in encoder counts; {counts_fix}")
+
+
+#: a torque column this many times the torque the motor current gives (gear spec's torque constant,
+#: ideal gear) is not in Nm: efficiency, offsets and inertia keep the ratio of a torque in Nm within
+#: about 0.1 to 10, a torque in mNm gives about 1000
+MAX_TORQUE_TO_CURRENT = 100.0
+#: largest plausible torque level at a motor shaft, Nm (the median |torque| while moving, divided
+#: by the total ratio at the output of a gear): servo motors for robot joints are rated below about
+#: 50 Nm; a level above this is a torque in mNm (or a wrong ratio)
+MAX_MOTOR_TORQUE = 100.0
+
+
+def _check_torque_unit(rec: Recording, src: str) -> None:
+    """A torque whose level only makes sense in mNm (:data:`MAX_TORQUE_TO_CURRENT`, :data:`MAX_MOTOR_TORQUE`)."""
+    if rec.unit != "rad" or rec.signal != "torque" or "torque" not in rec.data:
+        return
+    tau = np.abs(rec.data["torque"].to_numpy(dtype=float))
+    gear = rec.gear
+    fix = "if the torque is in mNm use --scale torque=0.001"
+    if gear is not None and gear.torque_constant is not None and "current" in rec.data:
+        cur = np.abs(gear.torque_from_current(rec.data["current"].to_numpy(dtype=float)))
+        ok = np.isfinite(cur) & np.isfinite(tau)
+        if ok.any() and np.median(cur[ok]) > 0:
+            ratio = float(np.median(tau[ok]) / np.median(cur[ok]))
+            if ratio > MAX_TORQUE_TO_CURRENT:
+                _doubt(rec, f"{src}: column 'torque' is {ratio:.3g} times the torque the current gives (torque "
+                            f"constant {gear.torque_constant:g} Nm/A of gear spec '{gear.name}'); {fix}")
+            return
+    ratio = gear.total_ratio if (gear is not None and gear.reference == "output" and gear.stages) else 1.0
+    level = float(np.median(tau[np.isfinite(tau)])) / ratio
+    if level > MAX_MOTOR_TORQUE:
+        at = "at the motor" + (f" (the output's divided by the ratio {ratio:g})" if ratio != 1 else "")
+        _doubt(rec, f"{src}: the median torque is {level:.3g} Nm {at}, more than any robot servo motor gives "
+                    f"(about {MAX_MOTOR_TORQUE:g} Nm); {fix}")
+
+
+#: a velocity column within this factor of d(theta)/dt is taken as consistent (lags, filters, a
+#: different derivative scheme move the ratio by a few %: Kinova's is 0.97 to 0.99)
+VELOCITY_TOLERANCE = 1.25
+#: clean factors a velocity column may be off by: name of the unit it then is in
+_VELOCITY_FACTORS = {60 / (2 * math.pi): "as if in rpm", 180 / math.pi: "as if in deg/s",
+                     1 / (2 * math.pi): "as if in rev/s", 1000.0: "as if in thousandths, mrad/s or mm/s",
+                     -1.0: "the opposite sign"}
+
+
+def _check_velocity_column(rec: Recording, src: str) -> None:
+    """A ``velocity`` column a constant factor away from d(theta)/dt: the factor, the unit it suggests, the fix."""
+    if "velocity" not in rec.data:
+        return
+    vel = rec.data["velocity"].to_numpy(dtype=float)
+    d_all, v_all = [], []
+    for _, s, e in rec.pieces():
+        if e - s >= 20:
+            d_all.append(np.gradient(rec.theta[s:e], rec.t[s:e]))
+            v_all.append(vel[s:e])
+    if not d_all:
+        return
+    d, v = np.concatenate(d_all), np.concatenate(v_all)
+    ok = np.isfinite(d) & np.isfinite(v)
+    # rows well in motion: the ratio of two small numbers is noise
+    moving = ok & (np.abs(d) > 0.2 * np.percentile(np.abs(d[ok]), 90)) if ok.any() else ok
+    if moving.sum() < 20:
+        return
+    k = float(np.median(v[moving] / d[moving]))
+    if k > 0 and abs(math.log(k)) < math.log(VELOCITY_TOLERANCE):
+        return
+    unit = rec.unit + "/s"
+    factors = dict(_VELOCITY_FACTORS)
+    if rec.gear is not None and rec.gear.stages and rec.gear.total_ratio > 1:
+        other = "motor" if rec.gear.reference == "output" else "output"
+        r = rec.gear.total_ratio
+        factors[r if other == "motor" else 1 / r] = f"as if the {other}'s speed, gear ratio {r:g}"
+    # a clean factor within 5 %: the ratio's scatter on a noisy or lagging column is a few %
+    found = next((f for f in factors if abs(k / f - 1) < 0.05), None)
+    if found is None and rec.unit == "rad" and abs(k * 180 / math.pi - 1) < 0.05:
+        # the velocity in rad/s, theta in degrees: theta is what to scale
+        _doubt(rec, f"{src}: column 'velocity' is {k:.4g} x d(theta)/dt, as if theta were in degrees and "
+                    "the velocity in rad/s: use --scale theta=0.0174533")
+        return
+    what = factors[found] if found is not None else "no usual unit"
+    fix = 1 / (found if found is not None else k)
+    _doubt(rec, f"{src}: column 'velocity' is {k:.4g} x d(theta)/dt ({what}); it is used as {unit}: "
+                f"use --scale velocity={fix:.6g}")

@@ -55,7 +55,8 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
                    fs: float | None = None, sep: str | None = None, header: bool = True,
                    names: Sequence[str] | str | None = None, signal: str | None = None,
                    max_bad_fraction: float = 0.05, max_gap: float | None = None, topic: str = DEFAULT_TOPIC,
-                   joint: str | None = None, urdf: str | Path | None = None) -> "Recording | list[Recording]":
+                   joint: str | None = None, urdf: str | Path | None = None,
+                   decimal: str | None = None) -> "Recording | list[Recording]":
     """Load recording files (or folders of them) into a validated :class:`Recording`.
 
     ``paths``: ``.csv`` (``.txt``, ``.dat``, ``.tsv``), ``.parquet``, ``.mat`` (v5/v7) or ``.npz``
@@ -73,7 +74,7 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
     topic; ``joint``: the joint read from bags (needed when a topic carries several) and looked up in
     ``urdf``; ``"all"``: a list of recordings, one per joint of the bags.  ``urdf``: a URDF file
     whose transmission gives the gear ratio when ``gear`` is None (:func:`.urdf.gear_from_urdf`,
-    said in ``notes``).
+    said in ``notes``).  ``decimal``: the csv files' decimal separator, "." (default) or ",".
     """
     files = _expand(paths)
     gear = load_gear(gear)
@@ -91,7 +92,7 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
                              "each source column can be mapped to one canonical column only")
         by_source[src] = canon
     recs = []
-    for name, parts in _read_parts(files, mapping, scaling, sep, header, names, topic, joint).items():
+    for name, parts in _read_parts(files, mapping, scaling, sep, header, names, topic, joint, decimal).items():
         this_gear, note = _gear_for(gear, urdf, name)
         rec = _assemble(parts, gear=this_gear, unit=None, signal=signal, fs=fs, max_bad_fraction=max_bad_fraction,
                         max_gap=max_gap)
@@ -121,7 +122,8 @@ def _expand(paths) -> list[Path]:
     return files
 
 
-def _read_parts(files, mapping: dict, scaling: dict, sep, header, names, topic: str, joint: str | None) -> dict:
+def _read_parts(files, mapping: dict, scaling: dict, sep, header, names, topic: str, joint: str | None,
+                decimal: str | None = None) -> dict:
     """The mapped and scaled tables ``(source, frame, meta)`` of ``files``, in order, grouped by joint
     (the key is None for files that are not bags unless ``joint`` names one)."""
     sources = {s: c for c, s in mapping.items() if str(s).startswith("/")}
@@ -134,7 +136,7 @@ def _read_parts(files, mapping: dict, scaling: dict, sep, header, names, topic: 
             if joint == "all":
                 raise InputError(f"{path}: --joint all makes one recording per joint of a ROS bag, and this file "
                                  "is not a bag; give --joint NAME or no --joint")
-            frame, meta = _read_file(path, sep, header, names)
+            frame, meta = _read_file(path, sep, header, names, decimal)
             tagged.append((None, (str(path), _map_and_scale(path, frame, meta, mapping, scaling), meta)))
     if joint == "all":
         groups: dict = {}

@@ -3,6 +3,7 @@ each into a table of columns plus the scalars the file holds; nothing is mapped 
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -37,18 +38,22 @@ def _refuse_duplicate_names(path, names, where: str = "header") -> None:
         seen[key] = str(raw)
 
 
-def _sniff_sep(path: Path) -> str:
+def _sniff_sep(path: Path, decimal: str | None = None) -> str:
+    """The column separator of a csv from its first non-blank line: ',', ';', a tab or blanks.  A line
+    holding both ';' and a digit, a comma and a digit (0,5;1,25) is ';'-separated with decimal commas."""
     with open(path, "r", errors="replace") as fh:
         for line in fh:
             if line.strip():
                 break
         else:
             return ","
-    return next((sep for sep in (",", ";", "\t") if sep in line), r"\s+")
+    if ";" in line and (decimal == "," or re.search(r"\d,\d", line)):
+        return ";"
+    return next((sep for sep in (",", ";", "\t") if sep in line and not (sep == "," and decimal == ",")), r"\s+")
 
 
-def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] | None):
-    """Read one file into (frame, meta)."""
+def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] | None, decimal: str | None = None):
+    """Read one file into (frame, meta); ``decimal``: the csv's decimal separator ("." when None, or ",")."""
     if not path.exists():
         raise InputError(f"{path}: no such file")
     if path.is_dir():
@@ -64,9 +69,10 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
         if sep == "":
             raise InputError(f"{path}: the separator given with --sep is empty")
         given_sep = sep
-        sep = sep if sep is not None else _sniff_sep(path)
+        sep = sep if sep is not None else _sniff_sep(path, decimal)
         if sep in (" ", "whitespace", r"\s+"):
             sep = r"\s+"
+        decimal = _decimal_option(path, decimal, sep)
         if names is not None:
             _refuse_duplicate_names(path, names, "--names")
         if names is not None and header:
@@ -74,7 +80,7 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
         if not header and names is None:
             raise InputError(f"{path}: --no-header needs --names to say what the columns are")
         try:
-            frame = _read_csv(path, sep, header, names)
+            frame = _read_csv(path, sep, header, names, decimal)
         except pd.errors.EmptyDataError:
             raise InputError(f"{path}: the file is empty") from None
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -85,6 +91,8 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
             how = "with the separator sniffed" if given_sep is None else f"with --sep '{given_sep}'"
             raise InputError(f"{path}: only one column ('{str(frame.columns[0])[:60]}') was found {how}; "
                              "if the file uses another separator, give --sep")
+        if decimal == ".":
+            _refuse_decimal_commas(path, frame)
     elif kind == "parquet":
         try:
             import pyarrow.parquet as pq
@@ -121,7 +129,35 @@ def _read_file(path: Path, sep: str | None, header: bool, names: Sequence[str] |
     return frame, meta
 
 
-def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -> pd.DataFrame:
+def _decimal_option(path: Path, decimal: str | None, sep: str) -> str:
+    """The decimal separator ("." or ","), refused when it is not one or is the column separator."""
+    decimal = "." if decimal is None else decimal
+    if decimal not in (".", ","):
+        raise InputError(f"{path}: --decimal must be '.' or ',', got '{decimal}'")
+    if decimal == sep:
+        raise InputError(f"{path}: --decimal '{decimal}' is also the column separator; a file with decimal commas "
+                         "separates its columns by ';' or tabs (give --sep)")
+    return decimal
+
+
+#: a number written with a decimal comma (1,25 or -0,5e-3), which "." reading leaves as text
+_DECIMAL_COMMA = r"^\s*[-+]?\d*,\d+([eE][-+]?\d+)?\s*$"
+
+
+def _refuse_decimal_commas(path: Path, frame: pd.DataFrame) -> None:
+    """A text column whose cells are numbers with a decimal comma is refused with the fix (--decimal ,)."""
+    for col in frame.columns:
+        s = frame[col]
+        if pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
+            continue
+        cells = s.dropna().astype(str)
+        cells = cells[cells.str.strip() != ""]
+        if len(cells) and cells.str.match(_DECIMAL_COMMA).mean() > 0.5:
+            raise InputError(f"{path}: column '{col}' holds numbers with a decimal comma "
+                             f"(e.g. '{cells.iloc[0].strip()}'); read the file with --decimal ,")
+
+
+def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None, decimal: str = ".") -> pd.DataFrame:
     """pandas.read_csv that never shifts columns silently.
 
     Left to itself, pandas takes the leading columns as the index when the header (or ``names``) has
@@ -129,7 +165,7 @@ def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None) -
     separator at the end of every line (an empty last field) is accepted; any other extra field is
     refused.
     """
-    kw = dict(sep=sep, skipinitialspace=True)
+    kw = dict(sep=sep, skipinitialspace=True, decimal=decimal)
     if len(sep) > 1 and sep != r"\s+":
         kw["engine"] = "python"  # a separator of several characters is a regular expression to pandas
     if not header:

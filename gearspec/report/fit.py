@@ -29,8 +29,14 @@ def _example_segments(data, per_direction: int = 3) -> list[int]:
     return out
 
 
-def write_fit_report(result: FitResult, out: str | Path, command: str = "", recording_summary: str = "") -> Path:
-    """Write ``report.md``, figures, ``model.json`` and per-segment CSVs into ``out``."""
+#: what the rpm of the papers' units are of, by the gear spec's ``reference`` (None: no gear spec)
+_SHAFT = {"motor": "rpm of the motor", "output": "rpm of the gear's output", None: "rpm of the shaft theta measures"}
+
+
+def write_fit_report(result: FitResult, out: str | Path, command: str = "", recording_summary: str = "",
+                     reference: str | None = None) -> Path:
+    """Write ``report.md``, figures, ``model.json`` and per-segment CSVs into ``out``; ``reference``:
+    the gear spec's shaft of theta ("motor" or "output", None unknown), which the speeds are of."""
     out = report_dir(out)
     m, data = result.model, result.data
     unit = data.unit
@@ -70,7 +76,7 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
            f"negative). " + " ".join(data.notes), ""]
     md += [f"## Model: {m.name}", "", f"Law: {m.law_spec.description}.", "",
            "Parameters per direction in SI units with standard errors, and in the SILO4 paper's units "
-           "(mNm, rpm of the motor) where the axis is rotary. `model.json` holds the same in the "
+           f"(mNm, {_SHAFT.get(reference, _SHAFT[None])}) where the axis is rotary. `model.json` holds the same in the "
            "`gearspec fit --json` form.", "", markdown_table(model_table(m, paper=True)), ""]
     md += bullets([f"`{k}`: {why}" for k, why in m.not_identified.items()],
                   "**Not identified** (left out, not invented):")
