@@ -72,7 +72,8 @@ def run(args) -> int:
     if args.out:
         from ..report.fit import write_fit_report
 
-        write_fit_report(result, args.out, command=command_line(), recording_summary=rec.summary())
+        write_fit_report(result, args.out, command=command_line(), recording_summary=rec.summary(),
+                         reference=rec.gear.reference if rec.gear else None)
     if not args.quiet:
         print(result.model.describe())
         print()
