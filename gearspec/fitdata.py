@@ -165,6 +165,21 @@ class FitData:
         """Whether the data hold blocks of free motion (segments of kind "free")."""
         return bool(len(self.segments)) and "kind" in self.segments and bool((self.segments["kind"] == "free").any())
 
+    def speed_change(self) -> np.ndarray | None:
+        """Per sample, its speed minus the mean speed of its segment, in data that hold free motion
+        (0 in quasi-static sweeps); None in other data.  The fits take its first-order effect out of
+        every segment (:func:`gearspec.core.reduction.partial_out_last`): a law evaluated at a
+        segment's mean speed would leave ``f'(v) x`` this in the residual, where partial cycles of a
+        line would take it up (viscous x the change of speed within a block is as large as the noise)."""
+        if not self.free_motion or self.speed is None:
+            return None
+        ids, inv = np.unique(self.segment, return_inverse=True)
+        dev = self.speed - (np.bincount(inv, weights=self.speed) / np.bincount(inv))[inv]
+        qs = self.segments.loc[self.segments["kind"] == "quasi_static", "segment"].to_numpy()
+        if len(qs):
+            dev[np.isin(self.segment, qs)] = 0.0
+        return dev
+
     def inputs(self) -> dict:
         """Keyword inputs of :meth:`gearspec.model.FrictionModel.evaluate`: the laws' velocity ``v``
         (a segment's mean), or in data that hold free motion each sample's own velocity (a model

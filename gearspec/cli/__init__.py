@@ -197,6 +197,14 @@ def add_segment_options(p: argparse.ArgumentParser) -> None:
                         "against position, no time derivative); --no-quasi-static: plateaus only; default: recognised")
 
 
+def add_motion_option(g) -> None:
+    """``--motion``: what a fit uses (:func:`gearspec.segment.free_motion`)."""
+    g.add_argument("--motion", default="auto", choices=("auto", "plateaus", "free"),
+                   help="what to fit: auto (default: plateaus and sweeps, plus free motion -- ramps, moves, chirps -- "
+                        "when it holds most of the moving rows; the inertia is then identified unless the gear spec "
+                        "gives it), plateaus (plateaus and sweeps only), free (every moving row)")
+
+
 def load_from_args(args, paths=None):
     """The recording named by the recording options (``paths``: other files read with the same options)."""
     from ..lag import lag_option

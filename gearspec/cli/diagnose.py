@@ -9,6 +9,7 @@ from ..jsonsafe import dumps
 from . import (
     POSITIVE,
     PROBABILITY,
+    add_motion_option,
     add_output_options,
     analysis_parser,
     command_line,
@@ -41,6 +42,7 @@ def register(sub) -> None:
                    help="frequencies (cycles per unit of theta) of the lines the baseline fits instead of the declared ones")
     g.add_argument("--symmetric", action="store_true",
                    help="one parameter set for both directions (the loop then tests whether the data want two)")
+    add_motion_option(g)
     g.add_argument("--trajectory", action="store_true",
                    help="use every sample of the whole trajectory (inverse dynamic model: filtered position, central "
                         "differences, decimation) instead of the constant-speed segments; the baseline is then "
@@ -82,7 +84,7 @@ def run(args) -> int:
         if args.trajectory:
             return dg.trajectory_data(r, cutoff=args.cutoff, decimate_by=args.decimate)
         return dg.DiagnoseData.from_recording(r, segments_from_args(r, args), by=args.holdout,
-                                              inertia=not args.no_inertia)
+                                              inertia=not args.no_inertia, motion=args.motion)
 
     rec = load_from_args(args)
     data = prepare(rec)

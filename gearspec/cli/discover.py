@@ -6,6 +6,7 @@ import time
 
 from . import (
     PROBABILITY,
+    add_motion_option,
     add_output_options,
     analysis_parser,
     command_line,
@@ -42,6 +43,7 @@ def register(sub) -> None:
     g.add_argument("--symmetric", action="store_true", help="symmetric terms only (no direction dependence)")
     g.add_argument("--no-acceleration-term", dest="no_inertia_term", action="store_true",
                    help="no residual-inertia (acceleration) column in the library")
+    add_motion_option(g)
     s = sp.add_argument_group("search and selection")
     s.add_argument("--optimizer", choices=("stlsq", "sr3"), default="stlsq", help="pysindy optimiser (default stlsq)")
     s.add_argument("--alpha", type=number(0), default=1e-4, help="STLSQ ridge weight, relative (default 1e-4)")
@@ -83,6 +85,7 @@ def run(args) -> int:
     from ..discover import PAPER_LAWS, discover, published_models
     from ..errors import InputError
     from ..fitdata import FitData
+    from ..segment import free_motion
     from ..report.discover import write_discover_report
 
     t0 = time.perf_counter()
@@ -93,7 +96,7 @@ def run(args) -> int:
         raise InputError(f"--compare: unknown law(s) {', '.join(bad)} (known: {', '.join(PAPER_LAWS)}, or 'none')")
     rec = load_from_args(args)
     seg = segments_from_args(rec, args)
-    data = FitData.from_recording(rec, seg, inertia=not args.no_inertia)
+    data = FitData.from_recording(rec, free_motion(rec, seg, motion=args.motion), inertia=not args.no_inertia)
     spectrum = None
     if not args.no_spectrum and data.theta is not None:
         from ..spectrum import analyze

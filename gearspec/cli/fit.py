@@ -7,6 +7,7 @@ import time
 
 from . import (
     POSITIVE,
+    add_motion_option,
     add_output_options,
     analysis_parser,
     command_line,
@@ -46,10 +47,7 @@ def register(sub) -> None:
     g.add_argument("--folds", type=number(2, 100, integer=True), default=5, help="cross-validation folds (default 5)")
     g.add_argument("--se", default="covariance", choices=("covariance", "bootstrap"),
                    help="standard errors from the fit's covariance (default) or a bootstrap over segments")
-    g.add_argument("--motion", default="auto", choices=("auto", "plateaus", "free"),
-                   help="what to fit: auto (default: plateaus and sweeps, plus free motion -- ramps, moves, chirps -- "
-                        "when it holds most of the moving rows; the inertia is then identified unless the "
-                        "gear spec gives it), plateaus (plateaus and sweeps only), free (every moving row)")
+    add_motion_option(g)
     g.add_argument("--no-published", action="store_true", help="skip the SILO4 published procedure")
     g.add_argument("--load-ratio", type=POSITIVE, metavar="N",
                    help="subtract |load|/N from the torque (default for lola laws: the gear's total ratio)")

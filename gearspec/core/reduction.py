@@ -12,7 +12,8 @@ from typing import ClassVar
 
 import numpy as np
 
-__all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations", "group_cross"]
+__all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations", "group_cross",
+           "partial_out_last"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -178,3 +179,17 @@ def harmonic_columns(theta, frequencies, center=None) -> tuple[np.ndarray, np.nd
     rot = _TWO_PI * freqs * m
     c, s = np.cos(rot), np.sin(rot)
     return sn * c + cs * s, cs * c - sn * s
+
+
+def partial_out_last(G, g, yy):
+    """Normal equations ``(G, g, yy)`` per group with their last column taken out by least squares
+    (the Schur complement): exactly those of the other columns fitted together with it, its
+    coefficient free in every group; a group where it is zero keeps its equations."""
+    gnn = G[:, -1, -1]
+    ok = gnn > 0
+    inv = np.where(ok, 1.0 / np.where(ok, gnn, 1.0), 0.0)
+    c = G[:, :-1, -1]
+    G2 = G[:, :-1, :-1] - np.einsum("sp,sq,s->spq", c, c, inv)
+    g2 = g[:, :-1] - c * (g[:, -1] * inv)[:, None]
+    yy2 = yy - g[:, -1] ** 2 * inv
+    return G2, g2, yy2

@@ -15,7 +15,7 @@ import pandas as pd
 from ..errors import InputError
 from ..fitdata import FitData
 from ..recording import Recording
-from ..segment import Segmentation, find_segments
+from ..segment import Segmentation, find_segments, free_motion
 from ..signals import butter_filtfilt, central_difference, decimate, decimation_index
 
 __all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves"]
@@ -169,11 +169,15 @@ class DiagnoseData:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, by: str = "segment",
-                       inertia: bool = True, load_ratio: float | None = None, **segment_options) -> "DiagnoseData":
+                       inertia: bool = True, load_ratio: float | None = None, motion: str = "plateaus",
+                       **segment_options) -> "DiagnoseData":
         """Samples inside the constant-speed segments of ``rec`` (laws evaluated at each segment's
-        mean velocity, as :func:`gearspec.identify.fit`), held out by whole segments or runs, with
-        the travel since the last reversal from the whole recording."""
-        seg = segmentation if segmentation is not None else find_segments(rec, **segment_options)
+        mean velocity, as :func:`gearspec.identify.fit`) and, by ``motion``
+        (:func:`~gearspec.segment.free_motion`), blocks of its free motion; held out by whole
+        segments (stretches of free motion) or runs, with the travel since the last reversal from
+        the whole recording."""
+        seg = free_motion(rec, segmentation if segmentation is not None else find_segments(rec, **segment_options),
+                          motion=motion)
         fd = FitData.from_recording(rec, seg, inertia=inertia, load_ratio=load_ratio)
         travel = reversal_travel(rec, seg)
         name = ", ".join(rec.sources) if rec.sources else ""

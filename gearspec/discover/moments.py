@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.reduction import GroupNormals, harmonic_columns
+from ..core.reduction import GroupNormals, harmonic_columns, partial_out_last
 from ..errors import InputError
 from ..fitdata import FitData
 
@@ -222,7 +222,12 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     for sl in segs if F else ():
         Phi[sl, K0::2], Phi[sl, K0 + 1::2] = harmonic_columns(th[sl], freqs)   # phases about the segment's mean
     y, v, dirs = data.y[order], data.v[order], data.direction[order]
-    gn = GroupNormals.of(Phi, y, starts, [sl.stop for sl in segs])
+    change = data.speed_change()
+    if change is None:
+        gn = GroupNormals.of(Phi, y, starts, [sl.stop for sl in segs])
+    else:  # free motion: the first-order effect of the change of speed within each segment taken out
+        ext = GroupNormals.of(np.column_stack([Phi, change[order]]), y, starts, [sl.stop for sl in segs])
+        gn = GroupNormals(*partial_out_last(ext.G, ext.b, ext.yy), ext.n)
     noise = np.array([_noise_variance(Phi[sl], y[sl], gn.G[s], gn.b[s]) for s, sl in enumerate(segs)])
     vm = np.array([np.mean(v[sl]) for sl in segs])
     varying = sum(np.ptp(v[sl]) > 1e-9 * max(abs(m), 1e-300) for sl, m in zip(segs, vm))

@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns
+from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns, partial_out_last
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
@@ -123,9 +123,8 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
             for sid, a, b in zip(sids, bounds[:-1], bounds[1:])]
     missing = [j for j, tag in enumerate(tags) if tag not in cache]
     if missing:
-        trend = _trend_flags(data, sids[missing])
         new = _segments_stats(data, [order[bounds[j]:bounds[j + 1]] for j in missing], freqs, min_cycles,
-                              nyquist_fraction, acc, trend)
+                              nyquist_fraction, acc, data.speed_change())
         for j, r in zip(missing, new):
             cache[tags[j]] = r
     rows = [cache[tag] for tag in tags]
@@ -150,29 +149,14 @@ def _free_flags(data: FitData, sids: np.ndarray) -> np.ndarray | None:
     return np.array([int(s) in free for s in sids], bool)
 
 
-def _trend_flags(data: FitData, sids) -> np.ndarray | None:
-    """Per segment id: its speed changes within it, so the first-order effect of that change is taken
-    out of it (the segments of data that hold free motion, but quasi-static sweeps); None when no
-    segment is."""
-    if not data.free_motion or data.speed is None:
-        return None
-    kind = data.segments.set_index("segment")["kind"]
-    return np.array([kind.get(int(s), "plateau") != "quasi_static" for s in sids], bool)
-
-
 def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, min_cycles: float, nyquist_fraction: float,
-                    acc: bool, trend: np.ndarray | None = None) -> list[dict]:
+                    acc: bool, change: np.ndarray | None = None) -> list[dict]:
     """The statistics of the segments whose rows (in time order) are ``groups``, all at once: one
-    dict per segment (the cached unit).
-
-    ``trend`` (per segment): the sample's speed minus the segment's mean speed, as a column with a
-    coefficient of its own in every segment, is taken out of its normal equations (partialled out
-    exactly).  In free motion the speed changes within a block, and with it every term of the law
-    (viscous x the change of speed is as large as the noise); a law evaluated at the block's mean
-    speed leaves ``f'(v) (|v| - mean)`` in the residual, where partial cycles of a line would take
-    it up.  Taken out, only the second-order part of the change remains."""
+    dict per segment (the cached unit).  ``change`` (per sample, :meth:`FitData.speed_change`): a
+    column with a coefficient of its own in every segment, taken out of its normal equations
+    exactly (only the second-order part of a change of speed within a segment remains)."""
     K = len(freqs)
-    T = trend is not None
+    T = change is not None
     P = 1 + 2 * K + int(acc) + int(T)
     ii = np.concatenate(groups)
     n = np.array([len(g) for g in groups], dtype=np.int64)
@@ -197,11 +181,11 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, min_cycles: 
     if acc:
         X[:, 1 + 2 * K] = data.direction[ii] * data.acc[ii]
     if T:
-        sp = data.speed[ii]
-        X[:, -1] = (sp - np.repeat(np.add.reduceat(sp, starts) / n, n)) * np.repeat(trend, n)
+        X[:, -1] = change[ii]
     G, g, yy = group_normal_equations(X, y, starts, stops)
     if T:
-        G, g, yy = _partial_out_last(G, g, yy)
+        G_change = G[:, -1, -1]
+        G, g, yy = partial_out_last(G, g, yy)
         P -= 1
     try:
         beta = np.einsum("spq,sq->sp", np.linalg.pinv(G, rcond=1e-12, hermitian=True), g)
@@ -209,26 +193,12 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, min_cycles: 
         raise ConvergenceError(f"the local fit of a segment did not converge ({exc}) with {K} lines; fit fewer "
                                f"lines (--lines)") from exc
     rss = np.maximum(yy - np.einsum("sp,sp->s", beta, g), 0.0)
-    dof = n - (1 + 2 * sampled.sum(axis=1) + int(acc) + (trend.astype(int) if T else 0))
+    dof = n - (1 + 2 * sampled.sum(axis=1) + int(acc) + (G_change > 0 if T else 0))
     sigma2 = np.where(dof >= 3, rss / np.maximum(dof, 1), np.nan)
     active = (cycles >= min_cycles) & sampled
     return [{"n": int(n[s]), "speed": float(speed[s]), "load": float(load[s]), "active": active[s],
              "sampled": sampled[s], "cycles": cycles[s], "G": G[s], "g": g[s], "yy": float(yy[s]),
              "beta_hat": beta[s], "rss_hat": float(rss[s]), "sigma2": float(sigma2[s])} for s in range(len(n))]
-
-
-def _partial_out_last(G, g, yy):
-    """Normal equations ``(G, g, yy)`` per group with their last column taken out by least squares
-    (the Schur complement): exactly those of the other columns fitted together with it, its
-    coefficient free in every group; a group where it is zero keeps its equations."""
-    gnn = G[:, -1, -1]
-    ok = gnn > 0
-    inv = np.where(ok, 1.0 / np.where(ok, gnn, 1.0), 0.0)
-    c = G[:, :-1, -1]
-    G2 = G[:, :-1, :-1] - np.einsum("sp,sq,s->spq", c, c, inv)
-    g2 = g[:, :-1] - c * (g[:, -1] * inv)[:, None]
-    yy2 = yy - g[:, -1] ** 2 * inv
-    return G2, g2, yy2
 
 
 def speed_ranges(stats: SegmentStats) -> np.ndarray:
