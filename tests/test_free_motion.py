@@ -90,6 +90,10 @@ def test_bell_moves_give_the_law_the_line_and_the_inertia(fitted):
         # the amplitude law was fitted over the speeds the moves cover, from near rest
         assert h.speed_range[0] < 2.0 and h.speed_range[1] > 10.0
     assert m.rmse_holdout < 1.5 * NOISE
+    # judged at each sample's own speed the model leaves the noise (measured 1.004x; the rms of 24,000
+    # samples scatters by 0.5 %); at each block's mean speed it would leave viscous x the change of
+    # speed within the block too (1.08x)
+    assert m.rmse < 1.05 * NOISE
     assert any("inertia identified with the friction" in n for n in m.notes)
 
 
