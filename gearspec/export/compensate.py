@@ -7,7 +7,8 @@
 * ``model``: the model as feed-forward, computed by the C that ``gearspec export --format c`` writes,
   compiled (``cc -std=c99 -O2 -shared -fPIC``) and called through ctypes (:func:`c_feedforward`);
 * ``coulomb_viscous``: a plain Coulomb + viscous feed-forward from the model's own ``tau_c`` and
-  ``viscous`` per direction (:func:`coulomb_viscous`; no Stribeck part, no lines, no terms).
+  ``viscous`` per direction (:func:`coulomb_viscous`; no Stribeck part, no lines, no terms), exported
+  and compiled the same way.
 
 Each feed-forward gets the encoder position and the reference velocity (what a drive has in its
 loop) and returns the torque (Nm at the motor) added to the PID's command.  On the held part of
@@ -313,7 +314,7 @@ def compensate(model, twin: str = "silo4", speeds_rpm: Sequence[float] | None = 
         raise InputError(f"trace speed {trace_rpm:g} rpm is not one of the speeds {', '.join(f'{s:g}' for s in speeds)}")
     cv = coulomb_viscous(model)
     cmodel = c_feedforward(model, cc, smooth_velocity)
-    ffs = {"none": None, "coulomb_viscous": python_feedforward(cv), "model": cmodel}
+    ffs = {"none": None, "coulomb_viscous": c_feedforward(cv, cc, smooth_velocity), "model": cmodel}
     freqs, rng_fit = locked_frequencies(model), _fitted_range(model)
     rows, traces = [], {}
     for label in COMPENSATIONS:
@@ -332,7 +333,8 @@ def compensate(model, twin: str = "silo4", speeds_rpm: Sequence[float] | None = 
                 "feedforward_inputs": "encoder position (rad) and reference velocity (rad/s); load "
                                       f"{LOAD:g} Nm, temperature {TEMPERATURE:g} degC, acceleration 0",
                 "model": "the model's exported C (gearspec_torque), compiled and called through ctypes",
-                "coulomb_viscous": "the model's own tau_c and viscous per direction (no Stribeck part, no lines)",
+                "coulomb_viscous": "the model's own tau_c and viscous per direction (no Stribeck part, no lines), "
+                                   "exported and compiled the same way",
                 "locked_frequencies": freqs, "fitted_speed_range": rng_fit}
     notes = [f"at {r.speed_rpm:g} rpm ({'positive' if r.direction > 0 else 'negative'}) the full model does not "
              f"lower the velocity ripple below Coulomb + viscous ({r.model:.3g} against {r.coulomb_viscous:.3g} rpm std)"
