@@ -187,7 +187,8 @@ class CompensationResult:
     ``table``: one row per (speed, direction, compensation) with ``twin, speed_rpm, direction,
     compensation`` and :func:`plateau_metrics`'s columns (one repetition's mean when there are more),
     plus ``in_fitted_range`` (the speed lies within the speeds the model's lines were fitted on, from
-    the lowest edge of their speed ranges to the highest; None when the model does not say); ``traces``: per compensation, the held part of the positive run at ``trace_rpm``: ``t`` (s from
+    the lowest edge of their speed ranges to the highest; None when the model does not say);
+    ``traces``: per compensation, the held part of the positive run at ``trace_rpm``: ``t`` (s from
     the start of the hold), ``velocity`` (rpm); ``not_better``: :func:`not_better` of the table;
     ``settings``: the twin, speeds, durations, seed, compiler command, what each compensation is.
     """
@@ -311,7 +312,8 @@ def compensate(model, twin: str = "silo4", speeds_rpm: Sequence[float] | None = 
     if trace_rpm is None:
         trace_rpm = min(speeds, key=lambda s: abs(math.log(s / TWINS[twin]["trace_rpm"])))
     elif float(trace_rpm) not in speeds:
-        raise InputError(f"trace speed {trace_rpm:g} rpm is not one of the speeds {', '.join(f'{s:g}' for s in speeds)}")
+        listed = ", ".join(f"{s:g}" for s in speeds)
+        raise InputError(f"trace speed {trace_rpm:g} rpm is not one of the speeds {listed}")
     cv = coulomb_viscous(model)
     cmodel = c_feedforward(model, cc, smooth_velocity)
     ffs = {"none": None, "coulomb_viscous": c_feedforward(cv, cc, smooth_velocity), "model": cmodel}
@@ -337,6 +339,7 @@ def compensate(model, twin: str = "silo4", speeds_rpm: Sequence[float] | None = 
                                    "exported and compiled the same way",
                 "locked_frequencies": freqs, "fitted_speed_range": rng_fit}
     notes = [f"at {r.speed_rpm:g} rpm ({'positive' if r.direction > 0 else 'negative'}) the full model does not "
-             f"lower the velocity ripple below Coulomb + viscous ({r.model:.3g} against {r.coulomb_viscous:.3g} rpm std)"
+             f"lower the velocity ripple below Coulomb + viscous ({r.model:.3g} against {r.coulomb_viscous:.3g} "
+             f"rpm std)"
              for r in bad.itertuples()]
     return CompensationResult(twin, model, table, traces, float(trace_rpm), bad, settings, notes)

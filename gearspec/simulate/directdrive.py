@@ -33,8 +33,8 @@ from ..recording import Recording
 from .effects import Cogging
 from .silo4 import PLANT as SILO4_PLANT, TwinTruth, silo4_twin
 
-__all__ = ["PLANT", "COGGING_COUNT", "COGGING_AMPLITUDE", "COGGING_FREQUENCY", "DEFAULT_SPEEDS_RPM", "truth_model", "cogging",
-           "direct_drive_twin"]
+__all__ = ["PLANT", "COGGING_COUNT", "COGGING_AMPLITUDE", "COGGING_FREQUENCY", "DEFAULT_SPEEDS_RPM", "truth_model",
+           "cogging", "direct_drive_twin"]
 
 #: the plant and controller: the SILO4 bench's entries with a torque motor's constants
 PLANT = {**SILO4_PLANT, "torque_constant": 0.2, "resistance": 2.0, "inertia": 5e-4, "supply_voltage": 48.0,
