@@ -23,7 +23,9 @@ _EXAMPLES = """examples:
 
 #: how each run is named in the report and the figures
 NAMES = {"none": "no compensation", "coulomb_viscous": "Coulomb + viscous", "model": "full model (exported C)"}
-_STYLE = {"none": ("0.45", "o", "-"), "coulomb_viscous": ("tab:blue", "s", "--"), "model": ("tab:red", "^", "-")}
+_STYLE = {"none": ("0.55", "o", "-"), "coulomb_viscous": ("tab:blue", "s", "--"), "model": ("tab:red", "^", "-")}
+#: "none" drawn wider and hollow, so that it shows where Coulomb + viscous lies on it
+_WIDE = {"none": {"lw": 2.6, "ms": 11, "fillstyle": "none", "mew": 1.5}}
 
 
 def _speeds(text: str) -> list[float]:
@@ -114,6 +116,7 @@ def summary_text(result) -> str:
 def plot_ripple(result, path) -> Path:
     """Velocity ripple (std, % of the speed) against speed, the three runs, one panel per direction."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     t = result.table
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
@@ -121,13 +124,16 @@ def plot_ripple(result, path) -> Path:
         for c in ("none", "coulomb_viscous", "model"):
             s = t[(t["direction"] == d) & (t["compensation"] == c)].sort_values("speed_rpm")
             color, marker, ls = _STYLE[c]
-            ax.plot(s["speed_rpm"], s["ripple_std_pct"], marker=marker, ls=ls, color=color, label=NAMES[c])
+            ax.plot(s["speed_rpm"], s["ripple_std_pct"], marker=marker, ls=ls, color=color, label=NAMES[c],
+                    **_WIDE.get(c, {}))
         rng = result.settings.get("fitted_speed_range")
         if rng:
             ax.axvspan(rng[0] * 60 / (2 * 3.141592653589793), min(rng[1] * 60 / (2 * 3.141592653589793),
                        t["speed_rpm"].max() * 1.5), color="0.9", zorder=0, label="speeds the lines were fitted on")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
+        ax.yaxis.set_minor_formatter(FuncFormatter(lambda y, _: f"{y:g}" if f"{y:.0e}"[0] in "25" else ""))
         ax.set_xlabel("motor speed (rpm)")
         ax.set_title(f"{'positive' if d > 0 else 'negative'} direction")
         ax.grid(True, which="both", alpha=0.3)
@@ -149,11 +155,12 @@ def plot_trace(result, path) -> Path:
         tr = result.traces.get(c)
         if tr:
             color, _, ls = _STYLE[c]
-            ax.plot(tr["t"], tr["velocity"], color=color, ls=ls, lw=0.9, label=NAMES[c])
+            ax.plot(tr["t"], tr["velocity"], color=color, ls=ls, lw=2.2 if c == "none" else 0.9, label=NAMES[c])
     ax.axhline(result.trace_rpm, color="k", lw=0.6, ls=":", label="commanded")
     ax.set_xlabel("time on the plateau (s)")
     ax.set_ylabel("motor speed (rpm)")
-    ax.set_title(f"{result.twin} twin at +{result.trace_rpm:g} rpm: true motor speed")
+    ax.set_title(f"{result.twin} twin at +{result.trace_rpm:g} rpm: true motor speed (grey under blue: Coulomb + "
+                 f"viscous changes little)")
     ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.18))
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
@@ -176,8 +183,8 @@ def write_compensate_report(result, out, command: str = "") -> Path:
             f"the model's lines were fitted on {rng[0] * 60 / 6.283185307179586:.4g}.."
             f"{rng[1] * 60 / 6.283185307179586:.4g} rpm (column in_fitted_range)")
     md = header(f"Friction compensation on the {result.twin} twin", command)
-    md += ["Each speed is run three times with the same seed: no compensation, a Coulomb + viscous feed-forward "
-           f"({s['coulomb_viscous']}), and the model as feed-forward ({s['model']}). The feed-forward gets the "
+    md += ["Each speed is run three times with the same seed: no compensation; a Coulomb + viscous feed-forward: "
+           f"{s['coulomb_viscous']}; and the model as feed-forward: {s['model']}. The feed-forward gets the "
            f"{s['feedforward_inputs']}; its torque is added to the PID's command. Measured on the held part of "
            "each plateau, from the twin's true motor velocity: ripple (std and peak-to-peak), its position-locked "
            "part (rms of the sinusoids at the model's line frequencies with at least two cycles on the plateau) "

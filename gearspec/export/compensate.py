@@ -187,7 +187,7 @@ class CompensationResult:
     ``table``: one row per (speed, direction, compensation) with ``twin, speed_rpm, direction,
     compensation`` and :func:`plateau_metrics`'s columns (one repetition's mean when there are more),
     plus ``in_fitted_range`` (the speed lies within the speeds the model's lines were fitted on, from
-    the lowest edge of their speed ranges to the highest; None when the model does not say);
+    the lowest edge of their speed ranges to the highest, +-1 %; None when the model does not say);
     ``traces``: per compensation, the held part of the positive run at ``trace_rpm``: ``t`` (s from
     the start of the hold), ``velocity`` (rpm); ``not_better``: :func:`not_better` of the table;
     ``settings``: the twin, speeds, durations, seed, compiler command, what each compensation is.
@@ -254,7 +254,9 @@ def _measure(rec, truth, label: str, freqs, trace_rpm: float, rng_fit) -> tuple[
         speed = abs(float(r["speed_rpm"]))
         row = {"speed_rpm": speed, "direction": int(r["direction"]), "compensation": label,
                **plateau_metrics(th, v, float(r["velocity"]), freqs)}
-        row["in_fitted_range"] = None if rng_fit is None else bool(rng_fit[0] <= speed * RPM <= rng_fit[1])
+        # 1 %: a line's speed range holds measured plateau speeds, which differ from the commanded ones
+        inside = rng_fit is not None and 0.99 * rng_fit[0] <= speed * RPM <= 1.01 * rng_fit[1]
+        row["in_fitted_range"] = None if rng_fit is None else bool(inside)
         rows.append(row)
         if speed == trace_rpm and r["direction"] > 0 and not trace:
             t = d["t"].to_numpy()[m]
