@@ -229,6 +229,9 @@ def test_no_compiler_is_one_sentence_and_exit_2(silo4_model, tmp_path, capsys, m
     path = silo4_model.to_json(tmp_path / "model.json")
     rc, out, err = _main(["compensate", str(path), "--speeds-rpm", "280", "--cc", str(tmp_path / "nocc")], capsys)
     assert rc == 2 and err.count("\n") == 1 and "no C compiler" in err and "Traceback" not in err
+    if shutil.which("false"):                          # a "compiler" that fails: one sentence too
+        rc, _, err = _main(["compensate", str(path), "--speeds-rpm", "280", "--cc", shutil.which("false")], capsys)
+        assert rc == 2 and "failed on the exported model" in err and err.count("\n") == 1
     monkeypatch.setenv("PATH", str(tmp_path))          # no cc anywhere
     monkeypatch.delenv("CC", raising=False)
     rc, _, err = _main(["compensate", str(path), "--speeds-rpm", "280"], capsys)
