@@ -242,7 +242,8 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                seed: int | None = 0, load=None, theta0: float | str = "auto", record_velocity: bool = False,
                sample_interval: float | None = None, current_noise: float | None = None,
                repeatability: float | None = None, plant: dict | None = None, profile: str = "plateaus",
-               profile_options: dict | None = None, top_speed_rpm: float | None = None) -> tuple[Recording, TwinTruth]:
+               profile_options: dict | None = None, top_speed_rpm: float | None = None,
+               feedforward: Callable | None = None) -> tuple[Recording, TwinTruth]:
     """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition) or of a ``profile``.
 
     Parameters
@@ -281,6 +282,10 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         ``"plateaus"`` (the above) or a :mod:`~gearspec.simulate.profiles` profile (``ramp, chirp,
         bell, sine``; its ``profile_options``, ``seed`` the sine's phases) up to ``top_speed_rpm``
         (default 6500): followed from rest to rest in every run (from ``theta0``, "auto": 0).
+    feedforward : callable(theta, velocity) -> torque, optional
+        A friction compensation: at every control step, the torque (Nm at the motor) it returns for
+        the encoder position (rad) and the reference velocity (rad/s), arrays over the runs, is added
+        to the PID's command (times ``R / k_M`` in volts, before the saturation).  None: the loop as is.
 
     Returns
     -------
@@ -321,7 +326,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     if model.law_spec.needs_load and "load" not in ch0:
         raise InputError(f"silo4_twin: law {model.law} needs a load; give load=...")
     starts = _starts(theta0, base, runs)
-    out = _closed_loop(runs, bench, lf, channels, ch0, starts)
+    out = _closed_loop(runs, bench, lf, channels, ch0, starts, feedforward)
     cols, rows = _twin_columns(runs, out, model, P, rng, speeds_rpm, repetitions, starts)
     data = {k: cols[k] for k in ("t", "theta", "current", "run")}
     data.update({k: cols[k] for k in out.out_ch if k in recorded})
@@ -450,7 +455,7 @@ class _Channels:
 
 
 def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channels: _Channels, ch0: dict,
-                 starts: np.ndarray) -> SimpleNamespace:
+                 starts: np.ndarray, ff: Callable | None = None) -> SimpleNamespace:
     """Every run of a twin integrated together to its stop: one numpy step per control period over
     the vector of runs, ordered by stop time (longest first) so that the runs still active are a
     prefix.  Returns what is recorded at each sample (``out_*``, per run slot; ``inv`` maps a run
@@ -491,6 +496,13 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
             t2 = np.maximum(np.minimum(tl_c, TH[a]) - TA[a], 0.0)
             t3 = np.maximum(np.minimum(tl_c, TE[a]) - TH[a], 0.0)
             ref_c = TH0[a] + sw[a] * (half_a * t1 * t1 + Wa[a] * (t2 + t3) - half_a * t3 * t3)
+        if ff is not None:  # the reference velocity of the chunk (rad/s), for the feed-forward
+            if profile_ref is not None:
+                vref_c = np.repeat(runs.prof.v[np.minimum(k0 + np.arange(len(tl_c)), len(runs.prof.v) - 1), None],
+                                   n_act, axis=1)
+            else:
+                vref_c = sw[a] * np.maximum(np.minimum(np.minimum(runs.acc * tl_c, Wa[a]), runs.acc * (TE[a] - tl_c)),
+                                            0.0)
         for kk_ in range(len(tl_c)):
             k = k0 + kk_
             tl = k * dt
@@ -506,6 +518,8 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
             e = ref_c[kk_, :n_act] - np.floor(th / q) * q
             j = k % m_der
             u_v = kp_v * e + ki_v * integ[a] + kd_v * (e - ebuf[j, a])
+            if ff is not None:
+                u_v = u_v + bench.volt * np.asarray(ff(np.floor(th / q) * q, vref_c[kk_, :n_act]), dtype=float)
             ebuf[j, a] = e
             U = np.minimum(np.maximum(u_v, -Vmax), Vmax)
             integ[a] += np.where((U != u_v) & ((e > 0) == (u_v > 0)), 0.0, e * dt)
