@@ -19,9 +19,12 @@ __all__ = ["write_fit_report"]
 
 
 def _example_segments(data, per_direction: int = 3) -> list[int]:
-    """A low, a middle and a high speed segment per direction."""
+    """A low, a middle and a high speed segment per direction (of free motion: among the longest
+    tenth of its blocks, so that a line shows cycles)."""
     out = []
     seg = data.segments
+    if data.free_motion and len(seg) > 10 * per_direction:
+        seg = seg[seg["n"] >= seg["n"].quantile(0.9)]
     for d in (1, -1):
         s = seg[seg["direction"] == d].sort_values("speed")
         idx = np.unique(np.linspace(0, len(s) - 1, min(per_direction, len(s))).round().astype(int))
