@@ -34,11 +34,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
+from threadpoolctl import threadpool_limits
 
 from ..errors import InputError
 from ..jsonsafe import plain
 from ..recording import Recording
-from .analysis import MEASURABLE_FRACTION, position_nyquist
+from .analysis import MEASURABLE_FRACTION
 
 __all__ = ["Motion", "motion", "OrderMap", "order_map", "NYQUIST_BLOCK", "MIN_SPEED_FRACTION", "MIN_PIECE"]
 
@@ -96,17 +97,36 @@ def motion(rec: Recording, direction: int = 1, *, min_speed: float | None = None
     default ``MIN_SPEED_FRACTION`` x the 99th percentile of |v|), with the position Nyquist frequency
     of every sample.  ``inertia`` (kg m^2 or kg): ``J * thetadd`` is subtracted from the torque;
     ``need_acc``: keep the acceleration (unit/s^2) for a fit of J."""
+    d = _check_direction(direction)
+    return _motion(rec, d, _kinematics(rec, bool(inertia) or need_acc, deriv_window), min_speed, inertia, need_acc)
+
+
+def _kinematics(rec: Recording, need_acc: bool = False, deriv_window: int | None = None) -> tuple:
+    """``(v, acc, source)``: the velocity of every row (unit/s: the ``velocity`` channel, else the
+    Savitzky-Golay derivative of :func:`gearspec.segment.derivatives`), the acceleration (unit/s^2;
+    None unless ``need_acc`` or the recording has no velocity channel) and where v came from: what
+    :func:`motion` needs, computed once for both directions."""
     from ..segment import derivatives
 
-    d = _check_direction(direction)
     has_v = "velocity" in rec.data
     acc = None
-    if not has_v or inertia or need_acc:
+    if not has_v or need_acc:
         v_d, acc = derivatives(rec, deriv_window)
     v = rec.channel("velocity").astype(float) if has_v else v_d
+    return v, acc, "velocity channel" if has_v else "Savitzky-Golay derivative of theta"
+
+
+def _default_min_speed(v: np.ndarray) -> float:
+    """``MIN_SPEED_FRACTION`` x the 99th percentile of the finite |v| (unit/s; 0 without any)."""
+    finite = np.abs(v[np.isfinite(v)])
+    return MIN_SPEED_FRACTION * float(np.percentile(finite, 99)) if len(finite) else 0.0
+
+
+def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bool) -> Motion:
+    """:func:`motion` from the :func:`_kinematics` of the recording."""
+    v, acc, source = kin
     if min_speed is None:
-        finite = np.abs(v[np.isfinite(v)])
-        min_speed = MIN_SPEED_FRACTION * float(np.percentile(finite, 99)) if len(finite) else 0.0
+        min_speed = _default_min_speed(v)
     if not (math.isfinite(min_speed) and min_speed >= 0):
         raise InputError(f"min_speed must be a speed >= 0 in {rec.unit}/s, got {min_speed!r}")
     moving = d * v > min_speed  # NaN compares False
@@ -133,40 +153,33 @@ def motion(rec: Recording, direction: int = 1, *, min_speed: float | None = None
     nyq = _block_nyquist(theta, bounds)
     return Motion(d, rec.unit, rec.t[idx], theta, np.abs(v[idx]), d * tau,
                   None if (acc is None or not need_acc) else acc[idx], nyq, bounds, float(min_speed),
-                  inertia if inertia else None, "velocity channel" if has_v else "Savitzky-Golay derivative of theta",
-                  excluded)
-
-
-def _block_starts(n: int) -> list:
-    """Starts of the consecutive blocks of ``NYQUIST_BLOCK`` samples of a piece of ``n`` samples (the
-    last one joined to its neighbour when shorter than half a block)."""
-    starts = list(range(0, n, NYQUIST_BLOCK))
-    if len(starts) > 1 and n - starts[-1] < NYQUIST_BLOCK // 2:
-        starts.pop()
-    return starts
+                  inertia if inertia else None, source, excluded)
 
 
 def _block_nyquist(theta: np.ndarray, bounds) -> np.ndarray:
     """The position Nyquist frequency of every sample: the package's rule
     (:func:`~gearspec.spectrum.analysis.position_nyquist`: half the inverse of the 95th percentile of
-    the nonzero spacings, in single precision) over each block of :func:`_block_starts` of every piece
-    ``(start, stop)`` of ``theta``, the spacing into the block included (a block of one sample at the
-    start of a piece has none: inf).  All blocks at once: each block's spacings a row of one array,
+    the nonzero spacings, in single precision) over consecutive blocks of ``NYQUIST_BLOCK`` samples of
+    every piece ``(start, stop)`` of ``theta`` (the pieces one after the other; a piece's last block
+    joined to its neighbour when shorter than half a block), the spacing into the block included (a
+    block of one sample at the start of a piece has none: inf).  All blocks at once: each block's spacings a row of one array,
     padded with NaN (sorted last, as in the rule), rows sorted; the same numbers as the rule's loop."""
     out = np.empty(len(theta))
     sp = np.empty(max(len(theta) - 1, 0), np.float32)  # as position_nyquist: a double difference, rounded
     np.subtract(theta[1:], theta[:-1], out=sp, casting="unsafe")
     np.abs(sp, out=sp)
-    first, lo, hi = [], [], []  # per block: first sample, first and end spacing
-    for s, e in bounds:
-        st = _block_starts(e - s)
-        en = st[1:] + [e - s]
-        first.extend(s + b for b in st)
-        lo.extend(s + max(b - 1, 0) for b in st)
-        hi.extend(s + b - 1 for b in en)
-    if not first:
+    n_p = np.array([e - s for s, e in bounds], dtype=np.int64)
+    if not len(n_p):
         return out
-    first, lo, hi = np.array(first), np.array(lo), np.array(hi)
+    # per piece: blocks of NYQUIST_BLOCK samples, the last one joined to its neighbour when shorter
+    # than half a block; per block: first sample, first and end spacing
+    n_blk = -(-n_p // NYQUIST_BLOCK)
+    n_blk -= (n_blk > 1) & (n_p - (n_blk - 1) * NYQUIST_BLOCK < NYQUIST_BLOCK // 2)
+    k = _local_index(n_blk)
+    s0 = np.repeat(np.array([s for s, _ in bounds], dtype=np.int64), n_blk)
+    start = k * NYQUIST_BLOCK
+    end = np.where(k == np.repeat(n_blk, n_blk) - 1, np.repeat(n_p, n_blk), start + NYQUIST_BLOCK)
+    first, lo, hi = s0 + start, s0 + np.maximum(start - 1, 0), s0 + end - 1
     length = hi - lo
     width = int(length.max())
     padded = np.concatenate([sp, np.full(width, np.nan, np.float32)])
@@ -294,7 +307,8 @@ def order_map(rec: Recording, *, direction: int = 1, orders=None, speed_bins: in
         window = _auto_window(m, spacing)
     length = window * spacing
     freq = orders if given else np.arange(1, window // 2 + 1) / length
-    wins = _window_spectra(m, spacing, window, freq if given else None)
+    with threadpool_limits(limits=1, user_api="blas"):  # small products: BLAS threads only contend
+        wins = _window_spectra(m, spacing, window, freq if given else None)
     if not len(wins[0]):
         name = "positive" if d > 0 else "negative"
         raise InputError(f"{', '.join(rec.sources) or 'recording'}: no piece of the {name} "
@@ -335,7 +349,7 @@ def _window_layout(m: Motion, spacing: float, window: int):
     step = window // 2
     # position along the direction of motion (increasing in both directions); time order kept
     th_all = m.theta if m.direction > 0 else -m.theta
-    grids, first, halfs, i_bs, th_as, th_bs, durs, ends = [], [], [], [], [], [], [], []
+    grids, first, halfs, i_bs, th_as, th_bs, durs, starts, ends = [], [], [], [], [], [], [], [], []
     n_grid_all = 0
     for s, e in m.bounds:
         th = th_all[s:e]
@@ -354,26 +368,34 @@ def _window_layout(m: Motion, spacing: float, window: int):
         # the lower of theirs.  edges: the window starts, then the end of the last one's first half
         edges = x[0:(n_win + 1) * step:step]
         th_b = x[window - 1:window - 1 + n_win * step:step]
-        halfs.append(s + np.clip(np.searchsorted(th, edges, side="right") - 1, 0, e - s - 1))
-        i_bs.append(s + np.minimum(np.searchsorted(th, th_b, side="left") + 1, e - s))
+        halfs.append(np.searchsorted(th, edges, side="right"))  # clipped to the piece below
+        i_bs.append(np.searchsorted(th, th_b, side="left"))
         tt = np.interp(np.concatenate([th_b, edges[:-1]]), th, m.t[s:e])
         durs.append(tt[:n_win] - tt[n_win:])
         th_as.append(edges[:-1])
         th_bs.append(th_b)
+        starts.append(s)
         ends.append(e)
     if not grids:
         z = np.zeros(0)
         return z, np.zeros(0, int), z, z, np.zeros(0, int), z
     n_win = np.array([len(a) for a in th_as])
+    start, ends = np.array(starts), np.array(ends)  # of the pieces with windows
+    # sample indices in the motion: each half-window edge's last sample at or before it, and each
+    # window's first sample after its end (both within the window's piece)
+    s_h, e_h = np.repeat(start, n_win + 1), np.repeat(ends, n_win + 1)
+    halfs = np.minimum(np.maximum(np.concatenate(halfs) - 1, 0) + s_h, e_h - 1)
+    i_b = np.minimum(np.concatenate(i_bs) + 1 + np.repeat(start, n_win), np.repeat(ends, n_win))
     # the lowest Nyquist of each half window (a reduceat over every piece's half-window edges and
     # its end: the segment from a piece's end to the next piece's first edge is not used)
-    idx = np.concatenate([np.append(h, e) for h, e in zip(halfs, ends)])
+    last = np.cumsum(n_win + 1) - 1  # the end of the last window's first half, per piece
+    idx = np.insert(halfs, last + 1, ends)
     if idx[-1] == len(m.nyquist):
         idx = idx[:-1]
     h_min = np.minimum.reduceat(m.nyquist, idx)
     pos = np.repeat(np.cumsum(n_win + 2) - (n_win + 2), n_win) + _local_index(n_win)
     nyqs = np.minimum(h_min[pos], h_min[pos + 1])
-    counts = np.concatenate(i_bs) - np.concatenate([h[:-1] for h in halfs])
+    counts = i_b - np.delete(halfs, last)
     travel = np.concatenate(th_bs) - np.concatenate(th_as)
     speeds = travel / np.abs(np.concatenate(durs))
     # linear interpolation between samples spaced ds reads a line at f low by sinc^2(f ds)
