@@ -118,8 +118,10 @@ def _kinematics(rec: Recording, need_acc: bool = False, deriv_window: int | None
 
 def _default_min_speed(v: np.ndarray) -> float:
     """``MIN_SPEED_FRACTION`` x the 99th percentile of the finite |v| (unit/s; 0 without any)."""
-    finite = np.abs(v[np.isfinite(v)])
-    return MIN_SPEED_FRACTION * float(np.percentile(finite, 99)) if len(finite) else 0.0
+    a = np.abs(v)
+    if not np.isfinite(a).all():
+        a = a[np.isfinite(a)]
+    return MIN_SPEED_FRACTION * float(np.percentile(a, 99, overwrite_input=True)) if len(a) else 0.0
 
 
 def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bool) -> Motion:
@@ -129,7 +131,7 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
         min_speed = _default_min_speed(v)
     if not (math.isfinite(min_speed) and min_speed >= 0):
         raise InputError(f"min_speed must be a speed >= 0 in {rec.unit}/s, got {min_speed!r}")
-    moving = d * v > min_speed  # NaN compares False
+    moving = v > min_speed if d > 0 else v < -min_speed  # d v > min_speed; NaN compares False
     if inertia and acc is not None:
         ok_acc = np.isfinite(acc)
         moving &= ok_acc
@@ -148,10 +150,14 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
                 f"pieces shorter than {MIN_PIECE} samples": n_moving - len(idx)}
     tau = rec.tau[idx]
     if inertia and acc is not None:
-        tau = tau - inertia * acc[idx]
+        tau -= inertia * acc[idx]
+    if d < 0:
+        np.negative(tau, out=tau)
+    speed = v[idx]
+    np.abs(speed, out=speed)
     theta = rec.theta[idx]
     nyq = _block_nyquist(theta, bounds)
-    return Motion(d, rec.unit, rec.t[idx], theta, np.abs(v[idx]), d * tau,
+    return Motion(d, rec.unit, rec.t[idx], theta, speed, tau,
                   None if (acc is None or not need_acc) else acc[idx], nyq, bounds, float(min_speed),
                   inertia if inertia else None, source, excluded)
 
@@ -162,15 +168,15 @@ def _block_nyquist(theta: np.ndarray, bounds) -> np.ndarray:
     the nonzero spacings, in single precision) over consecutive blocks of ``NYQUIST_BLOCK`` samples of
     every piece ``(start, stop)`` of ``theta`` (the pieces one after the other; a piece's last block
     joined to its neighbour when shorter than half a block), the spacing into the block included (a
-    block of one sample at the start of a piece has none: inf).  All blocks at once: each block's spacings a row of one array,
-    padded with NaN (sorted last, as in the rule), rows sorted; the same numbers as the rule's loop."""
-    out = np.empty(len(theta))
+    block of one sample at the start of a piece has none: inf).  All blocks at once: each block's
+    spacings a row of one array, padded with NaN (sorted last, as in the rule), rows sorted; the same
+    numbers as the rule applied block by block."""
     sp = np.empty(max(len(theta) - 1, 0), np.float32)  # as position_nyquist: a double difference, rounded
     np.subtract(theta[1:], theta[:-1], out=sp, casting="unsafe")
     np.abs(sp, out=sp)
     n_p = np.array([e - s for s, e in bounds], dtype=np.int64)
     if not len(n_p):
-        return out
+        return np.empty(len(theta))
     # per piece: blocks of NYQUIST_BLOCK samples, the last one joined to its neighbour when shorter
     # than half a block; per block: first sample, first and end spacing
     n_blk = -(-n_p // NYQUIST_BLOCK)
@@ -181,17 +187,32 @@ def _block_nyquist(theta: np.ndarray, bounds) -> np.ndarray:
     end = np.where(k == np.repeat(n_blk, n_blk) - 1, np.repeat(n_p, n_blk), start + NYQUIST_BLOCK)
     first, lo, hi = s0 + start, s0 + np.maximum(start - 1, 0), s0 + end - 1
     length = hi - lo
-    width = int(length.max())
-    padded = np.concatenate([sp, np.full(width, np.nan, np.float32)])
-    rows = sliding_window_view(padded, max(width, 1))[lo]
-    rows[np.arange(rows.shape[1])[None, :] >= length[:, None]] = np.nan
+    nyq = np.empty(len(first))
+    # most blocks hold exactly NYQUIST_BLOCK spacings (a view of them per block); the others (a
+    # piece's first and last) are padded with NaN to the longest
+    full = length == NYQUIST_BLOCK
+    if full.any():
+        nyq[full] = _rows_nyquist(sliding_window_view(sp, NYQUIST_BLOCK)[lo[full]], length[full])
+    if not full.all():
+        width = max(int(length[~full].max()), 1)
+        padded = np.concatenate([sp, np.full(width, np.nan, np.float32)])
+        rows = sliding_window_view(padded, width)[lo[~full]]
+        rows[np.arange(width)[None, :] >= length[~full, None]] = np.nan
+        nyq[~full] = _rows_nyquist(rows, length[~full])
+    return np.repeat(nyq, np.diff(np.append(first, len(theta))))
+
+
+def _rows_nyquist(rows: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """The rule of :func:`~gearspec.spectrum.analysis.position_nyquist` on every row of absolute
+    spacings (float32; the first ``length`` of each, NaN after them), sorted here in place."""
     rows.sort(axis=1)
+    width = rows.shape[1]
     n_zero = np.count_nonzero(rows == 0, axis=1)
     m = length - n_zero
     pos = 0.95 * (m - 1)
     i = np.floor(pos).astype(np.int64)
     frac = pos - i
-    k = np.clip(n_zero + i, 0, max(width - 1, 0))
+    k = np.clip(n_zero + i, 0, width - 1)
     r = np.arange(len(rows))
     a = rows[r, k].astype(float)
     has_b = (frac > 0) & (k + 1 < length)
@@ -199,8 +220,7 @@ def _block_nyquist(theta: np.ndarray, bounds) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         nyq = np.where(m > 0, 0.5 / (a + (b - a) * frac), 0.0)
     nyq[length == 0] = np.inf  # no spacing at all: nothing limits it
-    out[:] = np.repeat(nyq, np.diff(np.append(first, len(theta))))
-    return out
+    return nyq
 
 
 # ---------------------------------------------------------------------- the order map

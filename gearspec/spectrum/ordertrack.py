@@ -313,11 +313,15 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
         perm = np.argsort(span.astype(np.uint8), kind="stable")
         r, span = idx[i:i + _CHUNK][perm], span[perm]
         n = len(r)
+        cuts = np.searchsorted(span, np.arange(len(tk) + 1))
         # the speeds lie within [tk[0], tk[-1]]: the knots span the speeds of these samples
         U = np.empty((7, n))
         U[0] = 1.0
-        np.subtract(m.speed[r], tk[span], out=U[1])
-        U[1] /= tk[span + 1] - tk[span]
+        np.take(m.speed, r, out=U[1])
+        for jj in polys:  # u, the coordinate in the sample's span
+            a, e = cuts[jj], cuts[jj + 1]
+            U[1, a:e] -= tk[jj]
+            U[1, a:e] /= tk[jj + 1] - tk[jj]
         for k in range(2, 7):
             np.multiply(U[k - 1], U[1], out=U[k])
         y = m.y[r]
@@ -327,7 +331,6 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
             acc = m.acc[r]
             np.multiply(U[:4], acc, out=W[4:])
         G = _trig_rows(m.theta[r], freqs, two_pi)
-        cuts = np.searchsorted(span, np.arange(len(tk) + 1))
         for jj in polys:
             a, e = cuts[jj], cuts[jj + 1]
             if e == a:
