@@ -187,8 +187,9 @@ class _Measured:
         q = 3 * (knots + _DEGREE + 1) + (how == "fitted")
         dname = "positive" if m.direction > 0 else "negative"
         if self.n < 4 * q:
-            raise InputError(f"line at {f:.6g} cycles/{m.unit}: {self.n} samples of the {dname} direction lie below "
-                             f"{MEASURABLE_FRACTION:g} x their position Nyquist frequency; tracking needs at least {4 * q}")
+            raise InputError(f"line at {f:.6g} cycles/{m.unit}: {self.n} samples of the {dname} direction lie "
+                             f"below {MEASURABLE_FRACTION:g} x their position Nyquist frequency; tracking needs at "
+                             f"least {4 * q}")
         if self.speed is None:
             self.speed = m.speed[self.use]
             self.lo, self.hi = float(self.speed.min()), float(self.speed.max())
