@@ -301,17 +301,20 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
     n_f = len(freqs)
     moms = [{jj: [np.zeros((7, 6)), np.zeros((4, 3)), np.zeros((4, 3)), 0.0, 0.0] for jj in polys} for _ in freqs]
     idx = np.flatnonzero(use)
-    y_all = m.y[idx]
-    yy = float(y_all @ y_all)
+    yy = 0.0
     two_pi = np.float32(2 * np.pi)
-    top = len(tk) - _DEGREE - 2  # the last span (it takes the top speed)
+    # the span of a speed x within [tk[0], tk[-1]] (searchsorted(tk, x, "right") - 1, the top speed
+    # in the last span): _DEGREE + the number of interior knots at or below x
+    interior = tk[_DEGREE + 1:len(tk) - _DEGREE - 1]
     # G rows: 1, the sines and cosines of every line, then per line s^2, s c, c^2
     n_trig = 1 + 2 * n_f
     for i in range(0, len(idx), _CHUNK):
         # the chunk's samples span by span (time order kept within a span: a stable radix sort)
-        span = np.searchsorted(tk, m.speed[idx[i:i + _CHUNK]], side="right") - 1  # >= _DEGREE
-        np.minimum(span, top, out=span)
-        perm = np.argsort(span.astype(np.uint8), kind="stable")
+        x = m.speed[idx[i:i + _CHUNK]]
+        span = np.full(len(x), _DEGREE, np.uint8)
+        for t in interior:
+            span += x >= t
+        perm = np.argsort(span, kind="stable")
         r, span = idx[i:i + _CHUNK][perm], span[perm]
         n = len(r)
         cuts = np.searchsorted(span, np.arange(len(tk) + 1))
@@ -326,6 +329,7 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
         for k in range(2, 7):
             np.multiply(U[k - 1], U[1], out=U[k])
         y = m.y[r]
+        yy += float(y @ y)
         W = np.empty((4 + 4 * fit_j, n))  # u^s y, u^s acc (s = 0..3)
         np.multiply(U[:4], y, out=W[:4])
         if fit_j:
