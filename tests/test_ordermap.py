@@ -313,3 +313,105 @@ def test_slow_position_dependent_force_does_not_leak_into_low_orders():
     m = order_map(rec, direction=1, speed_bins=np.arange(10.0, 101.0, 10.0))
     assert m.frequency[0] < 0.1
     assert np.all(m.amplitude[:, :2] < 2 * m.noise[:, None])
+
+
+# ---------------------------------------------------------------------- speed (issue 12 benchmark): same numbers
+def _reference_block_nyquist(theta, bounds):
+    """The position Nyquist of every sample by the package's rule applied block by block (blocks of
+    NYQUIST_BLOCK samples per piece, the last joined to its neighbour when shorter than half a block,
+    the spacing into a block included): the loop the vectorised rule must reproduce exactly."""
+    from gearspec.spectrum import position_nyquist
+    from gearspec.spectrum.ordermap import NYQUIST_BLOCK
+
+    out = np.empty(len(theta))
+    for s, e in bounds:
+        starts = list(range(0, e - s, NYQUIST_BLOCK))
+        if len(starts) > 1 and e - s - starts[-1] < NYQUIST_BLOCK // 2:
+            starts.pop()
+        for i, a in enumerate(starts):
+            b = starts[i + 1] if i + 1 < len(starts) else e - s
+            out[s + a:s + b] = position_nyquist(theta[s + max(a - 1, 0):s + b])
+    return out
+
+
+def test_position_nyquist_of_all_blocks_at_once_is_the_rule_block_by_block():
+    # pieces of 16 .. 1000 samples (last blocks joined or not: 300 = 256 + 44 joined, 400 = 256 + 144
+    # not), spacings from a coarse encoder (many exact zeros at low speed, so the zero count moves the
+    # percentile's index) and a jittered one: the same numbers, bit for bit
+    from gearspec.spectrum.ordermap import _block_nyquist
+
+    rng = np.random.default_rng(17)
+    lengths = [16, 129, 255, 256, 257, 300, 383, 384, 400, 511, 1000, 40]
+    theta, bounds, n = [], [], 0
+    for k, ln in enumerate(lengths):
+        step = rng.uniform(0.0, 2e-3, ln) if k % 2 else 1e-3 * (1 + 0.3 * rng.standard_normal(ln))
+        th = np.cumsum(np.abs(step)) + (theta[-1][-1] if theta else 0.0)
+        if k % 2:
+            th = np.round(th / 1.5e-3) * 1.5e-3  # quantised: runs of equal positions
+        theta.append(th)
+        bounds.append((n, n + ln))
+        n += ln
+    theta = np.concatenate(theta)
+    got, ref = _block_nyquist(theta, bounds), _reference_block_nyquist(theta, bounds)
+    assert np.array_equal(got, ref)
+    assert len(np.unique(ref)) > 10  # the test sees many different blocks, not one number
+
+
+def test_lines_fitted_together_are_the_lines_fitted_alone():
+    # order_analysis fits the lines measured on the same samples in one pass over them (F and 2.5
+    # cycles/rad: below 0.8 x the Nyquist everywhere; 8 cycles/rad only below 50 rad/s): the same
+    # amplitudes, phases and bands as order_track line by line to 1e-9 relative (only the order of
+    # summation differs: rounding, 1e-12 measured), in the order the lines were given, and a line no
+    # sample measures is skipped in its place
+    rec = _recording(seed=18, lines=((F, A_POS, A_NEG, 0.3), (8.0, 0.04, 0.04, 1.0), (2.5, 0.02, 0.02, 0.5)))
+    res = order_analysis(rec, [F, 8.0, 400.0, 2.5], inertia=0)  # 400: measurable below 1 rad/s only
+    assert [(t.direction, t.frequency) for t in res.tracks] == [(d, f) for d in (1, -1) for f in (F, 8.0, 2.5)]
+    assert [s["frequency"] for s in res.skipped] == [400.0, 400.0]
+    for tr in res.tracks:
+        alone = order_track(rec, tr.frequency, direction=tr.direction, inertia=0)
+        ok = np.isfinite(alone.amplitude)
+        assert np.array_equal(ok, np.isfinite(tr.amplitude)) and ok.sum() > 20
+        for name in ("amplitude", "amplitude_se", "phase", "lower", "upper"):
+            a, b = getattr(alone, name)[ok], getattr(tr, name)[ok]
+            assert np.abs(a - b).max() <= 1e-9 * np.abs(a).max(), name
+        assert tr.n == alone.n and tr.sigma == pytest.approx(alone.sigma, rel=1e-12)
+
+
+def test_two_threads_give_the_numbers_of_one():
+    # the directions in two threads: bit for bit the numbers of one thread (each direction's work is
+    # the same sequence of operations); the inertia fitted, so that the acceleration path is used
+    rec = _recording(seed=19, inertia=0.002)
+    one = order_analysis(rec, [F, 8.0], inertia="fit", workers=1).to_dict()
+    two = order_analysis(rec, [F, 8.0], inertia="fit", workers=2).to_dict()
+    assert json.dumps(one, allow_nan=False) == json.dumps(two, allow_nan=False)
+    with pytest.raises(InputError, match="workers"):
+        order_analysis(rec, [F], workers=0)
+
+
+def test_map_windows_across_pieces_are_the_windows_piece_by_piece():
+    # the windows of all pieces are laid out at once: each window's lowest Nyquist, samples and speed
+    # are those of its own piece only (a window never reaches into the next piece), checked against
+    # a direct computation per piece on a chirp (many pieces, Nyquist varying within each)
+    from gearspec.spectrum import motion
+    from gearspec.spectrum.ordermap import _window_layout
+
+    m = motion(_recording("chirp", T=30.0, seed=20), 1)
+    spacing, window = 0.05, 64
+    grid, first, speeds, nyqs, counts, ds = _window_layout(m, spacing, window)
+    ref_nyq, ref_counts, ref_speed = [], [], []
+    for s, e in m.bounds:
+        th, nq, tt = m.theta[s:e], m.nyquist[s:e], m.t[s:e]
+        g0, g1 = int(np.ceil(th[0] / spacing)), int(np.floor(th[-1] / spacing))
+        for a in range(g0, g1 - window + 2, window // 2):
+            lo = max(np.searchsorted(th, a * spacing, side="right") - 1, 0)
+            mid = np.searchsorted(th, (a + window // 2) * spacing, side="right") - 1
+            end = np.searchsorted(th, (a + window) * spacing, side="right") - 1  # the next window's half
+            hi = min(np.searchsorted(th, (a + window - 1) * spacing, side="left") + 1, e - s)
+            ref_nyq.append(min(nq[lo:max(mid, lo + 1)].min(), nq[mid:max(end, mid + 1)].min()))
+            ref_counts.append(hi - lo)
+            dur = np.interp((a + window - 1) * spacing, th, tt) - np.interp(a * spacing, th, tt)
+            ref_speed.append((window - 1) * spacing / dur)
+    assert len(first) == len(ref_nyq) > 100 and len(m.bounds) >= 5
+    assert np.array_equal(nyqs, ref_nyq) and np.array_equal(counts, ref_counts)
+    assert np.allclose(speeds, ref_speed, rtol=1e-12)
+    assert np.unique(nyqs).size > 20

@@ -21,23 +21,28 @@ band's lower edge at 0 means "not distinguished from no line".
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import linalg, stats
 from scipy.interpolate import BSpline
+from threadpoolctl import threadpool_limits
 
 from ..errors import InputError
 from ..jsonsafe import plain
 from ..recording import Recording
 from .analysis import MEASURABLE_FRACTION
-from .ordermap import Motion, motion, order_map
+from .ordermap import Motion, _default_min_speed, _kinematics, _motion, motion, order_map
 
 __all__ = ["OrderTrack", "order_track", "resolve_line", "OrderAnalysis", "order_analysis", "SPEED_GRID"]
 
 #: speeds at which a track is evaluated
 SPEED_GRID = 64
-_CHUNK = 1 << 16
+#: ``order_analysis(workers="auto")`` analyses the two directions in two threads from this many rows
+PARALLEL_MIN_SAMPLES = 200_000
+_CHUNK = 1 << 15
 _DEGREE = 3
 
 
@@ -149,41 +154,73 @@ def order_track(rec: Recording, frequency, *, direction: int = 1, knots: int = 4
     """
     gear = gear if gear is not None else rec.gear
     f, label = resolve_line(gear, frequency)
-    if not (isinstance(knots, (int, np.integer)) and 0 <= knots <= 20):
-        raise InputError(f"knots must be an integer from 0 to 20, got {knots!r}")
-    if not (0 < level < 1):
-        raise InputError(f"level must be between 0 and 1, got {level!r}")
+    _check_options(knots, level)
     J, how = _inertia_choice(inertia, gear)
     m = mot if mot is not None else motion(rec, direction, min_speed=min_speed, inertia=J, need_acc=how == "fitted")
     if how == "fitted" and m.acc is None:
         raise InputError("order_track: the prepared motion has no acceleration to fit the inertia with")
     use = f < MEASURABLE_FRACTION * m.nyquist
-    n_use = int(np.count_nonzero(use))
+    group = _Measured(use)
+    group.check(m, f, knots, how)
+    with threadpool_limits(limits=1, user_api="blas"):  # small products: BLAS threads only contend
+        return _fit_tracks(m, [(f, label)], group, knots, level, J, how, gear)[0]
+
+
+def _check_options(knots, level) -> None:
+    if not (isinstance(knots, (int, np.integer)) and 0 <= knots <= 20):
+        raise InputError(f"knots must be an integer from 0 to 20, got {knots!r}")
+    if not (0 < level < 1):
+        raise InputError(f"level must be between 0 and 1, got {level!r}")
+
+
+class _Measured:
+    """The samples of a direction that measure a line (below ``MEASURABLE_FRACTION`` x their position
+    Nyquist frequency): shared by every line with the same samples, so that they are fitted together."""
+
+    def __init__(self, use: np.ndarray):
+        self.use = use
+        self.n = int(np.count_nonzero(use))
+        self.speed = None
+
+    def check(self, m: Motion, f: float, knots: int, how: str) -> None:
+        """Refuse (one sentence) a line with too few samples, or samples of one speed only."""
+        q = 3 * (knots + _DEGREE + 1) + (how == "fitted")
+        dname = "positive" if m.direction > 0 else "negative"
+        if self.n < 4 * q:
+            raise InputError(f"line at {f:.6g} cycles/{m.unit}: {self.n} samples of the {dname} direction lie "
+                             f"below {MEASURABLE_FRACTION:g} x their position Nyquist frequency; tracking needs at "
+                             f"least {4 * q}")
+        if self.speed is None:
+            self.speed = m.speed[self.use]
+            self.lo, self.hi = float(self.speed.min()), float(self.speed.max())
+        if not self.hi > self.lo:
+            raise InputError(f"line at {f:.6g} cycles/{m.unit}: the {dname} samples that measure it share one speed")
+
+
+def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: float, J, how: str, gear) -> list:
+    """The :class:`OrderTrack` of every ``(frequency, label)`` of ``lines``, all measured on the
+    samples of ``group`` (checked): one pass over the samples for all of them."""
+    lo, hi, n_use = group.lo, group.hi, group.n
     n_basis = knots + _DEGREE + 1
-    q = 3 * n_basis + (how == "fitted")
-    dname = "positive" if m.direction > 0 else "negative"
-    if n_use < 4 * q:
-        raise InputError(f"line at {f:.6g} cycles/{rec.unit}: {n_use} samples of the {dname} direction lie below "
-                         f"{MEASURABLE_FRACTION:g} x their position Nyquist frequency; tracking needs at least {4 * q}")
-    sp = m.speed[use]
-    lo, hi = float(sp.min()), float(sp.max())
-    if not hi > lo:
-        raise InputError(f"line at {f:.6g} cycles/{rec.unit}: the {dname} samples that measure it share one speed")
     tk = np.concatenate([[lo] * (_DEGREE + 1), np.linspace(lo, hi, knots + 2)[1:-1], [hi] * (_DEGREE + 1)])
-    A, b, yy = _normal_equations(m, use, f, tk, how == "fitted")
-    beta, cov, sigma = _solve(A, b, yy, n_use)
+    normals = _normal_equations_many(m, group.use, [f for f, _ in lines], tk, how == "fitted")
     grid = np.linspace(lo, hi, SPEED_GRID)
-    out = _evaluate(beta, cov, tk, n_basis, grid, level)
     cell = (hi - lo) / (SPEED_GRID - 1)
-    counts = np.histogram(sp, bins=np.concatenate([grid - cell / 2, [hi + cell / 2]]))[0]
-    for arr in out.values():
-        arr[counts == 0] = np.nan  # no sample near this speed: not measured there
-    j_fit = float(beta[-1]) if how == "fitted" else J
-    j_se = float(math.sqrt(cov[-1, -1])) if how == "fitted" else None
-    notes = [f"velocity from the {m.velocity_source}; white-noise standard errors (delta method)"]
-    return OrderTrack(f, label, None if gear is None else gear.order(f), m.direction, m.unit, grid, out["amp"],
-                      out["se"], out["lower"], out["upper"], out["phase"], out["phase_se"], counts, (lo, hi), n_use,
-                      len(m) - n_use, sigma, float(level), int(knots), j_fit, j_se, how, notes)
+    counts = np.histogram(group.speed, bins=np.concatenate([grid - cell / 2, [hi + cell / 2]]))[0]
+    tracks = []
+    for (f, label), (A, b, yy) in zip(lines, normals):
+        beta, cov, sigma = _solve(A, b, yy, n_use)
+        out = _evaluate(beta, cov, tk, n_basis, grid, level)
+        for arr in out.values():
+            arr[counts == 0] = np.nan  # no sample near this speed: not measured there
+        j_fit = float(beta[-1]) if how == "fitted" else J
+        j_se = float(math.sqrt(cov[-1, -1])) if how == "fitted" else None
+        notes = [f"velocity from the {m.velocity_source}; white-noise standard errors (delta method)"]
+        tracks.append(OrderTrack(f, label, None if gear is None else gear.order(f), m.direction, m.unit, grid,
+                                 out["amp"], out["se"], out["lower"], out["upper"], out["phase"], out["phase_se"],
+                                 counts.copy(), (lo, hi), n_use, len(m) - n_use, sigma, float(level), int(knots),
+                                 j_fit, j_se, how, notes))
+    return tracks
 
 
 def _inertia_choice(inertia, gear) -> tuple[float | None, str]:
@@ -242,53 +279,105 @@ def _span_polynomials(tk: np.ndarray) -> dict:
 
 
 def _normal_equations(m: Motion, use: np.ndarray, f: float, tk: np.ndarray, fit_j: bool):
-    """``X'X``, ``X'y`` and ``y'y`` of the track's design (the columns: B-splines of the level, of a
-    (sine), of c (cosine), then the acceleration when J is fitted), exactly, without forming it.
+    """``X'X``, ``X'y`` and ``y'y`` of one line's track design (see :func:`_normal_equations_many`)."""
+    return _normal_equations_many(m, use, [f], tk, fit_j)[0]
+
+
+def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fit_j: bool) -> list:
+    """``(X'X, X'y, y'y)`` of the track design of every line of ``freqs`` (the columns: B-splines of
+    the level, of a (sine), of c (cosine), then the acceleration when J is fitted) on the samples
+    ``use``, exactly, without forming it (``tk``: knots from the lowest to the highest speed of them).
 
     On a knot span the four B-splines a sample touches are cubics in the span coordinate u, so every
     entry of ``X'X`` is a combination of the moments ``sum u^s g_k g_l`` (s = 0..6; g = 1, sin, cos)
-    and ``X'y`` of ``sum u^s g_k y`` (s = 0..3): a 7 x 6 and a 4 x 3 product per run of samples in
-    one span, accumulated in double precision, then combined with the spans' polynomials."""
+    and ``X'y`` of ``sum u^s g_k y`` (s = 0..3), accumulated in double precision, then combined with
+    the spans' polynomials.  The samples are taken in chunks, each sorted by knot span (time order
+    kept within a span); per span two matrix products, ``u^s [1; g_k g_l]'`` and ``[u^s y; u^s acc]
+    [1; g_k]'`` over all lines at once, give the moments (the powers of u and the gathers shared by
+    the lines)."""
     nb = len(tk) - _DEGREE - 1
     q = 3 * nb + fit_j
     polys = _span_polynomials(tk)
-    mom = {j: [np.zeros((7, 6)), np.zeros((4, 3)), np.zeros((4, 3)), 0.0, 0.0] for j in polys}
-    yy = 0.0
+    n_f = len(freqs)
+    moms = [{jj: [np.zeros((7, 6)), np.zeros((4, 3)), np.zeros((4, 3)), 0.0, 0.0] for jj in polys} for _ in freqs]
     idx = np.flatnonzero(use)
-    lo, hi = tk[0], tk[-1]
-    p = _DEGREE
+    yy = 0.0
+    two_pi = np.float32(2 * np.pi)
+    # the span of a speed x within [tk[0], tk[-1]] (searchsorted(tk, x, "right") - 1, the top speed
+    # in the last span): _DEGREE + the number of interior knots at or below x
+    interior = tk[_DEGREE + 1:len(tk) - _DEGREE - 1]
+    # G rows: 1, the sines and cosines of every line, then per line s^2, s c, c^2
+    n_trig = 1 + 2 * n_f
     for i in range(0, len(idx), _CHUNK):
-        r = idx[i:i + _CHUNK]
-        x = np.clip(m.speed[r], lo, hi)
-        j = np.clip(np.searchsorted(tk, x, side="right") - 1, p, len(tk) - p - 2)
-        u = (x - tk[j]) / (tk[j + 1] - tk[j])
-        U = np.empty((7, len(r)))
+        # the chunk's samples span by span (time order kept within a span: a stable radix sort)
+        x = m.speed[idx[i:i + _CHUNK]]
+        span = np.full(len(x), _DEGREE, np.uint8)
+        for t in interior:
+            span += x >= t
+        perm = np.argsort(span, kind="stable")
+        r, span = idx[i:i + _CHUNK][perm], span[perm]
+        n = len(r)
+        cuts = np.searchsorted(span, np.arange(len(tk) + 1))
+        # the speeds lie within [tk[0], tk[-1]]: the knots span the speeds of these samples
+        U = np.empty((7, n))
         U[0] = 1.0
-        for k in range(1, 7):
-            np.multiply(U[k - 1], u, out=U[k])
-        ph = np.mod(f * m.theta[r], 1.0).astype(np.float32)
-        ph *= np.float32(2 * np.pi)
+        np.take(m.speed, r, out=U[1])
+        for jj in polys:  # u, the coordinate in the sample's span
+            a, e = cuts[jj], cuts[jj + 1]
+            U[1, a:e] -= tk[jj]
+            U[1, a:e] /= tk[jj + 1] - tk[jj]
+        for k in range(2, 7):
+            np.multiply(U[k - 1], U[1], out=U[k])
         y = m.y[r]
-        G = np.empty((6, len(r)))  # 1, s, c, s^2, s c, c^2
-        G[0] = 1.0
-        G[1] = np.sin(ph)
-        G[2] = np.cos(ph)
-        np.multiply(G[1], G[1], out=G[3])
-        np.multiply(G[1], G[2], out=G[4])
-        np.multiply(G[2], G[2], out=G[5])
-        Gy = G[:3] * y
-        Ga = G[:3] * m.acc[r] if fit_j else None
         yy += float(y @ y)
-        cuts = np.concatenate(([0], np.flatnonzero(np.diff(j)) + 1, [len(r)]))
-        for a, e in zip(cuts[:-1], cuts[1:]):
-            acc = mom[int(j[a])]
-            acc[0] += U[:, a:e] @ G[:, a:e].T
-            acc[1] += U[:4, a:e] @ Gy[:, a:e].T
+        W = np.empty((4 + 4 * fit_j, n))  # u^s y, u^s acc (s = 0..3)
+        np.multiply(U[:4], y, out=W[:4])
+        if fit_j:
+            acc = m.acc[r]
+            np.multiply(U[:4], acc, out=W[4:])
+        G = _trig_rows(m.theta[r], freqs, two_pi)
+        for jj in polys:
+            a, e = cuts[jj], cuts[jj + 1]
+            if e == a:
+                continue
+            P = U[:, a:e] @ G[:, a:e].T
+            Q = W[:, a:e] @ G[:n_trig, a:e].T
+            for li in range(n_f):
+                M, Y, Ya = moms[li][jj][:3]
+                cols = [0, 1 + 2 * li, 2 + 2 * li]
+                M[:, :3] += P[:, cols]
+                M[:, 3:] += P[:, n_trig + 3 * li:n_trig + 3 * li + 3]
+                Y += Q[:4, cols]
+                if fit_j:
+                    Ya += Q[4:, cols]
             if fit_j:
-                acc[2] += U[:4, a:e] @ Ga[:, a:e].T
-                acc[3] += float(Ga[0, a:e] @ m.acc[r][a:e])
-                acc[4] += float(Ga[0, a:e] @ y[a:e])
-    return _assemble(mom, polys, nb, q, fit_j) + (yy,)
+                aa, ay = float(acc[a:e] @ acc[a:e]), float(acc[a:e] @ y[a:e])
+                for li in range(n_f):
+                    moms[li][jj][3] += aa
+                    moms[li][jj][4] += ay
+    return [_assemble(mom, polys, nb, q, fit_j) + (yy,) for mom in moms]
+
+
+def _trig_rows(theta: np.ndarray, freqs, two_pi) -> np.ndarray:
+    """Rows 1, then ``sin, cos`` of ``2 pi f theta`` of every line, then ``s^2, s c, c^2`` of every
+    line (the phase reduced to one cycle in double precision, then sine and cosine in single)."""
+    n_f, n = len(freqs), len(theta)
+    sq = 1 + 2 * n_f
+    G = np.empty((1 + 5 * n_f, n))
+    G[0] = 1.0
+    ph64 = np.empty(n)
+    for li, f in enumerate(freqs):
+        np.multiply(theta, f, out=ph64)
+        ph64 -= np.floor(ph64)  # the phase in cycles (exactly np.mod(., 1.0))
+        ph = ph64.astype(np.float32)
+        ph *= two_pi
+        s, c = G[1 + 2 * li], G[2 + 2 * li]
+        s[:] = np.sin(ph)
+        c[:] = np.cos(ph)
+        np.multiply(s, s, out=G[sq + 3 * li])  # products of singles: exact in double
+        np.multiply(s, c, out=G[sq + 3 * li + 1])
+        np.multiply(c, c, out=G[sq + 3 * li + 2])
+    return G
 
 
 #: the moment column of g_k g_l (g = 1, sin, cos)
@@ -374,33 +463,79 @@ class OrderAnalysis:
 
 def order_analysis(rec: Recording, lines=(), *, gear=None, inertia: float | str | None = None,
                    min_speed: float | None = None, knots: int = 4, level: float = 0.95,
-                   map_options: dict | None = None) -> OrderAnalysis:
+                   map_options: dict | None = None, workers: int | str = "auto") -> OrderAnalysis:
     """The order map of both directions and the track of every line in ``lines`` (frequencies in
-    cycles per unit of theta or declared labels), each direction's samples prepared once.  A
-    direction or line without enough measurable samples is listed in ``skipped`` with the reason."""
+    cycles per unit of theta or declared labels), each direction's samples prepared once and the
+    lines measured on the same samples fitted in one pass over them.  A direction or line without
+    enough measurable samples is listed in ``skipped`` with the reason.  ``workers``: directions
+    analysed at once, in threads, with the same results whatever the number; ``"auto"``: two on a
+    machine with two or more CPUs when the recording has at least ``PARALLEL_MIN_SAMPLES`` rows."""
     gear = gear if gear is not None else rec.gear
     J, how = _inertia_choice(inertia, gear)
-    maps, tracks, skipped = {}, [], []
     resolved = [resolve_line(gear, ln) for ln in lines]
-    for d in (1, -1):
-        name = "positive" if d > 0 else "negative"
+    if workers == "auto":
+        workers = 2 if (os.cpu_count() or 1) >= 2 and len(rec) >= PARALLEL_MIN_SAMPLES else 1
+    if not (isinstance(workers, (int, np.integer)) and workers >= 1):
+        raise InputError(f"workers must be 'auto' or a number of threads >= 1, got {workers!r}")
+    with threadpool_limits(limits=1, user_api="blas"):  # small products: BLAS threads only contend
+        rec.tau, rec.pieces()  # cached by the recording: filled here, before the threads read them
         try:
-            m = motion(rec, d, min_speed=min_speed, inertia=J, need_acc=how == "fitted")
+            kin = _kinematics(rec, bool(J) or how == "fitted")
+            if min_speed is None:  # once for both directions (a percentile over all rows)
+                min_speed = _default_min_speed(kin[0])
         except InputError as exc:
-            skipped.append({"direction": d, "what": "map", "reason": str(exc)})
-            maps[d] = None
-            continue
-        try:
-            maps[d] = order_map(rec, direction=d, gear=gear, mot=m, min_speed=min_speed, **(map_options or {}))
-        except InputError as exc:
-            maps[d] = None
-            skipped.append({"direction": d, "what": "map", "reason": str(exc)})
-        for f, lab in resolved:
+            kin = exc
+
+        def one(d):
+            return _one_direction(rec, d, kin, resolved, gear, J, how, min_speed, knots, level, map_options)
+
+        if workers > 1:
+            with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gearspec-order") as pool:
+                done = list(pool.map(one, (1, -1)))
+        else:
+            done = [one(d) for d in (1, -1)]
+    maps = {d: mp for d, (mp, _, _) in zip((1, -1), done)}
+    return OrderAnalysis(maps, [t for _, tr, _ in done for t in tr], [s for _, _, sk in done for s in sk], rec.unit)
+
+
+def _one_direction(rec, d, kin, resolved, gear, J, how, min_speed, knots, level, map_options):
+    """``(order map or None, tracks, skipped)`` of one direction (see :func:`order_analysis`)."""
+    name = "positive" if d > 0 else "negative"
+    skipped = []
+    try:
+        if isinstance(kin, InputError):
+            raise kin
+        m = _motion(rec, d, kin, min_speed, J, how == "fitted")
+    except InputError as exc:
+        return None, [], [{"direction": d, "what": "map", "reason": str(exc)}]
+    try:
+        mp = order_map(rec, direction=d, gear=gear, mot=m, min_speed=min_speed, **(map_options or {}))
+    except InputError as exc:
+        mp = None
+        skipped.append({"direction": d, "what": "map", "reason": str(exc)})
+    # lines measured on the same samples (the same mask) are fitted together, reported in their order
+    groups = []
+    for i, (f, _) in enumerate(resolved):
+        use = f < MEASURABLE_FRACTION * m.nyquist
+        g = next((g for g in groups if np.array_equal(g[0].use, use)), None)
+        if g is None:
+            groups.append((_Measured(use), [i]))
+        else:
+            g[1].append(i)
+    out = {}
+    for group, members in groups:
+        fit = []
+        for i in members:
+            f, lab = resolved[i]
             try:
-                tracks.append(order_track(rec, f, direction=d, knots=knots, level=level,
-                                          inertia=J if how == "given" else ("fit" if how == "fitted" else 0),
-                                          gear=gear, mot=m))
+                _check_options(knots, level)
+                group.check(m, f, knots, how)
+                fit.append(i)
             except InputError as exc:
-                skipped.append({"direction": d, "what": lab or f"{f:.6g} cycles/{rec.unit}", "frequency": f,
-                                "reason": f"{name} direction: {exc}"})
-    return OrderAnalysis(maps, tracks, skipped, rec.unit)
+                out[i] = {"direction": d, "what": lab or f"{f:.6g} cycles/{rec.unit}", "frequency": f,
+                          "reason": f"{name} direction: {exc}"}
+        if fit:
+            tracks = _fit_tracks(m, [resolved[i] for i in fit], group, knots, level, J, how, gear)
+            out.update(zip(fit, tracks))
+    tracks = [out[i] for i in range(len(resolved)) if isinstance(out[i], OrderTrack)]
+    return mp, tracks, skipped + [out[i] for i in range(len(resolved)) if not isinstance(out[i], OrderTrack)]
