@@ -321,33 +321,53 @@ def position_nyquist(theta: np.ndarray) -> float:
     return 0.5 / (a + (b - a) * frac)
 
 
-def group_position_nyquist(theta: np.ndarray, starts, stops) -> np.ndarray:
-    """:func:`position_nyquist` of every contiguous group ``[starts[g], stops[g])`` of the samples at
-    once (the same rule and numbers; 0 for a group without a nonzero spacing)."""
-    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
-    ng = len(starts)
-    out = np.zeros(ng)
-    if ng == 0:
-        return out
-    sp = np.abs((theta[1:] - theta[:-1]).astype(np.float32))
-    nd = np.maximum(stops - starts - 1, 0)                      # spacings inside each group
-    gid = np.repeat(np.arange(ng), nd)
-    idx = np.concatenate([np.arange(a, a + k) for a, k in zip(starts, nd)]) if nd.sum() else np.zeros(0, np.int64)
-    vals = sp[idx]
-    order = np.lexsort((vals, gid))
-    vals = vals[order]
-    off = np.concatenate(([0], np.cumsum(nd)[:-1]))
-    n_zero = np.bincount(gid, weights=(vals == 0), minlength=ng).astype(np.int64) if len(gid) else np.zeros(ng, int)
-    m = nd - n_zero
-    ok = m > 0
+def rows_position_nyquist(rows: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """:func:`position_nyquist` of many pieces at once, from their absolute spacings as the rows of
+    one float32 array (the first ``length`` of each row; NaN after them, sorted last), sorted here in
+    place: the same numbers as the rule piece by piece; 0 when no spacing is nonzero, inf for a row
+    without any spacing."""
+    rows.sort(axis=1)
+    width = rows.shape[1]
+    n_zero = np.count_nonzero(rows == 0, axis=1)
+    m = length - n_zero
     pos = 0.95 * (m - 1)
     i = np.floor(pos).astype(np.int64)
     frac = pos - i
-    k = off + n_zero + i
-    a = np.where(ok, vals[np.clip(k, 0, max(len(vals) - 1, 0))] if len(vals) else 0.0, 0.0).astype(float)
-    has_b = ok & (frac > 0) & (i + 1 < m)
-    b = np.where(has_b, vals[np.clip(k + 1, 0, max(len(vals) - 1, 0))] if len(vals) else 0.0, a).astype(float)
-    out[ok] = 0.5 / (a[ok] + (b[ok] - a[ok]) * frac[ok])
+    k = np.clip(n_zero + i, 0, width - 1)
+    r = np.arange(len(rows))
+    a = rows[r, k].astype(float)
+    has_b = (frac > 0) & (k + 1 < length)
+    b = np.where(has_b, rows[r, np.minimum(k + 1, width - 1)], a).astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nyq = np.where(m > 0, 0.5 / (a + (b - a) * frac), 0.0)
+    nyq[length == 0] = np.inf  # no spacing at all: nothing limits it
+    return nyq
+
+
+#: groups with fewer spacings than this are sorted together as the rows of one array
+_ROWS_BELOW = 256
+
+
+def group_position_nyquist(theta: np.ndarray, starts, stops) -> np.ndarray:
+    """:func:`position_nyquist` of every contiguous group ``[starts[g], stops[g])`` of the samples (the
+    same numbers; 0 for a group without a nonzero spacing or of one sample): short groups together
+    (:func:`rows_position_nyquist`), long ones one by one."""
+    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
+    out = np.zeros(len(starts))
+    nd = np.maximum(stops - starts - 1, 0)
+    for g in np.flatnonzero(nd >= _ROWS_BELOW):
+        out[g] = position_nyquist(theta[starts[g]:stops[g]])
+    small = np.flatnonzero((nd > 0) & (nd < _ROWS_BELOW))
+    if len(small):
+        sp = np.empty(max(len(theta) - 1, 0), np.float32)  # as position_nyquist: a double difference, rounded
+        np.subtract(theta[1:], theta[:-1], out=sp, casting="unsafe")
+        np.abs(sp, out=sp)
+        for c in range(0, len(small), 16384):  # rows of at most 4 MB x 16 at a time
+            grp = small[c:c + 16384]
+            cols = np.arange(int(nd[grp].max()))
+            idx = np.minimum(starts[grp, None] + cols[None, :], len(sp) - 1)
+            rows = np.where(cols[None, :] < nd[grp, None], sp[idx], np.float32(np.nan))
+            out[grp] = rows_position_nyquist(rows, nd[grp])
     return out
 
 

@@ -39,7 +39,7 @@ from threadpoolctl import threadpool_limits
 from ..errors import InputError
 from ..jsonsafe import plain
 from ..recording import Recording
-from .analysis import MEASURABLE_FRACTION
+from .analysis import MEASURABLE_FRACTION, rows_position_nyquist
 
 __all__ = ["Motion", "motion", "OrderMap", "order_map", "NYQUIST_BLOCK", "MIN_SPEED_FRACTION", "MIN_PIECE"]
 
@@ -192,35 +192,14 @@ def _block_nyquist(theta: np.ndarray, bounds) -> np.ndarray:
     # piece's first and last) are padded with NaN to the longest
     full = length == NYQUIST_BLOCK
     if full.any():
-        nyq[full] = _rows_nyquist(sliding_window_view(sp, NYQUIST_BLOCK)[lo[full]], length[full])
+        nyq[full] = rows_position_nyquist(sliding_window_view(sp, NYQUIST_BLOCK)[lo[full]], length[full])
     if not full.all():
         width = max(int(length[~full].max()), 1)
         padded = np.concatenate([sp, np.full(width, np.nan, np.float32)])
         rows = sliding_window_view(padded, width)[lo[~full]]
         rows[np.arange(width)[None, :] >= length[~full, None]] = np.nan
-        nyq[~full] = _rows_nyquist(rows, length[~full])
+        nyq[~full] = rows_position_nyquist(rows, length[~full])
     return np.repeat(nyq, np.diff(np.append(first, len(theta))))
-
-
-def _rows_nyquist(rows: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """The rule of :func:`~gearspec.spectrum.analysis.position_nyquist` on every row of absolute
-    spacings (float32; the first ``length`` of each, NaN after them), sorted here in place."""
-    rows.sort(axis=1)
-    width = rows.shape[1]
-    n_zero = np.count_nonzero(rows == 0, axis=1)
-    m = length - n_zero
-    pos = 0.95 * (m - 1)
-    i = np.floor(pos).astype(np.int64)
-    frac = pos - i
-    k = np.clip(n_zero + i, 0, width - 1)
-    r = np.arange(len(rows))
-    a = rows[r, k].astype(float)
-    has_b = (frac > 0) & (k + 1 < length)
-    b = np.where(has_b, rows[r, np.minimum(k + 1, width - 1)], a).astype(float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        nyq = np.where(m > 0, 0.5 / (a + (b - a) * frac), 0.0)
-    nyq[length == 0] = np.inf  # no spacing at all: nothing limits it
-    return nyq
 
 
 # ---------------------------------------------------------------------- the order map
