@@ -415,3 +415,16 @@ def test_map_windows_across_pieces_are_the_windows_piece_by_piece():
     assert np.array_equal(nyqs, ref_nyq) and np.array_equal(counts, ref_counts)
     assert np.allclose(speeds, ref_speed, rtol=1e-12)
     assert np.unique(nyqs).size > 20
+
+
+def test_a_line_slower_than_the_travel_near_a_speed_is_not_tracked_there():
+    """A ramp to 100 rad/s and back in 40 s: near each grid speed (half a knot span, ~10 rad/s of
+    speed, ~1 s each way) the samples travel some 100 rad.  A line of 0.002 cycles/rad (one cycle per
+    500 rad) makes a fifth of a cycle there: its sine and cosine cannot be told from the level, so it
+    is NaN at every speed (without the rule a curve with a narrow band is drawn); the 1.5 cycles/rad
+    line is tracked everywhere the samples reach."""
+    rec = _recording("ramp", T=40.0, seed=5, lines=((F, A_POS, A_NEG, 0.3), (0.002, 0.04, 0.04, 1.0)))
+    slow = order_track(rec, 0.002, direction=1, inertia=0)
+    assert np.all(np.isnan(slow.amplitude)) and any("less than" in n for n in slow.notes)
+    fast = order_track(rec, F, direction=1, inertia=0)
+    assert np.isfinite(fast.amplitude).mean() > 0.9

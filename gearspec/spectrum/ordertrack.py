@@ -40,6 +40,10 @@ __all__ = ["OrderTrack", "order_track", "resolve_line", "OrderAnalysis", "order_
 
 #: speeds at which a track is evaluated
 SPEED_GRID = 64
+#: a line is tracked at a speed where the samples within half a knot span of it hold together at
+#: least this many of its cycles; elsewhere its sine and cosine cannot be told from the level (a line
+#: slower than the travel: an output shaft's once-per-turn in a short run), and it is NaN there
+MIN_TRACK_CYCLES = 1.0
 #: ``order_analysis(workers="auto")`` analyses the two directions in two threads from this many rows
 PARALLEL_MIN_SAMPLES = 200_000
 _CHUNK = 1 << 15
@@ -206,16 +210,27 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
     normals = _normal_equations_many(m, group.use, [f for f, _ in lines], tk, how == "fitted")
     grid = np.linspace(lo, hi, SPEED_GRID)
     cell = (hi - lo) / (SPEED_GRID - 1)
-    counts = np.histogram(group.speed, bins=np.concatenate([grid - cell / 2, [hi + cell / 2]]))[0]
+    edges = np.concatenate([grid - cell / 2, [hi + cell / 2]])
+    counts = np.histogram(group.speed, bins=edges)[0]
+    # travel of the samples near each grid speed (within half a knot span): speed x the median step
+    dt = float(np.median(np.diff(m.t))) if len(m.t) > 1 else 0.0
+    travel = np.histogram(group.speed, bins=edges, weights=group.speed * dt)[0]
+    half = max(int(round(0.5 * (SPEED_GRID - 1) / (knots + 1))), 0)
+    near = np.convolve(travel, np.ones(2 * half + 1), mode="same")
     tracks = []
     for (f, label), (A, b, yy) in zip(lines, normals):
         beta, cov, sigma = _solve(A, b, yy, n_use)
         out = _evaluate(beta, cov, tk, n_basis, grid, level)
+        few = f * near < MIN_TRACK_CYCLES
         for arr in out.values():
             arr[counts == 0] = np.nan  # no sample near this speed: not measured there
+            arr[few] = np.nan          # less than a cycle of the line near this speed
         j_fit = float(beta[-1]) if how == "fitted" else J
         j_se = float(math.sqrt(cov[-1, -1])) if how == "fitted" else None
         notes = [f"velocity from the {m.velocity_source}; white-noise standard errors (delta method)"]
+        if few.any():
+            notes.append(f"not tracked at {int(few.sum())} of {SPEED_GRID} speeds: the samples near them hold less "
+                         f"than {MIN_TRACK_CYCLES:g} cycle of the line together")
         tracks.append(OrderTrack(f, label, None if gear is None else gear.order(f), m.direction, m.unit, grid,
                                  out["amp"], out["se"], out["lower"], out["upper"], out["phase"], out["phase_se"],
                                  counts.copy(), (lo, hi), n_use, len(m) - n_use, sigma, float(level), int(knots),
