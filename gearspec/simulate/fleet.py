@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..gears import load_gear
 from ..model import FrictionModel
 from .synthetic import model_recording
@@ -84,6 +85,8 @@ def fleet_twin(out, *, robots: int = 4, joints: int = 6, dates: int = 10, days: 
 
     rng = np.random.default_rng(seed)
     out = Path(out)
+    if out.exists() and any(out.iterdir()):
+        raise InputError(f"{out}: the fleet twin is written into a new or empty folder, and this one is not empty")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     names = [f"joint{j + 1}" for j in range(joints)]
     levels = np.linspace(0.08, 0.13, joints)
