@@ -69,7 +69,7 @@ def _weighted_trend(t: np.ndarray, y: np.ndarray, se: np.ndarray) -> dict:
     tstat = b / se_b
     p = float(2 * stats.t.sf(abs(tstat), dof))
     change = b * (x.max() - x.min())
-    return {"n": len(x), "mean": yw, "slope_per_day": b, "slope_se": se_b, "change": change,
+    return {"n": len(x), "t_ref": float(t.mean() + xw * DAY), "mean": yw, "slope_per_day": b, "slope_se": se_b, "change": change,
             "relative_change": change / yw if yw != 0 else np.nan, "chi2_dof": chi2 / dof, "t": tstat, "p": p}
 
 
@@ -91,8 +91,9 @@ def trend_tests(df: pd.DataFrame, parameters=None, *, alpha: float = ALPHA, corr
     Returns
     -------
     DataFrame
-        One row per series tested: ``robot, joint, direction, parameter, n, mean, slope_per_day``
-        (parameter unit per day), ``slope_se, change`` (fitted change from the first to the last
+        One row per series tested: ``robot, joint, direction, parameter, n``, ``t_ref`` (the weighted
+        mean date, s since 1970), ``mean`` (the line's value there), ``slope_per_day`` (parameter unit
+        per day), ``slope_se, change`` (fitted change from the first to the last
         date), ``relative_change, chi2_dof, t, p, p_adjusted, flagged``.
     """
     if not 0 < alpha < 1:
@@ -110,7 +111,7 @@ def trend_tests(df: pd.DataFrame, parameters=None, *, alpha: float = ALPHA, corr
                 continue
             res = _weighted_trend(s["start_time"].to_numpy(float), s[p].to_numpy(float), s[p + "_se"].to_numpy(float))
             rows.append({"robot": robot, "joint": joint, "direction": direction, "parameter": p, **res})
-    out = pd.DataFrame(rows, columns=["robot", "joint", "direction", "parameter", "n", "mean", "slope_per_day",
+    out = pd.DataFrame(rows, columns=["robot", "joint", "direction", "parameter", "n", "t_ref", "mean", "slope_per_day",
                                       "slope_se", "change", "relative_change", "chi2_dof", "t", "p"])
     m = len(out)
     if correction == "holm":
