@@ -20,7 +20,7 @@ from ..errors import GearspecWarning, InputError
 __all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs", "analysis_parser"]
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
-COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo", "export")
+COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo", "export", "batch")
 #: longest message printed for a refusal (a message listing thousands of names helps nobody)
 MAX_MESSAGE = 600
 

@@ -173,6 +173,9 @@ def _frame(results: list[dict]) -> pd.DataFrame:
     rest = [c for c in df.columns if c not in BASE_COLUMNS]
     df = df[list(BASE_COLUMNS) + rest]
     df["start_time"] = pd.to_numeric(df["start_time"], errors="coerce")
+    for c in df.columns:  # text columns as plain objects, the same whichever rows hold text
+        if c in ("source", "robot", "joint", "direction", "status", "error", "law", "effects") or c.endswith("_label"):
+            df[c] = pd.Series(df[c].tolist(), dtype=object, index=df.index)
     for c in ("rmse", "rmse_holdout"):
         df[c] = pd.to_numeric(df[c], errors="coerce")
     return df.reset_index(drop=True)

@@ -16,7 +16,8 @@ __all__ = ["write_fleet_report", "plot_fleet_overview", "plot_flagged_joint", "R
 RULE = ("Per robot, joint, direction and parameter with at least {min_dates} dates: a weighted least-squares line "
         "of the parameter against the date (weights 1/se^2, se: the fit's standard error), its slope's standard "
         "error widened by the Birge ratio sqrt(chi2/(n-2)) when the dates scatter more than their standard "
-        "errors say, a two-sided Student-t test (n-2 degrees of freedom) of a zero slope; the {tests} tests made "
+        "errors say, a two-sided test of a zero slope (Student's t with n-2 degrees of freedom when widened, "
+        "else normal); the {tests} tests made "
         "corrected together by {correction} (family-wise error {alpha:g}). A joint is flagged when any of its "
         "series is. The robot is the folder holding the recording.")
 

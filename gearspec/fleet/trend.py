@@ -6,7 +6,8 @@ weights ``1 / se^2`` (``se``: the fit's standard error of each date's value).  T
 error is the weighted one, widened by the Birge ratio ``sqrt(chi2 / (n - 2))`` when the points
 scatter about the line more than their standard errors say (date-to-date variation the fit's
 standard error does not see: temperature, lubrication, load); the two-sided p-value of ``b / se_b``
-comes from Student's t with ``n - 2`` degrees of freedom.  Every test made over the fleet is then
+comes from Student's t with ``n - 2`` degrees of freedom when so widened, else from the normal
+distribution (the standard errors explain the scatter and are taken as known).  Every test made over the fleet is then
 corrected together by Holm's step-down method (family-wise error ``alpha``, default 1 %): a series
 is flagged when its Holm-adjusted p-value is below ``alpha``, and a joint when any of its series is.
 """
@@ -67,7 +68,9 @@ def _weighted_trend(t: np.ndarray, y: np.ndarray, se: np.ndarray) -> dict:
     birge = max(1.0, chi2 / dof)
     se_b = float(np.sqrt(birge / sxx))
     tstat = b / se_b
-    p = float(2 * stats.t.sf(abs(tstat), dof))
+    # standard errors that explain the scatter are taken as known (normal); widened ones are
+    # estimated from the n - 2 residuals (Student's t)
+    p = float(2 * (stats.t.sf(abs(tstat), dof) if chi2 > dof else stats.norm.sf(abs(tstat))))
     change = b * (x.max() - x.min())
     return {"n": len(x), "t_ref": float(t.mean() + xw * DAY), "mean": yw, "slope_per_day": b, "slope_se": se_b, "change": change,
             "relative_change": change / yw if yw != 0 else np.nan, "chi2_dof": chi2 / dof, "t": tstat, "p": p}
