@@ -106,13 +106,18 @@ def trend_tests(df: pd.DataFrame, parameters=None, *, alpha: float = ALPHA, corr
     ok = df[(df["status"] == "ok") & df["start_time"].notna()] if len(df) else df
     params = tested_parameters(ok) if parameters is None else list(parameters)
     rows = []
-    for (robot, joint, direction), g in ok.groupby(["robot", "joint", "direction"], dropna=False, sort=True):
+    t_all = pd.to_numeric(ok["start_time"], errors="coerce").to_numpy(float)
+    values = {p: (pd.to_numeric(ok[p], errors="coerce").to_numpy(float),
+                  pd.to_numeric(ok[p + "_se"], errors="coerce").to_numpy(float)) for p in params}
+    for (robot, joint, direction), idx in ok.groupby(["robot", "joint", "direction"], dropna=False,
+                                                     sort=True).indices.items():
+        t = t_all[idx]
         for p in params:
-            s = g[["start_time", p, p + "_se"]].apply(pd.to_numeric, errors="coerce").dropna()
-            s = s[s[p + "_se"] > 0]
-            if s["start_time"].nunique() < MIN_DATES or len(s) < MIN_DATES:
+            y, se = values[p][0][idx], values[p][1][idx]
+            keep = np.isfinite(t) & np.isfinite(y) & np.isfinite(se) & (se > 0)
+            if keep.sum() < MIN_DATES or len(np.unique(t[keep])) < MIN_DATES:
                 continue
-            res = _weighted_trend(s["start_time"].to_numpy(float), s[p].to_numpy(float), s[p + "_se"].to_numpy(float))
+            res = _weighted_trend(t[keep], y[keep], se[keep])
             rows.append({"robot": robot, "joint": joint, "direction": direction, "parameter": p, **res})
     out = pd.DataFrame(rows, columns=["robot", "joint", "direction", "parameter", "n", "t_ref", "mean", "slope_per_day",
                                       "slope_se", "change", "relative_change", "chi2_dof", "t", "p"])
