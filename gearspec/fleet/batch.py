@@ -33,7 +33,8 @@ SEGMENT_DEFAULTS = {"window": "auto", "rel_tol": 0.15, "min_speed": None, "min_d
 LINE_FAP = 0.01
 
 
-def tasks(recordings: Iterable, joint: str | None = "all", topic: str = "/joint_states") -> list[tuple[str, str | None]]:
+def tasks(recordings: Iterable, joint: str | None = "all",
+          topic: str = "/joint_states") -> list[tuple[str, str | None]]:
     """The ``(source, joint)`` pairs of a batch: a ROS bag gives one per joint of ``topic`` when
     ``joint`` is "all" (a bag that cannot be listed gives one task, which then fails with its
     sentence), else the named joint; any other file one task with joint None."""

@@ -72,11 +72,13 @@ def _weighted_trend(t: np.ndarray, y: np.ndarray, se: np.ndarray) -> dict:
     # estimated from the n - 2 residuals (Student's t)
     p = float(2 * (stats.t.sf(abs(tstat), dof) if chi2 > dof else stats.norm.sf(abs(tstat))))
     change = b * (x.max() - x.min())
-    return {"n": len(x), "t_ref": float(t.mean() + xw * DAY), "mean": yw, "slope_per_day": b, "slope_se": se_b, "change": change,
+    return {"n": len(x), "t_ref": float(t.mean() + xw * DAY), "mean": yw, "slope_per_day": b, "slope_se": se_b,
+            "change": change,
             "relative_change": change / yw if yw != 0 else np.nan, "chi2_dof": chi2 / dof, "t": tstat, "p": p}
 
 
-def trend_tests(df: pd.DataFrame, parameters=None, *, alpha: float = ALPHA, correction: str = "holm") -> pd.DataFrame:
+def trend_tests(df: pd.DataFrame, parameters=None, *, alpha: float = ALPHA,
+                correction: str = "holm") -> pd.DataFrame:
     """The trend test of every (robot, joint, direction, parameter) series in a batch table.
 
     Parameters
