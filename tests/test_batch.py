@@ -72,11 +72,13 @@ def test_dask_cluster_of_two_gives_the_serial_rows_and_a_corrupt_file_its_row(fl
 def test_cli_batch_exit_2_with_the_refused_row_and_fit_json_equal_to_gearspec_fit(fleet, tmp_path, capsys):
     bag = fleet["twin"]["bags"][0]
     out = tmp_path / "out"
-    code = main(["batch", str(bag), str(fleet["broken"]), "--gear", str(fleet["gear"]), "--out", str(out),
-                 "--workers", "1", "--quiet"])
+    missing = tmp_path / "missing.csv"
+    code = main(["batch", str(bag), str(fleet["broken"]), str(missing), "--gear", str(fleet["gear"]), "--out",
+                 str(out), "--workers", "1", "--quiet"])
     assert code == 2
     df = pd.read_parquet(out / "fleet.parquet")
-    assert (df["status"] == "ok").sum() == 6 and (df["status"] == "error").sum() == 1   # 3 joints x 2 dirs
+    assert (df["status"] == "ok").sum() == 6 and (df["status"] == "error").sum() == 2   # 3 joints x 2 dirs
+    assert df.loc[df["source"] == str(missing), "error"].iloc[0] == f"{missing}: no such file"
     assert (out / "report.md").is_file() and (out / "report.html").is_file()
     js = tmp_path / "fit.json"
     assert main(["fit", str(bag), "--gear", str(fleet["gear"]), "--joint", "joint2", "--json", str(js),
@@ -124,6 +126,29 @@ def test_fleet_report_shows_the_rule_and_the_flagged_joints(fleet, tmp_path):
     text = text.split("## Flagged joints")[1].split("##")[0]
     assert "| robot1 | joint1 |" in text and "| robot1 | joint2 |" in text and "| robot1 | joint3 |" not in text
     assert (tmp_path / "fleet_overview.png").is_file() and (tmp_path / "flagged_robot1_joint1.png").is_file()
+
+
+def test_warnings_of_a_task_are_in_its_rows(tmp_path):
+    # without a gear spec the fit says so (a GearspecWarning): the batch keeps it in the rows, once
+    from gearspec.model import FrictionModel
+    from gearspec.simulate import model_recording
+
+    truth = FrictionModel("stribeck", {"tau_c": 0.1, "tau_s": 0.15, "v_s": 2.0, "viscous": 1e-3})
+    rec, _ = model_recording(truth, [1, 3, 8, 20, -1, -3, -8, -20], duration=1.0, fs=250, noise=1e-3, seed=2)
+    df = batch([rec.save(tmp_path / "r.csv")], None, workers=1, progress=False)
+    assert (df["status"] == "ok").all() and len(df) == 2
+    assert df["warnings"].str.count("without a gear spec").tolist() == [1, 1]
+    # Stribeck truth: tau_c 0.1 Nm within 3 % (noise 1 mNm over 4 plateaus of 250 samples)
+    assert np.allclose(df["tau_c"], 0.1, rtol=0.03)
+
+
+def test_unreachable_scheduler_is_one_sentence(fleet, monkeypatch):
+    import gearspec.fleet.runner as fb
+    from gearspec.errors import InputError
+
+    monkeypatch.setattr(fb, "CONNECT_TIMEOUT", "1s")
+    with pytest.raises(InputError, match=r"--scheduler tcp://127.0.0.1:9: no Dask scheduler answers there"):
+        batch([fleet["twin"]["bags"][0]], fleet["gear"], scheduler="tcp://127.0.0.1:9", progress=False)
 
 
 # ---------------------------------------------------------------------- the trend rule on known series

@@ -6,7 +6,7 @@ their uncertainty allows (:func:`flagged_joints`); :func:`gearspec.fleet.report.
 writes the report with its figures.  The fleet twin is :func:`gearspec.simulate.fleet.fleet_twin`.
 """
 
-from .batch import BASE_COLUMNS, analyse_one, batch, tasks
+from .runner import BASE_COLUMNS, analyse_one, batch, tasks
 from .trend import flagged_joints, holm, trend_tests
 
 __all__ = ["batch", "analyse_one", "tasks", "BASE_COLUMNS", "trend_tests", "flagged_joints", "holm"]

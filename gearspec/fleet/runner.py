@@ -13,22 +13,25 @@ from __future__ import annotations
 
 import sys
 import traceback
+import warnings
 from pathlib import Path
 from typing import Iterable
 
 import pandas as pd
 
-from ..errors import InputError
+from ..errors import GearspecWarning, InputError
 
 __all__ = ["batch", "analyse_one", "tasks", "N_LINES", "BASE_COLUMNS"]
 
 #: strongest spectral lines kept per (source, joint, direction)
 N_LINES = 3
 #: the columns every row has, in this order (the law's parameters and the lines follow)
-BASE_COLUMNS = ("source", "robot", "joint", "direction", "status", "error", "start_time", "law", "rmse",
-                "rmse_holdout")
+BASE_COLUMNS = ("source", "robot", "joint", "direction", "status", "error", "warnings", "start_time", "law",
+                "rmse", "rmse_holdout")
 #: the segment options of ``gearspec fit`` and their defaults (window in s or "auto")
 SEGMENT_DEFAULTS = {"window": "auto", "rel_tol": 0.15, "min_speed": None, "min_duration": None, "quasi_static": None}
+#: how long a Dask scheduler may take to answer
+CONNECT_TIMEOUT = "20s"
 #: a line counts among the strongest only when its false-alarm probability is below this
 LINE_FAP = 0.01
 
@@ -73,7 +76,8 @@ def analyse_one(source: str, joint: str | None, gear=None, law: str = "silo4", d
     """Analyse one (source, joint) as ``gearspec fit`` (and ``spectrum``, ``diagnose``) would.
 
     Returns ``{"rows": [...], "fit": dict | None}``: one row per direction (dicts of
-    :data:`BASE_COLUMNS`, the law's parameters and standard errors in SI as in the fit's JSON, the
+    :data:`BASE_COLUMNS`; ``warnings``: the findings the analysis warned of, each once, joined by "; ";
+    the law's parameters and standard errors in SI as in the fit's JSON, the
     strongest lines), or one error row; ``fit``: the ``gearspec fit --json`` form.  Never raises for
     a bad input: an :class:`InputError` becomes the row's ``error``, any other exception
     ``"internal error: ..."``.
@@ -81,7 +85,15 @@ def analyse_one(source: str, joint: str | None, gear=None, law: str = "silo4", d
     base = {"source": str(source), "robot": Path(source).parent.name or ".", "joint": joint, "direction": None,
             "status": "error", "error": None, "start_time": None, "law": law}
     try:
-        return _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", GearspecWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)   # numerical noise of runs that succeed, as in the CLI
+            out = _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base)
+        said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught
+                                  if issubclass(w.category, GearspecWarning)))
+        for row in out["rows"]:
+            row["warnings"] = "; ".join(said) or None
+        return out
     except InputError as exc:
         return {"rows": [{**base, "error": _one_line(exc)}], "fit": None}
     except Exception as exc:  # not the user's fault: said as such, with the exception's type
@@ -175,7 +187,8 @@ def _frame(results: list[dict]) -> pd.DataFrame:
     df = df[list(BASE_COLUMNS) + rest]
     df["start_time"] = pd.to_numeric(df["start_time"], errors="coerce")
     for c in df.columns:  # text columns as plain objects, the same whichever rows hold text
-        if c in ("source", "robot", "joint", "direction", "status", "error", "law", "effects") or c.endswith("_label"):
+        if c in ("source", "robot", "joint", "direction", "status", "error", "warnings", "law", "effects") \
+                or c.endswith("_label"):
             df[c] = pd.Series(df[c].tolist(), dtype=object, index=df.index)
     for c in ("rmse", "rmse_holdout"):
         df[c] = pd.to_numeric(df[c], errors="coerce")
@@ -259,7 +272,7 @@ def _on_dask(args: list, workers: int | None, scheduler: str | None, progress: b
                                silence_logs=logging.ERROR)
     try:
         try:
-            client = Client(cluster if cluster is not None else scheduler, timeout="20s")
+            client = Client(cluster if cluster is not None else scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError) as exc:
             raise InputError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_one_line(exc)})") from None
         with client:
