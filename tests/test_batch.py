@@ -128,6 +128,14 @@ def test_fleet_report_shows_the_rule_and_the_flagged_joints(fleet, tmp_path):
     assert (tmp_path / "fleet_overview.png").is_file() and (tmp_path / "flagged_robot1_joint1.png").is_file()
 
 
+def test_diagnose_adds_the_closed_loop_verdict(fleet):
+    # the twin's friction is the SILO4 law with the declared lines and white noise: the closed loop
+    # has nothing to add (known answer 0 effects); the columns are there for every direction
+    df = batch([fleet["twin"]["bags"][0]], fleet["gear"], joint="joint3", diagnose=True, workers=1, progress=False)
+    assert list(df["direction"]) == ["positive", "negative"]
+    assert df["n_effects"].tolist() == [0, 0] and df["effects"].tolist() == ["", ""]
+
+
 def test_warnings_of_a_task_are_in_its_rows(tmp_path):
     # without a gear spec the fit says so (a GearspecWarning): the batch keeps it in the rows, once
     from gearspec.model import FrictionModel
