@@ -122,7 +122,7 @@ def test_fleet_report_shows_the_rule_and_the_flagged_joints(fleet, tmp_path):
 
     path = write_fleet_report(fleet["table"], trend_tests(fleet["table"]), tmp_path)
     text = path.read_text()
-    assert "holm" in text
+    assert "corrected together by Holm's step-down method (family-wise error 0.01)" in text
     text = text.split("## Flagged joints")[1].split("##")[0]
     assert "| robot1 | joint1 |" in text and "| robot1 | joint2 |" in text and "| robot1 | joint3 |" not in text
     assert (tmp_path / "fleet_overview.png").is_file() and (tmp_path / "flagged_robot1_joint1.png").is_file()

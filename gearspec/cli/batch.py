@@ -82,7 +82,9 @@ def run(args) -> int:
         n = df.groupby(["source", "joint"], dropna=False).ngroups
         print(f"{n} recording-joint pair(s): {n - len(bad)} fitted, {len(bad)} refused")
         for r in bad.itertuples(index=False):
-            print(f"refused: {r.source}{' [' + r.joint + ']' if isinstance(r.joint, str) else ''}: {r.error}")
+            where = f" [{r.joint}]" if isinstance(r.joint, str) else ""
+            said = r.error if str(r.error).startswith(str(r.source)) else f"{r.source}: {r.error}"
+            print(f"refused{where}: {said}")
         flagged = flagged_joints(trends)
         print(f"{len(trends)} trend test(s), {len(flagged)} joint(s) flagged"
               + "".join(f"\nflagged: {r.robot} {r.joint}: {r.flagged}" for r in flagged.itertuples(index=False)))

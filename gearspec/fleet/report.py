@@ -12,6 +12,8 @@ from .trend import DAY, MIN_DATES, flagged_joints
 
 __all__ = ["write_fleet_report", "plot_fleet_overview", "plot_flagged_joint", "RULE"]
 
+#: the multiple-testing corrections, as the report names them
+CORRECTIONS = {"holm": "Holm's step-down method", "bonferroni": "Bonferroni's method", "none": "no correction"}
 #: the flagging rule, as the report states it
 RULE = ("Per robot, joint, direction and parameter with at least {min_dates} dates: a weighted least-squares line "
         "of the parameter against the date (weights 1/se^2, se: the fit's standard error), its slope's standard "
@@ -145,7 +147,7 @@ def write_fleet_report(df: pd.DataFrame, trends: pd.DataFrame, out, command: str
     if len(bad):
         md += ["## Refused", "", markdown_table(bad[["source", "joint", "error"]]), ""]
     md += ["## Rule", "", RULE.format(min_dates=MIN_DATES, tests=trends.attrs.get("tests", len(trends)),
-                                      correction=trends.attrs.get("correction", "holm"),
+                                      correction=CORRECTIONS[trends.attrs.get("correction", "holm")],
                                       alpha=trends.attrs.get("alpha", 0.01)), ""]
     joints = flagged_joints(trends)
     md += ["## Flagged joints", ""]
