@@ -44,9 +44,9 @@ def _date_axis(ax) -> None:
     """Dates on the x axis: a few ticks, written concisely (no overlapping labels)."""
     import matplotlib.dates as mdates
 
-    loc = mdates.AutoDateLocator(minticks=3, maxticks=5)
-    ax.xaxis.set_major_locator(loc)
-    ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(loc))
+    ax.xaxis.set_major_locator(mdates.AutoDateLocator(minticks=2, maxticks=4))
+    ax.xaxis.set_major_formatter(mdates.DateFormatter("%Y-%m-%d"))
+    ax.tick_params(axis="x", labelrotation=20, labelsize=8)
 
 
 def _well_determined(df: pd.DataFrame, p: str) -> bool:
