@@ -118,7 +118,7 @@ def test_fleet_twin_flags_exactly_the_two_changed_joints(fleet, tmp_path):
 
 
 def test_fleet_report_shows_the_rule_and_the_flagged_joints(fleet, tmp_path):
-    from gearspec.fleet.report import write_fleet_report
+    from gearspec.cli.batch import write_fleet_report
 
     path = write_fleet_report(fleet["table"], trend_tests(fleet["table"]), tmp_path)
     text = path.read_text()
