@@ -209,3 +209,15 @@ def test_bad_alpha_is_one_sentence():
 
     with pytest.raises(InputError, match="alpha"):
         trend_tests(_series(1, 4, np.random.default_rng(0)), alpha=2)
+
+
+@pytest.mark.slow
+def test_two_robot_fleet_flags_the_changes_on_either_robot_and_nothing_else(tmp_path):
+    # 2 robots x 3 joints x 8 dates (48 recordings, about a minute on 2 cores): the Coulomb rise on
+    # robot1 joint1, the ripple growth on robot2 joint3; the same joints elsewhere did not change
+    tw = fleet_twin(tmp_path / "bags", robots=2, joints=3, dates=8, coulomb_joint=("robot1", "joint1"),
+                    ripple_joint=("robot2", "joint3"), seed=5)
+    df = batch(tw["bags"], FLEET_GEAR, workers=2, progress=False)
+    assert (df["status"] == "ok").all() and len(df) == 96
+    joints = flagged_joints(trend_tests(df))
+    assert set(zip(joints["robot"], joints["joint"])) == {("robot1", "joint1"), ("robot2", "joint3")}
