@@ -21,7 +21,7 @@ __all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs", "analy
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
 COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo", "export",
-            "compensate")
+            "compensate", "batch")
 #: longest message printed for a refusal (a message listing thousands of names helps nobody)
 MAX_MESSAGE = 600
 

@@ -1,0 +1,287 @@
+"""Many recordings and joints at once: one task per (source, joint), run serially or on Dask.
+
+The per-task code (:func:`analyse_one`) is plain numpy and is the same function whether it runs in
+this process (``workers=1``), on a :class:`distributed.LocalCluster` of processes started and closed
+here, or on an existing Dask scheduler.  It does what ``gearspec fit`` does on that file alone, with
+its defaults (load, ``--lag`` none, the segments of the default segment options, the joint fit with
+the published procedure and the simpler laws beside it), plus the spectrum's strongest lines and,
+when asked, the closed-loop diagnosis.  A failing task returns an error row with its sentence; it
+never stops the batch.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+import warnings
+from pathlib import Path
+from typing import Iterable
+
+import pandas as pd
+
+from ..errors import GearspecWarning, InputError
+
+__all__ = ["batch", "analyse_one", "tasks", "N_LINES", "BASE_COLUMNS"]
+
+#: strongest spectral lines kept per (source, joint, direction)
+N_LINES = 3
+#: the columns every row has, in this order (the law's parameters and the lines follow)
+BASE_COLUMNS = ("source", "robot", "joint", "direction", "status", "error", "warnings", "start_time", "law",
+                "rmse", "rmse_holdout")
+#: the segment options of ``gearspec fit`` and their defaults (window in s or "auto")
+SEGMENT_DEFAULTS = {"window": "auto", "rel_tol": 0.15, "min_speed": None, "min_duration": None, "quasi_static": None}
+#: how long a Dask scheduler may take to answer
+CONNECT_TIMEOUT = "20s"
+#: a line counts among the strongest only when its false-alarm probability is below this
+LINE_FAP = 0.01
+
+
+def tasks(recordings: Iterable, joint: str | None = "all",
+          topic: str = "/joint_states") -> list[tuple[str, str | None]]:
+    """The ``(source, joint)`` pairs of a batch: a ROS bag gives one per joint of ``topic`` when
+    ``joint`` is "all" (a bag that cannot be listed gives one task, which then fails with its
+    sentence), else the named joint; any other file one task with joint None."""
+    from ..recording.bags import bag_joints, is_bag
+    from ..recording.load import _expand
+
+    out: list[tuple[str, str | None]] = []
+    for path in recordings:
+        try:
+            files = _expand([path])
+        except InputError:
+            out.append((str(path), None))   # e.g. no such file: the task says so
+            continue
+        for f in files:
+            if not is_bag(f):
+                out.append((str(f), None))
+                continue
+            if joint not in (None, "all"):
+                out.append((str(f), joint))
+                continue
+            try:
+                names = bag_joints(f, topic)
+            except InputError:
+                names = [None]
+            out += [(str(f), j) for j in names]
+    return out
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+def analyse_one(source: str, joint: str | None, gear=None, law: str = "silo4", diagnose: bool = False,
+                load_options: dict | None = None) -> dict:
+    """Analyse one (source, joint) as ``gearspec fit`` (and ``spectrum``, ``diagnose``) would.
+
+    Returns ``{"rows": [...], "fit": dict | None}``: one row per direction (dicts of
+    :data:`BASE_COLUMNS`; ``warnings``: the findings the analysis warned of, each once, joined by "; ";
+    the law's parameters and standard errors in SI as in the fit's JSON, the
+    strongest lines), or one error row; ``fit``: the ``gearspec fit --json`` form.  Never raises for
+    a bad input: an :class:`InputError` becomes the row's ``error``, any other exception
+    ``"internal error: ..."``.
+    """
+    base = {"source": str(source), "robot": Path(source).parent.name or ".", "joint": joint, "direction": None,
+            "status": "error", "error": None, "start_time": None, "law": law}
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", GearspecWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)   # numerical noise of runs that succeed, as in the CLI
+            out = _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base)
+        said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught
+                                  if issubclass(w.category, GearspecWarning)))
+        for row in out["rows"]:
+            row["warnings"] = "; ".join(said) or None
+        return out
+    except InputError as exc:
+        return {"rows": [{**base, "error": _one_line(exc)}], "fit": None}
+    except Exception as exc:  # not the user's fault: said as such, with the exception's type
+        tb = traceback.extract_tb(exc.__traceback__)
+        where = f" at {Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else ""
+        return {"rows": [{**base, "error": f"internal error: {type(exc).__name__}: {_one_line(exc)}{where}"}],
+                "fit": None}
+
+
+def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
+    from ..identify import identify_recording
+    from ..jsonsafe import plain
+    from ..lag import lag_option
+    from ..recording import load_recording
+    from ..segment import find_segments
+    from ..spectrum import analyze
+
+    # the segment options with `gearspec fit`'s defaults
+    seg_opts = {**SEGMENT_DEFAULTS, **{k: opts.pop(k) for k in SEGMENT_DEFAULTS if k in opts}}
+    quasi_static = seg_opts.pop("quasi_static")
+    lag = opts.pop("lag", None)
+    rec = load_recording([source], gear, joint=joint, **opts)
+    rec = lag_option(rec, lag, say=lambda s: None, **seg_opts)
+    seg = find_segments(rec, **seg_opts, quasi_static=quasi_static)
+    result = identify_recording(rec, law, segmentation=seg)
+    fit = plain(result.to_dict())
+    fit.update({k: rec.meta[k] for k in ("lag", "lag_se") if k in rec.meta})
+    lines = _strongest_lines(analyze(rec, segmentation=seg, progress=False))
+    extra = _diagnosis(rec, seg, law) if diagnose else {}
+    base = {**base, "status": "ok", "start_time": rec.meta.get("start_time"), "rmse": fit.get("rmse"),
+            "rmse_holdout": fit.get("rmse_holdout"), **extra}
+    rows = []
+    for dname, params in fit["directions"].items():
+        rows.append({**base, "direction": dname, **_parameters(params), **lines.get(dname, {})})
+    return {"rows": rows, "fit": fit}
+
+
+def _parameters(params: dict) -> dict:
+    """A direction's parameters as flat columns: the law's (``tau_c``, ``tau_c_se``, ...) and each
+    line's ``<label> amplitude`` / ``decay`` / ``phase`` with ``_se`` (the names of the model table)."""
+    out = {k: v for k, v in params.items() if k != "harmonics" and (v is None or isinstance(v, (int, float)))}
+    for i, h in enumerate(params.get("harmonics") or []):
+        lab = h.get("label") or f"harmonic {i + 1}"
+        for key in ("amplitude", "decay", "phase"):
+            out[f"{lab} {key}"] = h.get(key)
+            out[f"{lab} {key}_se"] = h.get(key + "_se")
+    return out
+
+
+def _strongest_lines(spec) -> dict:
+    """Per direction, the :data:`N_LINES` lines of largest median amplitude over the direction's
+    segments (peaks with false-alarm probability below :data:`LINE_FAP`; grouped by label, or by
+    frequency for unlabelled ones): ``line1_frequency`` (cycles per unit), ``line1_amplitude`` (Nm or
+    N), ``line1_label``, ..."""
+    t = spec.peaks_table()
+    out: dict = {}
+    if t.empty:
+        return out
+    t = t[t["fap"] <= LINE_FAP].copy()
+    t["key"] = [lab if isinstance(lab, str) and lab else f"{f:.6g}" for lab, f in zip(t["label"], t["frequency"])]
+    for d, name in ((1, "positive"), (-1, "negative")):
+        g = t[t["direction"] == d].groupby("key").agg(frequency=("frequency", "median"),
+                                                      amplitude=("amplitude", "median"),
+                                                      label=("label", "first"))
+        g = g.sort_values("amplitude", ascending=False).head(N_LINES)
+        row = {}
+        for i, (_, r) in enumerate(g.iterrows(), 1):
+            row.update({f"line{i}_frequency": float(r["frequency"]), f"line{i}_amplitude": float(r["amplitude"]),
+                        f"line{i}_label": r["label"] if isinstance(r["label"], str) else None})
+        out[name] = row
+    return out
+
+
+def _diagnosis(rec, seg, law: str) -> dict:
+    """The closed loop with ``gearspec diagnose``'s defaults: the effects it accepted, named."""
+    from ..diagnose import DiagnoseData
+    from ..diagnose import diagnose as run
+
+    diag = run(DiagnoseData.from_recording(rec, seg, by="segment", inertia=True), None, law=law)
+    names = [e.name for e in diag.accepted]
+    return {"n_effects": len(names), "effects": "; ".join(names)}
+
+
+def _frame(results: list[dict]) -> pd.DataFrame:
+    rows = [r for res in results for r in res["rows"]]
+    df = pd.DataFrame(rows)
+    for c in BASE_COLUMNS:
+        if c not in df:
+            df[c] = None
+    rest = [c for c in df.columns if c not in BASE_COLUMNS]
+    df = df[list(BASE_COLUMNS) + rest]
+    df["start_time"] = pd.to_numeric(df["start_time"], errors="coerce")
+    for c in df.columns:  # text columns as plain objects, the same whichever rows hold text
+        if c in ("source", "robot", "joint", "direction", "status", "error", "warnings", "law", "effects") \
+                or c.endswith("_label"):
+            df[c] = pd.Series(df[c].tolist(), dtype=object, index=df.index)
+    for c in ("rmse", "rmse_holdout"):
+        df[c] = pd.to_numeric(df[c], errors="coerce")
+    return df.reset_index(drop=True)
+
+
+def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, workers: int | None = None,
+          scheduler: str | None = None, joint: str | None = "all", progress: bool = True,
+          fits: dict | None = None, **load_options) -> pd.DataFrame:
+    """Spectrum + fit (+ diagnosis) of every (recording, joint), one row per (source, joint, direction).
+
+    Parameters
+    ----------
+    recordings : iterable of path
+        Files, ROS bags or folders (as :func:`gearspec.recording.load_recording` reads them).
+    gear : GearTrain, preset name or TOML path, optional
+        The gear spec of every recording.
+    law : str
+        The friction law fitted (as ``gearspec fit --law``).
+    diagnose : bool
+        Also run the closed loop (``gearspec diagnose``'s defaults); columns ``n_effects``, ``effects``.
+    workers : int, optional
+        1: a plain loop in this process (no Dask).  N > 1: a local Dask cluster of N single-threaded
+        processes, started and closed here.  Default: one process per CPU (at most the tasks).
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``); ``workers`` is then ignored.
+    joint : str
+        "all" (default): every joint of each bag; a name: that joint.  Files other than bags have one.
+    progress : bool
+        A progress bar on stderr (tqdm) as tasks finish.
+    fits : dict, optional
+        Filled with each task's ``gearspec fit --json`` form, keyed by ``(source, joint)``.
+    **load_options
+        Recording and segment options (``map``, ``scale``, ``fs``, ``topic``, ``window``, ...).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`BASE_COLUMNS` (``start_time`` in s since 1970 when the recording has it,
+        ``rmse`` and ``rmse_holdout`` in Nm or N), the law's parameters with ``_se`` in SI, each line's
+        amplitude/decay/phase with ``_se``, ``line1_frequency`` ... (cycles per unit, Nm or N).  Rows
+        in task order whatever ran them.  A failing input has one row, ``status`` "error" and its
+        sentence in ``error``.
+    """
+    if workers is not None and (int(workers) != workers or workers < 1):
+        raise InputError(f"workers must be a positive integer, got {workers!r}")
+    todo = tasks(recordings, joint, load_options.get("topic", "/joint_states"))
+    if not todo:
+        raise InputError("no recording given to the batch")
+    args = [(src, j, gear, law, diagnose, load_options) for src, j in todo]
+    n = len(todo)
+    if scheduler is None and (workers == 1 or n == 1):
+        it = (analyse_one(*a) for a in args)
+        results = list(_bar(it, n, progress))
+    else:
+        results = _on_dask(args, workers, scheduler, progress)
+    if fits is not None:
+        fits.update({(src, j): r["fit"] for (src, j), r in zip(todo, results) if r["fit"] is not None})
+    return _frame(results)
+
+
+def _bar(it, total: int, enabled: bool):
+    if not enabled:
+        return it
+    from tqdm import tqdm
+
+    return tqdm(it, total=total, desc="recordings", unit="task", file=sys.stderr)
+
+
+def _on_dask(args: list, workers: int | None, scheduler: str | None, progress: bool) -> list[dict]:
+    """Run :func:`analyse_one` over ``args`` on a Dask cluster; results in the order of ``args``."""
+    import logging
+    import os
+
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        n = min(len(args), workers or os.cpu_count() or 1)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    try:
+        try:
+            client = Client(cluster if cluster is not None else scheduler, timeout=CONNECT_TIMEOUT)
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_one_line(exc)})") from None
+        with client:
+            futures = [client.submit(analyse_one, *a, pure=False) for a in args]
+            index = {f.key: i for i, f in enumerate(futures)}
+            results: list = [None] * len(args)
+            for fut, res in _bar(as_completed(futures, with_results=True), len(args), progress):
+                results[index[fut.key]] = res
+            return results
+    finally:
+        if cluster is not None:
+            cluster.close()
