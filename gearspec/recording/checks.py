@@ -219,6 +219,10 @@ def _check_velocity_column(rec: Recording, src: str) -> None:
     k = float(np.median(v[moving] / d[moving]))
     if k > 0 and abs(math.log(k)) < math.log(VELOCITY_TOLERANCE):
         return
+    if not (math.isfinite(k) and k != 0):
+        # the column is 0 where the position moves (stick-slip: an encoder's steps while the true
+        # velocity rests): not a unit, nothing to suggest
+        return
     unit = rec.unit + "/s"
     factors = dict(_VELOCITY_FACTORS)
     if rec.gear is not None and rec.gear.stages and rec.gear.total_ratio > 1:

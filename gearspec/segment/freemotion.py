@@ -24,7 +24,7 @@ from .kinematics import _filter_params, derivatives
 from .plateaus import _position_noise
 from .segmentation import Segment, Segmentation
 
-__all__ = ["free_motion", "FREE_BAND", "FREE_SHARE", "FREE_MIN_PLATEAU", "MOTIONS"]
+__all__ = ["free_motion", "FREE_BAND", "FREE_SHARE", "CHAIN_SPEED_STEP", "MOTIONS"]
 
 #: relative width of the speed band of a block (bins of constant width in log speed above the
 #: noise floor, of constant width in speed near it: see :func:`_speed_bins`)
@@ -35,9 +35,11 @@ FREE_FLOOR = 0.01
 #: them): a plateau experiment's ramps between plateaus are left out as before, a recording of
 #: moves, ramps or chirps is used whole
 FREE_SHARE = 0.5
-#: plateaus shorter than this (s) count as free motion in the share of ``motion="auto"``: a plateau
-#: experiment holds each speed for seconds, a slow ramp is found as a chain of short "plateaus"
-FREE_MIN_PLATEAU = 1.0
+#: consecutive plateaus of one run and direction whose speeds differ by less than this (relative) and
+#: that are closer than their own length are a *chain*: a slow ramp found as a row of short
+#: "plateaus" (a plateau experiment's speeds differ by tens of percent, or are held in runs of their
+#: own); in ``motion="auto"`` a chain's rows count as free motion in the share
+CHAIN_SPEED_STEP = 0.25
 #: what a segmentation may use: ``auto`` (plateaus and sweeps, plus free motion where it is a
 #: large part of the recording), ``plateaus`` (plateaus and sweeps only), ``free`` (every moving
 #: row as free motion, plateaus included)
@@ -76,8 +78,8 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
     ``motion`` (:data:`MOTIONS`): ``"plateaus"`` returns ``seg`` unchanged (as does a ``seg`` that
     already holds free blocks); ``"free"`` replaces
     its plateaus by free blocks (sweeps taken at rest are kept); ``"auto"`` adds the free blocks
-    when they (with plateaus shorter than :data:`FREE_MIN_PLATEAU`) hold at least :data:`FREE_SHARE`
-    of the moving rows, else returns ``seg``.
+    when they (with plateaus chained along a slow ramp, :data:`CHAIN_SPEED_STEP`) hold at least
+    :data:`FREE_SHARE` of the moving rows, else returns ``seg``.
     ``band``: relative speed band of a block; ``min_speed`` (unit/s): standstill below (default ten
     times the derivative's speed noise); ``velocity``: per-row speed to cut by (default the
     Savitzky-Golay derivative of :func:`~gearspec.segment.derivatives`).  Rows whose derivative
@@ -101,11 +103,8 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
     n_free = sum(s.n for s in blocks)
     settings = {**seg.settings, "motion": motion, "free_band": band, "free_rows": n_free}
     if motion == "auto":
-        # plateaus shorter than FREE_MIN_PLATEAU are pieces of a slow ramp or the tops of moves:
-        # they count as free motion in the share (they stay plateaus)
-        n_short = sum(s.n for s in keep
-                      if s.kind == "plateau" and rec.t[s.stop - 1] - rec.t[s.start] < FREE_MIN_PLATEAU)
-        share = (n_free + n_short) / max(n_free + moving_plateau, 1)
+        # plateaus chained along a slow ramp count as free motion in the share (they stay plateaus)
+        share = (n_free + _chained_rows(keep)) / max(n_free + moving_plateau, 1)
         settings["free_share"] = share
         if share < FREE_SHARE:
             return Segmentation(list(seg.segments), Counter(seg.excluded), seg.n_rows, settings)
@@ -119,6 +118,17 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
     out = Segmentation(sorted(keep + blocks, key=lambda s: s.start), +excluded, seg.n_rows, settings)
     out.check_ledger()
     return out
+
+
+def _chained_rows(segments) -> int:
+    """Rows of the plateaus of ``segments`` that belong to a chain (:data:`CHAIN_SPEED_STEP`)."""
+    pl = sorted((s for s in segments if s.kind == "plateau"), key=lambda s: s.start)
+    chained = set()
+    for i, (a, b) in enumerate(zip(pl, pl[1:])):
+        near = a.run == b.run and a.direction == b.direction and b.start - a.stop < min(a.n, b.n)
+        if near and abs(b.speed - a.speed) < CHAIN_SPEED_STEP * max(a.speed, b.speed):
+            chained.update((i, i + 1))
+    return sum(pl[i].n for i in chained)
 
 
 def _blocks(rec: Recording, vel: np.ndarray, taken: np.ndarray, band: float, min_speed, unit0: int):
