@@ -278,16 +278,22 @@ class FrictionModel:
         """
         if v is None:
             raise InputError("the model needs the velocity v")
-        v = np.atleast_1d(np.asarray(v, dtype=float))
+        v = np.asarray(v, dtype=float)
+        if v.ndim == 0:
+            v = v.reshape(1)
         shape = v.shape
-        theta, load, temperature, t, acc = (None if x is None else _shaped(np.asarray(x, dtype=float), shape)
-                                            for x in (theta, load, temperature, t, acc))
-        run = None if run is None else _shaped(np.asarray(run), shape)
+        theta, load = (None if x is None else _shaped(np.asarray(x, dtype=float), shape) for x in (theta, load))
         if self.law_spec.needs_load and load is None:
             raise InputError(f"law {self.law} needs the output load torque ('load' channel), which the data does not have")
-        flat = lambda x: None if x is None else x.reshape(-1)  # noqa: E731
-        out = self._compiled()(flat(theta), v.reshape(-1), flat(load)).reshape(shape)
+        if v.ndim == 1:
+            out = self._compiled()(theta, v, load)
+        else:
+            flat = lambda x: None if x is None else x.reshape(-1)  # noqa: E731
+            out = self._compiled()(flat(theta), v.reshape(-1), flat(load)).reshape(shape)
         if self.terms:
+            temperature, t, acc = (None if x is None else _shaped(np.asarray(x, dtype=float), shape)
+                                   for x in (temperature, t, acc))
+            run = None if run is None else _shaped(np.asarray(run), shape)
             sign = np.sign(v)
             inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
             for term in self.terms:

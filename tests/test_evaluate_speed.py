@@ -274,3 +274,120 @@ def test_evaluate_matches_the_per_line_algorithm_on_many_points(name):
     m = dict(CASES)[name]()
     x = inputs(m, 3000, seed=2)
     assert _close(m.evaluate(**x), _reference(m, **x)) <= 1.0
+
+
+def _silo4_fitted():
+    """The SILO4 joint fit of gearspec 0.4.1 (lines with speed ranges, const and exp laws; negative
+    Stribeck part not identified)."""
+    import json
+    from pathlib import Path
+
+    d = json.loads((Path(__file__).parent / "data" / "models_0.4.1.json").read_text())
+    return FrictionModel.from_dict(d["models"]["silo4 joint fit, harmonics with speed_range"]["model"])
+
+
+@pytest.mark.parametrize("make", [_silo4_fitted, lambda: law_model("silo4", seed=11)], ids=["fitted", "silo4"])
+def test_long_inputs_in_blocks_and_short_ones_both_ways(make):
+    # 100003 samples: several blocks, each moving both ways, with runs of one direction in between
+    # (the block fast path); then every short length up to 40 (both directions at once)
+    m = make()
+    x = inputs(m, 100_000, seed=4)
+    x["v"][20_000:50_000] = np.abs(x["v"][20_000:50_000])
+    x["v"][60_000:65_000] = -np.abs(x["v"][60_000:65_000])
+    assert _close(m.evaluate(**x), _reference(m, **x)) <= 1.0
+    for n in range(1, 41):
+        y = {k: a[:n] for k, a in inputs(m, n, seed=n).items()}
+        assert _close(m.evaluate(**y), _reference(m, **y)) <= 1.0, n
+
+
+def test_scalars_and_arrays_of_any_shape_as_before():
+    m = law_model("silo4", seed=2)
+    assert m.evaluate(0.3, -2.0).shape == (1,)
+    assert m.evaluate(0.3, -2.0)[0] == _reference(m, 0.3, -2.0)[0]
+    th, v = np.linspace(0, 9, 12).reshape(3, 4), np.linspace(-5, 6, 12).reshape(3, 4)
+    got = m.evaluate(th, v)
+    assert got.shape == (3, 4) and _close(got.ravel(), _reference(m, th.ravel(), v.ravel())) <= 1.0
+    # infinite and NaN velocities give what they gave (NaN: no direction, 0; inf: the laws' limits)
+    v = np.array([np.inf, -np.inf, np.nan, 0.0, 3.0])
+    with np.errstate(invalid="ignore"):
+        np.testing.assert_array_equal(m.evaluate(np.ones(5), v), _reference(m, np.ones(5), v))
+
+
+def _write_paths():
+    """Every way the engines change a model after it was evaluated (``git grep`` of gearspec 0.5):
+    ``Direction.set``, a harmonic's attributes, a speed range changed in place, the list of
+    harmonics, ``model.law``, a direction replaced, ``not_identified``."""
+    def set_(m):
+        m.params("positive").set("tau_c", 0.5, 0.01)
+
+    def attr(m):
+        m.harmonics("negative")[0].decay = 0.3
+
+    def law_attr(m):
+        m.harmonics("positive")[0].law = "power"
+
+    def in_place(m):
+        m.harmonics("positive")[2].speed_range[1] = 5.0
+
+    def append(m):
+        m.harmonics("negative").append(Harmonic(0.9, 0.04, 0.01, 0.2))
+
+    def clear(m):
+        m.params("positive").harmonics = []
+
+    def law(m):
+        m.law = "coulomb_viscous"
+
+    def replace(m):
+        m.directions["negative"] = m.directions["positive"]
+
+    def value_dict(m):
+        m.params("negative").values["viscous"] = 0.01
+
+    return [set_, attr, law_attr, in_place, append, clear, law, replace, value_dict]
+
+
+@pytest.mark.parametrize("change", _write_paths(), ids=lambda f: f.__name__)
+def test_a_model_changed_after_evaluation_evaluates_its_new_values(change):
+    m = law_model("silo4", seed=5)
+    x = inputs(m, 500, seed=6)
+    before = m.evaluate(**x)
+    change(m)
+    fresh = FrictionModel.from_dict(m.to_dict())        # a new model: nothing cached
+    after = m.evaluate(**x)
+    np.testing.assert_array_equal(after, fresh.evaluate(**x))
+    assert np.max(np.abs(after - before)) > 1e-4          # the change shows (torques ~0.1 Nm)
+
+
+def test_the_compiled_form_is_reused_until_a_value_changes_and_not_pickled():
+    import pickle
+
+    m = law_model("silo4", seed=5)
+    m.evaluate(0.1, 1.0)
+    c = m._compiled()
+    m.evaluate(0.2, -1.0)
+    assert m._compiled() is c
+    m.params("positive").se["tau_c"] = 1.0               # a standard error: not part of evaluation
+    assert m._compiled() is c
+    m.params("positive").set("tau_c", 0.2)
+    assert m._compiled() is not c
+    assert "_compiled_cache" not in pickle.loads(pickle.dumps(m)).__dict__
+
+
+def test_errors_name_what_is_missing_as_before():
+    m = law_model("silo4", seed=7, degraded=True)
+    m.params("negative").set("tau_c", None)
+    m.not_identified["negative.tau_c"] = "no negative plateaus"
+    assert np.isfinite(m.evaluate(0.0, [1.0, 2.0])).all()     # the positive direction only: fine
+    with pytest.raises(InputError, match="no negative-direction value for tau_c .not identified: no negative plateaus"):
+        m.evaluate(0.0, [1.0, -2.0])
+    with pytest.raises(InputError, match="position-locked harmonics and needs theta"):
+        law_model("silo4").evaluate(None, [1.0])
+    assert law_model("silo4").evaluate(None, [0.0])[0] == 0.0    # at rest no line is evaluated
+    with pytest.raises(InputError, match="load coefficient .SILO4 eq. 14. needs the 'load' channel"):
+        FrictionModel("coulomb_viscous", {"tau_c": 0.1, "viscous": 0.0, "harmonics": [
+            {"frequency": 1.0, "amplitude": 0.01, "load_coefficient": 1e-3}]}).evaluate(0.0, [1.0])
+    bad = FrictionModel("coulomb_viscous", {"tau_c": 0.1, "viscous": 0.0, "harmonics": [
+        {"frequency": 1.0, "amplitude": 0.01, "law": "cubic"}]})
+    with pytest.raises(InputError, match="unknown amplitude law 'cubic'"):
+        bad.evaluate(0.0, [1.0])
