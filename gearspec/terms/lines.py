@@ -154,14 +154,14 @@ class CompiledFriction:
         n = len(v)
         if n <= self.block:
             return self._block(theta, v, load, None)
-        out = np.empty(n)
+        out = np.zeros(n)         # 0 where v is 0 or NaN
         for i in range(0, n, self.block):
             j = min(n, i + self.block)
             self._block(None if theta is None else theta[i:j], v[i:j], None if load is None else load[i:j], out[i:j])
         return out
 
     def _block(self, theta, v, load, out):
-        """One block into ``out`` (None: a new array)."""
+        """One block into ``out`` (zeros; None: a new array)."""
         n = len(v)
         first = True
         for d, c in self.directions:
@@ -178,10 +178,7 @@ class CompiledFriction:
             if first:
                 if self.stacked is not None and out is None and n <= _SMALL and self.stacked.can(theta, load):
                     return self.stacked(theta, v, load)
-                if out is None:
-                    out = np.zeros(n)
-                else:
-                    out[...] = 0.0
+                out = np.zeros(n) if out is None else out
                 first = False
             if cnt:
                 idx = np.flatnonzero(sel)
