@@ -275,6 +275,10 @@ class FrictionModel:
         No extrapolation: a harmonic with a ``speed_range`` ``[min, max]`` is evaluated with ``|v|``
         held within it (below ``min``, e.g. at standstill, and above ``max`` the amplitude is the
         law's value at that edge); a harmonic without one is not clamped.
+
+        Speed: the base law and harmonics of both directions are compiled into parameter arrays
+        once and kept until a parameter changes (:meth:`_compiled`); samples are evaluated in
+        blocks, each direction on its own samples (``benchmarks/bench_evaluate.py``).
         """
         if v is None:
             raise InputError("the model needs the velocity v")
