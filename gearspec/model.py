@@ -280,20 +280,38 @@ class FrictionModel:
         once and kept until a parameter changes (:meth:`_compiled`); samples are evaluated in
         blocks, each direction on its own samples (``benchmarks/bench_evaluate.py``).
         """
+        return self._evaluate(self._compiled(), theta, v, load, temperature, t, acc, run)
+
+    def evaluator(self):
+        """:meth:`evaluate` with the parameters as they are now, for a loop that calls it thousands of
+        times with the same model (a simulation): ``f(theta, v, load=..., ...)`` computes what
+        ``evaluate`` does without checking, at each call, whether a parameter has changed; a change
+        made to the model afterwards is not seen by ``f`` (take a new one)."""
+        compiled = self._compiled()
+
+        def f(theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None):
+            return self._evaluate(compiled, theta, v, load, temperature, t, acc, run)
+
+        return f
+
+    def _evaluate(self, compiled, theta, v, load, temperature, t, acc, run) -> np.ndarray:
         if v is None:
             raise InputError("the model needs the velocity v")
         v = np.asarray(v, dtype=float)
         if v.ndim == 0:
             v = v.reshape(1)
         shape = v.shape
-        theta, load = (None if x is None else _shaped(np.asarray(x, dtype=float), shape) for x in (theta, load))
-        if self.law_spec.needs_load and load is None:
+        if theta is not None:
+            theta = _shaped(np.asarray(theta, dtype=float), shape)
+        if load is not None:
+            load = _shaped(np.asarray(load, dtype=float), shape)
+        elif LAWS[self.law].needs_load:
             raise InputError(f"law {self.law} needs the output load torque ('load' channel), which the data does not have")
         if v.ndim == 1:
-            out = self._compiled()(theta, v, load)
+            out = compiled(theta, v, load)
         else:
             flat = lambda x: None if x is None else x.reshape(-1)  # noqa: E731
-            out = self._compiled()(flat(theta), v.reshape(-1), flat(load)).reshape(shape)
+            out = compiled(flat(theta), v.reshape(-1), flat(load)).reshape(shape)
         if self.terms:
             temperature, t, acc = (None if x is None else _shaped(np.asarray(x, dtype=float), shape)
                                    for x in (temperature, t, acc))

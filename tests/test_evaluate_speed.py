@@ -391,3 +391,14 @@ def test_errors_name_what_is_missing_as_before():
         {"frequency": 1.0, "amplitude": 0.01, "law": "cubic"}]})
     with pytest.raises(InputError, match="unknown amplitude law 'cubic'"):
         bad.evaluate(0.0, [1.0])
+
+
+def test_an_evaluator_computes_what_evaluate_does_with_the_parameters_it_was_taken_with():
+    m = law_model("silo4", seed=8).with_terms({"kind": "temperature", "coefficient": 1e-3, "reference": 20.0})
+    x = inputs(m, 300, seed=9)
+    f = m.evaluator()
+    before = m.evaluate(**x)
+    np.testing.assert_array_equal(f(**x), before)
+    m.params("positive").set("tau_c", 0.9)
+    assert np.max(np.abs(m.evaluate(**x) - before)) > 0.5      # the model sees its change
+    np.testing.assert_array_equal(f(**x), before)                # the evaluator, as documented, does not

@@ -24,8 +24,9 @@ class _LoopFriction:
 
     def __init__(self, model: FrictionModel):
         self.model = model
-        self.pointwise = model.copy()
-        self.pointwise.terms = [t for t in model.terms if not TERMS[t["kind"]].signed and t["kind"] not in _HISTORY]
+        pointwise = model.copy()
+        pointwise.terms = [t for t in model.terms if not TERMS[t["kind"]].signed and t["kind"] not in _HISTORY]
+        self.pointwise = pointwise.evaluator()    # a private copy, never changed: compiled once
         self.signed = [t for t in model.terms if TERMS[t["kind"]].signed and t["kind"] != "inertia"]
         self.history = [t for t in model.terms if t["kind"] in _HISTORY]
         self.extra_inertia = float(sum(t["inertia"] for t in model.terms if t["kind"] == "inertia"))
@@ -38,7 +39,7 @@ class _LoopFriction:
         the last reversal (NaN: none yet) and the last nonzero direction of motion; ``prev_theta``:
         the position one step before (the turning point if the motion reverses now; default
         theta, as in the twin, where a reversing motor always stops for a step first)."""
-        f = self.pointwise.evaluate(theta, v, **kw)
+        f = self.pointwise(theta, v, **kw)
         if self.history:
             s = np.sign(v)
             now_rev = (s != 0) & (last_sign != 0) & (s != last_sign)
