@@ -19,8 +19,9 @@ class _LoopFriction:
     """A truth model split for step-by-step use in a closed loop: pointwise friction (base law,
     harmonics, magnitude terms: the model without its other terms, evaluated), signed terms
     (cogging, offset) as external torques, inertia terms added to the rotor inertia, and history
-    terms (hysteresis, backlash) evaluated on two-sample sequences ``[turning point, now]`` per run, the turning point kept as
-    state -- the same numbers as evaluating the whole trajectory at once."""
+    terms (hysteresis, backlash) evaluated on two-sample sequences ``[turning point, now]`` per
+    run, the turning point kept as state -- the same numbers as evaluating the whole trajectory at
+    once."""
 
     def __init__(self, model: FrictionModel):
         self.model = model
