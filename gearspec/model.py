@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import operator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ import pandas as pd
 from .errors import InputError
 from .jsonsafe import finite_or_none, plain
 from .terms import BASE_LAWS, TERMS, BaseLaw, evaluate_term
+from .terms.lines import CompiledDirection, CompiledFriction
 
 __all__ = ["FrictionModel", "Direction", "Harmonic", "LAWS", "Law", "RPM", "DIRECTIONS"]
 
@@ -273,45 +275,101 @@ class FrictionModel:
         No extrapolation: a harmonic with a ``speed_range`` ``[min, max]`` is evaluated with ``|v|``
         held within it (below ``min``, e.g. at standstill, and above ``max`` the amplitude is the
         law's value at that edge); a harmonic without one is not clamped.
+
+        Speed: the base law and harmonics of both directions are compiled into parameter arrays
+        once and kept until a parameter changes (:meth:`_compiled`); samples are evaluated in
+        blocks, each direction on its own samples (``benchmarks/bench_evaluate.py``).
         """
+        return self._evaluate(self._compiled(), theta, v, load, temperature, t, acc, run)
+
+    def evaluator(self):
+        """:meth:`evaluate` with the parameters as they are now, for a loop that calls it thousands of
+        times with the same model (a simulation): ``f(theta, v, load=..., ...)`` computes what
+        ``evaluate`` does without checking, at each call, whether a parameter has changed; a change
+        made to the model afterwards is not seen by ``f`` (take a new one)."""
+        compiled = self._compiled()
+
+        def f(theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None):
+            return self._evaluate(compiled, theta, v, load, temperature, t, acc, run)
+
+        return f
+
+    def _evaluate(self, compiled, theta, v, load, temperature, t, acc, run) -> np.ndarray:
         if v is None:
             raise InputError("the model needs the velocity v")
-        v = np.atleast_1d(np.asarray(v, dtype=float))
+        v = np.asarray(v, dtype=float)
+        if v.ndim == 0:
+            v = v.reshape(1)
         shape = v.shape
-        bc = lambda x: None if x is None else np.broadcast_to(np.asarray(x, dtype=float), shape)  # noqa: E731
-        theta, load, temperature, t, acc = map(bc, (theta, load, temperature, t, acc))
-        run = None if run is None else np.broadcast_to(np.asarray(run), shape)
-        law = self.law_spec
-        if law.needs_load and load is None:
+        if theta is not None:
+            theta = _shaped(np.asarray(theta, dtype=float), shape)
+        if load is not None:
+            load = _shaped(np.asarray(load, dtype=float), shape)
+        elif LAWS[self.law].needs_load:
             raise InputError(f"law {self.law} needs the output load torque ('load' channel), which the data does not have")
-        out = np.zeros(shape)
-        speed = np.abs(v)
-        sign = np.sign(v)
-        for d, name in ((1.0, "positive"), (-1.0, "negative")):
-            sel = sign == d
-            if not sel.any():
-                continue
-            p = self.directions[name]
-            missing = [k for k in law.params if p.values[k] is None and k not in law.optional]
-            if missing:
-                raise InputError(f"the model has no {name}-direction value for {', '.join(missing)} "
-                                 f"(not identified: {self.not_identified.get(name + '.' + missing[0], 'no data')}); "
-                                 f"it cannot predict motion in that direction")
-            ld = None if load is None else load[sel]
-            mag = np.asarray(law.magnitude(speed[sel], ld, *[p.values[k] for k in law.params]), dtype=float)
-            mag = np.broadcast_to(mag, (int(sel.sum()),)).copy()
-            for h in p.harmonics:
-                if h.amplitude is None:
-                    continue
-                if theta is None:
-                    raise InputError("the model has position-locked harmonics and needs theta")
-                mag += evaluate_term(h.term(), theta=theta[sel], v=v[sel], load=ld)[0]
-            out[sel] = d * mag
-        inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
-        for term in self.terms:
-            contrib, signed = evaluate_term(term, **inputs)
-            out += contrib if signed else sign * contrib
+        if v.ndim == 1:
+            out = compiled(theta, v, load)
+        else:
+            flat = lambda x: None if x is None else x.reshape(-1)  # noqa: E731
+            out = compiled(flat(theta), v.reshape(-1), flat(load)).reshape(shape)
+        if self.terms:
+            temperature, t, acc = (None if x is None else _shaped(np.asarray(x, dtype=float), shape)
+                                   for x in (temperature, t, acc))
+            run = None if run is None else _shaped(np.asarray(run), shape)
+            sign = np.sign(v)
+            inputs = dict(theta=theta, v=v, load=load, temperature=temperature, t=t, acc=acc, run=run)
+            for term in self.terms:
+                contrib, signed = evaluate_term(term, **inputs)
+                out += contrib if signed else sign * contrib
         return out
+
+    def _compiled(self) -> CompiledFriction:
+        """The base law and harmonics of both directions as parameter arrays
+        (:class:`~gearspec.terms.lines.CompiledFriction`), kept on the model and rebuilt when a value
+        they are made of has changed.  Engines write parameters through ``Direction.set`` but also
+        through a harmonic's attributes, ``p.harmonics.append`` or ``model.law``; so the cache is keyed
+        on the values themselves (one tuple built and compared, a few microseconds), whoever wrote them."""
+        key = self._compiled_key()
+        cached = self.__dict__.get("_compiled_cache")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        law = self.law_spec
+        dirs = []
+        for name in DIRECTIONS:
+            p = self.directions[name]
+            missing = [k for k in law.params if p.values.get(k) is None and k not in law.optional]
+            error = None if not missing else (
+                f"the model has no {name}-direction value for {', '.join(missing)} "
+                f"(not identified: {self.not_identified.get(name + '.' + missing[0], 'no data')}); "
+                f"it cannot predict motion in that direction")
+            lines = [{"frequency": h.frequency, "amplitude": h.amplitude, "decay": h.decay, "phase": h.phase,
+                      "law": h.law, "load_coefficient": h.load_coefficient, "speed_range": h.speed_range}
+                     for h in p.harmonics if h.amplitude is not None]
+            dirs.append(CompiledDirection(law, [p.values.get(k) for k in law.params], lines, error))
+        compiled = CompiledFriction(*dirs)
+        # kept with copies of the speed-range lists, so that one changed in place no longer compares equal
+        snapshot = list(key)
+        for i in (3, 5):        # the harmonics of each direction (see _compiled_key)
+            snapshot[i] = tuple(h[:6] + (copy.copy(h[6]),) for h in key[i])
+        self._compiled_cache = (tuple(snapshot), compiled)
+        return compiled
+
+    def _compiled_key(self) -> tuple:
+        """Every value :meth:`_compiled` reads: law, not_identified, then per direction the parameter
+        values and each harmonic's values (its speed range the list itself)."""
+        params = self.law_spec.params
+        key = [self.law, tuple(self.not_identified.items())]
+        for name in DIRECTIONS:
+            p = self.directions[name]
+            key.append(tuple(map(p.values.get, params)))
+            key.append(tuple(map(_LINE_KEY, p.harmonics)))
+        return tuple(key)
+
+    def __getstate__(self) -> dict:
+        """Pickled (e.g. sent to a Dask worker) without the compiled cache, rebuilt on first use."""
+        state = dict(self.__dict__)
+        state.pop("_compiled_cache", None)
+        return state
 
     def friction(self, theta=None, v=None, **inputs) -> np.ndarray:
         """Friction alone: :meth:`evaluate` without the signed terms (inertia, offset)."""
@@ -450,6 +508,15 @@ class FrictionModel:
         from .export import export
 
         return export(self, format, out, **options)
+
+#: what a harmonic contributes to the key of a model's compiled evaluation
+_LINE_KEY = operator.attrgetter("frequency", "amplitude", "decay", "phase", "law", "load_coefficient", "speed_range")
+
+
+def _shaped(x: np.ndarray, shape: tuple) -> np.ndarray:
+    """``x`` broadcast to ``shape`` (itself when it has that shape)."""
+    return x if x.shape == shape else np.broadcast_to(x, shape)
+
 
 def _speed_range(r) -> list:
     """``[min, max]`` of a harmonic's speed range, checked (InputError otherwise)."""

@@ -17,7 +17,8 @@ import numpy as np
 
 from ..errors import InputError
 from .registry import LiveView
-from .shapes import amplitude_law, clamp_speed, load_amplitude, sinusoid, stribeck_shape
+from .lines import Lines
+from .shapes import sinusoid, stribeck_shape
 
 __all__ = ["TERMS", "TermKind", "register_term", "evaluate_term", "term_names", "TERM_LINEAR"]
 
@@ -90,16 +91,11 @@ def evaluate_term(term: dict, **inputs) -> tuple[np.ndarray, bool]:
 def _periodic(term, *, theta, v, load=None, **_):
     """``(A + k load^2) g(|v|) sin(2 pi f theta + phi)``: SILO4 eqs. 6, 8 and 14, ``g`` the amplitude
     law ``law`` (exp by default).  With ``speed_range`` ``[min, max]`` (the speeds the law was
-    fitted on) ``g`` is held at the range's edges: never extrapolated (older models lack it)."""
-    speed = clamp_speed(np.abs(np.asarray(v, dtype=float)), term.get("speed_range"))
-    amp = term["amplitude"]
-    k = term.get("load_coefficient", 0.0)
-    if k:
-        if load is None:
-            raise InputError("a periodic term with a load coefficient (SILO4 eq. 14) needs the 'load' channel")
-        amp = load_amplitude(load, amp, k)
-    g = amplitude_law(term.get("law", "exp"), speed, term.get("decay", 0.0))
-    return amp * g * sinusoid(theta, term["frequency"], term.get("phase", 0.0))
+    fitted on) ``g`` is held at the range's edges: never extrapolated (older models lack it).
+    Evaluated as one :class:`.lines.Lines`, as the model evaluates its harmonics."""
+    theta, v = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(v, dtype=float))
+    flat = None if load is None else np.broadcast_to(np.asarray(load, dtype=float), v.shape).reshape(-1)
+    return Lines([term])(theta.reshape(-1), np.abs(v).reshape(-1), flat)[0].reshape(v.shape)
 
 
 # ---------------------------------------------------------------------- speed laws

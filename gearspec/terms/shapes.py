@@ -49,7 +49,8 @@ def amplitude_law(law: str, speed, decay):
     ``exp(-b |v|)`` (SILO4 eq. 8), ``"const"`` 1 (eq. 6), ``"rational"`` ``1 / (1 + (b |v|)^2)`` or
     ``"power"`` ``(1 + |v|)^(-b)``; ``decay`` b in s/rad (s/m), dimensionless for ``power``."""
     if law == "exp":
-        return np.exp(-decay * speed)
+        x = np.multiply(-decay, speed)
+        return np.exp(x, out=x) if isinstance(x, np.ndarray) else np.exp(x)
     if law == "const":
         return np.ones_like(speed)
     if law == "rational":
@@ -65,13 +66,22 @@ def clamp_speed(speed, speed_range):
     if not speed_range:
         return speed
     lo, hi = speed_range
-    return np.clip(speed, -np.inf if lo is None else float(lo), np.inf if hi is None else float(hi))
+    # np.minimum(np.maximum()) is np.clip (NaN kept), without its per-call overhead on short arrays
+    out = speed if lo is None or float(lo) == -np.inf else np.maximum(speed, float(lo))
+    return out if hi is None or float(hi) == np.inf else np.minimum(out, float(hi))
 
 
 def sinusoid(theta, frequency, phase=0.0):
     """``sin(2 pi f theta + phi)`` (SILO4 eqs. 6, 8): ``frequency`` in cycles per unit of theta,
     ``phase`` in rad."""
-    return np.sin(_TWO_PI * frequency * np.asarray(theta, dtype=float) + phase)
+    x = np.multiply(_TWO_PI * frequency, np.asarray(theta, dtype=float))     # a new array: worked in place
+    if not isinstance(x, np.ndarray):
+        return np.sin(x + phase)
+    try:
+        np.add(x, phase, out=x)
+    except ValueError:          # phase of a larger shape than theta and frequency
+        x = x + phase
+    return np.sin(x, out=x)
 
 
 def load_amplitude(load, amplitude0, load_coefficient):
