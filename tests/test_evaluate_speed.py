@@ -16,23 +16,8 @@ import pytest
 from gearspec.errors import InputError
 from gearspec.model import LAWS, FrictionModel, Harmonic
 from gearspec.terms import TERMS, AMPLITUDE_LAWS, evaluate_term
+from term_examples import example_term
 
-#: parameters of the size a fit gives, for every term kind (a kind missing here gets 0.5 for each)
-TERM_EXAMPLES = {
-    "periodic": {"frequency": 0.37, "amplitude": 0.02, "decay": 0.01, "phase": 0.4, "law": "rational",
-                 "speed_range": [0.5, 40.0]},
-    "viscous_power": {"coefficient": 0.001, "exponent": 1.5},
-    "stribeck_extra": {"amplitude": 0.05, "v_s": 0.7, "shape": "gauss"},
-    "load_coulomb": {"mu": 0.01},
-    "load_viscous": {"gamma": 0.0004},
-    "temperature": {"coefficient": -0.002, "reference": 30.0},
-    "drift": {"coefficient": 1e-4, "reference": 10.0},
-    "inertia": {"inertia": 0.003},
-    "offset": {"offset": -0.01},
-    "hysteresis": {"scale": 0.02, "length": 0.5},
-    "cogging": {"frequency": 7 / (2 * math.pi), "amplitude": 0.004, "phase": 0.3},
-    "backlash": {"scale": 0.01, "gap": 0.2},
-}
 
 
 def _lines(rng, with_load):
@@ -71,7 +56,7 @@ def law_model(law, seed=0, degraded=False):
 def term_model(kind):
     """A direction-dependent Coulomb + viscous base with the term for both directions and once more
     for the negative one only."""
-    t = {"kind": kind, **TERM_EXAMPLES.get(kind, {p: 0.5 for p in TERMS[kind].params})}
+    t = example_term(kind)
     return law_model("coulomb_viscous", seed=3).with_terms(t, {**t, "direction": -1})
 
 

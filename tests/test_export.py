@@ -22,6 +22,7 @@ from gearspec.export.c import C_LAWS, C_TERMS
 from gearspec.export.table import locked_parts, position_locked
 from gearspec.model import LAWS, FrictionModel
 from gearspec.terms import TERMS, evaluate_term
+from term_examples import example_term
 
 CC = shutil.which("cc")
 needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this machine to build the exported C")
@@ -30,27 +31,10 @@ needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this mac
 #: state cannot compute them, so every format but json must refuse them (the known answer)
 STATEFUL = {"hysteresis", "backlash", "drift"}
 
-#: an example of every term kind (parameters of the size a fit gives); a kind missing here gets 0.5 for
-#: each parameter
-EXAMPLES = {
-    "periodic": {"frequency": 0.37, "amplitude": 0.02, "decay": 0.01, "phase": 0.4, "law": "rational",
-                 "speed_range": [0.5, 40.0]},
-    "viscous_power": {"coefficient": 0.001, "exponent": 1.5},
-    "stribeck_extra": {"amplitude": 0.05, "v_s": 0.7, "shape": "gauss"},
-    "load_coulomb": {"mu": 0.01},
-    "load_viscous": {"gamma": 0.0004},
-    "temperature": {"coefficient": -0.002, "reference": 30.0},
-    "drift": {"coefficient": 1e-4, "reference": 10.0},
-    "inertia": {"inertia": 0.003},
-    "offset": {"offset": -0.01},
-    "hysteresis": {"scale": 0.02, "length": 0.5},
-    "cogging": {"frequency": 7 / (2 * math.pi), "amplitude": 0.004, "phase": 0.3},
-    "backlash": {"scale": 0.01, "gap": 0.2},
-}
 
 
 def _term(kind, **kw):
-    t = {"kind": kind, **EXAMPLES.get(kind, {p: 0.5 for p in TERMS[kind].params})}
+    t = example_term(kind)
     return {**t, **kw}
 
 
