@@ -21,7 +21,7 @@ __all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs", "analy
 
 #: command modules of this package, in the order ``gearspec --help`` lists them
 COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo", "export",
-            "compensate", "batch")
+            "compensate", "batch", "formats")
 #: longest message printed for a refusal (a message listing thousands of names helps nobody)
 MAX_MESSAGE = 600
 
@@ -147,7 +147,7 @@ def analysis_parser(sub, name: str, run, **kwargs) -> argparse.ArgumentParser:
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
     """RECORDING... --gear and the column options of CONTRACTS.md section 1."""
-    g = p.add_argument_group("recording (CONTRACTS.md section 1)")
+    g = p.add_argument_group("recording (columns and units: `gearspec formats recording`)")
     g.add_argument("recordings", nargs="+", metavar="RECORDING",
                    help="recording files (.csv, .parquet, .mat, .npz), ROS bags (.bag, .mcap, .db3, rosbag2 folder) "
                         "or folders; one experiment (run) per file")
@@ -296,6 +296,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(sub)
+    from .examples import attach
+
+    attach(p)
     return p
 
 
