@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from readme_numbers import check
 
 import gearspec.datasets as ds
 import gearspec.diagnose as dg
@@ -53,6 +54,12 @@ def _loop_from_the_asymmetric_model_judged_on_the_cross_test(emps_out):
     cross_final = q["gearspec final model: relative error, cross-test DATA_EMPS_PULSES (%)"]
     assert est_final < est_base                 # the loop's terms explain the estimation set better ...
     assert cross_final < cross_base             # ... and carry over to the cross-test
+    q1 = dict(zip(*(pd.read_csv(out / "table1_idim_ls.csv")[c] for c in ("quantity", "gearspec"))))
+    idim = [q1[f"IDIM-LS {k}"] for k in ("symmetric: relative error, estimation set DATA_EMPS (%)",
+                                          "asymmetric: relative error, estimation set DATA_EMPS (%)",
+                                          "symmetric: relative error, cross-test DATA_EMPS_PULSES (%)")]
+    check("emps-repro", "symmetric {:.4f} %, asymmetric {:.4f} %, cross-test {:.4f} %".format(*idim),
+          f"set {est_base:.3f} % -> {est_final:.3f} %, cross-test {cross_base:.3f} % -> {cross_final:.3f} %")
     d = json.loads((out / "loop" / "diagnose.json").read_text())
     kept = [e for e in d["effects"] if e["accepted"]]
     assert kept and all(e["validation"]["confirmed"] for e in kept)
