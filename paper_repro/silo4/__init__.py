@@ -611,7 +611,9 @@ def _figure_texts(v) -> list[str]:
            "the true speed is the twin's.", ""]
     pl = v["data"].plateaus()
     md += ["### Fig. 4: average friction against motor speed (Stribeck curve)", "", "![fig4](fig4_stribeck.png)", "",
-           f"Plateau averages of all {len(pl)} segments with Table 2's eq. 3, the joint fit and the published "
+           f"Plateau averages of the {int((pl['speed'] / RPM <= 1000 * 1.02).sum())} segments up to 1000 rpm "
+           f"(of {len(pl)}; the faster ones are in Figs. 5-7 and 9: above 1000 rpm the viscous term hides the "
+           "Stribeck curve) with Table 2's eq. 3, the joint fit and the published "
            "procedure (with eq. 4 on every plateau below 100 rpm, and on those <= 20 rpm only). The curve has the "
            "shape of the paper's Fig. 4: a minimum near 40 rpm, static friction above Coulomb, viscous slope above "
            "100 rpm. The published procedure's Stribeck part is visibly too slow (audit: the published Stribeck step).", ""]
@@ -641,7 +643,10 @@ def _figure_texts(v) -> list[str]:
            "decrease with speed and the asymmetry are reproduced; the 25 % is not, because Table 2 cannot produce it. "
            "(F2 is fitted only where a plateau covers a full worm-shaft turn, 88 motor rad: from 100 rpm up.)", ""]
     md += ["### Fig. 9: model against data at 280 / 560 / 3000 rpm", "", "![fig9](fig9_model_vs_data.png)", "",
-           "Twin data (grey) with the joint fit and Table 2 over two worm-shaft turns. As in the paper, the model "
+           "Twin data (grey) with the joint fit and Table 2 over two worm-shaft turns of the repetition of median "
+           "level. The twin's friction varies by 1 % between repetitions (the paper's bench: < 3 %), so the "
+           "repetition shown sits off the fit's level by its share of that scatter, said in each panel's title "
+           "(1 % of 48 mNm at 3000 rpm is 0.5 mNm). As in the paper, the model "
            "follows the F2 and F3 ripple; what is left is noise and the loop's encoder-rate ripple (not locked to "
            "position).", ""]
     return md

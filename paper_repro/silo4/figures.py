@@ -215,7 +215,10 @@ def fig9_model_vs_data(data, models: dict, targets_rpm, path, cycles: float = 2.
             for (label, m), ls in zip(models.items(), styles):
                 ax.plot(xq, 1e3 * d * m.evaluate(**sub.inputs()), ls, color=color if ls == "-" else "k", lw=1.1,
                         label=label)
-            ax.set_title(f"{'abc'[row]}) {r} rpm, {name}", fontsize=9, loc="left")
+            first = next(iter(models.values()))
+            off = 1e3 * np.mean(d * (sub.y - first.evaluate(**sub.inputs())))
+            ax.set_title(f"{'abc'[row]}) {r} rpm, {name}: this repetition {off:+.2f} mNm from the "
+                         f"{next(iter(models))}", fontsize=9, loc="left")
             ax.set_ylabel("friction (mNm)")
             ax.legend(fontsize=6, loc="upper right")
         axes[row, 0].set_xlabel("joint travel (rad)")
