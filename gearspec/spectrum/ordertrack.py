@@ -211,10 +211,10 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
     grid = np.linspace(lo, hi, SPEED_GRID)
     cell = (hi - lo) / (SPEED_GRID - 1)
     edges = np.concatenate([grid - cell / 2, [hi + cell / 2]])
-    counts = np.histogram(group.speed, bins=edges)[0]
+    cells = _grid_cells(group.speed, edges)
+    counts = np.bincount(cells, minlength=SPEED_GRID)
     # travel of the samples near each grid speed (within half a knot span): speed x the median step
-    dt = float(np.median(np.diff(m.t))) if len(m.t) > 1 else 0.0
-    travel = np.histogram(group.speed, bins=edges, weights=group.speed * dt)[0]
+    travel = np.bincount(cells, weights=group.speed, minlength=SPEED_GRID) * m.median_step
     half = max(int(round(0.5 * (SPEED_GRID - 1) / (knots + 1))), 0)
     near = np.convolve(travel, np.ones(2 * half + 1), mode="same")
     tracks = []
@@ -236,6 +236,20 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
                                  counts.copy(), (lo, hi), n_use, len(m) - n_use, sigma, float(level), int(knots),
                                  j_fit, j_se, how, notes))
     return tracks
+
+
+def _grid_cells(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """The cell ``i`` with ``edges[i] <= x < edges[i + 1]`` of every ``x`` within ``[edges[0],
+    edges[-1])`` (equal cells; as ``np.histogram(x, edges)`` counts them): the arithmetic guess
+    corrected by one cell where rounding put it on the wrong side of an edge, without a sort."""
+    n_cells = len(edges) - 1
+    i = np.subtract(x, edges[0])
+    i *= n_cells / (edges[-1] - edges[0])
+    cells = i.astype(np.intp)
+    np.clip(cells, 0, n_cells - 1, out=cells)
+    cells -= edges[cells] > x
+    cells += edges[cells + 1] <= x
+    return cells
 
 
 def _inertia_choice(inertia, gear) -> tuple[float | None, str]:
