@@ -442,11 +442,9 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
     # pi x the window's mean sample spacing x the frequency: the interpolation's response
     # sinc^2 divided out (single precision: a correction factor, good to 1e-6)
     pi_f = (np.pi * f_k).astype(np.float32)
-    blk = np.empty((min(_WINDOW_BATCH, len(first)), window))
     for j in range(0, len(first), _WINDOW_BATCH):
         sel = first[j:j + _WINDOW_BATCH]
-        b = blk[:len(sel)]
-        np.take(rows, sel, axis=0, out=b)
+        b = rows[sel]  # a copy of the windows (they overlap in the grid)
         coef = b @ line
         if freq is None:
             b *= hann

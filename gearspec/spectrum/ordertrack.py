@@ -321,22 +321,25 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
     entry of ``X'X`` is a combination of the moments ``sum u^s g_k g_l`` (s = 0..6; g = 1, sin, cos)
     and ``X'y`` of ``sum u^s g_k y`` (s = 0..3), accumulated in double precision, then combined with
     the spans' polynomials.  The samples are taken in chunks, each sorted by knot span (time order
-    kept within a span); per span two matrix products, ``u^s [1; g_k g_l]'`` and ``[u^s y; u^s acc]
-    [1; g_k]'`` over all lines at once, give the moments (the powers of u and the gathers shared by
-    the lines)."""
+    kept within a span); per span two matrix products, ``u^s [1; g_k; g_k g_l]'`` and ``[u^s y; u^s
+    acc] [1; g_k]'`` over all lines at once, give the moments (the powers of u and the gathers shared
+    by the lines; ``cos^2 = 1 - sin^2``, so its moments are those of 1 less those of sin^2)."""
     nb = len(tk) - _DEGREE - 1
     q = 3 * nb + fit_j
     polys = _span_polynomials(tk)
     n_f = len(freqs)
-    moms = [{jj: [np.zeros((7, 6)), np.zeros((4, 3)), np.zeros((4, 3)), 0.0, 0.0] for jj in polys} for _ in freqs]
+    n_trig = 1 + 2 * n_f  # G rows: 1, the sines and cosines of every line, then per line s^2, s c
+    n_w = 4 + 4 * fit_j
+    acc_p = {jj: np.zeros((7, 1 + 4 * n_f)) for jj in polys}
+    acc_q = {jj: np.zeros((n_w, n_trig)) for jj in polys}
+    acc_j = {jj: np.zeros(2) for jj in polys}  # sum acc^2, sum acc y
     idx = np.flatnonzero(use)
     yy = 0.0
-    two_pi = np.float32(2 * np.pi)
     # the span of a speed x within [tk[0], tk[-1]] (searchsorted(tk, x, "right") - 1, the top speed
     # in the last span): _DEGREE + the number of interior knots at or below x
     interior = tk[_DEGREE + 1:len(tk) - _DEGREE - 1]
-    # G rows: 1, the sines and cosines of every line, then per line s^2, s c, c^2
-    n_trig = 1 + 2 * n_f
+    U = np.empty((7, min(_CHUNK, len(idx))))
+    W = np.empty((n_w, U.shape[1]))
     for i in range(0, len(idx), _CHUNK):
         # the chunk's samples span by span (time order kept within a span: a stable radix sort)
         x = m.speed[idx[i:i + _CHUNK]]
@@ -348,64 +351,64 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
         n = len(r)
         cuts = np.searchsorted(span, np.arange(len(tk) + 1))
         # the speeds lie within [tk[0], tk[-1]]: the knots span the speeds of these samples
-        U = np.empty((7, n))
-        U[0] = 1.0
-        np.take(m.speed, r, out=U[1])
+        u = U[:, :n]
+        u[0] = 1.0
+        np.take(x, perm, out=u[1])
         for jj in polys:  # u, the coordinate in the sample's span
             a, e = cuts[jj], cuts[jj + 1]
-            U[1, a:e] -= tk[jj]
-            U[1, a:e] /= tk[jj + 1] - tk[jj]
+            u[1, a:e] -= tk[jj]
+            u[1, a:e] /= tk[jj + 1] - tk[jj]
         for k in range(2, 7):
-            np.multiply(U[k - 1], U[1], out=U[k])
+            np.multiply(u[k - 1], u[1], out=u[k])
         y = m.y[r]
         yy += float(y @ y)
-        W = np.empty((4 + 4 * fit_j, n))  # u^s y, u^s acc (s = 0..3)
-        np.multiply(U[:4], y, out=W[:4])
+        w = W[:, :n]  # u^s y, u^s acc (s = 0..3)
+        np.multiply(u[:4], y, out=w[:4])
         if fit_j:
             acc = m.acc[r]
-            np.multiply(U[:4], acc, out=W[4:])
-        G = _trig_rows(m.theta[r], freqs, two_pi)
+            np.multiply(u[:4], acc, out=w[4:])
+        G = _trig_rows(m.theta[r], freqs)
         for jj in polys:
             a, e = cuts[jj], cuts[jj + 1]
             if e == a:
                 continue
-            P = U[:, a:e] @ G[:, a:e].T
-            Q = W[:, a:e] @ G[:n_trig, a:e].T
-            for li in range(n_f):
-                M, Y, Ya = moms[li][jj][:3]
-                cols = [0, 1 + 2 * li, 2 + 2 * li]
-                M[:, :3] += P[:, cols]
-                M[:, 3:] += P[:, n_trig + 3 * li:n_trig + 3 * li + 3]
-                Y += Q[:4, cols]
-                if fit_j:
-                    Ya += Q[4:, cols]
+            acc_p[jj] += u[:, a:e] @ G[:, a:e].T
+            acc_q[jj] += w[:, a:e] @ G[:n_trig, a:e].T
             if fit_j:
-                aa, ay = float(acc[a:e] @ acc[a:e]), float(acc[a:e] @ y[a:e])
-                for li in range(n_f):
-                    moms[li][jj][3] += aa
-                    moms[li][jj][4] += ay
-    return [_assemble(mom, polys, nb, q, fit_j) + (yy,) for mom in moms]
+                acc_j[jj] += (float(acc[a:e] @ acc[a:e]), float(acc[a:e] @ y[a:e]))
+    out = []
+    for li in range(n_f):
+        cols = [0, 1 + 2 * li, 2 + 2 * li]
+        mom = {}
+        for jj in polys:
+            P, Q = acc_p[jj], acc_q[jj]
+            M = np.empty((7, 6))
+            M[:, :3] = P[:, cols]
+            M[:, 3:5] = P[:, n_trig + 2 * li:n_trig + 2 * li + 2]
+            M[:, 5] = M[:, 0] - M[:, 3]  # cos^2 = 1 - sin^2
+            mom[jj] = [M, Q[:4, cols], Q[4:, cols] if fit_j else None, acc_j[jj][0], acc_j[jj][1]]
+        out.append(_assemble(mom, polys, nb, q, fit_j) + (yy,))
+    return out
 
 
-def _trig_rows(theta: np.ndarray, freqs, two_pi) -> np.ndarray:
-    """Rows 1, then ``sin, cos`` of ``2 pi f theta`` of every line, then ``s^2, s c, c^2`` of every
-    line (the phase reduced to one cycle in double precision, then sine and cosine in single)."""
+def _trig_rows(theta: np.ndarray, freqs) -> np.ndarray:
+    """Rows 1, then ``sin, cos`` of ``2 pi f theta`` of every line, then ``s^2, s c`` of every line
+    (the phase reduced to one cycle in double precision, then sine and cosine in single)."""
     n_f, n = len(freqs), len(theta)
     sq = 1 + 2 * n_f
-    G = np.empty((1 + 5 * n_f, n))
+    G = np.empty((1 + 4 * n_f, n))
     G[0] = 1.0
     ph64 = np.empty(n)
+    ph = np.empty(n, np.float32)
     for li, f in enumerate(freqs):
         np.multiply(theta, f, out=ph64)
         ph64 -= np.floor(ph64)  # the phase in cycles (exactly np.mod(., 1.0))
-        ph = ph64.astype(np.float32)
-        ph *= two_pi
+        np.multiply(ph64, 2 * np.pi, out=ph, casting="same_kind")
         s, c = G[1 + 2 * li], G[2 + 2 * li]
         s[:] = np.sin(ph)
         c[:] = np.cos(ph)
-        np.multiply(s, s, out=G[sq + 3 * li])  # products of singles: exact in double
-        np.multiply(s, c, out=G[sq + 3 * li + 1])
-        np.multiply(c, c, out=G[sq + 3 * li + 2])
+        np.multiply(s, s, out=G[sq + 2 * li])  # products of singles: exact in double
+        np.multiply(s, c, out=G[sq + 2 * li + 1])
     return G
 
 
