@@ -127,7 +127,28 @@ def _default_min_speed(v: np.ndarray) -> float:
     a = np.abs(v)
     if not np.isfinite(a).all():
         a = a[np.isfinite(a)]
-    return MIN_SPEED_FRACTION * float(np.percentile(a, 99, overwrite_input=True)) if len(a) else 0.0
+    return MIN_SPEED_FRACTION * _percentile_99(a) if len(a) else 0.0
+
+
+def _percentile_99(a: np.ndarray) -> float:
+    """``np.percentile(a, 99)`` (linear interpolation between the two order statistics around rank
+    ``0.99 (n - 1)``), without partitioning all of ``a`` (overwritten): the values at or above the
+    99th percentile of every 64th value hold both order statistics unless that guess is too high
+    (checked by counting; then all of ``a`` is partitioned)."""
+    n = len(a)
+    if n < 1 << 16:
+        return float(np.percentile(a, 99, overwrite_input=True))
+    pos = 0.99 * (n - 1)
+    lo = int(math.floor(pos))
+    guess = np.percentile(a[::64], 98.0)
+    top = a[a >= guess]
+    below = n - len(top)  # values under the guess: the ranks of top start there
+    if below > lo:
+        return float(np.percentile(a, 99, overwrite_input=True))
+    k = (lo - below, min(lo + 1, n - 1) - below)
+    top.partition(k)
+    x0, x1 = float(top[k[0]]), float(top[k[1]])
+    return x0 + (x1 - x0) * (pos - lo)
 
 
 def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bool) -> Motion:
@@ -141,30 +162,33 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
     if inertia and acc is not None:
         ok_acc = np.isfinite(acc)
         moving &= ok_acc
-    idx_parts, bounds, n = [], [], 0
+    # the pieces: runs of moving samples within each stretch of the recording, at least MIN_PIECE
+    # long; the samples kept selected by a mask (a compress is cheaper than an index of every sample)
+    bounds, n = [], 0
+    n_moving = int(np.count_nonzero(moving))
     for _, a, b in rec.pieces():
         m = moving[a:b]
-        edges = np.flatnonzero(np.diff(np.concatenate(([False], m, [False])).astype(np.int8)))
+        edges = np.flatnonzero(np.diff(m.view(np.int8), prepend=0, append=0))
         for s, e in zip(edges[0::2], edges[1::2]):
             if e - s >= MIN_PIECE:
-                idx_parts.append(np.arange(a + s, a + e))
                 bounds.append((n, n + e - s))
                 n += e - s
-    idx = np.concatenate(idx_parts) if idx_parts else np.zeros(0, int)
-    n_moving = int(np.count_nonzero(moving))
+            else:
+                moving[a + s:a + e] = False  # moving is this function's own array
+    keep = moving  # the stretches of rec.pieces() tile the recording: their pieces in order
     excluded = {"other direction or slower than min_speed": len(rec) - n_moving,
-                f"pieces shorter than {MIN_PIECE} samples": n_moving - len(idx)}
-    tau = rec.tau[idx]
+                f"pieces shorter than {MIN_PIECE} samples": n_moving - n}
+    tau = rec.tau[keep]
     if inertia and acc is not None:
-        tau -= inertia * acc[idx]
+        tau -= inertia * acc[keep]
     if d < 0:
         np.negative(tau, out=tau)
-    speed = v[idx]
+    speed = v[keep]
     np.abs(speed, out=speed)
-    theta = rec.theta[idx]
+    theta = rec.theta[keep]
     nyq = _block_nyquist(theta, bounds)
-    return Motion(d, rec.unit, rec.t[idx], theta, speed, tau,
-                  None if (acc is None or not need_acc) else acc[idx], nyq, bounds, float(min_speed),
+    return Motion(d, rec.unit, rec.t[keep], theta, speed, tau,
+                  None if (acc is None or not need_acc) else acc[keep], nyq, bounds, float(min_speed),
                   inertia if inertia else None, source, excluded)
 
 
