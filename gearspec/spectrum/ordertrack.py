@@ -240,15 +240,17 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
 
 def _grid_cells(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """The cell ``i`` with ``edges[i] <= x < edges[i + 1]`` of every ``x`` within ``[edges[0],
-    edges[-1])`` (equal cells; as ``np.histogram(x, edges)`` counts them): the arithmetic guess
-    corrected by one cell where rounding put it on the wrong side of an edge, without a sort."""
+    edges[-1])`` (equal cells; as ``np.histogram(x, edges)`` counts them): the arithmetic guess,
+    and a search among the edges for the few values whose guess lies within 1e-9 of a cell's
+    border, where rounding may have put it on the wrong side (no sort of all values)."""
     n_cells = len(edges) - 1
-    i = np.subtract(x, edges[0])
-    i *= n_cells / (edges[-1] - edges[0])
-    cells = i.astype(np.intp)
+    pos = np.subtract(x, edges[0])
+    pos *= n_cells / (edges[-1] - edges[0])
+    cells = pos.astype(np.intp)
+    pos -= cells  # the fraction of the cell
+    near = np.flatnonzero((pos < 1e-9) | (pos > 1 - 1e-9))
+    cells[near] = np.searchsorted(edges, x[near], side="right") - 1
     np.clip(cells, 0, n_cells - 1, out=cells)
-    cells -= edges[cells] > x
-    cells += edges[cells + 1] <= x
     return cells
 
 
