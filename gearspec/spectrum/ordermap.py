@@ -483,9 +483,9 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
         np.square(resp, out=resp)
         np.maximum(resp, 0.1, out=resp)
         np.square(resp, out=resp)
-        Xv = X.view(np.float64).reshape(len(sel), len(f_k), 2)
         p = power[j:j + _WINDOW_BATCH]
-        np.einsum("wkc,wkc->wk", Xv, Xv, out=p)
+        np.square(X.real, out=p)
+        p += np.square(X.imag)
         p /= resp
     return speeds, nyqs, counts, power
 
