@@ -211,10 +211,15 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
     grid = np.linspace(lo, hi, SPEED_GRID)
     cell = (hi - lo) / (SPEED_GRID - 1)
     edges = np.concatenate([grid - cell / 2, [hi + cell / 2]])
-    cells = _grid_cells(group.speed, edges)
-    counts = np.bincount(cells, minlength=SPEED_GRID)
-    # travel of the samples near each grid speed (within half a knot span): speed x the median step
-    travel = np.bincount(cells, weights=group.speed, minlength=SPEED_GRID) * m.median_step
+    # samples per grid cell, and travel of the samples near each grid speed (within half a knot
+    # span): speed x the median step; a million samples at a time (memory)
+    counts, travel = np.zeros(SPEED_GRID, np.int64), np.zeros(SPEED_GRID)
+    for i in range(0, group.n, 1 << 20):
+        sp = group.speed[i:i + (1 << 20)]
+        cells = _grid_cells(sp, edges)
+        counts += np.bincount(cells, minlength=SPEED_GRID)
+        travel += np.bincount(cells, weights=sp, minlength=SPEED_GRID)
+    travel *= m.median_step
     half = max(int(round(0.5 * (SPEED_GRID - 1) / (knots + 1))), 0)
     near = np.convolve(travel, np.ones(2 * half + 1), mode="same")
     tracks = []
@@ -335,21 +340,20 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
     acc_p = {jj: np.zeros((7, 1 + 4 * n_f)) for jj in polys}
     acc_q = {jj: np.zeros((n_w, n_trig)) for jj in polys}
     acc_j = {jj: np.zeros(2) for jj in polys}  # sum acc^2, sum acc y
-    idx = np.flatnonzero(use)
     yy = 0.0
     # the span of a speed x within [tk[0], tk[-1]] (searchsorted(tk, x, "right") - 1, the top speed
     # in the last span): _DEGREE + the number of interior knots at or below x
     interior = tk[_DEGREE + 1:len(tk) - _DEGREE - 1]
-    U = np.empty((7, min(_CHUNK, len(idx))))
-    W = np.empty((n_w, U.shape[1]))
-    for i in range(0, len(idx), _CHUNK):
+    U = np.empty((7, _CHUNK))
+    W = np.empty((n_w, _CHUNK))
+    for chunk in _chunks(use):
         # the chunk's samples span by span (time order kept within a span: a stable radix sort)
-        x = m.speed[idx[i:i + _CHUNK]]
+        x = m.speed[chunk]
         span = np.full(len(x), _DEGREE, np.uint8)
         for t in interior:
             span += x >= t
         perm = np.argsort(span, kind="stable")
-        r, span = idx[i:i + _CHUNK][perm], span[perm]
+        r, span = chunk[perm], span[perm]
         n = len(r)
         cuts = np.searchsorted(span, np.arange(len(tk) + 1))
         # the speeds lie within [tk[0], tk[-1]]: the knots span the speeds of these samples
@@ -391,6 +395,21 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
             mom[jj] = [M, Q[:4, cols], Q[4:, cols] if fit_j else None, acc_j[jj][0], acc_j[jj][1]]
         out.append(_assemble(mom, polys, nb, q, fit_j) + (yy,))
     return out
+
+
+def _chunks(use: np.ndarray):
+    """The indices of the ``True`` samples of ``use``, at most ``_CHUNK`` at a time, in order, without
+    an index of them all (memory: one chunk)."""
+    block = _CHUNK // 4
+    counts = np.add.reduceat(use.view(np.int8), np.arange(0, len(use), block)) if len(use) else []
+    a = held = 0
+    for k, c in enumerate(counts):
+        if held + c > _CHUNK:
+            yield np.flatnonzero(use[a:k * block]) + a
+            a, held = k * block, 0
+        held += int(c)
+    if held:
+        yield np.flatnonzero(use[a:]) + a
 
 
 def _trig_rows(theta: np.ndarray, freqs) -> np.ndarray:
