@@ -523,3 +523,22 @@ def test_map_windows_detrended_in_the_transform_are_the_windows_detrended_first(
         # the interpolation's response in single precision: 1e-7 relative per cell (1e-6 allowed);
         # the rest is double-precision rounding, 1e-12 of the largest power
         assert np.allclose(got, ref, rtol=1e-6, atol=1e-12 * ref.max())
+
+
+def test_track_samples_taken_chunk_by_chunk_are_all_the_measured_samples_once():
+    # the chunks of a mask (dense, sparse, empty at the start, one sample at the end) hold its True
+    # samples in order, each exactly once, at most _CHUNK at a time
+    from gearspec.spectrum.ordertrack import _CHUNK, _chunks
+
+    rng = np.random.default_rng(33)
+    n = 5 * _CHUNK + 123
+    masks = [np.ones(n, bool), rng.uniform(size=n) < 0.03, np.zeros(n, bool)]
+    masks[2][-1] = True
+    late = np.zeros(n, bool)
+    late[3 * _CHUNK:] = True
+    masks.append(late)
+    for use in masks:
+        parts = list(_chunks(use))
+        assert all(0 < len(p) <= _CHUNK for p in parts)
+        assert np.array_equal(np.concatenate(parts), np.flatnonzero(use))
+    assert list(_chunks(np.zeros(10, bool))) == []
