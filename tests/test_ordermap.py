@@ -542,3 +542,23 @@ def test_track_samples_taken_chunk_by_chunk_are_all_the_measured_samples_once():
         assert all(0 < len(p) <= _CHUNK for p in parts)
         assert np.array_equal(np.concatenate(parts), np.flatnonzero(use))
     assert list(_chunks(np.zeros(10, bool))) == []
+
+
+def test_close_line_labels_of_the_order_map_go_to_opposite_edges():
+    # two lines 2 % of the axis apart (an output shaft and a planetary carrier) would print their
+    # labels over each other at the left edge: the upper one goes to the right edge; a line far
+    # from both is labelled at the left again
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gearspec.plots.ordermap import _mark_lines
+
+    fig, ax = plt.subplots()
+    ax.set_xlim(0, 300)
+    ax.set_ylim(0, 1.0)
+    _mark_lines(ax, [(0.50, "far"), (0.012, "carrier"), (0.010, "output shaft"), (2.0, "beyond")], 1.2, 0, 300, 1.0)
+    where = {t.get_text(): (t.xy[0], t.get_ha()) for t in ax.texts}
+    plt.close(fig)
+    assert where == {"output shaft": (0, "left"), "carrier": (300, "right"), "far": (0, "left")}
