@@ -161,7 +161,8 @@ def main(argv=None) -> int:
                   f"{tr.amplitude[i[-1]]:.4f} Nm (se {np.nanmedian(tr.amplitude_se):.1e})")
         checks.append(_check_track(tr))
     print("5. tracked amplitudes against the chirp's truth (issue 12: a line's amplitude within 10 %, where the "
-          "truth is at least 30 standard errors, so 10 % is 3 of them; the 95 % band's coverage of the truth over the tracked speeds):")
+          "truth is at least 30 standard errors, so 10 % is 3 of them; the 95 % band's coverage of the truth "
+          "over the tracked speeds):")
     for c in checks:
         print(f"   {c['label']} ({'+' if c['direction'] > 0 else '-'}): truth {c['truth']}; "
               + (f"largest error {100 * c['max_rel']:.1f} % at {c['at']:.0f} rad/s "
