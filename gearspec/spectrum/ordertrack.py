@@ -401,7 +401,7 @@ def _chunks(use: np.ndarray):
     """The indices of the ``True`` samples of ``use``, at most ``_CHUNK`` at a time, in order, without
     an index of them all (memory: one chunk)."""
     block = _CHUNK // 4
-    counts = np.add.reduceat(use.view(np.int8), np.arange(0, len(use), block)) if len(use) else []
+    counts = np.add.reduceat(use.view(np.int8), np.arange(0, len(use), block), dtype=np.int64) if len(use) else []
     a = held = 0
     for k, c in enumerate(counts):
         if held + c > _CHUNK:
