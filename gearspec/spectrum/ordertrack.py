@@ -568,8 +568,9 @@ def _one_direction(rec, d, kin, resolved, gear, J, how, min_speed, knots, level,
         skipped.append({"direction": d, "what": "map", "reason": str(exc)})
     # lines measured on the same samples (the same mask) are fitted together, reported in their order
     groups = []
+    limit = MEASURABLE_FRACTION * m.nyquist if resolved else None  # the highest measurable frequency per sample
     for i, (f, _) in enumerate(resolved):
-        use = f < MEASURABLE_FRACTION * m.nyquist
+        use = f < limit
         g = next((g for g in groups if np.array_equal(g[0].use, use)), None)
         if g is None:
             groups.append((_Measured(use), [i]))
