@@ -7,9 +7,11 @@ measured in the same run (issue 12: target <= 5x).
     python benchmarks/bench_ordermap.py --quick      # 10^6 samples, smoke run
     python benchmarks/bench_ordermap.py --samples 30000000 --json out.json
 
-Prints the synthetic recording, the baseline (``np.fft.rfft`` of all torque samples, best of 3),
-the order analysis (best of 2) with its stages, the ratio, and the peak memory of the analysis in
-copies of the data (one float64 array of the N samples) from tracemalloc (a separate pass).  The
+Prints the synthetic recording, the baseline (``np.fft.rfft`` of all torque samples, best of 3)
+with the load average, the order analysis (best of 2) with its stages, the ratio, the peak memory of
+the analysis in copies of the data (one float64 array of the N samples) from tracemalloc (a separate
+pass), and the tracked amplitudes against the chirp's truth (within 10 % where the truth is at least
+30 standard errors, so that 10 % is at least 3 of them; the band's coverage).  The
 recording has a ``velocity`` channel (a drive logs one); without it the Savitzky-Golay derivative
 adds its own time (printed).  The script informs, it does not gate CI: it exits 0 when it ran.
 """
@@ -67,6 +69,29 @@ def _tracks(m, gear, lines):
     return len(groups)
 
 
+def truth(label: str, speed):
+    """The amplitude (Nm) the chirp puts in the line ``label`` at ``speed`` (rad/s): the mesh line
+    0.05 exp(-0.01 v), the motor shaft (one cycle per radian of theta) 0.02, the output shaft none."""
+    speed = np.asarray(speed, float)
+    if "mesh" in label:
+        return 0.05 * np.exp(-0.01 * speed)
+    return np.full(speed.shape, 0.02 if "motor" in label else 0.0)
+
+
+def _check_track(tr) -> dict:
+    ok = np.isfinite(tr.amplitude)
+    v, a, se = tr.speed[ok], tr.amplitude[ok], tr.amplitude_se[ok]
+    true = truth(tr.label, v)
+    big = true >= 30 * se  # there 10 % of the truth is at least 3 standard errors
+    rel = np.abs(a - true) / np.where(big, true, np.inf)
+    k = int(np.argmax(rel)) if big.any() else None
+    return {"label": tr.label, "direction": tr.direction, "speeds": int(ok.sum()),
+            "truth": "0.05 exp(-0.01 v) Nm" if "mesh" in tr.label else ("0.02 Nm" if "motor" in tr.label else "none"),
+            "max_rel": float(rel[k]) if k is not None else None, "at": float(v[k]) if k is not None else float("nan"),
+            "cover": float(np.mean((tr.lower[ok] <= true) & (true <= tr.upper[ok]))) if ok.any() else float("nan"),
+            "max_z": float(np.max(np.abs(a - true) / se)) if ok.any() else float("nan")}
+
+
 def best_of(fn, k):
     best, out = float("inf"), None
     for _ in range(k):
@@ -94,7 +119,9 @@ def main(argv=None) -> int:
     c0 = time.process_time()
     t_fft, _ = best_of(lambda: np.fft.rfft(tau), 3)
     cpu_fft = (time.process_time() - c0) / 3
-    print(f"2. baseline np.fft.rfft of all {n:,} torque samples (best of 3): {t_fft:.3f} s")
+    load0 = os.getloadavg()
+    print(f"2. baseline np.fft.rfft of all {n:,} torque samples (best of 3): {t_fft:.3f} s "
+          f"(load average {load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f} on {os.cpu_count()} CPUs)")
     c0 = time.process_time()
     t_all, res = best_of(lambda: order_analysis(rec, lines, inertia=0), a.repeat)
     cpu_all = (time.process_time() - c0) / a.repeat
@@ -125,18 +152,32 @@ def main(argv=None) -> int:
     tracemalloc.stop()
     copies = peak / (8.0 * n)
     print(f"4. peak memory of order_analysis (tracemalloc): {peak / 2**20:.0f} MiB = {copies:.1f} copies of the data")
+    checks = []
     for tr in res.tracks:
         i = np.flatnonzero(np.isfinite(tr.amplitude))
         if len(i):
             print(f"   track {tr.label} ({'+' if tr.direction > 0 else '-'}): {tr.n:,} samples, "
                   f"{tr.speed_range[0]:.3g}..{tr.speed_range[1]:.3g} rad/s, amplitude {tr.amplitude[i[0]]:.4f} -> "
                   f"{tr.amplitude[i[-1]]:.4f} Nm (se {np.nanmedian(tr.amplitude_se):.1e})")
+        checks.append(_check_track(tr))
+    print("5. tracked amplitudes against the chirp's truth (issue 12: a line's amplitude within 10 %, where the "
+          "truth is at least 30 standard errors, so 10 % is 3 of them; the 95 % band's coverage of the truth "
+          "over the tracked speeds):")
+    for c in checks:
+        print(f"   {c['label']} ({'+' if c['direction'] > 0 else '-'}): truth {c['truth']}; "
+              + (f"largest error {100 * c['max_rel']:.1f} % at {c['at']:.0f} rad/s "
+                 f"({'within' if c['max_rel'] <= 0.10 else 'NOT within'} 10 %), " if c['max_rel'] is not None else "")
+              + f"band covers the truth at {100 * c['cover']:.0f} % of {c['speeds']} speeds, largest |error| / se "
+              f"{c['max_z']:.1f}")
+    load1 = os.getloadavg()
+    print(f"   load average at the end {load1[0]:.1f} {load1[1]:.1f} {load1[2]:.1f}")
     if a.json:
         with open(a.json, "w") as fh:
             json.dump({"samples": n, "fft_s": t_fft, "order_analysis_s": t_all, "ratio": ratio,
                        "one_thread_s": t_one, "cpu_ratio": cpu_all / cpu_fft,
                        "stages_positive_s": {"velocity": t_kin, "pieces_nyquist": t_mot, "map": t_map, "tracks": t_trk},
-                       "peak_copies": copies, "peak_mib": peak / 2**20,
+                       "peak_copies": copies, "peak_mib": peak / 2**20, "load_average": os.getloadavg(),
+                       "checks": checks,
                        "tracks": [{"label": tr.label, "direction": tr.direction, "speed": tr.speed.tolist(),
                                    "amplitude": tr.amplitude.tolist()} for tr in res.tracks]}, fh, indent=1)
     return 0

@@ -428,3 +428,137 @@ def test_a_line_slower_than_the_travel_near_a_speed_is_not_tracked_there():
     assert np.all(np.isnan(slow.amplitude)) and any("less than" in n for n in slow.notes)
     fast = order_track(rec, F, direction=1, inertia=0)
     assert np.isfinite(fast.amplitude).mean() > 0.9
+
+
+# ---------------------------------------------------------------------- the faster paths, against the plain ones
+def test_track_grid_cells_are_the_histogram_cells():
+    # the cells of the speed grid found by arithmetic (no sort) hold exactly the samples
+    # np.histogram puts there, samples lying exactly on an edge included (they belong to the cell
+    # above, as in np.histogram); the travel per cell is the speed-weighted histogram
+    from gearspec.spectrum.ordertrack import SPEED_GRID, _grid_cells
+
+    rng = np.random.default_rng(30)
+    lo, hi = 1.7, 93.1
+    grid = np.linspace(lo, hi, SPEED_GRID)
+    cell = (hi - lo) / (SPEED_GRID - 1)
+    edges = np.concatenate([grid - cell / 2, [hi + cell / 2]])
+    x = np.concatenate([rng.uniform(lo, hi, 200_000), edges[1:-1], [lo, hi], np.nextafter(edges[1:-1], 0)])
+    cells = _grid_cells(x, edges)
+    assert np.array_equal(np.bincount(cells, minlength=SPEED_GRID), np.histogram(x, bins=edges)[0])
+    assert np.allclose(np.bincount(cells, weights=x, minlength=SPEED_GRID),
+                       np.histogram(x, bins=edges, weights=x)[0], rtol=1e-12)
+    assert np.all(edges[cells] <= x) and np.all(x < edges[cells + 1])
+
+
+def test_99th_percentile_of_the_speeds_is_numpys():
+    # min_speed's 99th percentile from the values above a guess: numpy's number (to rounding: 1e-15)
+    # on smooth, tied and adversarial speeds; the last one (every 128th value large, so the guess
+    # from every 64th value is too high) must take the full partition and still be right
+    from gearspec.spectrum.ordermap import _percentile_99
+
+    rng = np.random.default_rng(31)
+    n = 300_001
+    cases = [np.abs(rng.standard_normal(n)), np.round(rng.uniform(0, 50, n)),
+             np.abs(300 * np.sin(np.linspace(0, 400, n)))]
+    bad = np.zeros(n)
+    bad[::128] = 10.0
+    bad[1::2] = rng.uniform(0, 1, len(bad[1::2]))
+    cases.append(bad)
+    for a in cases:
+        assert _percentile_99(a.copy()) == pytest.approx(np.percentile(a, 99), rel=1e-15, abs=0), a[:4]
+
+
+def test_pieces_shorter_than_the_minimum_are_left_out_of_the_arrays_and_counted():
+    # a velocity with moving bursts of 10 samples (shorter than MIN_PIECE = 16) between long moves:
+    # the bursts' samples are in no piece and not in the arrays (whose times are exactly those of
+    # the long moves), and the ledger counts them
+    from gearspec.spectrum import motion
+    from gearspec.spectrum.ordermap import MIN_PIECE
+
+    n = 4000
+    t = np.arange(n) / FS
+    v = np.zeros(n)
+    v[100:1100] = 20.0
+    v[1500:1510] = 20.0      # a burst of 10 samples
+    v[2000:3000] = 20.0
+    v[3500:3510] = 20.0
+    theta = np.cumsum(v) / FS
+    rec = Recording.from_arrays(t=t, theta=theta, torque=np.sign(v) * 0.3, velocity=v)
+    m = motion(rec, 1, min_speed=1.0)
+    assert 10 < MIN_PIECE
+    assert m.bounds == [(0, 1000), (1000, 2000)]
+    assert np.array_equal(m.t, np.concatenate([t[100:1100], t[2000:3000]]))
+    assert np.array_equal(m.theta, np.concatenate([theta[100:1100], theta[2000:3000]]))
+    assert m.excluded[f"pieces shorter than {MIN_PIECE} samples"] == 20
+    assert m.excluded["other direction or slower than min_speed"] == n - 2020
+
+
+def test_map_windows_detrended_in_the_transform_are_the_windows_detrended_first():
+    # the line (mean and slope) of every window removed after the transform: the same calibrated
+    # power as removing it from the window first, then Hann and FFT, on the FFT bins and on given
+    # frequencies (the chirp's friction level, 0.3 Nm, left in a window would dominate its low bins)
+    from gearspec.spectrum import motion
+    from gearspec.spectrum.ordermap import _window_layout, _window_spectra
+
+    m = motion(_recording("chirp", T=20.0, seed=32), 1)
+    spacing, window = 0.05, 64
+    grid, first, _, _, _, ds = _window_layout(m, spacing, window)
+    hann = np.hanning(window + 2)[1:-1]
+    gain = 2.0 / hann.sum()
+    ramp = np.arange(window) - 0.5 * (window - 1)
+    ramp /= np.sqrt(ramp @ ramp)
+    blk = np.lib.stride_tricks.sliding_window_view(grid, window)[first]
+    blk = blk - blk.mean(axis=1, keepdims=True)
+    blk = blk - np.outer(blk @ ramp, ramp)
+    f_k = np.arange(1, window // 2 + 1) / (window * spacing)
+    freqs = np.array([F, 3.3])
+    k = np.arange(window) * spacing
+    for freq, X in ((None, np.fft.rfft(blk * hann, axis=1)[:, 1:window // 2 + 1] * gain),
+                    (freqs, blk @ ((hann[:, None] * np.exp(-2j * np.pi * k[:, None] * freqs[None, :])) * gain))):
+        fk = f_k if freq is None else freq
+        resp = np.maximum(np.sinc(ds[:, None] * fk[None, :]) ** 2, 0.1)
+        ref = np.abs(X) ** 2 / resp**2
+        got = _window_spectra(m, spacing, window, freq)[3]
+        assert got.shape == ref.shape and len(got) > 100
+        # the interpolation's response in single precision: 1e-7 relative per cell (1e-6 allowed);
+        # the rest is double-precision rounding, 1e-12 of the largest power
+        assert np.allclose(got, ref, rtol=1e-6, atol=1e-12 * ref.max())
+
+
+def test_track_samples_taken_chunk_by_chunk_are_all_the_measured_samples_once():
+    # the chunks of a mask (dense, sparse, empty at the start, one sample at the end) hold its True
+    # samples in order, each exactly once, at most _CHUNK at a time
+    from gearspec.spectrum.ordertrack import _CHUNK, _chunks
+
+    rng = np.random.default_rng(33)
+    n = 5 * _CHUNK + 123
+    masks = [np.ones(n, bool), rng.uniform(size=n) < 0.03, np.zeros(n, bool)]
+    masks[2][-1] = True
+    late = np.zeros(n, bool)
+    late[3 * _CHUNK:] = True
+    masks.append(late)
+    for use in masks:
+        parts = list(_chunks(use))
+        assert all(0 < len(p) <= _CHUNK for p in parts)
+        assert np.array_equal(np.concatenate(parts), np.flatnonzero(use))
+    assert list(_chunks(np.zeros(10, bool))) == []
+
+
+def test_close_line_labels_of_the_order_map_go_to_opposite_edges():
+    # two lines 2 % of the axis apart (an output shaft and a planetary carrier) would print their
+    # labels over each other at the left edge: the upper one goes to the right edge; a line far
+    # from both is labelled at the left again
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from gearspec.plots.ordermap import _mark_lines
+
+    fig, ax = plt.subplots()
+    ax.set_xlim(0, 300)
+    ax.set_ylim(0, 1.0)
+    _mark_lines(ax, [(0.50, "far"), (0.012, "carrier"), (0.010, "output shaft"), (2.0, "beyond")], 1.2, 0, 300, 1.0)
+    where = {t.get_text(): (t.xy[0], t.get_ha()) for t in ax.texts}
+    plt.close(fig)
+    assert where == {"output shaft": (0, "left"), "carrier": (300, "right"), "far": (0, "left")}

@@ -53,14 +53,10 @@ def plot_order_map(maps, path, lines=None) -> Path:
         ok = np.flatnonzero(np.isfinite(m.limit))
         ax.hlines(m.limit[ok], m.speed_edges[ok], m.speed_edges[ok + 1], color="w", lw=1.6,
                   label="highest measurable frequency (0.8 x position Nyquist)")
-        for f, lab in (lines or []):
-            if f <= f_edges[-1]:
-                ax.axhline(f, color="w", lw=0.6, ls=":")
-                ax.annotate(lab, (m.speed_edges[0], f), xytext=(3, 2), textcoords="offset points", fontsize=7,
-                            va="bottom", color="k", bbox={"fc": "w", "ec": "none", "alpha": 0.7, "pad": 1})
         ax.set_xlim(m.speed_edges[0], m.speed_edges[-1])
         top = float(np.nanmax(m.limit)) * 1.25 if np.isfinite(m.limit).any() else f_edges[-1]
         ax.set_ylim(0, min(f_edges[-1], top))
+        _mark_lines(ax, lines, f_edges[-1], m.speed_edges[0], m.speed_edges[-1], min(f_edges[-1], top))
         ax.set_xlabel(f"speed |v| ({m.unit}/s)")
         ax.set_ylabel(f"frequency (cycles/{m.unit})")
         ax.set_title(f"{name} direction ({int(np.sum(m.samples)):,} samples, "
@@ -74,6 +70,22 @@ def plot_order_map(maps, path, lines=None) -> Path:
     fig.suptitle("Order map: amplitude over speed and frequency (grey: not measurable)", fontsize=11)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _mark_lines(ax, lines, f_max, x_left, x_right, y_top) -> None:
+    """Each line of ``lines`` ``[(frequency, label)]`` below ``f_max`` as a dotted line, labelled at
+    the left edge; a label closer than a text height (5 % of the axis) to the one below it goes to
+    the right edge instead, so that close lines (an output shaft and a planetary carrier) stay legible."""
+    last = {"left": -np.inf, "right": -np.inf}
+    for f, lab in sorted(lines or [], key=lambda x: x[0]):
+        if f > f_max:
+            continue
+        ax.axhline(f, color="w", lw=0.6, ls=":")
+        side = "left" if f - last["left"] >= 0.05 * y_top else "right"
+        last[side] = f
+        x, dx, ha = (x_left, 3, "left") if side == "left" else (x_right, -3, "right")
+        ax.annotate(lab, (x, f), xytext=(dx, 2), textcoords="offset points", fontsize=7, ha=ha,
+                    va="bottom", color="k", bbox={"fc": "w", "ec": "none", "alpha": 0.7, "pad": 1})
 
 
 def plot_order_tracks(tracks, path) -> Path:
@@ -101,10 +113,11 @@ def plot_order_tracks(tracks, path) -> Path:
         unit = mine[0].unit if mine else (tracks[0].unit if tracks else "rad")
         ax.set_xlabel(f"speed |v| ({unit}/s)")
         ax.set_title(f"{name} direction", fontsize=10)
-        ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
+    axes[0].set_ylim(bottom=0)  # after both panels are drawn: the shared top then holds both directions
     axes[0].set_ylabel(f"amplitude ({tu})")
     level = tracks[0].level if tracks else 0.95
-    fig.suptitle(f"Order tracks: amplitude against speed, {level:.0%} pointwise band", fontsize=11)
+    fig.suptitle(f"Order tracks: amplitude against speed, {level:.0%} pointwise band (errors assumed white: "
+                 "noise coloured near a line makes the band too narrow)", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -84,6 +85,11 @@ class Motion:
     def __len__(self) -> int:
         return len(self.theta)
 
+    @cached_property
+    def median_step(self) -> float:
+        """The median time step between consecutive samples (s; 0 for fewer than two), computed once."""
+        return float(np.median(np.diff(self.t))) if len(self.t) > 1 else 0.0
+
 
 def _check_direction(direction) -> int:
     if direction not in (1, -1):
@@ -121,7 +127,28 @@ def _default_min_speed(v: np.ndarray) -> float:
     a = np.abs(v)
     if not np.isfinite(a).all():
         a = a[np.isfinite(a)]
-    return MIN_SPEED_FRACTION * float(np.percentile(a, 99, overwrite_input=True)) if len(a) else 0.0
+    return MIN_SPEED_FRACTION * _percentile_99(a) if len(a) else 0.0
+
+
+def _percentile_99(a: np.ndarray) -> float:
+    """``np.percentile(a, 99)`` (linear interpolation between the two order statistics around rank
+    ``0.99 (n - 1)``), without partitioning all of ``a`` (overwritten): the values at or above the
+    99th percentile of every 64th value hold both order statistics unless that guess is too high
+    (checked by counting; then all of ``a`` is partitioned)."""
+    n = len(a)
+    if n < 1 << 16:
+        return float(np.percentile(a, 99, overwrite_input=True))
+    pos = 0.99 * (n - 1)
+    lo = int(math.floor(pos))
+    guess = np.percentile(a[::64], 98.0)
+    top = a[a >= guess]
+    below = n - len(top)  # values under the guess: the ranks of top start there
+    if below > lo:
+        return float(np.percentile(a, 99, overwrite_input=True))
+    k = (lo - below, min(lo + 1, n - 1) - below)
+    top.partition(k)
+    x0, x1 = float(top[k[0]]), float(top[k[1]])
+    return x0 + (x1 - x0) * (pos - lo)
 
 
 def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bool) -> Motion:
@@ -135,30 +162,33 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
     if inertia and acc is not None:
         ok_acc = np.isfinite(acc)
         moving &= ok_acc
-    idx_parts, bounds, n = [], [], 0
+    # the pieces: runs of moving samples within each stretch of the recording, at least MIN_PIECE
+    # long; the samples kept selected by a mask (a compress is cheaper than an index of every sample)
+    bounds, n = [], 0
+    n_moving = int(np.count_nonzero(moving))
     for _, a, b in rec.pieces():
         m = moving[a:b]
-        edges = np.flatnonzero(np.diff(np.concatenate(([False], m, [False])).astype(np.int8)))
+        edges = np.flatnonzero(np.diff(m.view(np.int8), prepend=0, append=0))
         for s, e in zip(edges[0::2], edges[1::2]):
             if e - s >= MIN_PIECE:
-                idx_parts.append(np.arange(a + s, a + e))
                 bounds.append((n, n + e - s))
                 n += e - s
-    idx = np.concatenate(idx_parts) if idx_parts else np.zeros(0, int)
-    n_moving = int(np.count_nonzero(moving))
+            else:
+                moving[a + s:a + e] = False  # moving is this function's own array
+    keep = moving  # the stretches of rec.pieces() tile the recording: their pieces in order
     excluded = {"other direction or slower than min_speed": len(rec) - n_moving,
-                f"pieces shorter than {MIN_PIECE} samples": n_moving - len(idx)}
-    tau = rec.tau[idx]
+                f"pieces shorter than {MIN_PIECE} samples": n_moving - n}
+    tau = rec.tau[keep]
     if inertia and acc is not None:
-        tau -= inertia * acc[idx]
+        tau -= inertia * acc[keep]
     if d < 0:
         np.negative(tau, out=tau)
-    speed = v[idx]
+    speed = v[keep]
     np.abs(speed, out=speed)
-    theta = rec.theta[idx]
+    theta = rec.theta[keep]
     nyq = _block_nyquist(theta, bounds)
-    return Motion(d, rec.unit, rec.t[idx], theta, speed, tau,
-                  None if (acc is None or not need_acc) else acc[idx], nyq, bounds, float(min_speed),
+    return Motion(d, rec.unit, rec.t[keep], theta, speed, tau,
+                  None if (acc is None or not need_acc) else acc[keep], nyq, bounds, float(min_speed),
                   inertia if inertia else None, source, excluded)
 
 
@@ -421,20 +451,42 @@ def _window_spectra(m: Motion, spacing: float, window: int, freq: np.ndarray | N
     if freq is not None:  # projection on exact frequencies (the window's grid from 0)
         k = np.arange(window) * spacing
         proj = (hann[:, None] * np.exp(-2j * np.pi * k[:, None] * freq[None, :])) * gain
+    # a straight line per window taken out (the friction level and slow position-dependent forces,
+    # which a Hann window would leak into the lowest orders): the transform is linear, so the
+    # transform of the window minus its line is the window's transform minus its mean and slope
+    # times the transforms of a constant and of the ramp (computed once)
+    line = np.stack([np.full(window, 1.0 / window), ramp], axis=1)  # (window, 2): mean and slope
+    basis = np.stack([np.ones(window), ramp])  # the constant and the unit ramp
+    if freq is None:
+        T_line = np.fft.rfft(basis * hann, axis=1)[:, 1:window // 2 + 1] * gain
+    else:
+        T_line = basis @ proj
     power = np.empty((len(first), len(f_k)))
     rows = sliding_window_view(grid, window) if len(grid) >= window else None
+    # pi x the window's mean sample spacing x the frequency: the interpolation's response
+    # sinc^2 divided out (single precision: a correction factor, good to 1e-6)
+    pi_f = (np.pi * f_k).astype(np.float32)
     for j in range(0, len(first), _WINDOW_BATCH):
-        blk = rows[first[j:j + _WINDOW_BATCH]]
-        # a straight line per window taken out (the friction level and slow position-dependent
-        # forces, which a Hann window would leak into the lowest orders)
-        blk = blk - blk.mean(axis=1, keepdims=True)
-        blk = blk - np.outer(blk @ ramp, ramp)
+        sel = first[j:j + _WINDOW_BATCH]
+        b = rows[sel]  # a copy of the windows (they overlap in the grid)
+        coef = b @ line
         if freq is None:
-            X = np.fft.rfft(blk * hann, axis=1)[:, 1:window // 2 + 1] * gain
+            b *= hann
+            X = np.fft.rfft(b, axis=1)[:, 1:window // 2 + 1]
+            X *= gain
         else:
-            X = blk @ proj
-        resp = np.maximum(np.sinc(ds[j:j + _WINDOW_BATCH, None] * f_k[None, :]) ** 2, 0.1)
-        power[j:j + _WINDOW_BATCH] = (X.real ** 2 + X.imag ** 2) / resp**2
+            X = b @ proj
+        X -= coef @ T_line
+        z = np.multiply.outer(ds[j:j + _WINDOW_BATCH].astype(np.float32), pi_f)
+        resp = np.sin(z)
+        resp /= z
+        np.square(resp, out=resp)
+        np.maximum(resp, 0.1, out=resp)
+        np.square(resp, out=resp)
+        p = power[j:j + _WINDOW_BATCH]
+        np.square(X.real, out=p)
+        p += np.square(X.imag)
+        p /= resp
     return speeds, nyqs, counts, power
 
 

@@ -211,10 +211,15 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
     grid = np.linspace(lo, hi, SPEED_GRID)
     cell = (hi - lo) / (SPEED_GRID - 1)
     edges = np.concatenate([grid - cell / 2, [hi + cell / 2]])
-    counts = np.histogram(group.speed, bins=edges)[0]
-    # travel of the samples near each grid speed (within half a knot span): speed x the median step
-    dt = float(np.median(np.diff(m.t))) if len(m.t) > 1 else 0.0
-    travel = np.histogram(group.speed, bins=edges, weights=group.speed * dt)[0]
+    # samples per grid cell, and travel of the samples near each grid speed (within half a knot
+    # span): speed x the median step; a million samples at a time (memory)
+    counts, travel = np.zeros(SPEED_GRID, np.int64), np.zeros(SPEED_GRID)
+    for i in range(0, group.n, 1 << 20):
+        sp = group.speed[i:i + (1 << 20)]
+        cells = _grid_cells(sp, edges)
+        counts += np.bincount(cells, minlength=SPEED_GRID)
+        travel += np.bincount(cells, weights=sp, minlength=SPEED_GRID)
+    travel *= m.median_step
     half = max(int(round(0.5 * (SPEED_GRID - 1) / (knots + 1))), 0)
     near = np.convolve(travel, np.ones(2 * half + 1), mode="same")
     tracks = []
@@ -236,6 +241,22 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
                                  counts.copy(), (lo, hi), n_use, len(m) - n_use, sigma, float(level), int(knots),
                                  j_fit, j_se, how, notes))
     return tracks
+
+
+def _grid_cells(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """The cell ``i`` with ``edges[i] <= x < edges[i + 1]`` of every ``x`` within ``[edges[0],
+    edges[-1])`` (equal cells; as ``np.histogram(x, edges)`` counts them): the arithmetic guess,
+    and a search among the edges for the few values whose guess lies within 1e-9 of a cell's
+    border, where rounding may have put it on the wrong side (no sort of all values)."""
+    n_cells = len(edges) - 1
+    pos = np.subtract(x, edges[0])
+    pos *= n_cells / (edges[-1] - edges[0])
+    cells = pos.astype(np.intp)
+    pos -= cells  # the fraction of the cell
+    near = np.flatnonzero((pos < 1e-9) | (pos > 1 - 1e-9))
+    cells[near] = np.searchsorted(edges, x[near], side="right") - 1
+    np.clip(cells, 0, n_cells - 1, out=cells)
+    return cells
 
 
 def _inertia_choice(inertia, gear) -> tuple[float | None, str]:
@@ -307,91 +328,108 @@ def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fi
     entry of ``X'X`` is a combination of the moments ``sum u^s g_k g_l`` (s = 0..6; g = 1, sin, cos)
     and ``X'y`` of ``sum u^s g_k y`` (s = 0..3), accumulated in double precision, then combined with
     the spans' polynomials.  The samples are taken in chunks, each sorted by knot span (time order
-    kept within a span); per span two matrix products, ``u^s [1; g_k g_l]'`` and ``[u^s y; u^s acc]
-    [1; g_k]'`` over all lines at once, give the moments (the powers of u and the gathers shared by
-    the lines)."""
+    kept within a span); per span two matrix products, ``u^s [1; g_k; g_k g_l]'`` and ``[u^s y; u^s
+    acc] [1; g_k]'`` over all lines at once, give the moments (the powers of u and the gathers shared
+    by the lines; ``cos^2 = 1 - sin^2``, so its moments are those of 1 less those of sin^2)."""
     nb = len(tk) - _DEGREE - 1
     q = 3 * nb + fit_j
     polys = _span_polynomials(tk)
     n_f = len(freqs)
-    moms = [{jj: [np.zeros((7, 6)), np.zeros((4, 3)), np.zeros((4, 3)), 0.0, 0.0] for jj in polys} for _ in freqs]
-    idx = np.flatnonzero(use)
+    n_trig = 1 + 2 * n_f  # G rows: 1, the sines and cosines of every line, then per line s^2, s c
+    n_w = 4 + 4 * fit_j
+    acc_p = {jj: np.zeros((7, 1 + 4 * n_f)) for jj in polys}
+    acc_q = {jj: np.zeros((n_w, n_trig)) for jj in polys}
+    acc_j = {jj: np.zeros(2) for jj in polys}  # sum acc^2, sum acc y
     yy = 0.0
-    two_pi = np.float32(2 * np.pi)
     # the span of a speed x within [tk[0], tk[-1]] (searchsorted(tk, x, "right") - 1, the top speed
     # in the last span): _DEGREE + the number of interior knots at or below x
     interior = tk[_DEGREE + 1:len(tk) - _DEGREE - 1]
-    # G rows: 1, the sines and cosines of every line, then per line s^2, s c, c^2
-    n_trig = 1 + 2 * n_f
-    for i in range(0, len(idx), _CHUNK):
+    U = np.empty((7, _CHUNK))
+    W = np.empty((n_w, _CHUNK))
+    for chunk in _chunks(use):
         # the chunk's samples span by span (time order kept within a span: a stable radix sort)
-        x = m.speed[idx[i:i + _CHUNK]]
+        x = m.speed[chunk]
         span = np.full(len(x), _DEGREE, np.uint8)
         for t in interior:
             span += x >= t
         perm = np.argsort(span, kind="stable")
-        r, span = idx[i:i + _CHUNK][perm], span[perm]
+        r, span = chunk[perm], span[perm]
         n = len(r)
         cuts = np.searchsorted(span, np.arange(len(tk) + 1))
         # the speeds lie within [tk[0], tk[-1]]: the knots span the speeds of these samples
-        U = np.empty((7, n))
-        U[0] = 1.0
-        np.take(m.speed, r, out=U[1])
+        u = U[:, :n]
+        u[0] = 1.0
+        np.take(x, perm, out=u[1])
         for jj in polys:  # u, the coordinate in the sample's span
             a, e = cuts[jj], cuts[jj + 1]
-            U[1, a:e] -= tk[jj]
-            U[1, a:e] /= tk[jj + 1] - tk[jj]
+            u[1, a:e] -= tk[jj]
+            u[1, a:e] /= tk[jj + 1] - tk[jj]
         for k in range(2, 7):
-            np.multiply(U[k - 1], U[1], out=U[k])
+            np.multiply(u[k - 1], u[1], out=u[k])
         y = m.y[r]
         yy += float(y @ y)
-        W = np.empty((4 + 4 * fit_j, n))  # u^s y, u^s acc (s = 0..3)
-        np.multiply(U[:4], y, out=W[:4])
+        w = W[:, :n]  # u^s y, u^s acc (s = 0..3)
+        np.multiply(u[:4], y, out=w[:4])
         if fit_j:
             acc = m.acc[r]
-            np.multiply(U[:4], acc, out=W[4:])
-        G = _trig_rows(m.theta[r], freqs, two_pi)
+            np.multiply(u[:4], acc, out=w[4:])
+        G = _trig_rows(m.theta[r], freqs)
         for jj in polys:
             a, e = cuts[jj], cuts[jj + 1]
             if e == a:
                 continue
-            P = U[:, a:e] @ G[:, a:e].T
-            Q = W[:, a:e] @ G[:n_trig, a:e].T
-            for li in range(n_f):
-                M, Y, Ya = moms[li][jj][:3]
-                cols = [0, 1 + 2 * li, 2 + 2 * li]
-                M[:, :3] += P[:, cols]
-                M[:, 3:] += P[:, n_trig + 3 * li:n_trig + 3 * li + 3]
-                Y += Q[:4, cols]
-                if fit_j:
-                    Ya += Q[4:, cols]
+            acc_p[jj] += u[:, a:e] @ G[:, a:e].T
+            acc_q[jj] += w[:, a:e] @ G[:n_trig, a:e].T
             if fit_j:
-                aa, ay = float(acc[a:e] @ acc[a:e]), float(acc[a:e] @ y[a:e])
-                for li in range(n_f):
-                    moms[li][jj][3] += aa
-                    moms[li][jj][4] += ay
-    return [_assemble(mom, polys, nb, q, fit_j) + (yy,) for mom in moms]
+                acc_j[jj] += (float(acc[a:e] @ acc[a:e]), float(acc[a:e] @ y[a:e]))
+    out = []
+    for li in range(n_f):
+        cols = [0, 1 + 2 * li, 2 + 2 * li]
+        mom = {}
+        for jj in polys:
+            P, Q = acc_p[jj], acc_q[jj]
+            M = np.empty((7, 6))
+            M[:, :3] = P[:, cols]
+            M[:, 3:5] = P[:, n_trig + 2 * li:n_trig + 2 * li + 2]
+            M[:, 5] = M[:, 0] - M[:, 3]  # cos^2 = 1 - sin^2
+            mom[jj] = [M, Q[:4, cols], Q[4:, cols] if fit_j else None, acc_j[jj][0], acc_j[jj][1]]
+        out.append(_assemble(mom, polys, nb, q, fit_j) + (yy,))
+    return out
 
 
-def _trig_rows(theta: np.ndarray, freqs, two_pi) -> np.ndarray:
-    """Rows 1, then ``sin, cos`` of ``2 pi f theta`` of every line, then ``s^2, s c, c^2`` of every
-    line (the phase reduced to one cycle in double precision, then sine and cosine in single)."""
+def _chunks(use: np.ndarray):
+    """The indices of the ``True`` samples of ``use``, at most ``_CHUNK`` at a time, in order, without
+    an index of them all (memory: one chunk)."""
+    block = _CHUNK // 4
+    counts = np.add.reduceat(use.view(np.int8), np.arange(0, len(use), block), dtype=np.int64) if len(use) else []
+    a = held = 0
+    for k, c in enumerate(counts):
+        if held + c > _CHUNK:
+            yield np.flatnonzero(use[a:k * block]) + a
+            a, held = k * block, 0
+        held += int(c)
+    if held:
+        yield np.flatnonzero(use[a:]) + a
+
+
+def _trig_rows(theta: np.ndarray, freqs) -> np.ndarray:
+    """Rows 1, then ``sin, cos`` of ``2 pi f theta`` of every line, then ``s^2, s c`` of every line
+    (the phase reduced to one cycle in double precision, then sine and cosine in single)."""
     n_f, n = len(freqs), len(theta)
     sq = 1 + 2 * n_f
-    G = np.empty((1 + 5 * n_f, n))
+    G = np.empty((1 + 4 * n_f, n))
     G[0] = 1.0
     ph64 = np.empty(n)
+    ph = np.empty(n, np.float32)
     for li, f in enumerate(freqs):
         np.multiply(theta, f, out=ph64)
         ph64 -= np.floor(ph64)  # the phase in cycles (exactly np.mod(., 1.0))
-        ph = ph64.astype(np.float32)
-        ph *= two_pi
+        np.multiply(ph64, 2 * np.pi, out=ph, casting="same_kind")
         s, c = G[1 + 2 * li], G[2 + 2 * li]
         s[:] = np.sin(ph)
         c[:] = np.cos(ph)
-        np.multiply(s, s, out=G[sq + 3 * li])  # products of singles: exact in double
-        np.multiply(s, c, out=G[sq + 3 * li + 1])
-        np.multiply(c, c, out=G[sq + 3 * li + 2])
+        np.multiply(s, s, out=G[sq + 2 * li])  # products of singles: exact in double
+        np.multiply(s, c, out=G[sq + 2 * li + 1])
     return G
 
 
@@ -530,8 +568,9 @@ def _one_direction(rec, d, kin, resolved, gear, J, how, min_speed, knots, level,
         skipped.append({"direction": d, "what": "map", "reason": str(exc)})
     # lines measured on the same samples (the same mask) are fitted together, reported in their order
     groups = []
+    limit = MEASURABLE_FRACTION * m.nyquist if resolved else None  # the highest measurable frequency per sample
     for i, (f, _) in enumerate(resolved):
-        use = f < MEASURABLE_FRACTION * m.nyquist
+        use = f < limit
         g = next((g for g in groups if np.array_equal(g[0].use, use)), None)
         if g is None:
             groups.append((_Measured(use), [i]))
