@@ -199,10 +199,11 @@ def _sizes_table(models, args, threads, pool) -> list:
             same = bool(np.array_equal(got, model.evaluate(theta, v, threads=1)))
             diff = float(np.max(np.abs(got - want)) / np.max(np.abs(want)))
             del got, want
-            t = _timed({"ev1": lambda: model.evaluate(theta, v, threads=1),
-                        "evN": lambda: model.evaluate(theta, v, threads=threads),
-                        "np1": lambda: _bare(model, theta, v),
-                        "npN": lambda: _bare_threaded(model, theta, v, threads, pool, block)}, args.repeat)
+            t = _timed({"ev1": lambda th=theta, vv=v: model.evaluate(th, vv, threads=1),
+                        "evN": lambda th=theta, vv=v: model.evaluate(th, vv, threads=threads),
+                        "np1": lambda th=theta, vv=v: _bare(model, th, vv),
+                        "npN": lambda th=theta, vv=v: _bare_threaded(model, th, vv, threads, pool, block)},
+                       args.repeat)
             rate = {k: n / w for k, (w, _) in t.items()}
             r = dict(model=name, points=n, threads=threads, identical_to_1_thread=same, max_rel_diff=diff,
                      evaluate_1t_per_s=rate["ev1"], evaluate_per_s=rate["evN"], bare_per_s=rate["np1"],
@@ -215,7 +216,7 @@ def _sizes_table(models, args, threads, pool) -> list:
                   f"{rate['npN']:>9.3g} | {r['ratio']:>11.2f} {r['ratio_1t']:>11.2f} "
                   f"{r['bare_threaded_ratio']:>11.2f} | {r['cpu_per_wall']:>8.2f} {diff:>8.1e}"
                   + ("" if same else "  NOT IDENTICAL to 1 thread"))
-            del theta, v
+            theta = v = t = None          # free the inputs before the next size
     return rows
 
 
