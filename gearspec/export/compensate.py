@@ -41,13 +41,15 @@ from ..terms import TERMS
 from .check import check_exportable, read_model
 
 __all__ = ["compensate", "CompensationResult", "c_feedforward", "python_feedforward", "coulomb_viscous",
-           "TWINS", "COMPENSATIONS", "not_better", "plateau_metrics", "find_compiler"]
+           "TWINS", "COMPENSATIONS", "LABELS", "not_better", "plateau_metrics", "find_compiler"]
 
 #: the twins and their default speeds (rpm, each run in both directions) and trace speed (rpm)
 TWINS = {"silo4": {"speeds_rpm": (50, 100, 280, 560, 1000, 3000), "trace_rpm": 280.0},
          "direct-drive": {"speeds_rpm": (10, 20, 30, 60, 120, 240), "trace_rpm": 30.0}}
 #: the three runs, in the order they are reported
 COMPENSATIONS = ("none", "coulomb_viscous", "model")
+#: how each run is named in the report and the figures
+LABELS = {"none": "no compensation", "coulomb_viscous": "Coulomb + viscous", "model": "full model (exported C)"}
 #: load (Nm) and temperature (degC) given to the feed-forward: the twins have neither channel
 LOAD, TEMPERATURE = 0.0, 20.0
 #: fewest cycles of a line over a plateau's travel for it to count in the position-locked ripple:
