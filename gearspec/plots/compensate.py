@@ -38,15 +38,23 @@ def plot_ripple(result: CompensationResult, path) -> Path:
                        color="0.9", zorder=0, label="speeds the lines were fitted on")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
-        ax.yaxis.set_minor_formatter(FuncFormatter(lambda y, _: f"{y:g}" if f"{y:.0e}"[0] in "25" else ""))
         ax.set_xlabel("motor speed (rpm)")
         ax.set_title(f"{'positive' if d > 0 else 'negative'} direction")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("velocity ripple, std (% of the speed)")
-    axes[0].legend(fontsize=8)
+    # within about a decade every minor tick is labelled (else only 2 and 5 x a power of ten)
+    lo, hi = axes[0].get_ylim()
+    every = math.log10(hi / lo) < 1.2
+    for ax in axes:
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
+        ax.yaxis.set_minor_formatter(FuncFormatter(lambda y, _: f"{y:g}" if every or f"{y:.0e}"[0] in "25" else ""))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))      # rpm as plain numbers
+        ax.xaxis.set_minor_formatter(FuncFormatter(lambda x, _: f"{x:g}" if f"{x:.0e}"[0] in "25" else ""))
+    # the legend below the panels, where it hides no point
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, ncol=len(labels), loc="lower center")
     fig.suptitle(f"{result.twin} twin: velocity ripple with and without friction feed-forward")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
