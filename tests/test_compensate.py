@@ -435,3 +435,24 @@ def test_with_the_cogging_phase_right_the_direct_drive_ripple_falls_to_the_floor
     for d in (1, -1):
         none, full = (_row(res.table, 30, d, c) for c in ("none", "model"))
         assert full.ripple_std_rpm < 0.1 * none.ripple_std_rpm
+
+
+def test_cli_refuses_an_older_model_or_a_term_it_cannot_run_with_one_sentence(tmp_path, capsys):
+    # issue 14: a model file from before 0.4.0 or with a term the exported C cannot compute without
+    # state is refused before any run, naming the file: exit 2, one line, never a run of other C
+    from pathlib import Path
+
+    golden = json.loads((Path(__file__).parent / "data" / "models_0.4.1.json").read_text())["models"]
+    older = dict(golden["stribeck"]["model"])
+    del older["rmse_holdout_reason"]
+    cases = [(older, "model.json: written by a gearspec older than 0.4.0"),
+             (golden["every term kind"]["model"], "model.json: term 8 \\(drift\\): cannot be exported"),
+             ({**golden["stribeck"]["model"], "terms": [{"kind": "magic"}]},
+              "model.json: unknown friction term kind 'magic'")]
+    for d, message in cases:
+        path = tmp_path / "model.json"
+        path.write_text(json.dumps(d))
+        rc, out, err = _main(["compensate", str(path), "--speeds-rpm", "280", "--out", str(tmp_path / "o")], capsys)
+        assert rc == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err, err
+        assert pytest.importorskip("re").search(message, err), err
+        assert not (tmp_path / "o").exists()
