@@ -236,7 +236,8 @@ def main(argv=None) -> int:
           f"{f'numpy {threads}t':>9}")
     for r in rows:
         c = r["per_cpu_second"]
-        print(f"{r['model']:8} {r['points']:>9} | {c['ev1']:>11.3g} {c['evN']:>11.3g} {c['np1']:>9.3g} {c['npN']:>9.3g}")
+        print(f"{r['model']:8} {r['points']:>9} | {c['ev1']:>11.3g} {c['evN']:>11.3g} {c['np1']:>9.3g} "
+              f"{c['npN']:>9.3g}")
     print("\nper call (microseconds, CPU; the single-thread path):")
     calls = []
     for name, model in models.items():
