@@ -500,3 +500,53 @@ def test_the_number_of_threads_default_environment_and_refusals(monkeypatch):
     for bad in (0, 1.5, "2", True):
         with pytest.raises(InputError, match="threads must be a whole number >= 1"):
             m.evaluate(0.3, 1.0, threads=bad)
+
+
+def test_a_call_does_not_wait_for_a_pool_thread_busy_elsewhere(monkeypatch):
+    # The pool's one thread is held by another task (another caller's work); evaluate's calling
+    # thread takes every block itself and returns, not waiting for a helper that never started.
+    import threading
+
+    import gearspec.terms.lines as lines
+
+    m = law_model("silo4", seed=13)
+    x = inputs(m, lines.PARALLEL_MIN_SAMPLES, seed=15)
+    want = m.evaluate(x["theta"], x["v"], threads=1)
+    release = threading.Event()
+    busy = lines._shared_pool(1).submit(release.wait, 60)
+    got = []
+    caller = threading.Thread(target=lambda: got.append(m.evaluate(x["theta"], x["v"], threads=2)))
+    caller.start()
+    caller.join(30)                 # ~0.1 s of work; 30 s: only a call waiting for the busy thread takes it
+    finished = not caller.is_alive()
+    release.set()
+    busy.result()
+    caller.join()
+    assert finished
+    np.testing.assert_array_equal(got[0], want)
+
+
+def test_a_forked_child_gets_its_own_pool(monkeypatch):
+    # After fork the parent's pool threads do not exist in the child: the child must start its own
+    # pool (its blocks on 2 threads, as in the parent), not hand blocks to threads that never run.
+    import multiprocessing as mp
+
+    m = law_model("silo4", seed=13)
+    x = inputs(m, 1 << 17, seed=16)
+    m.evaluate(x["theta"], x["v"], threads=2)            # the parent's pool exists
+    seen = _spy_blocks(monkeypatch, delay=0.001)
+
+    def child(conn):
+        seen.clear()
+        out = m.evaluate(x["theta"], x["v"], threads=2)
+        conn.send((len({t for t, _ in seen}), bool(np.array_equal(out, m.evaluate(x["theta"], x["v"], threads=1)))))
+
+    ctx = mp.get_context("fork")
+    a, b = ctx.Pipe()
+    p = ctx.Process(target=child, args=(b,))
+    p.start()
+    ready = a.poll(120)
+    p.join(5)
+    if p.is_alive():
+        p.kill()
+    assert ready and a.recv() == (2, True)

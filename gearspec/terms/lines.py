@@ -44,6 +44,17 @@ _pool_lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
 
 
+def _forget_pool() -> None:
+    """In a child process made by ``fork``: the parent's pool threads do not exist there, so its
+    pool is dropped and a new one started on first use."""
+    global _pool, _pool_lock
+    _pool, _pool_lock = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
+
+
 def default_threads() -> int:
     """Threads a long evaluation uses when none is given: the environment variable ``GEARSPEC_THREADS``
     (an integer >= 1) when set, else the CPUs this process may run on (``os.sched_getaffinity``,
@@ -239,8 +250,9 @@ class CompiledFriction:
         try:
             work()
         finally:
-            for f in futures:
-                f.result()
+            for f in futures:       # a helper not started yet (its thread busy elsewhere) is not waited for
+                if not f.cancel():
+                    f.result()
         return out
 
     def _slice(self, theta, v, load, out, i) -> None:
