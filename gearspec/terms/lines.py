@@ -24,8 +24,8 @@ import numpy as np
 from ..errors import InputError
 from .shapes import AMPLITUDE_LAWS, amplitude_law, clamp_speed, load_amplitude, sinusoid
 
-__all__ = ["Lines", "CompiledDirection", "CompiledFriction", "default_threads", "THREADS_ENV", "MAX_THREADS",
-           "PARALLEL_MIN_SAMPLES"]
+__all__ = ["Lines", "CompiledDirection", "CompiledFriction", "default_threads", "check_threads", "THREADS_ENV",
+           "MAX_THREADS", "PARALLEL_MIN_SAMPLES"]
 
 #: samples per block times lines: arrays of a block stay in the processor's cache, and the Python
 #: work per block (some 40 numpy calls) is spread over enough samples to cost < 5 % of the numpy work
