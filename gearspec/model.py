@@ -30,7 +30,7 @@ import pandas as pd
 from .errors import InputError
 from .jsonsafe import finite_or_none, plain
 from .terms import BASE_LAWS, TERMS, BaseLaw, evaluate_term
-from .terms.lines import CompiledDirection, CompiledFriction
+from .terms.lines import PARALLEL_MIN_SAMPLES, CompiledDirection, CompiledFriction, check_threads
 
 __all__ = ["FrictionModel", "Direction", "Harmonic", "LAWS", "Law", "RPM", "DIRECTIONS"]
 
@@ -264,7 +264,8 @@ class FrictionModel:
         return m
 
     # ------------------------------------------------------------------ evaluation
-    def evaluate(self, theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None) -> np.ndarray:
+    def evaluate(self, theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None,
+                 threads: int | None = None) -> np.ndarray:
         """Torque the drive supplies according to the model, at each sample.
 
         Friction (base law + harmonics + magnitude terms) has the sign of ``v``; signed terms
@@ -279,22 +280,30 @@ class FrictionModel:
         Speed: the base law and harmonics of both directions are compiled into parameter arrays
         once and kept until a parameter changes (:meth:`_compiled`); samples are evaluated in
         blocks, each direction on its own samples (``benchmarks/bench_evaluate.py``).
-        """
-        return self._evaluate(self._compiled(), theta, v, load, temperature, t, acc, run)
 
-    def evaluator(self):
+        ``threads``: inputs of at least ``gearspec.terms.lines.PARALLEL_MIN_SAMPLES`` (131072) samples
+        have their blocks of base law and lines shared among this many threads; shorter ones (a
+        scalar, a simulation's vector of runs) stay in the calling thread.  None: the environment
+        variable ``GEARSPEC_THREADS`` when set, else the CPUs the process may use, at most 4; 1: one
+        thread.  The values do not depend on it (the same blocks, bit for bit).  Extra terms are
+        evaluated on the whole input in the calling thread.
+        """
+        return self._evaluate(self._compiled(), theta, v, load, temperature, t, acc, run, threads)
+
+    def evaluator(self, threads: int | None = None):
         """:meth:`evaluate` with the parameters as they are now, for a loop that calls it thousands of
         times with the same model (a simulation): ``f(theta, v, load=..., ...)`` computes what
         ``evaluate`` does without checking, at each call, whether a parameter has changed; a change
-        made to the model afterwards is not seen by ``f`` (take a new one)."""
-        compiled = self._compiled()
+        made to the model afterwards is not seen by ``f`` (take a new one).  ``threads``: as in
+        :meth:`evaluate`, resolved once here (None: the default at this call)."""
+        compiled, threads = self._compiled(), check_threads(threads)
 
         def f(theta=None, v=None, *, load=None, temperature=None, t=None, acc=None, run=None):
-            return self._evaluate(compiled, theta, v, load, temperature, t, acc, run)
+            return self._evaluate(compiled, theta, v, load, temperature, t, acc, run, threads)
 
         return f
 
-    def _evaluate(self, compiled, theta, v, load, temperature, t, acc, run) -> np.ndarray:
+    def _evaluate(self, compiled, theta, v, load, temperature, t, acc, run, threads=1) -> np.ndarray:
         if v is None:
             raise InputError("the model needs the velocity v")
         v = np.asarray(v, dtype=float)
@@ -307,11 +316,13 @@ class FrictionModel:
             load = _shaped(np.asarray(load, dtype=float), shape)
         elif LAWS[self.law].needs_load:
             raise InputError(f"law {self.law} needs the output load torque ('load' channel), which the data does not have")
+        # the default (environment, CPUs) is looked up only for inputs long enough to use it
+        threads = check_threads(threads) if threads is not None or v.size >= PARALLEL_MIN_SAMPLES else 1
         if v.ndim == 1:
-            out = compiled(theta, v, load)
+            out = compiled(theta, v, load, threads)
         else:
             flat = lambda x: None if x is None else x.reshape(-1)  # noqa: E731
-            out = compiled(flat(theta), v.reshape(-1), flat(load)).reshape(shape)
+            out = compiled(flat(theta), v.reshape(-1), flat(load), threads).reshape(shape)
         if self.terms:
             temperature, t, acc = (None if x is None else _shaped(np.asarray(x, dtype=float), shape)
                                    for x in (temperature, t, acc))

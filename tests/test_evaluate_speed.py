@@ -387,3 +387,166 @@ def test_an_evaluator_computes_what_evaluate_does_with_the_parameters_it_was_tak
     m.params("positive").set("tau_c", 0.9)
     assert np.max(np.abs(m.evaluate(**x) - before)) > 0.5      # the model sees its change
     np.testing.assert_array_equal(f(**x), before)                # the evaluator, as documented, does not
+
+
+# ------------------------------------------------------------------ threads (gearspec 0.6)
+def _spy_blocks(monkeypatch, delay=0.0):
+    """Record, for every block evaluated, the thread that evaluated it and numpy's error state there;
+    ``delay`` (s) per block, so that a helper thread surely takes some blocks of a short input."""
+    import threading
+    import time
+
+    from gearspec.terms.lines import CompiledFriction
+
+    seen = []
+    original = CompiledFriction._slice
+
+    def spy(self, *args):
+        seen.append((threading.get_ident(), np.geterr()["invalid"]))
+        if delay:
+            time.sleep(delay)
+        return original(self, *args)
+
+    monkeypatch.setattr(CompiledFriction, "_slice", spy)
+    return seen
+
+
+@pytest.mark.parametrize("name", [c[0] for c in CASES])
+def test_blocks_on_threads_give_the_single_call_values_bit_for_bit(name, monkeypatch):
+    # Known answer: the values of one call on one thread with the default blocks (20003 samples: one or
+    # two blocks).  The same inputs cut into blocks of 97 samples (206 blocks, most moving both ways,
+    # some one way after the runs forced below) and shared among 2 and 3 threads must give every
+    # value bit for bit: each sample's arithmetic does not depend on its block or thread.
+    import gearspec.terms.lines as lines
+
+    want_model = dict(CASES)[name]()
+    x = inputs(want_model, 20_000, seed=12)
+    x["v"][3000:3500] = np.abs(x["v"][3000:3500])
+    x["v"][9000:9300] = -np.abs(x["v"][9000:9300])
+    want = want_model.evaluate(**x, threads=1)
+    monkeypatch.setattr(lines, "PARALLEL_MIN_SAMPLES", 0)
+    seen = _spy_blocks(monkeypatch)
+    for threads in (2, 3):
+        m = dict(CASES)[name]()
+        m._compiled().block = 97
+        got = m.evaluate(**x, threads=threads)
+        assert got.dtype == want.dtype and got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+        assert not np.shares_memory(got, x["v"])
+    assert len(seen) == 2 * math.ceil(len(x["v"]) / 97)
+
+
+def test_long_inputs_use_the_threads_and_short_ones_only_the_calling_thread(monkeypatch):
+    # The rule: threads only from PARALLEL_MIN_SAMPLES samples (below it the pool's hand-over is not
+    # small against the work).  Blocks are recorded with the thread that ran them (1 ms each, so the
+    # helper thread takes some of the long input's 6 blocks).
+    import threading
+
+    from gearspec.terms.lines import PARALLEL_MIN_SAMPLES
+
+    m = law_model("silo4", seed=13)
+    seen = _spy_blocks(monkeypatch, delay=0.001)
+    short = inputs(m, PARALLEL_MIN_SAMPLES - 100, seed=14)
+    m.evaluate(short["theta"], short["v"], threads=2)
+    assert len(seen) > 1 and {t for t, _ in seen} == {threading.get_ident()}
+    seen.clear()
+    long = inputs(m, PARALLEL_MIN_SAMPLES, seed=14)
+    m.evaluate(long["theta"], long["v"], threads=2)
+    assert len({t for t, _ in seen}) == 2
+    seen.clear()
+    m.evaluate(long["theta"], long["v"], threads=1)
+    assert {t for t, _ in seen} == {threading.get_ident()}
+
+
+def test_helper_threads_run_under_the_callers_numpy_error_state(monkeypatch):
+    # np.errstate is a context variable: a thread of the pool starts with numpy's default ("warn").
+    # Each helper runs in a copy of the caller's context, so a caller's errstate("ignore") holds in
+    # every block (infinite speeds make inf - inf in the Stribeck part: a warning otherwise).
+    import gearspec.terms.lines as lines
+
+    monkeypatch.setattr(lines, "PARALLEL_MIN_SAMPLES", 0)
+    seen = _spy_blocks(monkeypatch, delay=0.001)
+    m = law_model("silo4", seed=2)
+    m._compiled().block = 50
+    v = np.tile([np.inf, -np.inf, 3.0, np.nan], 500)
+    with np.errstate(invalid="ignore"):
+        got = m.evaluate(np.ones(len(v)), v, threads=2)
+    with np.errstate(invalid="ignore"):
+        np.testing.assert_array_equal(got, m.evaluate(np.ones(len(v)), v, threads=1))
+    assert len({t for t, _ in seen}) == 2
+    assert {e for _, e in seen} == {"ignore"}
+
+
+def test_the_number_of_threads_default_environment_and_refusals(monkeypatch):
+    import os
+
+    from gearspec.terms.lines import MAX_THREADS, THREADS_ENV, default_threads
+
+    monkeypatch.delenv(THREADS_ENV, raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(16)), raising=False)
+    assert default_threads() == MAX_THREADS == 4           # 16 CPUs: capped
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert default_threads() == 1                          # one CPU allowed: one thread
+    monkeypatch.setenv(THREADS_ENV, "3")
+    assert default_threads() == 3                          # the environment wins over the CPUs
+    m = law_model("silo4", seed=2)
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv(THREADS_ENV, bad)
+        with pytest.raises(InputError, match="GEARSPEC_THREADS must be a whole number of threads >= 1"):
+            default_threads()
+    with pytest.raises(InputError, match="GEARSPEC_THREADS"):
+        m.evaluator()                                      # the default is resolved when asked for
+    assert m.evaluate(0.3, 1.0).shape == (1,)             # a short input never looks the default up
+    for bad in (0, 1.5, "2", True):
+        with pytest.raises(InputError, match="threads must be a whole number >= 1"):
+            m.evaluate(0.3, 1.0, threads=bad)
+
+
+def test_a_call_does_not_wait_for_a_pool_thread_busy_elsewhere(monkeypatch):
+    # The pool's one thread is held by another task (another caller's work); evaluate's calling
+    # thread takes every block itself and returns, not waiting for a helper that never started.
+    import threading
+
+    import gearspec.terms.lines as lines
+
+    m = law_model("silo4", seed=13)
+    x = inputs(m, lines.PARALLEL_MIN_SAMPLES, seed=15)
+    want = m.evaluate(x["theta"], x["v"], threads=1)
+    release = threading.Event()
+    busy = lines._shared_pool(1).submit(release.wait, 60)
+    got = []
+    caller = threading.Thread(target=lambda: got.append(m.evaluate(x["theta"], x["v"], threads=2)))
+    caller.start()
+    caller.join(30)                 # ~0.1 s of work; 30 s: only a call waiting for the busy thread takes it
+    finished = not caller.is_alive()
+    release.set()
+    busy.result()
+    caller.join()
+    assert finished
+    np.testing.assert_array_equal(got[0], want)
+
+
+def test_a_forked_child_gets_its_own_pool(monkeypatch):
+    # After fork the parent's pool threads do not exist in the child: the child must start its own
+    # pool (its blocks on 2 threads, as in the parent), not hand blocks to threads that never run.
+    import multiprocessing as mp
+
+    m = law_model("silo4", seed=13)
+    x = inputs(m, 1 << 17, seed=16)
+    m.evaluate(x["theta"], x["v"], threads=2)            # the parent's pool exists
+    seen = _spy_blocks(monkeypatch, delay=0.001)
+
+    def child(conn):
+        seen.clear()
+        out = m.evaluate(x["theta"], x["v"], threads=2)
+        conn.send((len({t for t, _ in seen}), bool(np.array_equal(out, m.evaluate(x["theta"], x["v"], threads=1)))))
+
+    ctx = mp.get_context("fork")
+    a, b = ctx.Pipe()
+    p = ctx.Process(target=child, args=(b,))
+    p.start()
+    ready = a.poll(120)
+    p.join(5)
+    if p.is_alive():
+        p.kill()
+    assert ready and a.recv() == (2, True)

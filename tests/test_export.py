@@ -405,6 +405,26 @@ def _bad_models():
     nan = copy.deepcopy(good)
     nan["directions"]["positive"]["viscous"] = "fast"
     yield "not a number", nan, "positive viscous is 'fast', not a finite number"
+    # issue 14, "What must be shown": every refusal names the file, also those the model or the C
+    # writer raise (they used to say only "unknown friction term kind 'magic'"), and a malformed list is
+    # one sentence, not a traceback (it was exit 1)
+    kind = copy.deepcopy(good)
+    kind["terms"] = [{"kind": "magic", "x": 1.0}]
+    yield "unknown term kind", kind, "unknown friction term kind 'magic'"
+    law = {**copy.deepcopy(good), "law": "dahl"}
+    yield "unknown law", law, "unknown friction law 'dahl'"
+    amp = copy.deepcopy(GOLDEN["models"]["silo4 joint fit, harmonics with speed_range"]["model"])
+    amp["directions"]["positive"]["harmonics"][0]["law"] = "cubic"
+    yield "amplitude law", amp, "unknown amplitude law 'cubic'"
+    term = copy.deepcopy(good)
+    term["terms"] = [{"kind": "cogging", "frequency": 1.0}]
+    yield "term without a parameter", term, "term 1 \\(cogging\\) has no 'amplitude'"
+    yield "terms not a list", {**copy.deepcopy(good), "terms": "offset"}, "'terms' must be a list of objects"
+    lines = copy.deepcopy(good)
+    lines["directions"]["negative"]["harmonics"] = {"frequency": 1.0}
+    yield "lines not a list", lines, "negative direction's 'harmonics' must be a list of objects"
+    yield "directions not objects", {**copy.deepcopy(good), "directions": {"positive": 0.1}}, \
+        "'directions' must be an object of directions"
 
 
 @pytest.mark.parametrize("case,d,message", list(_bad_models()), ids=[c for c, _, _ in _bad_models()])

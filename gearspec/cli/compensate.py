@@ -2,8 +2,8 @@
 with a Coulomb + viscous and with the model's exported C as friction compensation; the report, the
 figures (ripple against speed; a time trace) and the JSON.
 
-The figures and the report are written here (this module is a leaf, as ``gearspec.report`` and
-``gearspec.plots`` are): the analysis is :func:`gearspec.export.compensate.compensate`.
+This module parses and calls: the analysis is :func:`gearspec.export.compensate.compensate`, the
+report :mod:`gearspec.report.compensate`, the figures :mod:`gearspec.plots.compensate`.
 """
 
 from __future__ import annotations
@@ -20,12 +20,6 @@ _EXAMPLES = """examples:
   gearspec compensate model.json --twin silo4 --speeds-rpm 50,100,280,560,1000,3000 --out comp/
       velocity ripple and tracking error per speed and direction: none / Coulomb+viscous / the model (via its C)
 """
-
-#: how each run is named in the report and the figures
-NAMES = {"none": "no compensation", "coulomb_viscous": "Coulomb + viscous", "model": "full model (exported C)"}
-_STYLE = {"none": ("0.55", "o", "-"), "coulomb_viscous": ("tab:blue", "s", "--"), "model": ("tab:red", "^", "-")}
-#: "none" drawn wider and hollow, so that it shows where Coulomb + viscous lies on it
-_WIDE = {"none": {"lw": 2.6, "ms": 11, "fillstyle": "none", "mew": 1.5}}
 
 
 def _speeds(text: str) -> list[float]:
@@ -69,6 +63,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..export.compensate import compensate
+    from ..report.compensate import summary_text, write_compensate_report
 
     if not Path(args.model).is_file():
         raise InputError(f"{args.model}: no such model file")
@@ -89,115 +84,3 @@ def run(args) -> int:
         if args.json:
             print(f"json: {args.json}")
     return 0
-
-
-def ripple_table(result):
-    """Velocity ripple std (rpm and %) per speed and direction, the three runs side by side."""
-    t = result.table
-    w = t.pivot_table(index=["direction", "speed_rpm"], columns="compensation",
-                      values=["ripple_std_rpm", "ripple_std_pct"]).sort_index(ascending=[False, True])
-    rows = []
-    for (d, s), r in w.iterrows():
-        row = {"direction": "positive" if d > 0 else "negative", "speed (rpm)": s}
-        for c in ("none", "coulomb_viscous", "model"):
-            row[f"{NAMES[c]}: std rpm (%)"] = f"{r[('ripple_std_rpm', c)]:.3g} ({r[('ripple_std_pct', c)]:.3g} %)"
-        rows.append(row)
-    import pandas as pd
-
-    return pd.DataFrame(rows)
-
-
-def summary_text(result) -> str:
-    """The ripple table as printed."""
-    return (f"velocity ripple (std of the true motor speed on each plateau), {result.twin} twin\n"
-            + ripple_table(result).to_string(index=False))
-
-
-def plot_ripple(result, path) -> Path:
-    """Velocity ripple (std, % of the speed) against speed, the three runs, one panel per direction."""
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FuncFormatter
-
-    t = result.table
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    for ax, d in zip(axes, (1, -1)):
-        for c in ("none", "coulomb_viscous", "model"):
-            s = t[(t["direction"] == d) & (t["compensation"] == c)].sort_values("speed_rpm")
-            color, marker, ls = _STYLE[c]
-            ax.plot(s["speed_rpm"], s["ripple_std_pct"], marker=marker, ls=ls, color=color, label=NAMES[c],
-                    **_WIDE.get(c, {}))
-        rng = result.settings.get("fitted_speed_range")
-        if rng:
-            ax.axvspan(rng[0] * 60 / (2 * 3.141592653589793), min(rng[1] * 60 / (2 * 3.141592653589793),
-                       t["speed_rpm"].max() * 1.5), color="0.9", zorder=0, label="speeds the lines were fitted on")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _: f"{y:g}"))
-        ax.yaxis.set_minor_formatter(FuncFormatter(lambda y, _: f"{y:g}" if f"{y:.0e}"[0] in "25" else ""))
-        ax.set_xlabel("motor speed (rpm)")
-        ax.set_title(f"{'positive' if d > 0 else 'negative'} direction")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].set_ylabel("velocity ripple, std (% of the speed)")
-    axes[0].legend(fontsize=8)
-    fig.suptitle(f"{result.twin} twin: velocity ripple with and without friction feed-forward")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
-
-
-def plot_trace(result, path) -> Path:
-    """The true motor speed over the held part of the positive plateau at ``trace_rpm``, three runs."""
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4.2))
-    for c in ("none", "coulomb_viscous", "model"):
-        tr = result.traces.get(c)
-        if tr:
-            color, _, ls = _STYLE[c]
-            ax.plot(tr["t"], tr["velocity"], color=color, ls=ls, lw=2.2 if c == "none" else 0.9, label=NAMES[c])
-    ax.axhline(result.trace_rpm, color="k", lw=0.6, ls=":", label="commanded")
-    ax.set_xlabel("time on the plateau (s)")
-    ax.set_ylabel("motor speed (rpm)")
-    ax.set_title(f"{result.twin} twin at +{result.trace_rpm:g} rpm: true motor speed (grey under blue: Coulomb + "
-                 f"viscous changes little)")
-    ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.18))
-    ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
-
-
-def write_compensate_report(result, out, command: str = "") -> Path:
-    """``out/report.md`` (+ HTML), ``ripple_vs_speed.png``, ``trace.png``, ``compensation.csv``."""
-    from ..report import bullets, header, markdown_table, report_dir, write_report
-
-    out = report_dir(out)
-    plot_ripple(result, out / "ripple_vs_speed.png")
-    plot_trace(result, out / "trace.png")
-    result.table.to_csv(out / "compensation.csv", index=False)
-    s = result.settings
-    rng = s.get("fitted_speed_range")
-    seen = ("the model does not record the speeds its lines were fitted on" if not rng else
-            f"the model's lines were fitted on {rng[0] * 60 / 6.283185307179586:.4g}.."
-            f"{rng[1] * 60 / 6.283185307179586:.4g} rpm (column in_fitted_range)")
-    md = header(f"Friction compensation on the {result.twin} twin", command)
-    md += ["Each speed is run three times with the same seed: no compensation; a Coulomb + viscous feed-forward: "
-           f"{s['coulomb_viscous']}; and the model as feed-forward: {s['model']}. The feed-forward gets the "
-           f"{s['feedforward_inputs']}; its torque is added to the PID's command. Measured on the held part of "
-           "each plateau, from the twin's true motor velocity: ripple (std and peak-to-peak), its position-locked "
-           "part (rms of the sinusoids at the model's line frequencies with at least two cycles on the plateau) "
-           f"and the speed error (commanded - true). {s['duration']:g} s per plateau, {s['repetitions']} "
-           f"repetition(s), seed {s['seed']}; {seen}.", "",
-           f"Model: {result.model.name} (law {result.model.law}). Compiled with: `{s['compiler']}`.", "",
-           "## Velocity ripple", "", markdown_table(ripple_table(result)),
-           "![ripple against speed](ripple_vs_speed.png)", "",
-           f"![time trace at {result.trace_rpm:g} rpm](trace.png)", ""]
-    md += bullets(result.notes or ["at every speed and direction the full model lowers the ripple below "
-                                   "Coulomb + viscous"], "## Where the full model does not help")
-    cols = ["direction", "speed_rpm", "compensation", "ripple_std_rpm", "ripple_pp_rpm", "ripple_pp_pct",
-            "locked_rpm", "error_mean_rpm", "error_rms_rpm", "in_fitted_range"]
-    md += ["## All measures (rpm; % of the speed)", "", markdown_table(result.table[cols]), "",
-           "Files: `compensation.csv` (this table), `ripple_vs_speed.png`, `trace.png`.", ""]
-    return write_report(out, md)

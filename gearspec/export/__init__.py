@@ -99,5 +99,9 @@ def export(model, format: str, out, **options) -> Written:
     name = source or f"model '{model.name}'"
     check_exportable(model, name, stateless=format != "json")
     notes = _notes(model, raw, name)
-    paths = _formats()[format](model, Path(out), source=name, notes=notes, **options)
+    try:
+        paths = _formats()[format](model, Path(out), source=name, notes=notes, **options)
+    except InputError as exc:   # a refusal of the writer (a line or term it cannot express): say which file
+        text = str(exc)
+        raise InputError(text if text.startswith(name) else f"{name}: {text}") from None
     return Written(paths, notes)

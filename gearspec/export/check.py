@@ -90,7 +90,27 @@ def read_model(source, name: str = "the model") -> tuple[FrictionModel, dict]:
     if unknown:
         raise InputError(f"{name}: unknown key '{unknown[0]}' at the top level; this gearspec would ignore it, "
                          f"so the export could compute something else than the file means")
-    return FrictionModel.from_dict(d), dict(d)
+    _check_shape(d, name)
+    try:
+        return FrictionModel.from_dict(d), dict(d)
+    except InputError as exc:       # the model's own sentence, with the file it is about
+        raise InputError(f"{name}: {exc}") from None
+
+
+def _check_shape(d: Mapping, name: str) -> None:
+    """Refuse (one sentence naming the file and the key) a model whose directions, lines or terms are
+    not the JSON objects and lists a model file holds, before they are read."""
+    dirs = d["directions"]
+    if not isinstance(dirs, Mapping) or not dirs or not all(isinstance(p, Mapping) for p in dirs.values()):
+        raise InputError(f"{name}: 'directions' must be an object of directions ('positive', 'negative'), each an "
+                         f"object of parameters")
+    for dname, p in dirs.items():
+        lines = p.get("harmonics", [])
+        if not isinstance(lines, list) or not all(isinstance(h, Mapping) for h in lines):
+            raise InputError(f"{name}: the {dname} direction's 'harmonics' must be a list of objects (one per line)")
+    terms = d.get("terms", [])
+    if not isinstance(terms, list) or not all(isinstance(t, Mapping) for t in terms):
+        raise InputError(f"{name}: 'terms' must be a list of objects (one per term, each with its 'kind')")
 
 
 def check_exportable(model: FrictionModel, name: str = "the model", *, stateless: bool = True) -> None:

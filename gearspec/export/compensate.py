@@ -41,13 +41,15 @@ from ..terms import TERMS
 from .check import check_exportable, read_model
 
 __all__ = ["compensate", "CompensationResult", "c_feedforward", "python_feedforward", "coulomb_viscous",
-           "TWINS", "COMPENSATIONS", "not_better", "plateau_metrics", "find_compiler"]
+           "TWINS", "COMPENSATIONS", "LABELS", "not_better", "plateau_metrics", "find_compiler"]
 
 #: the twins and their default speeds (rpm, each run in both directions) and trace speed (rpm)
 TWINS = {"silo4": {"speeds_rpm": (50, 100, 280, 560, 1000, 3000), "trace_rpm": 280.0},
          "direct-drive": {"speeds_rpm": (10, 20, 30, 60, 120, 240), "trace_rpm": 30.0}}
 #: the three runs, in the order they are reported
 COMPENSATIONS = ("none", "coulomb_viscous", "model")
+#: how each run is named in the report and the figures
+LABELS = {"none": "no compensation", "coulomb_viscous": "Coulomb + viscous", "model": "full model (exported C)"}
 #: load (Nm) and temperature (degC) given to the feed-forward: the twins have neither channel
 LOAD, TEMPERATURE = 0.0, 20.0
 #: fewest cycles of a line over a plateau's travel for it to count in the position-locked ripple:
@@ -80,13 +82,14 @@ class _CModel:
     """The exported C of a model, compiled into a shared library in a temporary folder (kept while
     this object lives); calling it evaluates ``gearspec_torque`` over arrays."""
 
-    def __init__(self, model: FrictionModel, cc: str | None = None, smooth_velocity: float = 0.0):
+    def __init__(self, model: FrictionModel, cc: str | None = None, smooth_velocity: float = 0.0,
+                 source: str | None = None):
         from . import export
 
         compiler = find_compiler(cc)
         self._dir = tempfile.TemporaryDirectory(prefix="gearspec-ff-")
         out = Path(self._dir.name)
-        export(model, "c", out, smooth_velocity=smooth_velocity)
+        export(model, "c", out, smooth_velocity=smooth_velocity, source=source)
         (out / "gearspec_ff.c").write_text(_WRAPPER)
         lib = out / "libgearspec_ff.so"
         cmd = [compiler, "-std=c99", "-O2", "-shared", "-fPIC", "-o", str(lib), str(out / "gearspec_model.c"),
@@ -112,12 +115,14 @@ class _CModel:
         return out
 
 
-def c_feedforward(model: FrictionModel, cc: str | None = None, smooth_velocity: float = 0.0) -> Callable:
+def c_feedforward(model: FrictionModel, cc: str | None = None, smooth_velocity: float = 0.0, *,
+                  source: str | None = None) -> Callable:
     """``feedforward(theta, velocity) -> torque`` (rad, rad/s -> Nm, arrays) computed by the model's
     exported C (``gearspec_torque`` with acceleration 0, load :data:`LOAD`, temperature
     :data:`TEMPERATURE`), compiled with ``cc`` (default ``$CC`` or ``cc``) and loaded with ctypes.
-    ``smooth_velocity``: ``GEARSPEC_SMOOTH_VELOCITY`` (rad/s; 0, the default: the exact sign)."""
-    return _CModel(model, cc, smooth_velocity)
+    ``smooth_velocity``: ``GEARSPEC_SMOOTH_VELOCITY`` (rad/s; 0, the default: the exact sign);
+    ``source``: the model's file, named in a refusal (default: the model's name)."""
+    return _CModel(model, cc, smooth_velocity, source)
 
 
 def python_feedforward(model: FrictionModel) -> Callable:
@@ -303,9 +308,11 @@ def compensate(model, twin: str = "silo4", speeds_rpm: Sequence[float] | None = 
     """
     if twin not in TWINS:
         raise InputError(f"unknown twin '{twin}' (known: {', '.join(TWINS)})")
+    where = f"model '{getattr(model, 'name', None)}'"
     if not isinstance(model, FrictionModel):
-        model = read_model(model, Path(model).name if isinstance(model, (str, Path)) else "the model")[0]
-    check_exportable(model, f"model '{model.name}'")
+        where = Path(model).name if isinstance(model, (str, Path)) else "the model"
+        model = read_model(model, where)[0]
+    check_exportable(model, where)
     needs = {n for t in model.terms for n in TERMS[t["kind"]].needs} & {"load", "temperature"}
     if model.law_spec.needs_load or needs:
         raise InputError(f"model '{model.name}' needs a {' and '.join(sorted(needs) or ['load'])} channel, which the "
@@ -319,7 +326,7 @@ def compensate(model, twin: str = "silo4", speeds_rpm: Sequence[float] | None = 
         listed = ", ".join(f"{s:g}" for s in speeds)
         raise InputError(f"trace speed {trace_rpm:g} rpm is not one of the speeds {listed}")
     cv = coulomb_viscous(model)
-    cmodel = c_feedforward(model, cc, smooth_velocity)
+    cmodel = c_feedforward(model, cc, smooth_velocity, source=where)
     ffs = {"none": None, "coulomb_viscous": c_feedforward(cv, cc, smooth_velocity), "model": cmodel}
     freqs, rng_fit = locked_frequencies(model), _fitted_range(model)
     rows, traces = [], {}

@@ -12,6 +12,11 @@ samples.  Units: SI (rad, rad/s, Nm; frequencies in cycles per unit of theta, de
 
 from __future__ import annotations
 
+import contextvars
+import itertools
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -19,13 +24,77 @@ import numpy as np
 from ..errors import InputError
 from .shapes import AMPLITUDE_LAWS, amplitude_law, clamp_speed, load_amplitude, sinusoid
 
-__all__ = ["Lines", "CompiledDirection", "CompiledFriction"]
+__all__ = ["Lines", "CompiledDirection", "CompiledFriction", "default_threads", "check_threads", "THREADS_ENV",
+           "MAX_THREADS", "PARALLEL_MIN_SAMPLES"]
 
 #: samples per block times lines: arrays of a block stay in the processor's cache, and the Python
 #: work per block (some 40 numpy calls) is spread over enough samples to cost < 5 % of the numpy work
 _BLOCK = 65536
 #: blocks up to this many samples that move both ways are evaluated for both directions at once
 _SMALL = 256
+#: environment variable giving the default number of threads of :meth:`CompiledFriction.__call__`
+THREADS_ENV = "GEARSPEC_THREADS"
+#: the default number of threads is the CPUs this process may use, at most this many
+MAX_THREADS = 4
+#: inputs shorter than this many samples are evaluated in the calling thread only: below it the
+#: pool's hand-over (some 50-100 us) is not small against the work (~10 us per 100 samples)
+PARALLEL_MIN_SAMPLES = 1 << 17
+
+_pool_lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
+
+
+def _forget_pool() -> None:
+    """In a child process made by ``fork``: the parent's pool threads do not exist there, so its
+    pool is dropped and a new one started on first use."""
+    global _pool, _pool_lock
+    _pool, _pool_lock = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
+
+
+def default_threads() -> int:
+    """Threads a long evaluation uses when none is given: the environment variable ``GEARSPEC_THREADS``
+    (an integer >= 1) when set, else the CPUs this process may run on (``os.sched_getaffinity``,
+    else ``os.cpu_count()``) capped at :data:`MAX_THREADS`."""
+    env = os.environ.get(THREADS_ENV, "").strip()
+    if env:
+        try:
+            n = int(env)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InputError(f"the environment variable {THREADS_ENV} must be a whole number of threads >= 1, "
+                             f"got {env!r}")
+        return n
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    return max(1, min(MAX_THREADS, cpus))
+
+
+def check_threads(threads) -> int:
+    """``threads`` (None: :func:`default_threads`) as a number >= 1, or an InputError naming it."""
+    if threads is None:
+        return default_threads()
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise InputError(f"threads must be a whole number >= 1 (or None for the default), got {threads!r}")
+    return int(threads)
+
+
+def _shared_pool(workers: int) -> ThreadPoolExecutor:
+    """The module's thread pool, grown to at least ``workers`` threads (daemon threads of the
+    standard executor, started on first use and reused by every later call)."""
+    global _pool
+    with _pool_lock:
+        if _pool is None or _pool._max_workers < workers:
+            # a smaller pool is dropped, not shut down: a call may still be submitting to it (its idle
+            # threads end when it is garbage-collected)
+            _pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gearspec-evaluate")
+        return _pool
 
 
 class Lines:
@@ -146,19 +215,50 @@ class CompiledFriction:
                     raise InputError("the model has position-locked harmonics and needs theta")
                 raise InputError("a periodic term with a load coefficient (SILO4 eq. 14) needs the 'load' channel")
 
-    def __call__(self, theta, v, load=None) -> np.ndarray:
+    def __call__(self, theta, v, load=None, threads: int = 1) -> np.ndarray:
         """``sign(v) * magnitude`` at 1-D samples ``theta`` (None when no line needs it), ``v``, ``load``
         (None when not needed); 0 where v is 0 or NaN.  Blocks of samples; in each, the samples of
-        each direction gathered (all of them, without a copy, when the block moves one way)."""
+        each direction gathered (all of them, without a copy, when the block moves one way).
+
+        ``threads`` > 1: inputs of at least :data:`PARALLEL_MIN_SAMPLES` samples have their blocks
+        shared among that many threads (the calling one and a shared pool; numpy releases the GIL in
+        its loops).  The blocks are the same whatever the number of threads, so each value is
+        bit-identical to the single-thread result."""
         self.check(theta, v, load)
         n = len(v)
         if n <= self.block:
             return self._block(theta, v, load, None)
         out = np.zeros(n)         # 0 where v is 0 or NaN
-        for i in range(0, n, self.block):
-            j = min(n, i + self.block)
-            self._block(None if theta is None else theta[i:j], v[i:j], None if load is None else load[i:j], out[i:j])
+        starts = range(0, n, self.block)
+        threads = min(threads, len(starts))
+        if threads <= 1 or n < PARALLEL_MIN_SAMPLES:
+            for i in starts:
+                self._slice(theta, v, load, out, i)
+            return out
+        following = itertools.count()       # the next block to take: next() is atomic under the GIL
+
+        def work():
+            for k in following:
+                if k >= len(starts):
+                    return
+                self._slice(theta, v, load, out, starts[k])
+
+        # each helper thread runs in a copy of the caller's context: numpy's errstate (a context
+        # variable) and anything else the caller set apply to its blocks too
+        pool = _shared_pool(threads - 1)
+        futures = [pool.submit(contextvars.copy_context().run, work) for _ in range(threads - 1)]
+        try:
+            work()
+        finally:
+            for f in futures:       # a helper not started yet (its thread busy elsewhere) is not waited for
+                if not f.cancel():
+                    f.result()
         return out
+
+    def _slice(self, theta, v, load, out, i) -> None:
+        """The block starting at sample ``i`` into ``out``."""
+        j = min(len(v), i + self.block)
+        self._block(None if theta is None else theta[i:j], v[i:j], None if load is None else load[i:j], out[i:j])
 
     def _block(self, theta, v, load, out):
         """One block into ``out`` (zeros; None: a new array)."""
