@@ -2,7 +2,7 @@
 
 :func:`batch` analyses every (recording, joint) as ``gearspec fit`` would, serially or on Dask, into
 one table; :func:`trend_tests` finds the joints whose parameters changed over the dates by more than
-their uncertainty allows (:func:`flagged_joints`); :func:`gearspec.cli.batch.write_fleet_report`
+their uncertainty allows (:func:`flagged_joints`); :func:`gearspec.report.fleet.write_fleet_report`
 writes the report with its figures.  The fleet twin is :func:`gearspec.simulate.fleet.fleet_twin`.
 """
 

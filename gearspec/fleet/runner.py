@@ -32,6 +32,13 @@ BASE_COLUMNS = ("source", "robot", "joint", "direction", "status", "error", "war
 SEGMENT_DEFAULTS = {"window": "auto", "rel_tol": 0.15, "min_speed": None, "min_duration": None, "quasi_static": None}
 #: how long a Dask scheduler may take to answer
 CONNECT_TIMEOUT = "20s"
+#: Dask's background sampling in the local cluster, made rare: a worker's statistical profiler (every
+#: 10 ms), event-loop tick (20 ms) and memory monitor (100 ms) each take the GIL from the task
+#: running beside them; measured on 6 recordings under load, they cost 15-25 % more CPU per task and
+#: 1-1.5 s of the scheduler's.  The tasks here are seconds long: sampled each second is enough.
+QUIET_CLUSTER = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+                 "distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "2s",
+                 "distributed.admin.system-monitor.gil.enabled": False}
 #: a line counts among the strongest only when its false-alarm probability is below this
 LINE_FAP = 0.01
 
@@ -42,12 +49,12 @@ def tasks(recordings: Iterable, joint: str | None = "all",
     ``joint`` is "all" (a bag that cannot be listed gives one task, which then fails with its
     sentence), else the named joint; any other file one task with joint None."""
     from ..recording.bags import bag_joints, is_bag
-    from ..recording.load import _expand
+    from ..recording.load import expand_paths
 
     out: list[tuple[str, str | None]] = []
     for path in recordings:
         try:
-            files = _expand([path])
+            files = expand_paths([path])
         except InputError:
             out.append((str(path), None))   # e.g. no such file: the task says so
             continue
@@ -197,7 +204,7 @@ def _frame(results: list[dict]) -> pd.DataFrame:
 
 def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, workers: int | None = None,
           scheduler: str | None = None, joint: str | None = "all", progress: bool = True,
-          fits: dict | None = None, **load_options) -> pd.DataFrame:
+          fits: dict | None = None, start: str | None = None, **load_options) -> pd.DataFrame:
     """Spectrum + fit (+ diagnosis) of every (recording, joint), one row per (source, joint, direction).
 
     Parameters
@@ -221,6 +228,11 @@ def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, 
         A progress bar on stderr (tqdm) as tasks finish.
     fits : dict, optional
         Filled with each task's ``gearspec fit --json`` form, keyed by ``(source, joint)``.
+    start : {"fork", "spawn", "forkserver"}, optional
+        How the local worker processes start.  Default: "fork" on Linux (a copy of this process,
+        whose imports are done: a fraction of a second), elsewhere Dask's configured method
+        ("spawn").  Give "spawn" when this process runs threads of its own that fork would copy in
+        an unsafe state.
     **load_options
         Recording and segment options (``map``, ``scale``, ``fs``, ``topic``, ``window``, ...).
 
@@ -244,7 +256,7 @@ def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, 
         it = (analyse_one(*a) for a in args)
         results = list(_bar(it, n, progress))
     else:
-        results = _on_dask(args, workers, scheduler, progress)
+        results = _on_dask(args, workers, scheduler, progress, start=start, diagnose=diagnose)
     if fits is not None:
         fits.update({(src, j): r["fit"] for (src, j), r in zip(todo, results) if r["fit"] is not None})
     return _frame(results)
@@ -258,28 +270,85 @@ def _bar(it, total: int, enabled: bool):
     return tqdm(it, total=total, desc="recordings", unit="task", file=sys.stderr)
 
 
-def _on_dask(args: list, workers: int | None, scheduler: str | None, progress: bool) -> list[dict]:
-    """Run :func:`analyse_one` over ``args`` on a Dask cluster; results in the order of ``args``."""
+def _start_method(start: str | None) -> str:
+    """How local worker processes start: ``start`` when given; else "fork" where the system has it
+    (Linux: a copy of this process, whose imports are done, starts in a fraction of a second) and
+    otherwise Dask's configured method ("spawn": a fresh interpreter that imports distributed,
+    numpy, scipy, pandas and gearspec again, about 2 s of CPU per worker on an idle machine)."""
+    import multiprocessing
+
+    import dask
+
+    if start is not None:
+        if start not in multiprocessing.get_all_start_methods():
+            raise InputError(f"start must be one of {', '.join(multiprocessing.get_all_start_methods())} "
+                             f"on this system, got {start!r}")
+        return start
+    if sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods():
+        return "fork"
+    return dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+
+
+def _warm(diagnose: bool) -> None:
+    """Import what a task needs here, before worker processes are forked from this one."""
+    from .. import identify, lag, recording, segment, spectrum  # noqa: F401
+    if diagnose:
+        from .. import diagnose as _d  # noqa: F401
+
+
+def _one_blas_thread(fn, *args):
+    """``fn(*args)`` with numpy's BLAS / OpenMP pools held to one thread: a worker is one process on
+    one core, and threads of its own only contend with the other workers (a forked worker inherits
+    this process's pools, which Dask's ``OMP_NUM_THREADS=1`` does not reach)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return fn(*args)
+
+
+def _largest_first(args: list) -> list[int]:
+    """The order tasks are submitted in: the largest files first (a long task started last would run
+    alone at the end while the other workers wait), ties and unreadable paths in task order."""
+    def size(a) -> int:
+        try:
+            p = Path(a[0])
+            return sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) if p.is_dir() else p.stat().st_size
+        except OSError:
+            return 0
+    sizes = [size(a) for a in args]
+    return sorted(range(len(args)), key=lambda i: -sizes[i])
+
+
+def _on_dask(args: list, workers: int | None, scheduler: str | None, progress: bool, start: str | None = None,
+             diagnose: bool = False, fn=analyse_one) -> list:
+    """Run ``fn`` (:func:`analyse_one`) over ``args`` on a Dask cluster, the largest files first,
+    each task with one BLAS thread; results in the order of ``args``."""
     import logging
     import os
 
+    import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
     if scheduler is None:
         n = min(len(args), workers or os.cpu_count() or 1)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        method = _start_method(start)
+        if method == "fork":
+            _warm(diagnose)
+        with dask.config.set({**QUIET_CLUSTER, "distributed.worker.multiprocessing-method": method}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
     try:
         try:
             client = Client(cluster if cluster is not None else scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError) as exc:
             raise InputError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_one_line(exc)})") from None
         with client:
-            futures = [client.submit(analyse_one, *a, pure=False) for a in args]
-            index = {f.key: i for i, f in enumerate(futures)}
+            order = _largest_first(args)
+            futures = {client.submit(_one_blas_thread, fn, *args[i], pure=False): i for i in order}
+            index = {f.key: i for f, i in futures.items()}
             results: list = [None] * len(args)
-            for fut, res in _bar(as_completed(futures, with_results=True), len(args), progress):
+            for fut, res in _bar(as_completed(list(futures), with_results=True), len(args), progress):
                 results[index[fut.key]] = res
             return results
     finally:
