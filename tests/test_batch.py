@@ -159,6 +159,59 @@ def test_unreachable_scheduler_is_one_sentence(fleet, monkeypatch):
         batch([fleet["twin"]["bags"][0]], fleet["gear"], scheduler="tcp://127.0.0.1:9", progress=False)
 
 
+# ---------------------------------------------------------------------- the local cluster's workers
+def _probe(tag):
+    """What a worker sees: a mark set in the parent after import (kept only by a forked copy), its BLAS
+    threads inside the task, and Dask's profiler setting."""
+    import dask
+    from threadpoolctl import threadpool_info
+
+    import gearspec.fleet.runner as runner
+
+    blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    return {"tag": tag, "mark": getattr(runner, "_TEST_MARK", None), "blas": max(blas, default=None),
+            "profile": dask.config.get("distributed.worker.profile.enabled")}
+
+
+def test_local_workers_are_forked_with_one_blas_thread_and_no_profiler(monkeypatch):
+    import sys
+
+    from threadpoolctl import threadpool_info
+
+    import gearspec.fleet.runner as runner
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("fork is the default start on Linux only")
+    monkeypatch.setattr(runner, "_TEST_MARK", 7, raising=False)
+    out = runner._on_dask([("a",), ("b",), ("c",)], 2, None, False, fn=_probe)
+    # results in the order given, whatever order the workers ran them in
+    assert [r["tag"] for r in out] == ["a", "b", "c"]
+    # forked: the workers carry this process's state (a spawned one re-imports and has no mark)
+    assert [r["mark"] for r in out] == [7, 7, 7]
+    # one BLAS thread in each task, whatever this process has (the test can only fail with more cores)
+    if max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas") > 1:
+        assert [r["blas"] for r in out] == [1, 1, 1]
+    assert [r["profile"] for r in out] == [False, False, False]
+
+
+def test_largest_files_are_submitted_first_and_a_bad_start_is_one_sentence(tmp_path):
+    import gearspec.fleet.runner as runner
+    from gearspec.errors import InputError
+
+    sizes = {"small.csv": 10, "big.csv": 300, "middle.csv": 100, "same.csv": 100}
+    for name, n in sizes.items():
+        (tmp_path / name).write_bytes(b"x" * n)
+    folder = tmp_path / "bag"
+    folder.mkdir()
+    (folder / "a.mcap").write_bytes(b"x" * 150)
+    (folder / "metadata.yaml").write_bytes(b"x" * 60)   # a rosbag2 folder: its files together, 210 bytes
+    args = [(str(tmp_path / n),) for n in sizes] + [(str(folder),), (str(tmp_path / "missing.csv"),)]
+    # big 300, the folder 210, middle and same 100 each (in task order), small 10, missing (0) last
+    assert runner._largest_first(args) == [1, 4, 2, 3, 0, 5]
+    with pytest.raises(InputError, match="start must be one of .*fork.*, got 'threads'"):
+        runner._start_method("threads")
+
+
 # ---------------------------------------------------------------------- the trend rule on known series
 def _series(n_series, n_dates, rng, slope=0.0, scatter=0.0, se=0.01):
     """A batch-like table: ``n_series`` joints, values 1 + slope * date index + scatter noise, with
