@@ -150,6 +150,42 @@ def test_warnings_of_a_task_are_in_its_rows(tmp_path):
     assert np.allclose(df["tau_c"], 0.1, rtol=0.03)
 
 
+def _one_sided(tmp_path, speeds, name):
+    """A Stribeck twin (tau_c 0.1 Nm, 1 mNm noise) of plateaus at ``speeds`` (rad/s) as a CSV."""
+    from gearspec.model import FrictionModel
+    from gearspec.simulate import model_recording
+
+    truth = FrictionModel("stribeck", {"tau_c": 0.1, "tau_s": 0.15, "v_s": 2.0, "viscous": 1e-3})
+    rec, _ = model_recording(truth, speeds, duration=1.0, fs=250, noise=1e-3, seed=3)
+    return rec.save(tmp_path / name)
+
+
+def test_every_direction_has_its_row_when_one_cannot_be_analysed(tmp_path, capsys):
+    # the fleet twin's odd row: one joint's fit refused in one direction gave one row, not two.
+    # (1) plateaus in the positive direction only: the negative row says why, the positive is fitted
+    one = _one_sided(tmp_path, [1, 3, 8, 20], "positive_only.csv")
+    # (2) the positive direction at one speed, too few for the law's 4 parameters: the fit is
+    # refused, as `gearspec fit` refuses it, and each direction has its error row with the sentence
+    few = _one_sided(tmp_path, [3, -1, -3, -8, -20], "few_speeds.csv")
+    df = batch([one, few], None, law="stribeck", workers=1, progress=False)
+    assert list(zip(df["source"], df["direction"], df["status"])) == [
+        (str(one), "positive", "ok"), (str(one), "negative", "error"),
+        (str(few), "positive", "error"), (str(few), "negative", "error")]
+    assert df["error"].iloc[1] == "no segment in the negative direction"
+    assert df["tau_c"].iloc[0] == pytest.approx(0.1, rel=0.03)   # as in test_warnings_of_a_task_are_in_its_rows
+    said = "law stribeck has 4 parameters per direction but the positive direction has plateaus at only 1 speed(s)"
+    assert df["error"].iloc[2].startswith(said) and df["error"].iloc[3] == df["error"].iloc[2]
+    assert main(["fit", str(few), "--law", "stribeck", "--quiet"]) == 2
+    assert said in capsys.readouterr().err
+    # the command line counts pairs, not rows, and names the direction of each refused row
+    assert main(["batch", str(one), str(few), "--law", "stribeck", "--workers", "1", "--out",
+                 str(tmp_path / "o")]) == 2
+    out = capsys.readouterr().out
+    assert "2 recording-joint pair(s): 0 fitted, 1 refused, 1 fitted in one direction only" in out
+    assert f"refused [negative]: {one}: no segment in the negative direction" in out
+    assert "1 fitted in one direction only" in (tmp_path / "o" / "report.md").read_text()
+
+
 def test_unreachable_scheduler_is_one_sentence(fleet, monkeypatch):
     import gearspec.fleet.runner as fb
     from gearspec.errors import InputError

@@ -76,7 +76,7 @@ def _fit_name(source: str, joint) -> str:
 
 
 def run(args) -> int:
-    from ..fleet import batch
+    from ..fleet import batch, pair_counts
     from ..fleet.trend import flagged_joints, trend_tests
     from ..gears import load_gear
     from ..report.fleet import write_fleet_report
@@ -96,10 +96,12 @@ def run(args) -> int:
     report = write_fleet_report(df, trends, out, command=command_line())
     bad = df[df["status"] != "ok"]
     if not args.quiet:
-        n = df.groupby(["source", "joint"], dropna=False).ngroups
-        print(f"{n} recording-joint pair(s): {n - len(bad)} fitted, {len(bad)} refused")
+        c = pair_counts(df)
+        print(f"{c['pairs']} recording-joint pair(s): {c['fitted']} fitted, {c['refused']} refused"
+              + (f", {c['partly']} fitted in one direction only" if c["partly"] else ""))
         for r in bad.itertuples(index=False):
-            where = f" [{r.joint}]" if isinstance(r.joint, str) else ""
+            where = " ".join(x for x in (r.joint, r.direction) if isinstance(x, str))
+            where = f" [{where}]" if where else ""
             said = r.error if str(r.error).startswith(str(r.source)) else f"{r.source}: {r.error}"
             print(f"refused{where}: {said}")
         flagged = flagged_joints(trends)

@@ -21,8 +21,10 @@ import pandas as pd
 
 from ..errors import GearspecWarning, InputError
 
-__all__ = ["batch", "analyse_one", "tasks", "N_LINES", "BASE_COLUMNS"]
+__all__ = ["batch", "analyse_one", "tasks", "pair_counts", "N_LINES", "BASE_COLUMNS", "DIRECTIONS"]
 
+#: the directions of motion, one row each per (source, joint)
+DIRECTIONS = ("positive", "negative")
 #: strongest spectral lines kept per (source, joint, direction)
 N_LINES = 3
 #: the columns every row has, in this order (the law's parameters and the lines follow)
@@ -85,32 +87,58 @@ def analyse_one(source: str, joint: str | None, gear=None, law: str = "silo4", d
     Returns ``{"rows": [...], "fit": dict | None}``: one row per direction (dicts of
     :data:`BASE_COLUMNS`; ``warnings``: the findings the analysis warned of, each once, joined by "; ";
     the law's parameters and standard errors in SI as in the fit's JSON, the
-    strongest lines), or one error row; ``fit``: the ``gearspec fit --json`` form.  Never raises for
-    a bad input: an :class:`InputError` becomes the row's ``error``, any other exception
-    ``"internal error: ..."``.
+    strongest lines); ``fit``: the ``gearspec fit --json`` form.  Never raises for a bad input: an
+    :class:`InputError` becomes the ``error`` sentence, any other exception ``"internal error: ..."``.
+    A recording that cannot be read has one error row (``direction`` None: its directions are not
+    known); a recording read but not analysed (e.g. the fit refused in one direction, which refuses
+    the whole fit as ``gearspec fit`` does) has an error row per direction with the sentence, and a
+    direction without any identified parameter of the law (no segment in it) an error row saying so.
     """
     base = {"source": str(source), "robot": Path(source).parent.name or ".", "joint": joint, "direction": None,
             "status": "error", "error": None, "start_time": None, "law": law}
+    read: dict = {}   # filled once the recording is read: its start time
+    caught: list = []
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", GearspecWarning)
             warnings.simplefilter("ignore", RuntimeWarning)   # numerical noise of runs that succeed, as in the CLI
-            out = _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base)
-        said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught
-                                  if issubclass(w.category, GearspecWarning)))
-        for row in out["rows"]:
-            row["warnings"] = "; ".join(said) or None
-        return out
+            out = _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base, read)
     except InputError as exc:
-        return {"rows": [{**base, "error": _one_line(exc)}], "fit": None}
+        out = {"rows": _error_rows(base, read, _one_line(exc)), "fit": None}
     except Exception as exc:  # not the user's fault: said as such, with the exception's type
         tb = traceback.extract_tb(exc.__traceback__)
         where = f" at {Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else ""
-        return {"rows": [{**base, "error": f"internal error: {type(exc).__name__}: {_one_line(exc)}{where}"}],
-                "fit": None}
+        out = {"rows": _error_rows(base, read, f"internal error: {type(exc).__name__}: {_one_line(exc)}{where}"),
+               "fit": None}
+    said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught
+                              if issubclass(w.category, GearspecWarning)))
+    for row in out["rows"]:
+        row["warnings"] = "; ".join(said) or None
+    return out
 
 
-def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
+def _error_rows(base: dict, read: dict, sentence: str) -> list[dict]:
+    """The rows of a task that failed: one (direction None) when the recording was not read, else one
+    per direction with its start time."""
+    if not read:
+        return [{**base, "error": sentence}]
+    return [{**base, "direction": d, "start_time": read.get("start_time"), "error": sentence} for d in DIRECTIONS]
+
+
+def _direction_refused(fit: dict, dname: str, law: str) -> str | None:
+    """The sentence of a direction in which no parameter of the law was identified (None when some
+    was): the fit's own reason (e.g. "no segment in the negative direction")."""
+    from ..model import LAWS
+
+    names = LAWS[law].params if law in LAWS else ()
+    params = fit["directions"].get(dname) or {}
+    if not names or any(params.get(k) is not None for k in names):
+        return None
+    reason = (fit.get("not_identified") or {}).get(f"{dname}.{names[0]}")
+    return reason or f"no parameter of the {law} law was identified in the {dname} direction"
+
+
+def _analyse(source, joint, gear, law, diagnose, opts, base, read) -> dict:
     from ..identify import identify_recording
     from ..jsonsafe import plain
     from ..lag import lag_option
@@ -124,6 +152,7 @@ def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
     lag = opts.pop("lag", None)
     rec = load_recording([source], gear, joint=joint, **opts)
     rec = lag_option(rec, lag, say=lambda s: None, **seg_opts)
+    read["start_time"] = rec.meta.get("start_time")
     seg = find_segments(rec, **seg_opts, quasi_static=quasi_static)
     result = identify_recording(rec, law, segmentation=seg)
     fit = plain(result.to_dict())
@@ -133,8 +162,13 @@ def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
     base = {**base, "status": "ok", "start_time": rec.meta.get("start_time"), "rmse": fit.get("rmse"),
             "rmse_holdout": fit.get("rmse_holdout"), **extra}
     rows = []
-    for dname, params in fit["directions"].items():
-        rows.append({**base, "direction": dname, **_parameters(params), **lines.get(dname, {})})
+    for dname in DIRECTIONS:
+        params = fit["directions"].get(dname) or {}
+        row = {**base, "direction": dname, **_parameters(params), **lines.get(dname, {})}
+        refused = _direction_refused(fit, dname, law)
+        if refused:
+            row.update(status="error", error=refused)
+        rows.append(row)
     return {"rows": rows, "fit": fit}
 
 
@@ -182,6 +216,15 @@ def _diagnosis(rec, seg, law: str) -> dict:
     diag = run(DiagnoseData.from_recording(rec, seg, by="segment", inertia=True), None, law=law)
     names = [e.name for e in diag.accepted]
     return {"n_effects": len(names), "effects": "; ".join(names)}
+
+
+def pair_counts(df: pd.DataFrame) -> dict:
+    """How the (source, joint) pairs of a batch table fared: ``pairs``; ``fitted`` (every row "ok"),
+    ``partly`` (fitted in one direction, the other's row an error) and ``refused`` (no row "ok")."""
+    ok = (df["status"] == "ok").groupby([df["source"], df["joint"]], dropna=False)
+    n_ok, n = ok.sum(), ok.size()
+    return {"pairs": int(len(n)), "fitted": int((n_ok == n).sum()), "partly": int(((n_ok > 0) & (n_ok < n)).sum()),
+            "refused": int((n_ok == 0).sum())}
 
 
 def _frame(results: list[dict]) -> pd.DataFrame:

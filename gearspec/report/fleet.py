@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..fleet import pair_counts
 from ..fleet.trend import MIN_DATES, flagged_joints
 from ..plots.fleet import plot_fleet_overview, plot_flagged_joint
 from . import bullets, header, markdown_table, report_dir, write_report
@@ -32,12 +33,14 @@ def _safe(name) -> str:
 def write_fleet_report(df, trends, out, command: str = "") -> Path:
     """Write ``out/report.md`` (and ``report.html``) with the figures beside it; returns its path."""
     out = report_dir(out)
-    n_tasks = df.groupby(["source", "joint"], dropna=False).ngroups
+    c = pair_counts(df)
     bad = df[df["status"] != "ok"]
     md = header("Fleet report", command)
-    md += [f"{n_tasks} recording-joint pair(s) analysed: {n_tasks - len(bad)} fitted, {len(bad)} refused.", ""]
+    md += [f"{c['pairs']} recording-joint pair(s) analysed: {c['fitted']} fitted, {c['refused']} refused"
+           + (f", {c['partly']} fitted in one direction only" if c["partly"] else "") + ".", ""]
     if len(bad):
-        md += ["## Refused", "", markdown_table(bad[["source", "joint", "error"]]), ""]
+        md += ["## Refused", "", "One row per recording, joint and direction not analysed (no direction: the "
+               "recording could not be read).", "", markdown_table(bad[["source", "joint", "direction", "error"]]), ""]
     md += ["## Rule", "", RULE.format(min_dates=MIN_DATES, tests=trends.attrs.get("tests", len(trends)),
                                       correction=CORRECTIONS[trends.attrs.get("correction", "holm")],
                                       alpha=trends.attrs.get("alpha", 0.01)), ""]
