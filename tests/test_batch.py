@@ -310,3 +310,11 @@ def test_two_robot_fleet_flags_the_changes_on_either_robot_and_nothing_else(tmp_
     assert (df["status"] == "ok").all() and len(df) == 96
     joints = flagged_joints(trend_tests(df))
     assert set(zip(joints["robot"], joints["joint"])) == {("robot1", "joint1"), ("robot2", "joint3")}
+
+
+def test_figure_states_a_tiny_adjusted_p_value_as_a_bound():
+    from gearspec.plots.fleet import _p_text
+
+    # Holm's adjustment of a p-value that underflowed is exactly 0: the figure gives the bound, not 0
+    assert _p_text(0.0) == "p_adj < 1e-16" and _p_text(3e-17) == "p_adj < 1e-16"
+    assert _p_text(3.1e-9) == "p_adj 3.1e-09"

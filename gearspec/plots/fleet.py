@@ -37,6 +37,12 @@ def _date_axis(ax) -> None:
     ax.tick_params(axis="x", labelrotation=20, labelsize=8)
 
 
+def _p_text(p: float) -> str:
+    """An adjusted p-value as the figure states it: below 1e-16 only as a bound (a normal or t tail so
+    far out says more about the model than the data; an underflow would print 0)."""
+    return "p_adj < 1e-16" if p < 1e-16 else f"p_adj {p:.1e}"
+
+
 def _well_determined(df, p: str) -> bool:
     """A parameter worth an overview panel: its typical value at least 3 standard errors."""
     v, se = pd.to_numeric(df[p], errors="coerce"), pd.to_numeric(df[p + "_se"], errors="coerce")
@@ -59,13 +65,15 @@ def plot_fleet_overview(df, trends, path) -> Path | None:
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, p in zip(axes.flat, params):
         k = 0
+        joint_colour: dict = {}
         for (robot, joint, d), g in ok.groupby(["robot", "joint", "direction"], sort=True):
             g = g.sort_values("start_time")
             y = pd.to_numeric(g[p], errors="coerce")
             rel = 100 * (y / y.mean() - 1)
             if (robot, joint, d, p) in flagged:
-                ax.plot(_dates(g["start_time"]), rel, "o-", color=colours[k % len(colours)], lw=1.6, ms=3,
-                        label=f"{robot} {joint} {d}", zorder=3)
+                colour = joint_colour.setdefault((robot, joint), colours[len(joint_colour) % len(colours)])
+                ax.plot(_dates(g["start_time"]), rel, "o-" if d == "positive" else "s--", color=colour, lw=1.6,
+                        ms=3, label=f"{robot} {joint} {d}", zorder=3)
                 k += 1
             else:
                 ax.plot(_dates(g["start_time"]), rel, "-", color="0.7", lw=0.7, zorder=1)
@@ -78,7 +86,8 @@ def plot_fleet_overview(df, trends, path) -> Path | None:
             ax.legend(fontsize=7, loc="upper left")
     for ax in list(axes.flat)[len(params):]:
         ax.set_visible(False)
-    fig.suptitle("Fleet: parameters over time (grey: not flagged; colour: flagged)", fontsize=11)
+    fig.suptitle("Fleet: parameters over time (grey: not flagged; colour: flagged, one per joint; "
+                 "solid: positive, dashed: negative direction)", fontsize=11)
     fig.tight_layout()
     return save(fig, path)
 
@@ -104,7 +113,7 @@ def plot_flagged_joint(df, trends, robot, joint, path) -> Path:
                 r = tr.iloc[0]
                 line = r["mean"] + r["slope_per_day"] * ((x - r["t_ref"]) / DAY)
                 ax.plot(_dates(x), line, "-", color=colour, lw=1,
-                        label=f"{dname} trend {100 * r['relative_change']:+.1f} % (p_adj {r['p_adjusted']:.1e})")
+                        label=f"{dname} trend {100 * r['relative_change']:+.1f} % ({_p_text(r['p_adjusted'])})")
         unit = _unit(p, laws)
         ax.set_ylabel(f"{p} ({unit})" if unit else p)
         ax.set_xlabel("recording date (UTC)")
