@@ -318,3 +318,17 @@ def test_figure_states_a_tiny_adjusted_p_value_as_a_bound():
     # Holm's adjustment of a p-value that underflowed is exactly 0: the figure gives the bound, not 0
     assert _p_text(0.0) == "p_adj < 1e-16" and _p_text(3e-17) == "p_adj < 1e-16"
     assert _p_text(3.1e-9) == "p_adj 3.1e-09"
+
+
+def test_expand_paths_is_public_and_the_old_name_stays(tmp_path):
+    from gearspec.errors import InputError
+    from gearspec.recording.load import _expand, expand_paths
+
+    for name in ("b.csv", "a.parquet", "notes.txt.bak"):
+        (tmp_path / name).write_text("x")
+    # a folder becomes its recording files, sorted by name; what is not a recording is left out
+    assert expand_paths(tmp_path) == [tmp_path / "a.parquet", tmp_path / "b.csv"]
+    assert _expand is expand_paths
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="empty: the folder holds no recording files"):
+        expand_paths([tmp_path / "empty"])
