@@ -67,12 +67,25 @@ def _load() -> float:
     return os.getloadavg()[0]
 
 
+def _cpu() -> float:
+    """CPU seconds of this process and of its ended children (the local cluster's worker processes)."""
+    import resource
+
+    return sum(resource.getrusage(who).ru_utime + resource.getrusage(who).ru_stime
+               for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+
+
+CPU: dict = {}
+
+
 def _timed(files, workers: int, start: str | None = None) -> tuple[float, object]:
+    """Wall time of one batch (and its CPU seconds, all processes, in ``CPU[workers, start]``)."""
     from gearspec.fleet import batch
     from gearspec.simulate.fleet import FLEET_GEAR
 
-    t0 = time.perf_counter()
+    c0, t0 = _cpu(), time.perf_counter()
     df = batch(files, FLEET_GEAR, workers=workers, progress=False, start=start)
+    CPU[workers, start] = _cpu() - c0
     return time.perf_counter() - t0, df
 
 
@@ -127,14 +140,20 @@ def main(argv=None) -> int:
               f"(load average {l1:.1f} -> {l2:.1f})")
         print(f"ratio 2 workers / 1: {ratio:.2f}  (target <= 0.6: {'MET' if ratio <= 0.6 else 'NOT MET'}); "
               f"tables identical: {same}")
+        cpu1, cpu2 = CPU[1, None], CPU[2, None]
+        # what load does not change much: the CPU seconds each way; on two idle cores the 2-worker wall
+        # time is at least half its CPU seconds
+        print(f"CPU seconds, every process: 1 worker {cpu1:.1f} s, 2 workers {cpu2:.1f} s (x{cpu2 / cpu1:.2f}); "
+              f"on 2 idle cores the ratio would be about {cpu2 / 2 / cpu1:.2f} or more")
         out = {"n": n, "cpus": os.cpu_count(), "serial_s": base, "two_workers_s": wall2, "ratio": ratio,
-               "identical": same, "load": [l0, l1, l2]}
+               "identical": same, "load": [l0, l1, l2], "cpu_serial_s": cpu1, "cpu_two_workers_s": cpu2}
         if args.spawn:
             wall3, _ = _timed(files, 2, start="spawn")
             l3 = _load()
+            cpu3 = CPU[2, "spawn"]
             print(f"workers=2 started by spawn (Dask's default): {wall3:.1f} s, ratio {wall3 / base:.2f} "
-                  f"(load average {l2:.1f} -> {l3:.1f})")
-            out.update(spawn_s=wall3, spawn_ratio=wall3 / base)
+                  f"(load average {l2:.1f} -> {l3:.1f}); CPU {cpu3:.1f} s (x{cpu3 / cpu1:.2f})")
+            out.update(spawn_s=wall3, spawn_ratio=wall3 / base, cpu_spawn_s=cpu3)
         sweep = _size_sweep(tmp, args.quick)
         print("per-file cost against file size (serial):")
         for r in sweep:
