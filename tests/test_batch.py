@@ -150,6 +150,42 @@ def test_warnings_of_a_task_are_in_its_rows(tmp_path):
     assert np.allclose(df["tau_c"], 0.1, rtol=0.03)
 
 
+def _one_sided(tmp_path, speeds, name):
+    """A Stribeck twin (tau_c 0.1 Nm, 1 mNm noise) of plateaus at ``speeds`` (rad/s) as a CSV."""
+    from gearspec.model import FrictionModel
+    from gearspec.simulate import model_recording
+
+    truth = FrictionModel("stribeck", {"tau_c": 0.1, "tau_s": 0.15, "v_s": 2.0, "viscous": 1e-3})
+    rec, _ = model_recording(truth, speeds, duration=1.0, fs=250, noise=1e-3, seed=3)
+    return rec.save(tmp_path / name)
+
+
+def test_every_direction_has_its_row_when_one_cannot_be_analysed(tmp_path, capsys):
+    # the fleet twin's odd row: one joint's fit refused in one direction gave one row, not two.
+    # (1) plateaus in the positive direction only: the negative row says why, the positive is fitted
+    one = _one_sided(tmp_path, [1, 3, 8, 20], "positive_only.csv")
+    # (2) the positive direction at one speed, too few for the law's 4 parameters: the fit is
+    # refused, as `gearspec fit` refuses it, and each direction has its error row with the sentence
+    few = _one_sided(tmp_path, [3, -1, -3, -8, -20], "few_speeds.csv")
+    df = batch([one, few], None, law="stribeck", workers=1, progress=False)
+    assert list(zip(df["source"], df["direction"], df["status"])) == [
+        (str(one), "positive", "ok"), (str(one), "negative", "error"),
+        (str(few), "positive", "error"), (str(few), "negative", "error")]
+    assert df["error"].iloc[1] == "no segment in the negative direction"
+    assert df["tau_c"].iloc[0] == pytest.approx(0.1, rel=0.03)   # as in test_warnings_of_a_task_are_in_its_rows
+    said = "law stribeck has 4 parameters per direction but the positive direction has plateaus at only 1 speed(s)"
+    assert df["error"].iloc[2].startswith(said) and df["error"].iloc[3] == df["error"].iloc[2]
+    assert main(["fit", str(few), "--law", "stribeck", "--quiet"]) == 2
+    assert said in capsys.readouterr().err
+    # the command line counts pairs, not rows, and names the direction of each refused row
+    assert main(["batch", str(one), str(few), "--law", "stribeck", "--workers", "1", "--out",
+                 str(tmp_path / "o")]) == 2
+    out = capsys.readouterr().out
+    assert "2 recording-joint pair(s): 0 fitted, 1 refused, 1 fitted in one direction only" in out
+    assert f"refused [negative]: {one}: no segment in the negative direction" in out
+    assert "1 fitted in one direction only" in (tmp_path / "o" / "report.md").read_text()
+
+
 def test_unreachable_scheduler_is_one_sentence(fleet, monkeypatch):
     import gearspec.fleet.runner as fb
     from gearspec.errors import InputError
@@ -157,6 +193,59 @@ def test_unreachable_scheduler_is_one_sentence(fleet, monkeypatch):
     monkeypatch.setattr(fb, "CONNECT_TIMEOUT", "1s")
     with pytest.raises(InputError, match=r"--scheduler tcp://127.0.0.1:9: no Dask scheduler answers there"):
         batch([fleet["twin"]["bags"][0]], fleet["gear"], scheduler="tcp://127.0.0.1:9", progress=False)
+
+
+# ---------------------------------------------------------------------- the local cluster's workers
+def _probe(tag):
+    """What a worker sees: a mark set in the parent after import (kept only by a forked copy), its BLAS
+    threads inside the task, and Dask's profiler setting."""
+    import dask
+    from threadpoolctl import threadpool_info
+
+    import gearspec.fleet.runner as runner
+
+    blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    return {"tag": tag, "mark": getattr(runner, "_TEST_MARK", None), "blas": max(blas, default=None),
+            "profile": dask.config.get("distributed.worker.profile.enabled")}
+
+
+def test_local_workers_are_forked_with_one_blas_thread_and_no_profiler(monkeypatch):
+    import sys
+
+    from threadpoolctl import threadpool_info
+
+    import gearspec.fleet.runner as runner
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("fork is the default start on Linux only")
+    monkeypatch.setattr(runner, "_TEST_MARK", 7, raising=False)
+    out = runner._on_dask([("a",), ("b",), ("c",)], 2, None, False, fn=_probe)
+    # results in the order given, whatever order the workers ran them in
+    assert [r["tag"] for r in out] == ["a", "b", "c"]
+    # forked: the workers carry this process's state (a spawned one re-imports and has no mark)
+    assert [r["mark"] for r in out] == [7, 7, 7]
+    # one BLAS thread in each task, whatever this process has (the test can only fail with more cores)
+    if max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas") > 1:
+        assert [r["blas"] for r in out] == [1, 1, 1]
+    assert [r["profile"] for r in out] == [False, False, False]
+
+
+def test_largest_files_are_submitted_first_and_a_bad_start_is_one_sentence(tmp_path):
+    import gearspec.fleet.runner as runner
+    from gearspec.errors import InputError
+
+    sizes = {"small.csv": 10, "big.csv": 300, "middle.csv": 100, "same.csv": 100}
+    for name, n in sizes.items():
+        (tmp_path / name).write_bytes(b"x" * n)
+    folder = tmp_path / "bag"
+    folder.mkdir()
+    (folder / "a.mcap").write_bytes(b"x" * 150)
+    (folder / "metadata.yaml").write_bytes(b"x" * 60)   # a rosbag2 folder: its files together, 210 bytes
+    args = [(str(tmp_path / n),) for n in sizes] + [(str(folder),), (str(tmp_path / "missing.csv"),)]
+    # big 300, the folder 210, middle and same 100 each (in task order), small 10, missing (0) last
+    assert runner._largest_first(args) == [1, 4, 2, 3, 0, 5]
+    with pytest.raises(InputError, match="start must be one of .*fork.*, got 'threads'"):
+        runner._start_method("threads")
 
 
 # ---------------------------------------------------------------------- the trend rule on known series
@@ -221,3 +310,25 @@ def test_two_robot_fleet_flags_the_changes_on_either_robot_and_nothing_else(tmp_
     assert (df["status"] == "ok").all() and len(df) == 96
     joints = flagged_joints(trend_tests(df))
     assert set(zip(joints["robot"], joints["joint"])) == {("robot1", "joint1"), ("robot2", "joint3")}
+
+
+def test_figure_states_a_tiny_adjusted_p_value_as_a_bound():
+    from gearspec.plots.fleet import _p_text
+
+    # Holm's adjustment of a p-value that underflowed is exactly 0: the figure gives the bound, not 0
+    assert _p_text(0.0) == "p_adj < 1e-16" and _p_text(3e-17) == "p_adj < 1e-16"
+    assert _p_text(3.1e-9) == "p_adj 3.1e-09"
+
+
+def test_expand_paths_is_public_and_the_old_name_stays(tmp_path):
+    from gearspec.errors import InputError
+    from gearspec.recording.load import _expand, expand_paths
+
+    for name in ("b.csv", "a.parquet", "notes.txt.bak"):
+        (tmp_path / name).write_text("x")
+    # a folder becomes its recording files, sorted by name; what is not a recording is left out
+    assert expand_paths(tmp_path) == [tmp_path / "a.parquet", tmp_path / "b.csv"]
+    assert _expand is expand_paths
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="empty: the folder holds no recording files"):
+        expand_paths([tmp_path / "empty"])

@@ -21,8 +21,10 @@ import pandas as pd
 
 from ..errors import GearspecWarning, InputError
 
-__all__ = ["batch", "analyse_one", "tasks", "N_LINES", "BASE_COLUMNS"]
+__all__ = ["batch", "analyse_one", "tasks", "pair_counts", "N_LINES", "BASE_COLUMNS", "DIRECTIONS"]
 
+#: the directions of motion, one row each per (source, joint)
+DIRECTIONS = ("positive", "negative")
 #: strongest spectral lines kept per (source, joint, direction)
 N_LINES = 3
 #: the columns every row has, in this order (the law's parameters and the lines follow)
@@ -32,6 +34,13 @@ BASE_COLUMNS = ("source", "robot", "joint", "direction", "status", "error", "war
 SEGMENT_DEFAULTS = {"window": "auto", "rel_tol": 0.15, "min_speed": None, "min_duration": None, "quasi_static": None}
 #: how long a Dask scheduler may take to answer
 CONNECT_TIMEOUT = "20s"
+#: Dask's background sampling in the local cluster, made rare: a worker's statistical profiler (every
+#: 10 ms), event-loop tick (20 ms) and memory monitor (100 ms) each take the GIL from the task
+#: running beside them; measured on 6 recordings under load, they cost 15-25 % more CPU per task and
+#: 1-1.5 s of the scheduler's.  The tasks here are seconds long: sampled each second is enough.
+QUIET_CLUSTER = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+                 "distributed.worker.memory.monitor-interval": "1s", "distributed.admin.system-monitor.interval": "2s",
+                 "distributed.admin.system-monitor.gil.enabled": False}
 #: a line counts among the strongest only when its false-alarm probability is below this
 LINE_FAP = 0.01
 
@@ -42,12 +51,12 @@ def tasks(recordings: Iterable, joint: str | None = "all",
     ``joint`` is "all" (a bag that cannot be listed gives one task, which then fails with its
     sentence), else the named joint; any other file one task with joint None."""
     from ..recording.bags import bag_joints, is_bag
-    from ..recording.load import _expand
+    from ..recording.load import expand_paths
 
     out: list[tuple[str, str | None]] = []
     for path in recordings:
         try:
-            files = _expand([path])
+            files = expand_paths([path])
         except InputError:
             out.append((str(path), None))   # e.g. no such file: the task says so
             continue
@@ -78,32 +87,58 @@ def analyse_one(source: str, joint: str | None, gear=None, law: str = "silo4", d
     Returns ``{"rows": [...], "fit": dict | None}``: one row per direction (dicts of
     :data:`BASE_COLUMNS`; ``warnings``: the findings the analysis warned of, each once, joined by "; ";
     the law's parameters and standard errors in SI as in the fit's JSON, the
-    strongest lines), or one error row; ``fit``: the ``gearspec fit --json`` form.  Never raises for
-    a bad input: an :class:`InputError` becomes the row's ``error``, any other exception
-    ``"internal error: ..."``.
+    strongest lines); ``fit``: the ``gearspec fit --json`` form.  Never raises for a bad input: an
+    :class:`InputError` becomes the ``error`` sentence, any other exception ``"internal error: ..."``.
+    A recording that cannot be read has one error row (``direction`` None: its directions are not
+    known); a recording read but not analysed (e.g. the fit refused in one direction, which refuses
+    the whole fit as ``gearspec fit`` does) has an error row per direction with the sentence, and a
+    direction without any identified parameter of the law (no segment in it) an error row saying so.
     """
     base = {"source": str(source), "robot": Path(source).parent.name or ".", "joint": joint, "direction": None,
             "status": "error", "error": None, "start_time": None, "law": law}
+    read: dict = {}   # filled once the recording is read: its start time
+    caught: list = []
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", GearspecWarning)
             warnings.simplefilter("ignore", RuntimeWarning)   # numerical noise of runs that succeed, as in the CLI
-            out = _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base)
-        said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught
-                                  if issubclass(w.category, GearspecWarning)))
-        for row in out["rows"]:
-            row["warnings"] = "; ".join(said) or None
-        return out
+            out = _analyse(source, joint, gear, law, diagnose, dict(load_options or {}), base, read)
     except InputError as exc:
-        return {"rows": [{**base, "error": _one_line(exc)}], "fit": None}
+        out = {"rows": _error_rows(base, read, _one_line(exc)), "fit": None}
     except Exception as exc:  # not the user's fault: said as such, with the exception's type
         tb = traceback.extract_tb(exc.__traceback__)
         where = f" at {Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else ""
-        return {"rows": [{**base, "error": f"internal error: {type(exc).__name__}: {_one_line(exc)}{where}"}],
-                "fit": None}
+        out = {"rows": _error_rows(base, read, f"internal error: {type(exc).__name__}: {_one_line(exc)}{where}"),
+               "fit": None}
+    said = list(dict.fromkeys(" ".join(str(w.message).split()) for w in caught
+                              if issubclass(w.category, GearspecWarning)))
+    for row in out["rows"]:
+        row["warnings"] = "; ".join(said) or None
+    return out
 
 
-def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
+def _error_rows(base: dict, read: dict, sentence: str) -> list[dict]:
+    """The rows of a task that failed: one (direction None) when the recording was not read, else one
+    per direction with its start time."""
+    if not read:
+        return [{**base, "error": sentence}]
+    return [{**base, "direction": d, "start_time": read.get("start_time"), "error": sentence} for d in DIRECTIONS]
+
+
+def _direction_refused(fit: dict, dname: str, law: str) -> str | None:
+    """The sentence of a direction in which no parameter of the law was identified (None when some
+    was): the fit's own reason (e.g. "no segment in the negative direction")."""
+    from ..model import LAWS
+
+    names = LAWS[law].params if law in LAWS else ()
+    params = fit["directions"].get(dname) or {}
+    if not names or any(params.get(k) is not None for k in names):
+        return None
+    reason = (fit.get("not_identified") or {}).get(f"{dname}.{names[0]}")
+    return reason or f"no parameter of the {law} law was identified in the {dname} direction"
+
+
+def _analyse(source, joint, gear, law, diagnose, opts, base, read) -> dict:
     from ..identify import identify_recording
     from ..jsonsafe import plain
     from ..lag import lag_option
@@ -117,6 +152,7 @@ def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
     lag = opts.pop("lag", None)
     rec = load_recording([source], gear, joint=joint, **opts)
     rec = lag_option(rec, lag, say=lambda s: None, **seg_opts)
+    read["start_time"] = rec.meta.get("start_time")
     seg = find_segments(rec, **seg_opts, quasi_static=quasi_static)
     result = identify_recording(rec, law, segmentation=seg)
     fit = plain(result.to_dict())
@@ -126,8 +162,13 @@ def _analyse(source, joint, gear, law, diagnose, opts, base) -> dict:
     base = {**base, "status": "ok", "start_time": rec.meta.get("start_time"), "rmse": fit.get("rmse"),
             "rmse_holdout": fit.get("rmse_holdout"), **extra}
     rows = []
-    for dname, params in fit["directions"].items():
-        rows.append({**base, "direction": dname, **_parameters(params), **lines.get(dname, {})})
+    for dname in DIRECTIONS:
+        params = fit["directions"].get(dname) or {}
+        row = {**base, "direction": dname, **_parameters(params), **lines.get(dname, {})}
+        refused = _direction_refused(fit, dname, law)
+        if refused:
+            row.update(status="error", error=refused)
+        rows.append(row)
     return {"rows": rows, "fit": fit}
 
 
@@ -177,6 +218,15 @@ def _diagnosis(rec, seg, law: str) -> dict:
     return {"n_effects": len(names), "effects": "; ".join(names)}
 
 
+def pair_counts(df: pd.DataFrame) -> dict:
+    """How the (source, joint) pairs of a batch table fared: ``pairs``; ``fitted`` (every row "ok"),
+    ``partly`` (fitted in one direction, the other's row an error) and ``refused`` (no row "ok")."""
+    ok = (df["status"] == "ok").groupby([df["source"], df["joint"]], dropna=False)
+    n_ok, n = ok.sum(), ok.size()
+    return {"pairs": int(len(n)), "fitted": int((n_ok == n).sum()), "partly": int(((n_ok > 0) & (n_ok < n)).sum()),
+            "refused": int((n_ok == 0).sum())}
+
+
 def _frame(results: list[dict]) -> pd.DataFrame:
     rows = [r for res in results for r in res["rows"]]
     df = pd.DataFrame(rows)
@@ -197,7 +247,7 @@ def _frame(results: list[dict]) -> pd.DataFrame:
 
 def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, workers: int | None = None,
           scheduler: str | None = None, joint: str | None = "all", progress: bool = True,
-          fits: dict | None = None, **load_options) -> pd.DataFrame:
+          fits: dict | None = None, start: str | None = None, **load_options) -> pd.DataFrame:
     """Spectrum + fit (+ diagnosis) of every (recording, joint), one row per (source, joint, direction).
 
     Parameters
@@ -221,6 +271,11 @@ def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, 
         A progress bar on stderr (tqdm) as tasks finish.
     fits : dict, optional
         Filled with each task's ``gearspec fit --json`` form, keyed by ``(source, joint)``.
+    start : {"fork", "spawn", "forkserver"}, optional
+        How the local worker processes start.  Default: "fork" on Linux (a copy of this process,
+        whose imports are done: a fraction of a second), elsewhere Dask's configured method
+        ("spawn").  Give "spawn" when this process runs threads of its own that fork would copy in
+        an unsafe state.
     **load_options
         Recording and segment options (``map``, ``scale``, ``fs``, ``topic``, ``window``, ...).
 
@@ -244,7 +299,7 @@ def batch(recordings, gear=None, *, law: str = "silo4", diagnose: bool = False, 
         it = (analyse_one(*a) for a in args)
         results = list(_bar(it, n, progress))
     else:
-        results = _on_dask(args, workers, scheduler, progress)
+        results = _on_dask(args, workers, scheduler, progress, start=start, diagnose=diagnose)
     if fits is not None:
         fits.update({(src, j): r["fit"] for (src, j), r in zip(todo, results) if r["fit"] is not None})
     return _frame(results)
@@ -258,28 +313,85 @@ def _bar(it, total: int, enabled: bool):
     return tqdm(it, total=total, desc="recordings", unit="task", file=sys.stderr)
 
 
-def _on_dask(args: list, workers: int | None, scheduler: str | None, progress: bool) -> list[dict]:
-    """Run :func:`analyse_one` over ``args`` on a Dask cluster; results in the order of ``args``."""
+def _start_method(start: str | None) -> str:
+    """How local worker processes start: ``start`` when given; else "fork" where the system has it
+    (Linux: a copy of this process, whose imports are done, starts in a fraction of a second) and
+    otherwise Dask's configured method ("spawn": a fresh interpreter that imports distributed,
+    numpy, scipy, pandas and gearspec again, about 2 s of CPU per worker on an idle machine)."""
+    import multiprocessing
+
+    import dask
+
+    if start is not None:
+        if start not in multiprocessing.get_all_start_methods():
+            raise InputError(f"start must be one of {', '.join(multiprocessing.get_all_start_methods())} "
+                             f"on this system, got {start!r}")
+        return start
+    if sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods():
+        return "fork"
+    return dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+
+
+def _warm(diagnose: bool) -> None:
+    """Import what a task needs here, before worker processes are forked from this one."""
+    from .. import identify, lag, recording, segment, spectrum  # noqa: F401
+    if diagnose:
+        from .. import diagnose as _d  # noqa: F401
+
+
+def _one_blas_thread(fn, *args):
+    """``fn(*args)`` with numpy's BLAS / OpenMP pools held to one thread: a worker is one process on
+    one core, and threads of its own only contend with the other workers (a forked worker inherits
+    this process's pools, which Dask's ``OMP_NUM_THREADS=1`` does not reach)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return fn(*args)
+
+
+def _largest_first(args: list) -> list[int]:
+    """The order tasks are submitted in: the largest files first (a long task started last would run
+    alone at the end while the other workers wait), ties and unreadable paths in task order."""
+    def size(a) -> int:
+        try:
+            p = Path(a[0])
+            return sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) if p.is_dir() else p.stat().st_size
+        except OSError:
+            return 0
+    sizes = [size(a) for a in args]
+    return sorted(range(len(args)), key=lambda i: -sizes[i])
+
+
+def _on_dask(args: list, workers: int | None, scheduler: str | None, progress: bool, start: str | None = None,
+             diagnose: bool = False, fn=analyse_one) -> list:
+    """Run ``fn`` (:func:`analyse_one`) over ``args`` on a Dask cluster, the largest files first,
+    each task with one BLAS thread; results in the order of ``args``."""
     import logging
     import os
 
+    import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
     if scheduler is None:
         n = min(len(args), workers or os.cpu_count() or 1)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        method = _start_method(start)
+        if method == "fork":
+            _warm(diagnose)
+        with dask.config.set({**QUIET_CLUSTER, "distributed.worker.multiprocessing-method": method}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
     try:
         try:
             client = Client(cluster if cluster is not None else scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError) as exc:
             raise InputError(f"--scheduler {scheduler}: no Dask scheduler answers there ({_one_line(exc)})") from None
         with client:
-            futures = [client.submit(analyse_one, *a, pure=False) for a in args]
-            index = {f.key: i for i, f in enumerate(futures)}
+            order = _largest_first(args)
+            futures = {client.submit(_one_blas_thread, fn, *args[i], pure=False): i for i in order}
+            index = {f.key: i for f, i in futures.items()}
             results: list = [None] * len(args)
-            for fut, res in _bar(as_completed(futures, with_results=True), len(args), progress):
+            for fut, res in _bar(as_completed(list(futures), with_results=True), len(args), progress):
                 results[index[fut.key]] = res
             return results
     finally:

@@ -21,7 +21,7 @@ from .readers import _SUFFIXES, _names, _read_file
 from .record import GAP_FACTOR, GAP_QUANTILE, Recording, _logged_gap_limits
 from .urdf import gear_from_urdf, urdf_reduction
 
-__all__ = ["load_recording", "CANONICAL", "parse_assignments"]
+__all__ = ["load_recording", "CANONICAL", "parse_assignments", "expand_paths"]
 
 CANONICAL = ("t", "theta", "torque", "current", "velocity", "load", "temperature", "run")
 
@@ -102,8 +102,26 @@ def load_recording(paths: "str | Path | Iterable[str | Path]", gear=None, *,
     return recs if joint == "all" else recs[0]
 
 
-def _expand(paths) -> list[Path]:
-    """The files (and rosbag2 folders) named by ``paths``, folders expanded."""
+def expand_paths(paths) -> list[Path]:
+    """The recording files (and rosbag2 folders) named by ``paths``, as :func:`load_recording` reads them.
+
+    Parameters
+    ----------
+    paths : path or iterable of path
+        Files, ROS bags (a rosbag2 folder or a single file) or folders of recordings.
+
+    Returns
+    -------
+    list of Path
+        Each file or bag as given; a folder that is not a bag becomes its recording files and bags
+        (.csv, .txt, .dat, .tsv, .parquet, .pq, .mat, .npz; .bag, .mcap, .db3 and rosbag2 folders),
+        sorted by name.
+
+    Raises
+    ------
+    InputError
+        A folder holds no recording, or no path is given.
+    """
     if isinstance(paths, (str, Path)):
         paths = [paths]
     files: list[Path] = []
@@ -120,6 +138,10 @@ def _expand(paths) -> list[Path]:
     if not files:
         raise InputError("no recording files given")
     return files
+
+
+#: the former private name of :func:`expand_paths`, kept for code that imported it
+_expand = expand_paths
 
 
 def _read_parts(files, mapping: dict, scaling: dict, sep, header, names, topic: str, joint: str | None,
