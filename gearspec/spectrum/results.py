@@ -17,7 +17,7 @@ from ..jsonsafe import plain
 from ..segment import Segment
 from .harmonic import HarmonicFit
 
-__all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "SPEED_GROUP_TOL", "REPRESENTATIVES"]
+__all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "speed_groups", "SPEED_GROUP_TOL", "REPRESENTATIVES"]
 
 #: relative speed difference within which segments of one direction are repetitions of one speed
 SPEED_GROUP_TOL = 0.05
@@ -142,23 +142,12 @@ class SpectrumResult:
 
 
     def speed_groups(self, rel_tol: float = SPEED_GROUP_TOL) -> list[tuple[int, float, list[int]]]:
-        """Segments of one direction at the same nominal speed: ``(direction, median speed, segment
-        indices)``, positive direction first, then by speed.  Sorted by |speed|, a segment more than
-        ``rel_tol`` (relative) faster than the previous one starts a new group."""
-        groups = []
-        for d in (1, -1):
-            idx = sorted((i for i, s in enumerate(self.segments) if s.direction == d and np.isfinite(s.speed)),
-                         key=lambda i: abs(self.segments[i].speed))
-            cur: list[int] = []
-            for i in idx:
-                if cur and abs(self.segments[i].speed) > (1 + rel_tol) * abs(self.segments[cur[-1]].speed):
-                    groups.append(cur)
-                    cur = []
-                cur.append(i)
-            if cur:
-                groups.append(cur)
-        return [(self.segments[g[0]].direction, float(np.median([self.segments[i].speed for i in g])), g)
-                for g in groups]
+        """Segments of one direction at the same nominal speed (:func:`speed_groups`): ``(direction,
+        median speed, segment indices)``, positive direction first, then by speed."""
+        gid = speed_groups([s.speed for s in self.segments], [s.direction for s in self.segments], rel_tol)
+        groups = [list(np.flatnonzero(gid == k)) for k in range(int(gid.max()) + 1)] if len(gid) else []
+        return [(self.segments[g[0]].direction, float(np.median([self.segments[i].speed for i in g])),
+                 [int(i) for i in g]) for g in groups]
 
     def information(self, i: int, max_fap: float = 0.01) -> tuple[int, float, int]:
         """How much segment ``i``'s spectrum shows, to rank segments for figures: (significant
@@ -175,6 +164,27 @@ class SpectrumResult:
         if len(reps) > limit:
             reps = sorted(reps, key=self.information, reverse=True)[:limit]
         return sorted(reps)
+
+
+def speed_groups(speed, direction, rel_tol: float = SPEED_GROUP_TOL) -> np.ndarray:
+    """Group ids of segments (or any rows) of one direction at one nominal speed: numbered from 0,
+    positive direction first, then by |speed|; sorted by |speed|, a row more than ``rel_tol``
+    (relative) faster than the previous one of its direction starts a new group.  -1 for a row
+    without a finite speed or a direction of 0."""
+    speed = np.abs(np.asarray(speed, dtype=float))
+    direction = np.asarray(direction)
+    gid = np.full(len(speed), -1, dtype=int)
+    k = -1
+    for d in (1, -1):
+        idx = np.flatnonzero((direction == d) & np.isfinite(speed))
+        idx = idx[np.argsort(speed[idx], kind="stable")]
+        prev = None
+        for i in idx:
+            if prev is None or speed[i] > (1 + rel_tol) * prev:
+                k += 1
+            gid[i] = k
+            prev = speed[i]
+    return gid
 
 
 def _jsonable(v) -> bool:
