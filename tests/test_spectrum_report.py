@@ -22,7 +22,7 @@ from gearspec.segment import find_segments
 from gearspec.simulate import Ripple, plateau_recording
 from gearspec.spectrum import analyze
 from gearspec.spectrum.pipeline import attach_spectra
-from gearspec.spectrum.results import REPRESENTATIVES, SPEED_GROUP_TOL
+from gearspec.spectrum.results import REPRESENTATIVES, SPEED_GROUP_TOL, speed_groups
 
 SPEEDS = [20, 30, 40, 55, 70, 90, 120]  # rad/s, > 5 % apart (one group each)
 MOTOR_AMPLITUDE = 1e-3                  # Nm at 1/(2 pi) cycles/rad: the motor shaft of silo4-joint3
@@ -139,3 +139,9 @@ def test_cli_prints_a_summary_per_speed_and_direction(twin, tmp_path, capsys):
     assert all(("unexplained peak" in ln) == ln.startswith(" -1") for ln in rows)
     d = json.loads(js.read_text())  # every segment stays in the JSON
     assert len(d["segments"]) == 28 and {"direction", "speed", "n", "run", "peaks"} <= set(d["segments"][0])
+
+
+def test_speed_groups_of_rows_split_at_the_tolerance():
+    # 10 and 10.4 (4 % apart) are one speed; 11 (5.8 % above 10.4) starts the next; directions apart
+    gid = speed_groups([10.0, 10.4, 11.0, -10.0, 10.2, np.nan], [1, 1, 1, -1, -1, 1])
+    assert gid.tolist() == [0, 0, 1, 2, 2, -1]
