@@ -162,7 +162,9 @@ def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> 
         ax.set_xlabel(xl)
         ax.grid(alpha=0.3, which="both")
         ax.ticklabel_format(axis="y", style="plain", useOffset=False)
-        ax.legend(fontsize=6)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:  # one legend for both panels, below them: never over the points
+        fig.legend(handles, labels, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
     fig.suptitle("Residuals per segment (markers: segments)", fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.02 + 0.055 * ((len(handles) + 3) // 4), 1, 1))
     return save(fig, path)
