@@ -128,7 +128,8 @@ def big_recording(folder: Path, rows: float = 1e7) -> tuple[Path, str]:
 
 def floor_rss(max_rss: float) -> int:
     """Peak RSS of a child that imports the analysis and exits (the interpreter's own floor)."""
-    code = "import gearspec.cli, gearspec.spectrum, gearspec.identify, gearspec.diagnose, gearspec.discover, gearspec.plots"
+    code = ("import gearspec.cli, gearspec.spectrum, gearspec.identify, gearspec.diagnose, gearspec.discover, "
+            "gearspec.plots")
     return run_child([sys.executable, "-c", code], max_rss, 300)["max_rss"]
 
 
