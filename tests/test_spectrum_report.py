@@ -145,3 +145,23 @@ def test_speed_groups_of_rows_split_at_the_tolerance():
     # 10 and 10.4 (4 % apart) are one speed; 11 (5.8 % above 10.4) starts the next; directions apart
     gid = speed_groups([10.0, 10.4, 11.0, -10.0, 10.2, np.nan], [1, 1, 1, -1, -1, 1])
     assert gid.tolist() == [0, 0, 1, 2, 2, -1]
+
+
+def test_single_speed_panel_has_no_axis_offset_text(tmp_path, monkeypatch):
+    """Issue 16: a line measured at one speed only (the twin's output shaft at 680.68 rad/s, speeds
+    equal to 1e-10) drew the axis offset "1e-10+6.806834017e2" over the x label."""
+    import gearspec.plots.spectrum as splots
+
+    v = 680.6834017
+    rec, _ = plateau_recording([v, -v, v * (1 + 1e-12), -v], ripples=[Ripple(1 / (2 * np.pi), 1e-3)], duration=1.0,
+                               fs=2000, noise=1e-4, seed=2, gear=load_gear("silo4-joint3"), one_run_per_plateau=True)
+    res = analyze(rec, progress=False)
+    figs = []
+    monkeypatch.setattr(splots, "_save", lambda fig, path: figs.append(fig) or path)
+    splots.plot_amplitude_vs_speed(res, tmp_path / "a.png")
+    (fig,) = figs
+    fig.canvas.draw()
+    ax = next(a for a in fig.axes if a.get_title() == "motor shaft")
+    assert ax.xaxis.get_offset_text().get_text() == ""
+    lo, hi = ax.get_xlim()
+    assert lo < v < hi and hi - lo >= 0.09 * v  # the points inside a range that reads

@@ -201,6 +201,11 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
         ax.set_ylabel("amplitude (% of mean friction)" if relative else f"amplitude ({tu})")
         if (df["speed"] > 0).all() and len(df) and df["speed"].max() / max(df["speed"].min(), 1e-300) > 20:
             ax.set_xscale("log")
+        else:  # no offset text ("1e-10+6.8e2") over the label: plain numbers, a range of 10 % at least
+            ax.ticklabel_format(axis="x", style="plain", useOffset=False)
+            if len(df) and df["speed"].max() < 1.1 * df["speed"].min():
+                mid = float(df["speed"].median())
+                ax.set_xlim(0.95 * mid, 1.05 * mid)
         ax.set_ylim(bottom=0)
         ax.ticklabel_format(axis="y", style="plain", useOffset=False)
     for ax in axes.ravel()[n:]:
@@ -299,11 +304,11 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
         ax.scatter(sub["speed"] * np.sign(sub["direction"]), sub["frequency"], s=15 + 300 * sub["amplitude"] / amax,
                    color=color, alpha=0.6, edgecolor="k", lw=0.3,
                    label="harmonic or sideband of a declared line" if lab else "unexplained")
-    # one annotation per frequency band (within 15 %), at its strongest peak
+    # one annotation per frequency band (a factor 1.4: closer labels overlap), at its strongest peak
     done: list[float] = []
     for _, r in t.sort_values("amplitude", ascending=False).iterrows():
         f = r["frequency"]
-        if any(abs(math.log(f / g)) < math.log(1.15) for g in done) or len(done) >= 10:
+        if any(abs(math.log(f / g)) < math.log(1.4) for g in done) or len(done) >= 10:
             continue
         done.append(f)
         txt = (r["label"].split(" = ")[0] if isinstance(r["label"], str) else
