@@ -120,12 +120,12 @@ def _spectrum_panel(ax, i: int, s, unit: str, points: int) -> None:
         color = ("#9467bd" if p.declared else "#17becf" if p.aliased_from else "#ff7f0e" if p.label else "#d62728")
         ax.errorbar([p.frequency], [max(p.amplitude, 1e-12)], yerr=[[0], [p.amplitude_se]], fmt="o",
                     ms=4, color=color, mfc=color if p.fap < 0.01 else "none", zorder=5)
-    # the strongest peaks named, one a frequency band (a factor 2: labels of close peaks overlap),
+    # the three strongest peaks named, one a frequency band (a factor 3: labels of close peaks overlap),
     # those near the right edge written leftwards (inside the axes)
     named: list[float] = []
     f_hi = s.fft_frequency[-1] if len(s.fft_frequency) else 1.0
     for p in sorted(s.peaks, key=lambda q: -q.amplitude):
-        if len(named) >= 4 or p.frequency <= 0 or any(abs(math.log(p.frequency / g)) < math.log(2.0) for g in named):
+        if len(named) >= 3 or p.frequency <= 0 or any(abs(math.log(p.frequency / g)) < math.log(3.0) for g in named):
             continue
         named.append(p.frequency)
         txt = p.label.split(" = ")[0] if p.label else (p.hint or "?")
