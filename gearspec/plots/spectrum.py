@@ -52,7 +52,7 @@ def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 20_
              f"{len(runs)} of {len(all_runs)} runs, spread over the recording")
     fig.suptitle(f"Constant-speed segments (blue: positive, red: negative direction); {shown}", fontsize=11)
     height = 1.9 * nrow + 0.8
-    fig.subplots_adjust(left=0.08 if ncol == 1 else 0.06, right=0.98, top=1 - 0.55 / height, bottom=0.5 / height,
+    fig.subplots_adjust(left=0.08 if ncol == 1 else 0.06, right=0.98, top=1 - 0.95 / height, bottom=0.5 / height,
                         hspace=0.5, wspace=0.18)
     return _save_once(fig, path)
 
