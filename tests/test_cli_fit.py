@@ -116,3 +116,28 @@ def test_comparison_text_prints_a_missing_held_out_rmse_as_n_a_with_its_reason()
     assert "None" not in text
     assert [ln.split()[-1] for ln in text.splitlines()[1:3]] == ["n/a", "n/a"]
     assert "held-out rmse n/a for a: 2 segments only" in text
+
+
+def test_segment_errors_cut_once_equal_the_whole_data_loop(recording_csv):
+    """The fit's per-segment errors (report, residual figure) computed from the data cut into one
+    piece per segment once are the rows segment_errors gives on the whole data (same samples, same
+    order: equal to the last bit), and the truth's own errors are the noise: e ~ 0 within 4 se of a
+    mean of n samples, rmse ~ 1e-3 (the twin's white noise)."""
+    import numpy as np
+    import pandas as pd
+
+    from gearspec.identify import pipeline
+    from gearspec.identify.validate import segment_errors
+    from gearspec.recording import load_recording
+
+    rec = load_recording(recording_csv)
+    res = pipeline.identify_recording(rec, "coulomb_viscous", published=False, compare_with=[], folds=3)
+    truth = FrictionModel("silo4", TRUTH, NEG)
+    models = {**res.models, "truth": truth}
+    cut = pipeline._segment_errors(models, res.data)
+    assert len(cut["truth"]) == 16
+    for name, m in models.items():
+        pd.testing.assert_frame_equal(cut[name], segment_errors(m, res.data))
+    t = cut["truth"]
+    assert (np.abs(t["e"]) < 4 * 1e-3 / np.sqrt(t["n"])).all()
+    assert t["rmse"].to_numpy() == pytest.approx(1e-3, rel=0.15)

@@ -7,6 +7,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 import gearspec.plots.diagnose as dplots
 from gearspec.diagnose.residual import ResidualSpectrum
@@ -46,3 +47,29 @@ def test_residual_spectra_extend_past_and_mark_every_candidate(tmp_path, monkeyp
     assert any("31.4-31.4" in (ln.get_label() or "") for ln in axes[0].lines)
     assert "beyond the spectra" in " ".join(t.get_text() for t in axes[1].texts)
     assert "beyond the spectra" not in " ".join(t.get_text() for t in axes[0].texts if "1.114" in t.get_text())
+
+
+def test_fit_residuals_draw_repetitions_as_markers_and_join_only_medians(tmp_path, monkeypatch):
+    """Issue 16: the fit's residual figure joined the repetitions of a speed with lines (a tangle).
+    3 speeds x 3 repetitions per direction: each segment a marker, one line through the 3 medians;
+    errors of 0.1-0.3 mNm drawn in mNm."""
+    import pandas as pd
+
+    import gearspec.plots.fit as fplots
+
+    speeds = np.repeat([10.0, 20.0, 40.0], 3) * (1 + np.tile([-0.01, 0.0, 0.01], 3))
+    rows = [{"direction": d, "speed": v, "e": d * 1e-4 * (1 + k % 3), "rmse": 3e-4 + 1e-5 * k}
+            for d in (1, -1) for k, v in enumerate(speeds)]
+    figs = []
+    monkeypatch.setattr(fplots, "save", lambda fig, path: figs.append(fig) or path)
+    fplots.plot_residuals({"joint": pd.DataFrame(rows)}, tmp_path / "r.png")
+    (fig,) = figs
+    for ax in fig.axes:
+        joined = [ln for ln in ax.lines if ln.get_linestyle() not in ("None", "") and not ln.get_label().startswith("_")]
+        markers = [ln for ln in ax.lines if ln.get_linestyle() in ("None", "")]
+        assert len(joined) == 2 and all(len(ln.get_xdata()) == 3 for ln in joined)   # one median per speed
+        assert sorted(len(ln.get_xdata()) for ln in markers) == [9, 9]              # every segment, unjoined
+        assert "mNm" in ax.get_ylabel()
+    rm = [ln for ln in fig.axes[1].lines if len(ln.get_xdata()) == 3][0]
+    # the median rmse of the first speed's three repetitions (k = 0, 1, 2 on the positive side): 0.31 mNm
+    assert float(rm.get_ydata()[0]) == pytest.approx(0.31, rel=1e-9)

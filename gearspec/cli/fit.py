@@ -64,14 +64,18 @@ def run(args) -> int:
     result = identify_recording(rec, args.law, segmentation=seg, harmonics=harmonics,
                                 published=False if args.no_published else None, holdout=args.holdout,
                                 folds=args.folds, se=args.se, load_ratio=args.load_ratio, motion=args.motion)
-    stages(args).done(f"fitted {args.law}")
+    st = stages(args)
+    st.done(f"fitted {args.law}")
     if args.json:
         write_json(args.json, result.to_dict(), rec, json.dumps)
+        st.done(f"JSON written: {args.json}")
     if args.out:
         from ..report.fit import write_fit_report
 
+        st.start("report and figures")
         write_fit_report(result, args.out, command=command_line(), recording_summary=rec.summary(),
                          reference=rec.gear.reference if rec.gear else None)
+        st.done(f"report written: {args.out}")
     if not args.quiet:
         print(result.model.describe())
         print()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 from ..errors import InputError
+from ..spectrum.results import REPRESENTATIVES as AUTO_PAGES
 from ..jsonsafe import dumps
 from . import (
     POSITIVE,
@@ -25,6 +26,8 @@ from . import (
 MAX_HARMONICS = 16
 #: most undeclared peaks per segment
 MAX_PEAKS = 64
+#: more segments than this: the console prints a summary per speed and direction, not one line each
+MAX_CONSOLE_SEGMENTS = 24
 
 
 def register(sub) -> None:
@@ -43,6 +46,10 @@ def register(sub) -> None:
                    help=f"most undeclared peaks per segment (default 8, at most {MAX_PEAKS})")
     g.add_argument("--method", default="auto", choices=("auto", "nifty", "astropy", "scipy"),
                    help="Lomb-Scargle implementation")
+    g.add_argument("--pages", default="auto", choices=("auto", "all", "none"),
+                   help="segments whose spectra are drawn in the report (spectra_NN.png, 8 a page): auto (default: "
+                        "one representative segment per speed and direction, the most informative, at most "
+                        f"{AUTO_PAGES}), all, or none; the summary figure always shows every segment")
     o = sp.add_argument_group("motion at varying speed (order map)")
     o.add_argument("--order-map", action="store_true",
                    help="also analyse whole motions per direction: amplitude over order and speed (order_map.png, "
@@ -76,16 +83,23 @@ def run(args) -> int:
         return _orders_only(rec, seg, orders, args, t0)
     result = analyze(rec, segmentation=seg, inertia=not args.no_inertia, max_frequency=args.max_frequency,
                      min_cycles=args.min_cycles, harmonics=args.harmonics, fap_threshold=args.fap,
-                     max_peaks=args.max_peaks, method=args.method, keep_spectra=bool(args.out),
+                     max_peaks=args.max_peaks, method=args.method,
+                     # every segment's spectra only when every page is drawn (they take memory of the
+                     # order of the samples); the report computes those of the pages it draws
+                     keep_spectra=bool(args.out) and args.pages == "all",
                      progress=None if not args.quiet else False)
-    stages(args).done(f"spectra of {len(result.segments)} segment(s)")
+    st = stages(args)
+    st.done(f"spectra of {len(result.segments)} segment(s)")
     if args.json:
         if orders is None:
             result.to_json(args.json)
         else:
             write_json(args.json, {**result.to_dict(), "order_map": orders.to_dict()}, rec, dumps)
+        st.done(f"JSON written: {args.json}")
     if args.out:
-        write_spectrum_report(result, rec, seg, args.out, command=command_line(), orders=orders)
+        write_spectrum_report(result, rec, seg, args.out, command=command_line(), orders=orders, pages=args.pages,
+                              stages=st)
+        st.done(f"report written: {args.out}")
     if not args.quiet:
         _print_summary(result, time.perf_counter() - t0, args)
         if orders is not None:
@@ -155,15 +169,48 @@ def _print_summary(result, elapsed, args) -> None:
     print(f"{len(result.segments)} segments; rows: {result.n_rows} read, "
           f"{sum(s.segment.n for s in result.segments)} in segments"
           + "".join(f", {v} {k}" for k, v in sorted(result.excluded.items())) + f"  ({elapsed:.1f} s)")
-    print(f"{'seg':>3} {'run':>3} {'dir':>3} {'speed':>10} {'n':>8}  strongest lines "
-          f"(frequency cycles/{unit}: amplitude {tu})")
-    for i, s in enumerate(result.segments):
-        top = sorted(s.peaks, key=lambda p: -p.amplitude)[:3]
-        txt = "; ".join(f"{p.frequency:.4g}: {p.amplitude:.3g}" + (f" [{p.label.split(' = ')[0]}]" if p.label else " [?]")
-                        for p in top)
-        print(f"{i:>3} {s.segment.run:>3} {s.direction:>+3d} {s.speed:>10.4g} {s.segment.n:>8}  {txt}")
+    if len(result.segments) > MAX_CONSOLE_SEGMENTS:
+        _print_groups(result)
+    else:
+        print(f"{'seg':>3} {'run':>3} {'dir':>3} {'speed':>10} {'n':>8}  strongest lines "
+              f"(frequency cycles/{unit}: amplitude {tu})")
+        for i, s in enumerate(result.segments):
+            top = sorted(s.peaks, key=lambda p: -p.amplitude)[:3]
+            txt = "; ".join(f"{p.frequency:.4g}: {p.amplitude:.3g}" + (f" [{_name(p)}]" if p.label else " [?]")
+                            for p in top)
+            print(f"{i:>3} {s.segment.run:>3} {s.direction:>+3d} {s.speed:>10.4g} {s.segment.n:>8}  {txt}")
     un = result.unexplained()
     if len(un):
         print(f"{len(un)} significant peak(s) no declared line explains; see the report"
               + ("" if args.out else " (--out DIR)"))
     print_outputs(args, as_path=True)
+
+
+def _name(p) -> str:
+    return p.label.split(" = ")[0] if p.label else "?"
+
+
+def _print_groups(result, strongest: int = 3) -> None:
+    """One line per speed and direction: segments, the strongest declared lines' median amplitude,
+    the significant peaks no declared line fits (the per-segment table is in the report and JSON)."""
+    import numpy as np
+
+    unit = result.unit
+    tu = "Nm" if unit == "rad" else "N"
+    groups = result.speed_groups()
+    print(f"summary of {len(groups)} groups of segments at one speed and direction (one line per segment: "
+          "the report and --json)")
+    print(f"{'dir':>3} {'speed':>10} {'segs':>4}  strongest declared lines (median amplitude {tu}; speed {unit}/s)")
+    for d, speed, idx in groups:
+        amps: dict[str, list[float]] = {}
+        n_found = 0
+        for i in idx:
+            for p in result.segments[i].peaks:
+                if p.declared:
+                    amps.setdefault(_name(p), []).append(p.amplitude)
+                elif p.fap <= 0.01 and p.label is None:
+                    n_found += 1
+        top = sorted(((float(np.median(v)), k) for k, v in amps.items()), reverse=True)[:strongest]
+        txt = "; ".join(f"{k}: {a:.3g}" for a, k in top) or "no declared line fitted"
+        print(f"{d:>+3d} {speed:>10.4g} {len(idx):>4}  {txt}"
+              + (f"; {n_found} unexplained peak(s)" if n_found else ""))

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping
 
+import numpy as np
 import pandas as pd
 
 from ..core.crossval import n_params as _n_params
@@ -155,5 +156,24 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     rows = [{"model": name, "law": m.law, "parameters": _n_params(m), "rmse": m.rmse,
              "rmse_holdout": m.rmse_holdout, "rmse_holdout_reason": m.rmse_holdout_reason}
             for name, m in models.items()]
-    errors = {name: segment_errors(m, data) for name, m in models.items()}
+    errors = _segment_errors(models, data)
     return FitResult(model, models, pd.DataFrame(rows), errors, data, amplitudes, notes)
+
+
+def _segment_errors(models: dict, data: FitData) -> dict:
+    """:func:`segment_errors` of every model, the data cut into one piece per segment once (a
+    segment's rows are found by one sort, not by a mask over all rows per segment and model: the
+    cost grows with rows, not rows x segments); the same rows as on the whole data.  Data that
+    hold free motion (blocks grouped by stretch) go through :func:`segment_errors` as they are."""
+    if data.free_motion or len(data) == 0:
+        return {name: segment_errors(m, data) for name, m in models.items()}
+    group = data.groups("segment")
+    order = np.argsort(group, kind="stable")
+    _, starts = np.unique(group[order], return_index=True)
+    bounds = np.append(starts, len(order))
+    pieces = [data.subset(order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+    out = {}
+    for name, m in models.items():
+        rows = [df for df in (segment_errors(m, piece) for piece in pieces) if not df.empty]
+        out[name] = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame([])
+    return out

@@ -12,6 +12,7 @@ from ..fitdata import FitData
 from ..model import RPM, FrictionModel
 from ..terms import amplitude_law, clamp_speed
 from . import DIRS, NEG, POS, plt, save
+from .ordermap import _scale
 
 __all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
 
@@ -129,19 +130,30 @@ def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int],
 
 
 def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> Path:
-    """Per segment: mean error e and rmse of model - data against speed, per model and direction."""
+    """Per segment: mean error e and rmse of model - data against speed, per model and direction;
+    each segment a marker, the median of the repetitions of a speed joined by a line (never the
+    repetitions themselves: a tangle)."""
+    from ..spectrum.results import speed_groups
+
     xl, xs, tu = _units(unit)
+    frames = [df for df in errors.values() if not df.empty]
+    factor, tu = _scale(np.concatenate([np.abs(df[c].to_numpy(float)) for df in frames for c in ("e", "rmse")])
+                        if frames else np.ones(1), tu)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.0))
     for (label, df), ls in zip(errors.items(), _STYLES):
         if df.empty:
             continue
+        df = df.assign(group=speed_groups(df["speed"], df["direction"]))
         for d, name, color, mk in DIRS:
             sub = df[df["direction"] == d].sort_values("speed")
             if sub.empty:
                 continue
+            med = sub.groupby("group")[["speed", "e", "rmse"]].median().sort_values("speed")
             for ax, col in zip(axes, ("e", "rmse")):
-                ax.plot(sub["speed"] * xs, sub[col], ls, marker=mk, color=color, ms=4, mfc="none",
-                        label=f"{label}, {name}")
+                ax.plot(sub["speed"] * xs, factor * sub[col], mk, color=color, ms=3.5, mfc="none", alpha=0.7,
+                        rasterized=len(sub) > 2000)
+                ax.plot(med["speed"] * xs, factor * med[col], ls, color=color, lw=1.0,
+                        label=f"{label}, {name}" + (" (median per speed)" if len(med) < len(sub) else ""))
     axes[0].axhline(0, color="0.6", lw=0.6)
     axes[0].set_ylabel(f"mean error e = model - data ({tu})")
     axes[1].set_ylabel(f"rmse per segment ({tu})")
@@ -149,7 +161,10 @@ def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> 
         ax.set_xscale("log")
         ax.set_xlabel(xl)
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=6)
-    fig.suptitle("Residuals per segment", fontsize=11)
-    fig.tight_layout()
+        ax.ticklabel_format(axis="y", style="plain", useOffset=False)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:  # one legend for both panels, below them: never over the points
+        fig.legend(handles, labels, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
+    fig.suptitle("Residuals per segment (markers: segments)", fontsize=11)
+    fig.tight_layout(rect=(0, 0.02 + 0.055 * ((len(handles) + 3) // 4), 1, 1))
     return save(fig, path)

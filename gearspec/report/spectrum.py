@@ -9,9 +9,12 @@ import numpy as np
 import pandas as pd
 
 from .. import plots
+from ..errors import InputError
+from ..progress import Stages
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
+from ..spectrum.results import REPRESENTATIVES
 from . import _rpm, bullets, header, markdown_table, report_dir, write_report
 
 __all__ = ["write_spectrum_report", "write_order_report", "order_section"]
@@ -23,18 +26,49 @@ def _ranges(idx: list[int]) -> str:
     return ", ".join(f"{r[0]}" if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
 
 
+#: ``pages="auto"``: at most this many segments get a panel of spectra
+AUTO_PAGES = REPRESENTATIVES
+PAGES = ("auto", "all", "none")
+
+
 def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentation, out: str | Path,
-                          command: str = "", orders=None) -> Path:
+                          command: str = "", orders=None, pages: str = "all", stages=None) -> Path:
     """Write ``report.md``, the figures and ``peaks.csv`` of a spectrum analysis into ``out``
-    (``orders``: an :class:`~gearspec.spectrum.OrderAnalysis`, its section and files added)."""
+    (``orders``: an :class:`~gearspec.spectrum.OrderAnalysis`, its section and files added).
+
+    ``pages``: the segments whose spectra are drawn (8 a page, ``spectra_NN.png``): ``"all"``,
+    ``"none"`` or ``"auto"`` (at most ``AUTO_PAGES`` representative segments,
+    :meth:`~gearspec.spectrum.SpectrumResult.representatives`; every segment when there are no
+    more); segments analysed without their spectra get them computed here
+    (:func:`~gearspec.spectrum.pipeline.attach_spectra`).  ``stages``: a
+    :class:`~gearspec.progress.Stages` told of each step.
+    """
+    from ..plots.spectrum import plot_spectrum_summary
+    from ..spectrum.pipeline import attach_spectra
+
+    if pages not in PAGES:
+        raise InputError(f"--pages must be one of {', '.join(PAGES)}, got '{pages}'")
+    st = stages if stages is not None else Stages(enabled=False)
     out = report_dir(out)
     unit = result.unit
     tu = "Nm" if unit == "rad" else "N"
+    n_all = len(result.segments)
+    drawn = (list(range(n_all)) if pages == "all" else [] if pages == "none" else
+             result.representatives(AUTO_PAGES))
+    st.start("summary figures")
     figs = {"segments": plots.plot_segments(rec, seg, out / "segments.png"),
-            "spectra": plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png")),
+            "summary": plot_spectrum_summary(result, out / "spectrum_summary.png"),
             "amplitude": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png"),
             "relative": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png", relative=True),
             "unexplained": plots.plot_unexplained(result, out / "unexplained_peaks.png")}
+    st.done("summary figures drawn")
+    if drawn:
+        st.start(f"spectra of {len(drawn)} segment(s) for the pages")
+        attach_spectra(result, rec, drawn)
+        figs["spectra"] = plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png"), indices=drawn)
+        st.done(f"{len(figs['spectra'])} page(s) of spectra for {len(drawn)} of {n_all} segment(s)")
+    else:
+        figs["spectra"] = []
     table = result.peaks_table()
     table.to_csv(out / "peaks.csv", index=False)
 
@@ -45,6 +79,12 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
            + ". (Every row is in one segment or counted once.)", ""]
     md += ["## Gear train", ""] + (["```", result.gear.describe(), "```", ""] if result.gear is not None else
                                   ["No gear spec: no line is declared; every peak found is reported unlabelled.", ""])
+    if figs["summary"] is not None:
+        md += ["## Summary over all segments", "",
+               f"All {len(result.segments)} segments on one figure per direction: the amplitude of every declared "
+               "line against speed (dots: segments; line: median of the repetitions of a speed) and the strongest "
+               "significant peaks of each segment that no declared line fits (crosses).", "",
+               f"![summary]({figs['summary'].name})", ""]
     ws = seg.settings.get("windows_chosen")
     md += ["## Segments", "",
            "Found from position alone (" + (f"speed window(s) {', '.join(f'{w:g} s' for w in ws)}, " if ws else "")
@@ -61,7 +101,32 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
                      **({"speed (rpm)": _rpm(g.speed, unit)} if unit == "rad" else {}),
                      "samples": g.n, f"travel ({unit})": s.span, f"mean friction ({tu})": s.level,
                      f"residual sd ({tu})": s.sigma, "speed ripple (rel. sd)": g.speed_ripple})
-    md += [markdown_table(pd.DataFrame(rows)), "", "## Declared lines", ""]
+    md += [markdown_table(pd.DataFrame(rows)), ""] + _lines_sections(result, table, figs)
+    md += ["## Order spectra", "", _pages_sentence(drawn, n_all, pages), ""]
+    if figs["spectra"]:
+        md += ["FFT of torque resampled over position (Hann window, amplitude-calibrated) in grey, Lomb-Scargle of "
+               "the raw samples in green, the local noise level dotted (each curve drawn as its maximum over "
+               "logarithmic frequency bins); dots are the jointly fitted amplitudes (purple: declared, orange: "
+               "harmonic/sideband, red: unexplained).", ""]
+    md += [f"![spectra]({p.name})" for p in figs["spectra"]]
+    md += ["", "## Method", "",
+           "Friction magnitude y = direction x (torque - J thetadd) over position; joint least-squares fit of all "
+           "declared lines and significant peaks with a Legendre nuisance polynomial, peaks searched again in the "
+           "residual of every line found until none is left (a dense comb of lines raises the noise level around "
+           "each); standard errors scaled by the local noise level of the Lomb-Scargle periodogram; false-alarm "
+           "probabilities against the local noise level (one frequency for declared lines, all searched frequencies "
+           "for found peaks). "
+           f"Frequencies in cycles/{unit}; amplitudes in {tu}; phases in rad of A sin(2 pi f theta + phi).", ""]
+    if orders is not None:
+        md += order_section(orders, out)
+    return write_report(out, md + bullets(result.notes, "Notes:"))
+
+
+def _lines_sections(result: SpectrumResult, table: pd.DataFrame, figs: dict) -> list[str]:
+    """The sections 'Declared lines' and 'Peaks no declared line explains'."""
+    unit = result.unit
+    tu = "Nm" if unit == "rad" else "N"
+    md = ["## Declared lines", ""]
     if result.gear is None or table.empty or not table["declared"].any():
         md += ["_No declared line fits in any segment._", ""]
     else:
@@ -104,22 +169,20 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
                "sits on within its frequency uncertainty (a motor pole-pair or cogging order looks like this), a "
                "clue, not an explanation; given only when the uncertainty tells neighbouring multiples apart, with "
                "the exact order in `order_exact` beside the measured one.", ""]
-    md += ["## Order spectra", "",
-           "FFT of torque resampled over position (Hann window, amplitude-calibrated) in grey, Lomb-Scargle of the "
-           "raw samples in green, the local noise level dotted; dots are the jointly fitted amplitudes "
-           "(purple: declared, orange: harmonic/sideband, red: unexplained).", ""]
-    md += [f"![spectra]({p.name})" for p in figs["spectra"]]
-    md += ["", "## Method", "",
-           "Friction magnitude y = direction x (torque - J thetadd) over position; joint least-squares fit of all "
-           "declared lines and significant peaks with a Legendre nuisance polynomial, peaks searched again in the "
-           "residual of every line found until none is left (a dense comb of lines raises the noise level around "
-           "each); standard errors scaled by the local noise level of the Lomb-Scargle periodogram; false-alarm "
-           "probabilities against the local noise level (one frequency for declared lines, all searched frequencies "
-           "for found peaks). "
-           f"Frequencies in cycles/{unit}; amplitudes in {tu}; phases in rad of A sin(2 pi f theta + phi).", ""]
-    if orders is not None:
-        md += order_section(orders, out)
-    return write_report(out, md + bullets(result.notes, "Notes:"))
+    return md
+
+
+def _pages_sentence(drawn: list[int], n_all: int, pages: str) -> str:
+    """What the pages of spectra show, and how to get the others."""
+    if len(drawn) == n_all:
+        return f"Spectra of all {n_all} segments."
+    if not drawn:
+        return (f"No page of spectra drawn (--pages none); the summary figure shows all {n_all} segments; "
+                "--pages all draws every one.")
+    return (f"Pages for {len(drawn)} of {n_all} segments ({_ranges(drawn)}): in each group of repetitions of one "
+            "speed and direction the segment with the most significant peaks no declared line fits (then the "
+            f"highest signal-to-noise ratio), at most {AUTO_PAGES} groups, those that show the most. The summary "
+            "figure and the tables hold every segment; --pages all draws every one.")
 
 
 def write_order_report(orders, rec: Recording, out: str | Path, command: str = "", note: str = "") -> Path:

@@ -17,7 +17,7 @@ from . import analysis as _one  # LS_MAX_SAMPLES read at call time (a test patch
 from .analysis import _local, analyze_segment
 from .results import SegmentSpectrum, SpectrumResult
 
-__all__ = ["analyze", "relabel_aliases"]
+__all__ = ["analyze", "relabel_aliases", "attach_spectra"]
 
 
 def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = None,
@@ -56,11 +56,7 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     n_workers = _n_workers(workers, seg)
 
     def one(s: Segment) -> SegmentSpectrum:
-        # a quasi-static sweep was taken at rest: its torque is analysed as measured (no J thetadd)
-        y = (rec.tau if s.kind == "quasi_static" else tau)[s.rows]
-        if s.direction < 0:  # the friction magnitude (a view of the torque when it is the torque)
-            y = -y
-        return analyze_segment(theta[s.rows], y, gear, segment=s, **options)
+        return analyze_segment(theta[s.rows], _magnitude(rec, tau, s), gear, segment=s, **options)
 
     def one_in_pool(s: Segment) -> SegmentSpectrum:
         _local.in_pool = True
@@ -79,7 +75,43 @@ def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = No
     relabel_aliases(results, gear, unit=rec.unit)
     excluded = Counter(rec.excluded) + Counter(seg.excluded)
     return SpectrumResult(results, excluded, rec.n_read, rec.unit, gear, notes,
-                          settings={**seg.settings, **options, "inertia": inertia})
+                          settings={**seg.settings, **options, "inertia": inertia},
+                          options={**options, "inertia": J})
+
+
+def _magnitude(rec: Recording, tau, s: Segment):
+    """The friction magnitude of segment ``s``: direction x (torque - J thetadd), a quasi-static
+    sweep's torque as measured (it was taken at rest: no J thetadd)."""
+    y = (rec.tau if s.kind == "quasi_static" else tau)[s.rows]
+    return -y if s.direction < 0 else y  # a view of the torque when it is the torque
+
+
+def attach_spectra(result: SpectrumResult, rec: Recording, indices) -> list[int]:
+    """Compute the figures' spectra (``keep_spectra``) of the segments ``indices`` of ``result``
+    after an analysis run without them, so that a report draws a few segments without holding
+    every segment's spectra (memory of the order of the samples) for a long recording.
+
+    The segment is analysed again with the options of ``result`` (the analysis is deterministic:
+    the same peaks); only the spectra are taken from it, the peaks of ``result`` (relabelled
+    across segments by :func:`relabel_aliases`) are kept.  Segments that hold spectra already are
+    left alone.  ``rec``: the recording ``result`` was computed from.  Returns the indices computed.
+    """
+    opts = dict(result.options)
+    J = opts.pop("inertia", None)
+    opts["keep_spectra"] = True
+    tau = FrictionTorque(rec, inertia=J) if J else rec.tau
+    done = []
+    for i in indices:
+        s = result.segments[i]
+        if s.fft_frequency is not None or s.fit is None:
+            continue
+        g = s.segment
+        again = analyze_segment(rec.theta[g.rows], _magnitude(rec, tau, g), result.gear, segment=g, **opts)
+        for name in ("fft_frequency", "fft_amplitude", "ls_frequency", "ls_amplitude", "ls_residual_amplitude",
+                     "noise_amplitude"):
+            setattr(s, name, getattr(again, name))
+        done.append(i)
+    return done
 
 
 def relabel_aliases(segments: list[SegmentSpectrum], gear: GearTrain | None = None, unit: str = "rad") -> int:

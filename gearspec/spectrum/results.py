@@ -17,7 +17,12 @@ from ..jsonsafe import plain
 from ..segment import Segment
 from .harmonic import HarmonicFit
 
-__all__ = ["Peak", "SegmentSpectrum", "SpectrumResult"]
+__all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "speed_groups", "SPEED_GROUP_TOL", "REPRESENTATIVES"]
+
+#: relative speed difference within which segments of one direction are repetitions of one speed
+SPEED_GROUP_TOL = 0.05
+#: segments :meth:`SpectrumResult.representatives` picks by default (the report's ``--pages auto``)
+REPRESENTATIVES = 12
 
 
 @dataclass(frozen=True)
@@ -99,6 +104,8 @@ class SpectrumResult:
     gear: GearTrain | None
     notes: list[str] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
+    #: the options the segments were analysed with (to compute spectra again: ``attach_spectra``)
+    options: dict = field(default_factory=dict, repr=False)
 
     def to_dict(self) -> dict:
         return {"unit": self.unit, "torque_unit": "Nm" if self.unit == "rad" else "N",
@@ -132,6 +139,52 @@ class SpectrumResult:
         if t.empty:
             return t
         return t[(~t["declared"]) & t["label"].isna() & (t["fap"] <= max_fap)].reset_index(drop=True)
+
+
+    def speed_groups(self, rel_tol: float = SPEED_GROUP_TOL) -> list[tuple[int, float, list[int]]]:
+        """Segments of one direction at the same nominal speed (:func:`speed_groups`): ``(direction,
+        median speed, segment indices)``, positive direction first, then by speed."""
+        gid = speed_groups([s.speed for s in self.segments], [s.direction for s in self.segments], rel_tol)
+        groups = [list(np.flatnonzero(gid == k)) for k in range(int(gid.max()) + 1)] if len(gid) else []
+        return [(self.segments[g[0]].direction, float(np.median([self.segments[i].speed for i in g])),
+                 [int(i) for i in g]) for g in groups]
+
+    def information(self, i: int, max_fap: float = 0.01) -> tuple[int, float, int]:
+        """How much segment ``i``'s spectrum shows, to rank segments for figures: (significant
+        peaks no declared line fits, highest signal-to-noise ratio of a significant peak, samples)."""
+        s = self.segments[i]
+        sig = [p for p in s.peaks if p.fap <= max_fap]
+        return (sum(not p.declared for p in sig), max((p.snr for p in sig), default=0.0), s.segment.n)
+
+    def representatives(self, limit: int = REPRESENTATIVES) -> list[int]:
+        """At most ``limit`` segments whose spectra stand for the rest: in each group of
+        :meth:`speed_groups` the one of most :meth:`information`; when there are more groups than
+        ``limit``, the groups whose representative shows the most.  Sorted by segment index."""
+        reps = [max(g, key=self.information) for _, _, g in self.speed_groups()]
+        if len(reps) > limit:
+            reps = sorted(reps, key=self.information, reverse=True)[:limit]
+        return sorted(reps)
+
+
+def speed_groups(speed, direction, rel_tol: float = SPEED_GROUP_TOL) -> np.ndarray:
+    """Group ids of segments (or any rows) of one direction at one nominal speed: numbered from 0,
+    positive direction first, then by |speed|; sorted by |speed|, a row more than ``rel_tol``
+    (relative) faster than the previous one of its direction starts a new group.  -1 for a row
+    without a finite speed or a direction of 0."""
+    speed = np.abs(np.asarray(speed, dtype=float))
+    direction = np.asarray(direction)
+    gid = np.full(len(speed), -1, dtype=int)
+    k = -1
+    for d in (1, -1):
+        idx = np.flatnonzero((direction == d) & np.isfinite(speed))
+        idx = idx[np.argsort(speed[idx], kind="stable")]
+        prev = None
+        for i in idx:
+            if prev is None or speed[i] > (1 + rel_tol) * prev:
+                k += 1
+            gid[i] = k
+            prev = speed[i]
+    return gid
 
 
 def _jsonable(v) -> bool:
