@@ -111,27 +111,37 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
             keep = ext.keep_mask(p_ext.drop)
             beta, _ = train_fit(ext, keep, p_ext, ext.all_groups())
             contribution = np.column_stack([ext.X[:, keep], p_ext.columns(dd)]) @ beta - rnd.fitted.prediction
-    r0 = np.zeros(len(dd))
+    p0 = np.zeros(len(dd))
     p1 = np.zeros(len(dd))
     props = []
     n_par = 0
     for _, test in splits(rnd.fold):
         train = ~test
-        rows = np.flatnonzero(~rnd.rows(train))
-        beta0 = rnd.beta(train)
-        p0 = rnd.X[rows] @ beta0
-        r0[rows] = dd.y[rows] - p0
+        _predict(p0, test, dd, rnd.X, rnd.beta(train))
         prop = cand.propose(ext, train) if (train.any() and not train.all()) else None
         if prop is None:
-            p1[rows] = p0
+            _predict(p1, test, dd, rnd.X, rnd.beta(train))
             props.append(None)
             continue
         keep = ext.keep_mask(prop.drop)
         beta1, _ = train_fit(ext, keep, prop, train)
         n_par = prop.n_params(ext)
-        p1[rows] = np.column_stack([ext.X[rows][:, keep], prop.columns(dd)[rows]]) @ beta1
+        full = np.zeros(ext.X.shape[1])
+        full[keep] = beta1[:int(keep.sum())]
+        _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
-    return _Folds(r0, p1, props, contribution, n_par)
+    return _Folds(dd.y - p0, p1, props, contribution, n_par)
+
+
+def _predict(out: np.ndarray, test: np.ndarray, dd: DiagnoseData, X: np.ndarray, beta: np.ndarray,
+             C: np.ndarray | None = None, beta_c: np.ndarray | None = None) -> None:
+    """``out`` at the observations of the groups ``test``: ``X beta`` (+ ``C beta_c``), group by group
+    on views of the rows (no copy of the design)."""
+    for g in np.flatnonzero(test):
+        a, z = dd.starts[g], dd.stops[g]
+        out[a:z] = X[a:z] @ beta
+        if C is not None:
+            out[a:z] += C[a:z] @ beta_c
 
 
 def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, min_gain: float,

@@ -129,7 +129,7 @@ def verdict_line(e: Effect, unit: str | None = None, torque_unit: str = "") -> s
     where = "on the independent recording" if v.test == "validation" else "held-out"
     nums = (f"{v.test} test: Z {_fmt(v.z, '.2f')} (needs {_fmt(v.z_crit, '.2f')}), {where} rmse "
             f"{_fmt(v.rmse_before, '.4g')} -> {_fmt(v.rmse_after, '.4g')}{tu} ({_fmt(-100 * v.gain, '+.2f')} %, "
-            f"needs {_fmt(-100 * v.min_gain, '.2g')} %)")
+            f"needs a fall of {_fmt(100 * v.min_gain, '.2g')} %)")
     return f"{head}: {v.reason} [{nums}]" + (f"; {v.note}" if v.note else "")
 
 
