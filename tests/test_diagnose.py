@@ -530,6 +530,19 @@ def test_one_reason_the_gate_that_decided_z_passes_but_the_gain_does_not():
     # the same record in the JSON, with the rendered line
     j = next(x for x in d.to_dict()["effects"] if x["name"] == line.name)["verdict"]
     assert j["reason"] == v.reason and j["z"] == pytest.approx(v.z) and j["line"].startswith("rejected")
+    # two gates failing (consistency asked above 100 %, gain 99 %): the one reason is the first of them in
+    # the order Z, consistency, gain; the full decision keeps both
+    from gearspec.diagnose import loop
+    from gearspec.diagnose.candidates import FixedCandidate
+    from gearspec.diagnose.design import HarmonicBlock
+
+    blk = HarmonicBlock(key="cogging", frequency=7 * F_MOTOR, dirs=(1, -1), law=((1, "const"), (-1, "const")),
+                        decay=((1, 0.0), (-1, 0.0)))
+    ev = loop.evaluate_candidate(loop.Round(d.data, d.baseline.state, d.folds), FixedCandidate("periodic", "c", [blk]),
+                                 z_crit=3.0, min_gain=0.99, consistency=1.01, repolish=False)
+    assert ev.z > 3.0 and not ev.passed
+    assert ev.gate.startswith("improves in folds carrying only") and "rmse" not in ev.gate
+    assert "needs a fall of 99 %" in ev.reason and ev.verdict("rejected", None, 1).reason == ev.gate
 
 
 @pytest.mark.slow
@@ -556,6 +569,8 @@ def test_console_report_and_json_show_one_decision_and_the_final_numbers(tmp_pat
         assert v["status"] == e["status"] and v["line"] in out and " ".join(v["line"].split()) in report
     cog = next(e for e in d["effects"] if e["frequency"] and abs(e["frequency"] / (7 * F_MOTOR) - 1) < 0.01)
     assert cog["status"] == "removed" and cog["verdict"]["test"] == "validation"
+    assert cog["verdict"]["z"] == pytest.approx(cog["validation"]["z"])          # the deciding test's Z ...
+    assert cog["verdict"]["z"] < cog["verdict"]["z_crit"]                        # ... which it failed
     assert cog["verdict"]["line"].startswith("removed") and "ACCEPTED periodic" not in out
     assert "validation: removed " + cog["name"] in out                 # the progress says so when it happens
     drift = next(e for e in d["effects"] if e["kind"] == "drift")

@@ -26,22 +26,23 @@ from gearspec.simulate import model_recording, table2_model, twin_gear
 
 #: recordings of the false-discovery test
 SEEDS = 20
-#: plateau speeds per direction, geometric from 2 to 600 rad/s at the motor (19-5700 rpm: the twin's range)
-N_SPEEDS = 6
+#: plateau speeds per direction, geometric from 0.5 to 600 rad/s at the motor (5-5700 rpm: the twin's range,
+#: from below its Stribeck velocities of 2.8-3.0 rad/s, so that the data identify the whole law)
+N_SPEEDS = 8
 NOISE = 2e-4
 
 
-def complete_twin(seed: int, *, scatter: float = 0.0):
-    """A plateau recording of the twin's truth (both directions, shuffled order, one run), and its
-    gear.  ``scatter``: relative sd of a level change of the friction per plateau (repetition
+def complete_twin(seed: int, *, one_run_per_plateau: bool = True, scatter: float = 0.0):
+    """A plateau recording of the twin's truth (both directions, shuffled order; one run per
+    plateau as the SILO4 twin records them, or all in one run), and its gear.  ``scatter``: relative sd of a level change of the friction per plateau (repetition
     scatter of a real bench, coloured across the plateau's samples) -- part of the noise, which the
     held-out Z must count per group."""
     rng = np.random.default_rng(seed)
-    mag = np.geomspace(2.0, 600.0, N_SPEEDS)
+    mag = np.geomspace(0.5, 600.0, N_SPEEDS)
     speeds = [x for a, b in zip(rng.permutation(mag), rng.permutation(mag)) for x in (a, -b)]
     gear = twin_gear()
     rec, table = model_recording(table2_model(), speeds, noise=NOISE, gear=gear, seed=seed, duration=0.8, fs=500.0,
-                                 one_run_per_plateau=False, inertia=gear.inertia)
+                                 one_run_per_plateau=one_run_per_plateau, inertia=gear.inertia)
     if scatter:
         tau = rec.data["torque"].to_numpy(dtype=float).copy()
         t = rec.t

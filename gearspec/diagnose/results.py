@@ -85,7 +85,8 @@ class Effect:
     value: float | None = None       # a scalar effect's estimate (lag: s)
     verdict: Verdict | None = None   # the decision record (:func:`verdict_line` renders it)
 
-    def to_dict(self) -> dict:
+    def to_dict(self, unit: str | None = None, torque_unit: str = "") -> dict:
+        """The JSON entry (``unit``, ``torque_unit``: of the data, for the decision line as printed)."""
         f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
         d = {"kind": self.kind, "accepted": bool(self.accepted), "frequency": f(self.frequency), "label": self.label,
              "evidence": self.evidence, "rmse_holdout_before": f(self.rmse_holdout_before),
@@ -98,7 +99,7 @@ class Effect:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
         d["status"] = self.status
         if self.verdict is not None:
-            d["verdict"] = {**self.verdict.to_dict(), "status": self.status, "line": verdict_line(self)}
+            d["verdict"] = {**self.verdict.to_dict(), "status": self.status, "line": verdict_line(self, unit, torque_unit)}
         return d
 
     @property
@@ -189,7 +190,7 @@ class Diagnosis:
         out = {"baseline": {"model": self.baseline_model.name, "rmse": f(self.baseline.rmse),
                             "rmse_holdout": f(self.baseline_model.rmse_holdout),
                             "parameters": len(self.baseline.coef), "friction_model": self.baseline_model.to_dict()},
-               "effects": [e.to_dict() for e in self.effects],
+               "effects": [e.to_dict(self.data.unit, self.data.torque_unit) for e in self.effects],
                "final": {"model": self.final_model.name, "rmse": f(self.final.rmse),
                          "rmse_holdout": f(self.final_model.rmse_holdout), "parameters": len(self.final.coef),
                          "friction_model": self.final_model.to_dict()},
