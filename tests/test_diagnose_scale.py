@@ -13,6 +13,7 @@ import pytest
 import gearspec.diagnose as dg
 from gearspec.core.reduction import GroupNormals
 from gearspec.diagnose import context, design
+from gearspec.diagnose.data import per_speed
 from gearspec.model import FrictionModel
 from gearspec.simulate import model_recording
 
@@ -57,7 +58,7 @@ def test_speed_laws_are_evaluated_once_per_distinct_speed():
         seen.append(len(sp))
         return np.exp(-0.1 * sp) / (1 + sp ** 2)
 
-    out = design.per_speed(dd, law)
+    out = per_speed(dd, law)
     assert seen == [6] and len(out) == len(dd.fit) > 100 * 6
     assert np.array_equal(out, law(np.abs(dd.fit.v)))
     # samples that each have their own speed (free motion): evaluated on the samples
@@ -65,7 +66,7 @@ def test_speed_laws_are_evaluated_once_per_distinct_speed():
     free = dg.DiagnoseData.from_fitdata(dd.fit.subset(np.arange(n)))
     free.fit.v = np.linspace(0.1, 2.0, n)
     seen.clear()
-    assert np.array_equal(design.per_speed(free, law), law(free.fit.v)) and seen[-1] == n
+    assert np.array_equal(per_speed(free, law), law(free.fit.v)) and seen[-1] == n
 
 
 def test_column_cache_is_bounded_in_columns_not_blocks(monkeypatch):
@@ -74,7 +75,8 @@ def test_column_cache_is_bounded_in_columns_not_blocks(monkeypatch):
     serves repeated requests from memory."""
     monkeypatch.setattr(design, "_CACHE_COLUMNS", 6)
     dd = _plateau_data(n_speeds=4)
-    blocks = [design.HarmonicBlock(key=f"l{k}", frequency=0.3 + 0.1 * k, dirs=(1, -1), law=((1, "const"), (-1, "const")),
+    const = ((1, "const"), (-1, "const"))
+    blocks = [design.HarmonicBlock(key=f"l{k}", frequency=0.3 + 0.1 * k, dirs=(1, -1), law=const,
                                    decay=((1, 0.0), (-1, 0.0))) for k in range(5)]      # 4 columns each
     for b in blocks:
         b.columns(dd)

@@ -16,8 +16,6 @@ the test fails on a rule that accepts noise often, not on one unlucky seed.
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -32,24 +30,15 @@ N_SPEEDS = 8
 NOISE = 2e-4
 
 
-def complete_twin(seed: int, *, one_run_per_plateau: bool = True, scatter: float = 0.0):
+def complete_twin(seed: int, *, one_run_per_plateau: bool = True):
     """A plateau recording of the twin's truth (both directions, shuffled order; one run per
-    plateau as the SILO4 twin records them, or all in one run), and its gear.  ``scatter``: relative sd of a level change of the friction per plateau (repetition
-    scatter of a real bench, coloured across the plateau's samples) -- part of the noise, which the
-    held-out Z must count per group."""
+    plateau as the SILO4 twin records them, or all in one run), and its gear."""
     rng = np.random.default_rng(seed)
     mag = np.geomspace(0.5, 600.0, N_SPEEDS)
     speeds = [x for a, b in zip(rng.permutation(mag), rng.permutation(mag)) for x in (a, -b)]
     gear = twin_gear()
-    rec, table = model_recording(table2_model(), speeds, noise=NOISE, gear=gear, seed=seed, duration=0.8, fs=500.0,
-                                 one_run_per_plateau=one_run_per_plateau, inertia=gear.inertia)
-    if scatter:
-        tau = rec.data["torque"].to_numpy(dtype=float).copy()
-        t = rec.t
-        for _, row in table.iterrows():
-            sel = (t >= row["t0"]) & (t <= row["t1"])
-            tau[sel] += row["direction"] * scatter * row["level"] * rng.normal()
-        rec = dataclasses.replace(rec, data=rec.data.assign(torque=tau))
+    rec, _ = model_recording(table2_model(), speeds, noise=NOISE, gear=gear, seed=seed, duration=0.8, fs=500.0,
+                             one_run_per_plateau=one_run_per_plateau, inertia=gear.inertia)
     return rec, gear
 
 

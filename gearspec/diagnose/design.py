@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
-from .data import DiagnoseData
+from .data import DiagnoseData, per_speed
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "FittedState", "fit_state",
            "state_from_model", "LINEAR", "solve_normal", "predict_model", "nonlinear_parameters"]
@@ -34,22 +34,6 @@ _DNAME = {1: "positive", -1: "negative"}
 #: linear and nonlinear parameters of every base law (the magnitude is linear in the first
 #: given the second): the term registry's (:mod:`gearspec.terms.registry`)
 LINEAR = LAW_LINEAR
-
-
-# ---------------------------------------------------------------------- per speed
-def per_speed(dd: DiagnoseData, fn) -> np.ndarray:
-    """``fn(|v|)`` at every sample of ``dd.fit`` for a function of the speed alone, elementwise
-    (an amplitude law, a base law without load): evaluated once per distinct speed when the samples
-    share few (plateaus: one speed per segment) and gathered, else on the samples.  The same
-    numbers either way; the cost then grows with the segments, not the samples."""
-    v = dd.fit.v
-    hit = dd.cache.get("speeds")
-    if hit is None or hit[0] is not v:
-        sp = np.abs(v)
-        u, inv = np.unique(sp, return_inverse=True)
-        hit = dd.cache["speeds"] = (v, u, inv) if 4 * len(u) <= len(sp) else (v, None, None)
-    _, u, inv = hit
-    return fn(np.abs(v)) if u is None else np.asarray(fn(u))[inv]
 
 
 # ---------------------------------------------------------------------- blocks

@@ -99,7 +99,8 @@ class Effect:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
         d["status"] = self.status
         if self.verdict is not None:
-            d["verdict"] = {**self.verdict.to_dict(), "status": self.status, "line": verdict_line(self, unit, torque_unit)}
+            d["verdict"] = {**self.verdict.to_dict(), "status": self.status,
+                            "line": verdict_line(self, unit, torque_unit)}
         return d
 
     @property
