@@ -321,17 +321,21 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     base_fit = rnd.fitted
     base_h = rnd.baseline_holdout()
     base_ho = base_h["rmse"]
+    say = progress or (lambda s: None)
+    say(f"baseline: {model.name}, rmse {base_fit.rmse:.4g}, held-out rmse {base_ho:.4g} ({dd.n_groups} held-out "
+        f"groups, {int(fold.max()) + 1} folds)")
     baseline = base_fit.model(name=f"baseline: {model.name}", rmse_holdout=base_ho)
     effects: dict[str, Effect] = {}
     rounds = []
     trace = []
     first_analyses = None
-    say = progress or (lambda s: None)
     for k in range(1, max_rounds + 1):
         analyses = analyse(rnd, fap=fap, per_segment=per_segment_spectra and k == 1)
         if first_analyses is None:
             first_analyses = analyses
         cands = propose(rnd, analyses, gate=gate, kinds=kinds)
+        if cands:
+            say(f"round {k}: residual analysed, testing {len(cands)} candidate(s) on held-out groups")
         if not cands:
             rounds.append({"round": k, "candidates": 0, "accepted": None})
             break
