@@ -110,7 +110,10 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         if p_ext is not None:
             keep = ext.keep_mask(p_ext.drop)
             beta, _ = train_fit(ext, keep, p_ext, ext.all_groups())
-            contribution = np.column_stack([ext.X[:, keep], p_ext.columns(dd)]) @ beta - rnd.fitted.prediction
+            nk = int(keep.sum())
+            full = np.zeros(ext.X.shape[1])
+            full[keep] = beta[:nk]      # no copy of the kept columns (rows x terms) of a long recording
+            contribution = ext.X @ full + p_ext.columns(dd) @ beta[nk:] - rnd.fitted.prediction
     p0 = np.zeros(len(dd))
     p1 = np.zeros(len(dd))
     props = []
