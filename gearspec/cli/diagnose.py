@@ -68,6 +68,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from .. import diagnose as dg
+    from ..diagnose.results import verdict_line
     from ..errors import InputError
     from ..model import FrictionModel
 
@@ -115,14 +116,8 @@ def run(args) -> int:
         print()
         print(diag.summary_table().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
         for e in diag.effects:
-            # the verdict of the final model: accepted, removed again (and why), rejected (which gate)
-            mark = {"accepted": "ACCEPTED", "removed": "removed", "rejected": "rejected"}[e.status]
-            f = "" if (e.frequency is None or e.kind == "periodic") else f" at {e.frequency:.6g} cycles/{data.unit}"
-            lab = f" ({e.label})" if e.label else (f" (unknown order; {e.hint})" if e.hint else "")
-            print(f"{mark:8s} {e.kind:11s} {e.name}{f}{lab}: held-out rmse {e.rmse_holdout_before:.4g} -> "
-                  f"{e.rmse_holdout_after:.4g}, Z {e.z:.1f} (needs {e.z_crit:.1f})")
-            if not e.accepted:
-                print(f"         {e.decision.removeprefix('rejected: ')}")
+            # the one decision record of each candidate, as the report and the JSON show it
+            print(verdict_line(e, data.unit, data.torque_unit))
         for n in diag.notes:
             print(f"note: {n}")
         print(f"({time.perf_counter() - t0:.1f} s)")

@@ -11,11 +11,33 @@ import numpy as np
 
 from ..core.crossval import held_out
 from .data import DiagnoseData
-from ..core.reduction import GroupNormals
+from ..core.reduction import GroupNormals, normal_equations
 from .design import FittedState, HarmonicBlock, State, fit_state, solve_normal
 from .nonlinear import nonlinear_standard_errors
 
-__all__ = ["Round"]
+__all__ = ["Round", "group_normals"]
+
+#: groups of at least this many observations on average are reduced one by one (BLAS): the
+#: batched outer products of :func:`~gearspec.core.reduction.group_normal_equations` cost
+#: rows x p^2 element operations, several times a BLAS product of plateau-sized groups
+BLAS_GROUP_ROWS = 256
+
+
+def group_normals(X: np.ndarray, y: np.ndarray, starts, stops) -> GroupNormals:
+    """:class:`~gearspec.core.reduction.GroupNormals` of the columns ``X`` (n, p) and ``y`` (n,) over
+    the contiguous groups ``[starts[g], stops[g])``: by one BLAS product per group
+    (:func:`~gearspec.core.reduction.normal_equations`) when the groups hold :data:`BLAS_GROUP_ROWS`
+    rows or more on average (plateaus, runs), else :meth:`GroupNormals.of` (thousands of short
+    free-motion blocks).  The same numbers up to round-off either way."""
+    starts, stops = np.asarray(starts), np.asarray(stops)
+    n = stops - starts
+    if not len(n) or float(np.mean(n)) < BLAS_GROUP_ROWS:
+        return GroupNormals.of(X, y, starts, stops)
+    p = X.shape[1]
+    G, b, yy = np.empty((len(n), p, p)), np.empty((len(n), p)), np.empty(len(n))
+    for g, (a, z) in enumerate(zip(starts, stops)):
+        G[g], b[g], yy[g] = normal_equations(X[a:z], y[a:z])
+    return GroupNormals(G, b, yy, n)
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,7 +67,7 @@ class Round:
         state = fitted.state = self.state.refreshed(fitted.coef)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
         X = state.design(dd, taylor=True)
-        grams = GroupNormals.of(X, dd.y, dd.starts, dd.stops)
+        grams = group_normals(X, dd.y, dd.starts, dd.stops)
         G_all = grams.sum()[0]
         fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
         for name, value in (("state", state), ("fitted", fitted), ("X", X), ("grams", grams),

@@ -18,7 +18,7 @@ from ..recording import Recording
 from ..segment import Segmentation, find_segments, free_motion
 from ..signals import butter_filtfilt, central_difference, decimate, decimation_index
 
-__all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves"]
+__all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves", "per_speed"]
 
 
 # ---------------------------------------------------------------------- reversals
@@ -237,6 +237,22 @@ class DiagnoseData:
         """Directions with observations (+1 / -1)."""
         d = self.at("direction")
         return [x for x in (1, -1) if np.any(d == x)]
+
+
+# ---------------------------------------------------------------------- per speed
+def per_speed(dd: DiagnoseData, fn) -> np.ndarray:
+    """``fn(|v|)`` at every sample of ``dd.fit`` for a function of the speed alone, elementwise
+    (an amplitude law, a base law without load): evaluated once per distinct speed when the samples
+    share few (plateaus: one speed per segment) and gathered, else on the samples.  The same
+    numbers either way; the cost then grows with the segments, not the samples."""
+    v = dd.fit.v
+    hit = dd.cache.get("speeds")
+    if hit is None or hit[0] is not v:
+        sp = np.abs(v)
+        u, inv = np.unique(sp, return_inverse=True)
+        hit = dd.cache["speeds"] = (v, u, inv) if 4 * len(u) <= len(sp) else (v, None, None)
+    _, u, inv = hit
+    return fn(np.abs(v)) if u is None else np.asarray(fn(u))[inv]
 
 
 # ---------------------------------------------------------------------- whole trajectories

@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
-from .data import DiagnoseData
+from .data import DiagnoseData, per_speed
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "FittedState", "fit_state",
            "state_from_model", "LINEAR", "solve_normal", "predict_model", "nonlinear_parameters"]
@@ -39,6 +39,8 @@ LINEAR = LAW_LINEAR
 # ---------------------------------------------------------------------- blocks
 _UID = itertools.count(1)
 _CACHE_SIZE = 96
+#: ... and at most this many columns' worth of observations (memory bounded on long recordings)
+_CACHE_COLUMNS = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,8 +74,9 @@ class Block:
             cols = raw if dd.reduce is None else (np.column_stack([dd.R(raw[:, j]) for j in range(raw.shape[1])])
                                                   if raw.shape[1] else np.zeros((len(dd), 0)))
         cache[ck] = (self, cols)
-        while len(cache) > _CACHE_SIZE:
-            cache.popitem(last=False)
+        held = sum(v[1].shape[1] for v in cache.values())
+        while len(cache) > 1 and (len(cache) > _CACHE_SIZE or held > _CACHE_COLUMNS):
+            held -= cache.popitem(last=False)[1][1].shape[1]
         return cols
 
     def taylor_columns(self, dd: DiagnoseData) -> np.ndarray:
@@ -146,7 +149,10 @@ class BaseBlock(Block):
         cols = []
         groups = [(0, np.ones(len(f), bool))] if self.symmetric else [(d, f.direction == d) for d in self.dirs]
         for d, sel in groups:
-            X = law.design(self._lin(d), self._nonlin(d), speed, load)
+            if f.load is None:
+                X = per_speed(dd, lambda sp, d=d: law.design(self._lin(d), self._nonlin(d), sp, np.zeros(len(sp))))
+            else:
+                X = law.design(self._lin(d), self._nonlin(d), speed, load)
             cols.append(np.where(sel[:, None], sgn[:, None] * X, 0.0))
         return np.concatenate(cols, axis=1) if cols else np.zeros((len(f), 0))
 
@@ -227,7 +233,6 @@ class HarmonicBlock(Block):
         f = dd.fit
         if f.theta is None:
             raise InputError("a position-locked line needs positions (theta)")
-        speed = np.abs(f.v)
         sgn = np.sign(f.v)
         trig = dd.cache.setdefault("trig", OrderedDict())
         hit = trig.get(self.frequency)
@@ -247,7 +252,7 @@ class HarmonicBlock(Block):
                 sn, cs = np.where(ok, sn, 0.0), np.where(ok, cs, 0.0)
         rng = self.ranges(dd)
         for d, sel in self._groups(f):
-            g = np.where(sel, sgn * self._g(d, speed, rng.get(d)), 0.0)
+            g = np.where(sel, sgn * per_speed(dd, lambda sp, d=d: self._g(d, sp, rng.get(d))), 0.0)
             cols += [g * sn, g * cs]
             if d in lp:
                 if f.load is None:

@@ -32,7 +32,7 @@ from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
 from .detectors import analyse, propose
-from .results import Diagnosis, Effect
+from .results import Diagnosis, Effect, Verdict
 from .validate import validate
 
 __all__ = ["diagnose", "Diagnosis", "Effect", "Round", "evaluate_candidate", "folds_of", "baseline_model",
@@ -67,6 +67,16 @@ class Evaluation:
     passed: bool
     reason: str
     contribution: np.ndarray = field(repr=False, default=None)   # all-data fit with the candidate minus without
+    gate: str = ""               # the one reason: the first gate failed (or that every gate passed)
+    min_gain: float = 0.0
+    test: str = "held-out"       # the test that decided ("re-entry" when the re-entry rule barred it)
+
+    def verdict(self, status: str, test: str | None, round_no: int | None, reason: str | None = None) -> Verdict:
+        """The decision record of this evaluation (``test``: default :attr:`test`; ``reason``:
+        default the gate that decided)."""
+        return Verdict(status, self.test if test is None else test, self.gate if reason is None else reason, self.z,
+                       self.z_crit, self.gain, self.min_gain, self.rmse_holdout_before, self.rmse_holdout_after,
+                       round_no)
 
 
 @dataclass
@@ -100,28 +110,41 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         if p_ext is not None:
             keep = ext.keep_mask(p_ext.drop)
             beta, _ = train_fit(ext, keep, p_ext, ext.all_groups())
-            contribution = np.column_stack([ext.X[:, keep], p_ext.columns(dd)]) @ beta - rnd.fitted.prediction
-    r0 = np.zeros(len(dd))
+            nk = int(keep.sum())
+            full = np.zeros(ext.X.shape[1])
+            full[keep] = beta[:nk]      # no copy of the kept columns (rows x terms) of a long recording
+            contribution = ext.X @ full + p_ext.columns(dd) @ beta[nk:] - rnd.fitted.prediction
+    p0 = np.zeros(len(dd))
     p1 = np.zeros(len(dd))
     props = []
     n_par = 0
     for _, test in splits(rnd.fold):
         train = ~test
-        rows = np.flatnonzero(~rnd.rows(train))
-        beta0 = rnd.beta(train)
-        p0 = rnd.X[rows] @ beta0
-        r0[rows] = dd.y[rows] - p0
+        _predict(p0, test, dd, rnd.X, rnd.beta(train))
         prop = cand.propose(ext, train) if (train.any() and not train.all()) else None
         if prop is None:
-            p1[rows] = p0
+            _predict(p1, test, dd, rnd.X, rnd.beta(train))
             props.append(None)
             continue
         keep = ext.keep_mask(prop.drop)
         beta1, _ = train_fit(ext, keep, prop, train)
         n_par = prop.n_params(ext)
-        p1[rows] = np.column_stack([ext.X[rows][:, keep], prop.columns(dd)[rows]]) @ beta1
+        full = np.zeros(ext.X.shape[1])
+        full[keep] = beta1[:int(keep.sum())]
+        _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
-    return _Folds(r0, p1, props, contribution, n_par)
+    return _Folds(dd.y - p0, p1, props, contribution, n_par)
+
+
+def _predict(out: np.ndarray, test: np.ndarray, dd: DiagnoseData, X: np.ndarray, beta: np.ndarray,
+             C: np.ndarray | None = None, beta_c: np.ndarray | None = None) -> None:
+    """``out`` at the observations of the groups ``test``: ``X beta`` (+ ``C beta_c``), group by group
+    on views of the rows (no copy of the design)."""
+    for g in np.flatnonzero(test):
+        a, z = dd.starts[g], dd.stops[g]
+        out[a:z] = X[a:z] @ beta
+        if C is not None:
+            out[a:z] += C[a:z] @ beta_c
 
 
 def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, min_gain: float,
@@ -161,7 +184,11 @@ def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, 
     passed = not reasons
     reason = (f"accepted: held-out Z {z:.1f} >= {z_crit:.2f}, rmse -{100 * gain:.2f} %" if passed
               else "; ".join(reasons))
-    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, fr.contribution)
+    # the one reason: the first gate failed, in the order Z, consistency, gain
+    first = (f"passes every gate (Z, {100 * consistency:.0f} % of the change in improving folds, rmse fall of "
+             f"{100 * min_gain:.2g} %)" if passed else reasons[0])
+    return Evaluation(z, z_crit, drop, fold_d, cons, hb, ha, gain, fr.n_par, passed, reason, fr.contribution,
+                      first, min_gain)
 
 
 #: the Z test is called low-power when its t quantile exceeds the normal quantile of the same level by this factor
@@ -297,17 +324,21 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     base_fit = rnd.fitted
     base_h = rnd.baseline_holdout()
     base_ho = base_h["rmse"]
+    say = progress or (lambda s: None)
+    say(f"baseline: {model.name}, rmse {base_fit.rmse:.4g}, held-out rmse {base_ho:.4g} ({dd.n_groups} held-out "
+        f"groups, {int(fold.max()) + 1} folds)")
     baseline = base_fit.model(name=f"baseline: {model.name}", rmse_holdout=base_ho)
     effects: dict[str, Effect] = {}
     rounds = []
     trace = []
     first_analyses = None
-    say = progress or (lambda s: None)
     for k in range(1, max_rounds + 1):
         analyses = analyse(rnd, fap=fap, per_segment=per_segment_spectra and k == 1)
         if first_analyses is None:
             first_analyses = analyses
         cands = propose(rnd, analyses, gate=gate, kinds=kinds)
+        if cands:
+            say(f"round {k}: residual analysed, testing {len(cands)} candidate(s) on held-out groups")
         if not cands:
             rounds.append({"round": k, "candidates": 0, "accepted": None})
             break
@@ -347,18 +378,22 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     final_ho = final_h["rmse"]
     name = "final: " + model.name + "".join(f" + {e.name}" for e in effects.values() if e.accepted)
     final = final_fit.model(name=name, rmse_holdout=final_ho)
-    for e in effects.values():
-        if e.accepted:
-            e.terms = _written_terms(e, rnd)
     diag = Diagnosis(dd, base_fit, final_fit, baseline, final, list(effects.values()), rounds, fold, base_h, final_h,
                      first_analyses or {}, {},
                      {"alpha": alpha, "min_gain": min_gain, "folds": int(fold.max()) + 1, "gate": gate, "fap": fap,
                       "max_rounds": max_rounds, "kinds": sorted(kinds), "symmetric": bool(state.symmetric)})
     diag.trace = pd.DataFrame(trace)
     if validation is not None:
-        validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain)
+        validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain, say=say)
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
+    # what each accepted term wrote, from the final model (after backward elimination and the
+    # validation data): the numbers final_model.json holds
+    for e in diag.effects:
+        if e.accepted:
+            e.terms = _written_terms(e, diag.final)
+            blocks = [diag.final.state.block(u) for u in e.detail.get("blocks", [])]
+            e.parameters = "; ".join(b.describe() for b in blocks if b is not None)
     # what each accepted term explains in the final model: its contribution, and the partial
     # residual (data minus the rest of the final model) it is fitted to
     for e in diag.effects:
@@ -377,6 +412,7 @@ def _mark_accepted(e: Effect, c: Candidate, ev: Evaluation, prop, new_state: Sta
     dd = rnd.dd
     e.accepted = True
     e.decision = ev.reason
+    e.verdict = ev.verdict("accepted", "held-out", k)
     e.detail.setdefault("accepted_z", []).append(float(ev.z))
     e.history.append(f"round {k}: accepted")
     e.detail["blocks"] = [b.uid for b in prop.add]
@@ -467,6 +503,8 @@ def _backward(rnd: Round, effects: dict, newest: Effect, *, z_crit: float, min_g
                       f"error enough ({ev.reason})")
         e.history.append(e.decision)
         e.z, e.gain = ev.z, ev.gain
+        e.verdict = ev.verdict("removed", "backward elimination", round_no,
+                               f"once '{newest.name}' was in, it no longer passes: {ev.gate}")
         rnd = changed = rnd_wo
 
 
@@ -506,7 +544,8 @@ def _bar_reentry(effects: dict, c: Candidate, ev: Evaluation) -> None:
     else:
         return
     ev.passed = False
-    ev.reason = why
+    ev.reason = ev.gate = why
+    ev.test = "re-entry"
 
 
 def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> None:
@@ -524,6 +563,10 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
                decision=("passes the test (another candidate went first this round)" if ev.passed else
                          "rejected: " + ev.reason), detail=dict(c.detail), history=history,
                value=getattr(c, "value", None))
+    barred = prev is not None and bool(prev.detail.get("removed"))
+    e.verdict = ev.verdict("removed" if barred else "rejected", None,
+                           k, f"passes every gate, but another candidate went first in round {k} and it was not "
+                              "tested again" if ev.passed else None)
     e.detail["residual"] = rnd.fitted.residual
     e.detail["contribution"] = ev.contribution
     e.history.append(f"round {k}: Z {ev.z:.2f} (needs {ev.z_crit:.2f}), held-out rmse {ev.rmse_holdout_before:.4g} -> "
@@ -535,10 +578,11 @@ def _record(effects: dict, c: Candidate, ev: Evaluation, k: int, rnd: Round) -> 
     effects[key] = e
 
 
-def _written_terms(e: Effect, rnd: Round) -> list:
-    """The model entries an accepted effect added (terms and harmonics, with standard errors)."""
-    blocks = [rnd.state.block(u) for u in e.detail.get("blocks", [])]
-    m = rnd.fitted.model()
+def _written_terms(e: Effect, fitted: FittedState) -> list:
+    """The model entries an accepted effect added (terms and harmonics, with standard errors), as
+    the fitted state ``fitted`` (the final model) has them."""
+    blocks = [fitted.state.block(u) for u in e.detail.get("blocks", [])]
+    m = fitted.model()
     out = []
     for blk in [b for b in blocks if b is not None]:
         if isinstance(blk, HarmonicBlock):

@@ -13,7 +13,46 @@ from ..model import FrictionModel
 from .data import DiagnoseData
 from .design import FittedState
 
-__all__ = ["Effect", "Diagnosis"]
+__all__ = ["Effect", "Diagnosis", "Verdict", "verdict_line"]
+
+#: the tests that decide a candidate's fate, in the order the loop applies them
+TESTS = ("held-out", "re-entry", "backward elimination", "validation")
+
+
+def _num(x):
+    return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+
+
+@dataclass
+class Verdict:
+    """The one decision record of a candidate, made once by the loop and shown identically on the
+    console, in the report and in the JSON (:func:`verdict_line`).
+
+    ``status``: ``accepted`` (in the final model), ``removed`` (accepted once, then taken out) or
+    ``rejected`` (never accepted); ``test``: the test that decided (:data:`TESTS`); ``reason``:
+    the one gate that decided, one sentence; ``z``, ``z_crit``: that test's Z and the value it
+    needed; ``gain``: the relative rmse fall it measured (``min_gain``: needed); ``rmse_before``,
+    ``rmse_after``: that test's rmse without and with the term (torque units); ``round``: the
+    loop's round (None for the validation); ``note``: what a later check added (e.g. confirmed on
+    the independent recording)."""
+
+    status: str
+    test: str
+    reason: str
+    z: float
+    z_crit: float
+    gain: float
+    min_gain: float
+    rmse_before: float
+    rmse_after: float
+    round: int | None = None
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        return {"status": self.status, "test": self.test, "reason": self.reason, "z": _num(self.z),
+                "z_crit": _num(self.z_crit), "gain": _num(self.gain), "min_gain": _num(self.min_gain),
+                "rmse_before": _num(self.rmse_before), "rmse_after": _num(self.rmse_after), "round": self.round,
+                "note": self.note}
 
 
 @dataclass
@@ -44,8 +83,10 @@ class Effect:
     validation: dict | None = None
     history: list = field(default_factory=list)
     value: float | None = None       # a scalar effect's estimate (lag: s)
+    verdict: Verdict | None = None   # the decision record (:func:`verdict_line` renders it)
 
-    def to_dict(self) -> dict:
+    def to_dict(self, unit: str | None = None, torque_unit: str = "") -> dict:
+        """The JSON entry (``unit``, ``torque_unit``: of the data, for the decision line as printed)."""
         f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x  # noqa: E731
         d = {"kind": self.kind, "accepted": bool(self.accepted), "frequency": f(self.frequency), "label": self.label,
              "evidence": self.evidence, "rmse_holdout_before": f(self.rmse_holdout_before),
@@ -57,6 +98,9 @@ class Effect:
         if self.validation is not None:
             d["validation"] = {k: f(v) if isinstance(v, float) else v for k, v in self.validation.items()}
         d["status"] = self.status
+        if self.verdict is not None:
+            d["verdict"] = {**self.verdict.to_dict(), "status": self.status,
+                            "line": verdict_line(self, unit, torque_unit)}
         return d
 
     @property
@@ -66,6 +110,29 @@ class Effect:
         if self.accepted:
             return "accepted"
         return "removed" if self.detail.get("removed") else "rejected"
+
+
+def _fmt(x: float, spec: str) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
+
+
+def verdict_line(e: Effect, unit: str | None = None, torque_unit: str = "") -> str:
+    """One line for an effect's decision (its :class:`Verdict`): status, kind, name, label, the one
+    reason, and the deciding test's Z (needed), gain and rmse before -> after.  The console, the
+    report and the JSON (``verdict.line``) all show this line."""
+    v = e.verdict
+    mark = {"accepted": "ACCEPTED", "removed": "removed", "rejected": "rejected"}[e.status]
+    f = "" if (e.frequency is None or e.kind == "periodic" or unit is None) else f" at {e.frequency:.6g} cycles/{unit}"
+    lab = f" ({e.label})" if e.label else (f" (unknown order; {e.hint})" if e.hint else "")
+    head = f"{mark:8s} {e.kind:11s} {e.name}{f}{lab}"
+    if v is None:
+        return head
+    tu = f" {torque_unit}" if torque_unit else ""
+    where = "on the independent recording" if v.test == "validation" else "held-out"
+    nums = (f"{v.test} test: Z {_fmt(v.z, '.2f')} (needs {_fmt(v.z_crit, '.2f')}), {where} rmse "
+            f"{_fmt(v.rmse_before, '.4g')} -> {_fmt(v.rmse_after, '.4g')}{tu} ({_fmt(-100 * v.gain, '+.2f')} %, "
+            f"needs a fall of {_fmt(100 * v.min_gain, '.2g')} %)")
+    return f"{head}: {v.reason} [{nums}]" + (f"; {v.note}" if v.note else "")
 
 
 @dataclass
@@ -124,7 +191,7 @@ class Diagnosis:
         out = {"baseline": {"model": self.baseline_model.name, "rmse": f(self.baseline.rmse),
                             "rmse_holdout": f(self.baseline_model.rmse_holdout),
                             "parameters": len(self.baseline.coef), "friction_model": self.baseline_model.to_dict()},
-               "effects": [e.to_dict() for e in self.effects],
+               "effects": [e.to_dict(self.data.unit, self.data.torque_unit) for e in self.effects],
                "final": {"model": self.final_model.name, "rmse": f(self.final.rmse),
                          "rmse_holdout": f(self.final_model.rmse_holdout), "parameters": len(self.final.coef),
                          "friction_model": self.final_model.to_dict()},

@@ -11,13 +11,15 @@ from .baseline import relative_error
 from .context import Round
 from .data import DiagnoseData
 from .design import fit_state
-from .results import Diagnosis
+from .results import Diagnosis, Verdict
 
 __all__ = ["validate"]
 
 
-def validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, min_gain: float) -> None:
-    """Check every accepted term on independent data; remove those that do not help there."""
+def validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, min_gain: float, say=None) -> None:
+    """Check every accepted term on independent data; remove those that do not help there (each
+    removal is the effect's :class:`~.results.Verdict`, test ``validation``; ``say``: called with
+    one line per removal)."""
     dd = diag.data
     accepted = [e for e in diag.effects if e.accepted]
     state = rnd.state
@@ -61,6 +63,13 @@ def validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, min
                       f"< {v['z_crit']:.2f} or gain below {100 * min_gain:.2g} %)")
         e.history.append(e.decision)
         e.detail.setdefault("removed", []).append("validation")
+        why = (f"Z {v['z']:.2f} below {v['z_crit']:.2f}" if not v["z"] >= v["z_crit"] else
+               f"rmse changes by {-100 * v['gain']:+.2f} % (needs a fall of {100 * min_gain:.2g} %)")
+        e.verdict = Verdict("removed", "validation", f"does not help on the independent recording: {why}", v["z"],
+                            v["z_crit"], v["gain"], min_gain, v["rmse_without"], v["rmse_with"], None,
+                            f"on the estimation data it passed the held-out test (Z {e.z:.2f}, needs {e.z_crit:.2f})")
+        if say is not None:
+            say(f"validation: removed {e.name} ({e.verdict.reason})")
         removed.append(e)
         state = st_wo
     if removed:
@@ -76,6 +85,11 @@ def validate(diag: Diagnosis, rnd: Round, vd: DiagnoseData, *, alpha: float, min
                           f"model): the validation data removed {', '.join(e.name for e in removed)} after the "
                           f"loop, and the final model is the one without "
                           f"{'them' if len(removed) > 1 else 'it'} (same folds as every step)")
+    for e in accepted:
+        if e.accepted and e.verdict is not None and e.validation:
+            v = e.validation
+            e.verdict.note = (f"confirmed on the independent recording (Z {v['z']:.2f}, needs {v['z_crit']:.2f}; rmse "
+                              f"{v['rmse_without']:.4g} -> {v['rmse_with']:.4g})")
     # numbers on the validation data, baseline and final (both fitted on the estimation data)
     pb = diag.baseline.state.design(vd) @ diag.baseline.coef
     pf = diag.final.state.design(vd) @ diag.final.coef

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from ..diagnose import Diagnosis
+from ..diagnose.results import verdict_line
 from ..plots import diagnose as dplots
 from . import bullets, header, markdown_table, model_table, report_dir, write_report
 
@@ -138,16 +139,14 @@ def _header_section(diag: Diagnosis, title: str, command: str, recording_summary
 
 def _summary_section(diag: Diagnosis) -> list[str]:
     """The accepted effects, before and after, the notes and the validation data (Markdown lines)."""
-    tu, unit = diag.data.torque_unit, diag.data.unit
+    tu = diag.data.torque_unit
     acc = [e for e in diag.effects if e.accepted]
     md = ["## Summary", ""]
     if acc:
         n_rem = sum(e.status == "removed" for e in diag.effects)
         md += [f"{len(acc)} effect(s) accepted, " + (f"{n_rem} accepted and removed again, " if n_rem else "")
                + f"{len(diag.effects) - len(acc) - n_rem} candidate(s) rejected:", ""]
-        md += [f"- **{e.kind}**: {e.name}" + (f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else "")
-               + (f" ({e.label})" if e.label else (f" (unknown order, {e.hint})" if e.hint else ""))
-               + f" -- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu}" for e in acc]
+        md += [f"- {_line(e, diag)}" for e in acc]
         md.append("")
     else:
         md += [f"Nothing was accepted: no candidate lowered the held-out error by more than noise would "
@@ -203,7 +202,7 @@ def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
         if not e.accepted:
             continue
         fig = _figure_for(diag, e, out, i)
-        md += [f"### {e.kind}: {e.name}", "", f"- evidence: {e.evidence}", f"- held-out test: {e.decision}",
+        md += [f"### {e.kind}: {e.name}", "", f"- decision: {_line(e, diag)}", f"- evidence: {e.evidence}",
                f"- held-out rmse {e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu} "
                f"({-100 * e.gain:+.2f} %), {e.n_params} parameter(s) added", f"- fitted: {e.parameters}"]
         if e.validation:
@@ -220,9 +219,14 @@ def _accepted_section(diag: Diagnosis, out: Path) -> list[str]:
     return md
 
 
+def _line(e, diag: Diagnosis) -> str:
+    """The effect's decision record as the console prints it (:func:`verdict_line`), one line."""
+    return " ".join(verdict_line(e, diag.data.unit, diag.data.torque_unit).split())
+
+
 def _rejected_section(diag: Diagnosis, out: Path) -> list[str]:
     """Every candidate not accepted, why, and the figures of the strongest (Markdown lines)."""
-    tu, unit = diag.data.torque_unit, diag.data.unit
+    unit = diag.data.unit
     md = ["## Candidates not accepted", "", "Every candidate the detectors proposed, with its evidence and why it was "
           "not accepted (Z: the held-out correlation of the residual with what the candidate predicts, in units of "
           "its noise; needed: the one-sided t quantile at the round's Bonferroni level).", ""]
@@ -232,11 +236,7 @@ def _rejected_section(diag: Diagnosis, out: Path) -> list[str]:
         if e.accepted:
             continue
         f = f" at {e.frequency:.6g} cycles/{unit}" if e.frequency else ""
-        lab = f" ({e.label})" if e.label else (f" (unknown order, {e.hint})" if e.hint else "")
-        what = "accepted, then removed again" if e.status == "removed" else "rejected"
-        md += [f"- **{e.kind}: {e.name}**{f}{lab} ({what}) -- evidence: {e.evidence}. Held-out rmse "
-               f"{e.rmse_holdout_before:.4g} -> {e.rmse_holdout_after:.4g} {tu}, Z {_f(e.z, '.2f')} (needs "
-               f"{_f(e.z_crit, '.2f')}). Decision: {e.decision}"]
+        md += [f"- {_line(e, diag)}", f"  - evidence{f}: {e.evidence}", f"  - in full: {e.decision}"]
         if len(e.history) > 1:
             md.append("  - history: " + "; ".join(e.history))
     md.append("")
