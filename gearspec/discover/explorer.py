@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -24,7 +24,9 @@ from .moments import Moments, moments
 from .pool import _addable, _front, _path_structures, _Pool, _signature, climb, finalize
 from .references import PAPER_LAWS, _paper_law, _published, _segment_mean
 from .results import Candidate, DiscoveryResult, Reference
+from .screen import screen_lines
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
+from .accept import backward, validate_law
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
@@ -92,7 +94,8 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
              thresholds: int | Sequence[float] = 24, folds: int = 5, by: str = "segment", n_models: int = 50,
              max_parts: int = 12, se_rule: float = 4.0, local_search: bool = True,
              references: Sequence[str] = PAPER_LAWS, published: Mapping[str, FrictionModel] | None = None,
-             inertia: bool | str = "auto", seed: int = 0) -> DiscoveryResult:
+             inertia: bool | str = "auto", seed: int = 0, test_alpha: float = 0.01, min_gain: float = 0.005,
+             validation: FitData | None = None, progress=None) -> DiscoveryResult:
     """Search a library of friction terms for the laws the data support.
 
     Parameters
@@ -135,6 +138,17 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
         Offer a signed acceleration (residual inertia) column.
     seed : int
         Of the bootstrap.
+    test_alpha, min_gain
+        The acceptance rule of the closed loop (:func:`gearspec.diagnose.diagnose`'s ``alpha`` and
+        ``min_gain``, same defaults): a ripple line enters the library only if its held-out Z
+        reaches the critical value at ``test_alpha`` over the lines tried (:mod:`.screen`), and every
+        term of the selected law must pass the held-out test against the law without it
+        (:mod:`.accept`): the selection rule above proposes, this rule decides.
+    validation : FitData, optional
+        An independent recording (same preparation): every term of the selected law must also
+        lower the error there (the closed loop's validation check), or it is simplified away.
+    progress : callable, optional
+        Called with one line of text as each stage ends.
 
     Returns
     -------
@@ -145,16 +159,19 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
     # the work is many small dense problems: BLAS threads only add overhead (and contend)
     with threadpool_limits(limits=1, user_api="blas"):
         t_start = time.perf_counter()
+        say = progress or (lambda text: None)
         run = _prepare(data, t_start, frequencies=frequencies, gear=gear, spectrum=spectrum, library=library,
                        library_options=library_options, optimizer=optimizer, alpha=alpha, thresholds=thresholds,
                        folds=folds, by=by, n_models=n_models, max_parts=max_parts, se_rule=se_rule,
-                       local_search=local_search, inertia=inertia, seed=seed)
+                       local_search=local_search, inertia=inertia, seed=seed, test_alpha=test_alpha, say=say)
+        run.min_gain = min_gain
         M, lib = run.M, run.lib
         lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
         lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
         M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
               if len(lib2) else M)
         pool1, path1, level, z_level = _level_stage(run, M1, lib1)
+        say(f"level law searched: {len(pool1.cands)} laws ({run.timings['level path'] + run.timings['level selection']:.1f} s)")
         t0 = time.perf_counter()
         pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
         if not pool.fits:
@@ -166,14 +183,21 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
             climb(pool)
         sel = finalize(pool, run.local_search)
         run.timings["selection"] = time.perf_counter() - t0
+        say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened ({run.timings['ripple path'] + run.timings['selection']:.1f} s)")
+        sel = _accept(run, pool, sel, validation, inertia)
+        say(f"acceptance: every term of the selected law tested on held-out data ({run.timings['acceptance']:.1f} s)")
         run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
         cand_list, front, selected = _finish(run, pool, sel)
         inclusion = _inclusion(run, cand_list[selected].parts, (M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
+        if run.n_models:
+            say(f"inclusion probabilities: {run.n_models} bootstrap replicates ({run.timings['bootstrap']:.1f} s)")
         refs, levels = _compare(data, run, cand_list[selected], references, published)
+        if references or published:
+            say(f"{len(refs)} reference laws scored on the same folds ({run.timings['references']:.1f} s)")
         run.timings["total"] = time.perf_counter() - t_start
         run.settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
         return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, run.fold, run.settings,
-                               run.notes, run.timings, levels)
+                               run.notes, run.timings, levels, run.lines, run.verdicts)
 
 
 @dataclass
@@ -197,6 +221,10 @@ class _Run:
     settings: dict
     notes: list
     timings: dict
+    test_alpha: float = 0.01
+    min_gain: float = 0.005
+    lines: list = field(default_factory=list)
+    verdicts: list = field(default_factory=list)
 
     def pool(self, M: Moments, lib: Library) -> _Pool:
         return _Pool(M, self.fold, self.by, self.max_parts, self.se_rule, addable=_addable(lib))
@@ -213,8 +241,9 @@ class _Run:
 
 
 def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_options, optimizer, alpha, thresholds,
-             folds, by, n_models, max_parts, se_rule, local_search, inertia, seed) -> _Run:
-    """The inputs checked, the moments of the data, the library, the thresholds and the folds."""
+             folds, by, n_models, max_parts, se_rule, local_search, inertia, seed, test_alpha, say) -> _Run:
+    """The inputs checked, the lines screened, the moments of the data, the library, the
+    thresholds and the folds."""
     if optimizer not in OPTIMIZERS:
         raise InputError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got '{optimizer}'")
     if by not in ("segment", "run"):
@@ -222,16 +251,36 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     specs = _frequency_specs(frequencies, gear, spectrum)
     if specs and data.theta is None:
         raise InputError("ripple frequencies were given but the fit data has no positions (theta)")
+    if not 0 < test_alpha < 1:
+        raise InputError(f"test_alpha must be a probability between 0 and 1, got {test_alpha}")
     lib_opts = dict(library_options or {})
     min_cycles = lib_opts.get("min_cycles", 1.0)
-    M = moments(data, [s["frequency"] for s in specs], [s.get("label") for s in specs], inertia=inertia,
-                min_cycles=min_cycles)
-    timings = {"moments": time.perf_counter() - t_start}
-    notes = list(M.notes)
-    ngroups = len(np.unique(M.groups(by)))
+    M0 = moments(data, [], inertia=inertia)          # the level bases alone: groups, folds
+    ngroups = len(np.unique(M0.groups(by)))
     if ngroups < 3:
         raise InputError(f"the data has {ngroups} {by}(s): held-out errors need at least 3 (whole {by}s are held "
                          "out); record more constant-speed plateaus")
+    say(f"{M0.N} samples in {M0.S} segments reduced ({time.perf_counter() - t_start:.1f} s)")
+    t0 = time.perf_counter()
+    screen = screen_lines(data, [s["frequency"] for s in specs], fold_ids(M0, by, folds), M0.groups(by),
+                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles) if specs else []
+    notes: list = []
+    lines = []
+    for s, r in zip(specs, screen):
+        lines.append({**s, **r})
+        if not r["passed"] and r["cycles"] >= min_cycles:
+            notes.append(f"ripple line {s['frequency']:.6g} cycles/{data.unit}" + (f" ({s['label']})" if s.get("label")
+                         else "") + f": held-out Z {r['z']:.2f} below {r['z_crit']:.2f} (line screen, "
+                         f"{'alone' if r['round'] == 0 else 'beside the stronger lines'}): left out")
+    kept = [s for s, r in zip(specs, screen) if r["passed"]]
+    if specs:
+        say(f"{len(specs)} ripple lines screened on held-out data, {len(kept)} kept "
+            f"({time.perf_counter() - t0:.1f} s)")
+    t_screen = time.perf_counter() - t0
+    M = moments(data, [s["frequency"] for s in kept], [s.get("label") for s in kept], inertia=inertia,
+                min_cycles=min_cycles)
+    timings = {"moments": time.perf_counter() - t_start - t_screen, "line screen": t_screen}
+    notes = list(M.notes) + notes
     lib = library if library is not None else default_library(M, **lib_opts)
     if len(lib) == 0:
         raise InputError("the candidate library is empty")
@@ -248,8 +297,9 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     settings = {"optimizer": optimizer, "alpha": alpha, "thresholds": [float(t) for t in ths], "folds": int(
         len(np.unique(fold))), "by": by, "n_models": n_models, "max_parts": max_parts, "se_rule": se_rule,
         "local_search": local_search, "library": lib.describe()}
+    settings.update(test_alpha=test_alpha)
     return _Run(M, lib, specs, fold, ths, optimizer, alpha, by, max_parts, se_rule, local_search, n_models, seed,
-                min_cycles, settings, notes, timings)
+                min_cycles, settings, notes, timings, test_alpha, lines=lines)
 
 
 def _level_stage(run: _Run, M1: Moments, lib1: Library) -> tuple:
@@ -314,6 +364,47 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
             break
         current, z_cur = nxt.parts, nxt.fit.z
     return pool, path2, X2, nf
+
+
+def _accept(run: _Run, pool: _Pool, sel, validation, inertia):
+    """The closed loop's acceptance rule on the law the search selected (:mod:`.accept`): backward
+    elimination by the held-out test, then the independent recording's check; the signature of
+    the law that stands (added to the pool with its full held-out refit when it is new)."""
+    t0 = time.perf_counter()
+    M = run.M
+    cand = pool.cands[sel]
+    fams = {t.family for t in run.lib.terms}
+    splittable = sum(1 for p in cand.parts if not p.split and p.fam.basis != "acc") if len(M.directions) == 2 else 0
+    n_cand = max(len(_addable(run.lib)) + splittable, 1)
+    final, verdicts = backward(M, run.fold, M.groups(run.by), cand.parts, alpha=run.test_alpha,
+                               min_gain=run.min_gain, n_candidates=n_cand, families=fams)
+    if validation is not None:
+        Mv = _validation_moments(validation, M, inertia)
+        final, more = validate_law(M, Mv, final, alpha=run.test_alpha, min_gain=run.min_gain, families=fams)
+        verdicts += more
+        run.settings["validation_segments"] = Mv.S
+    run.verdicts = [v.to_dict() for v in verdicts]
+    run.settings["acceptance_candidates"] = n_cand
+    before = "+".join(p.label(M.frequencies) for p in cand.parts)
+    if _signature(final) != _signature(cand.parts):
+        gone = [v.reason() for v in verdicts if not v.passed]
+        run.notes.append(f"the search proposed {before}; the acceptance test simplified it: " + "; ".join(gone))
+        pool.consider(final, "the search's law simplified by the acceptance test", cand.threshold)
+        sel = _signature(final)
+        pool.screen()
+        pool.refit_holdout([sel])
+    run.timings["acceptance"] = time.perf_counter() - t0
+    return sel
+
+
+def _validation_moments(validation: FitData, M: Moments, inertia) -> Moments:
+    """The independent recording reduced on the estimation moments' bases and lines."""
+    Mv = moments(validation, M.frequencies, M.labels, inertia=inertia)
+    missing = [b for b in M.basis if b not in Mv.basis]
+    if missing:
+        raise InputError(f"the validation recording lacks the channel(s) {', '.join(missing)} that the estimation "
+                         "recording's law uses (acc: acceleration; load; temperature)")
+    return Mv.restrict(M.basis)
 
 
 def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
