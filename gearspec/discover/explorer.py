@@ -18,10 +18,10 @@ import pandas as pd
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
-from .law import LawFit, _design, _multipliers, equation, fit_law, fold_ids, to_model
+from .law import LawFit, Part, _design, _multipliers, equation, fit_law, fold_ids, to_model
 from .library import Library, default_library
 from .moments import Moments, moments
-from .pool import _addable, _front, _path_structures, _Pool, _signature, climb, finalize
+from .pool import _addable, _front, _group_of, _path_structures, _Pool, _signature, climb, finalize
 from .references import PAPER_LAWS, _paper_law, _published, _segment_mean
 from .results import Candidate, DiscoveryResult, Reference
 from .screen import screen_lines
@@ -171,7 +171,7 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
         M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
               if len(lib2) else M)
         pool1, path1, level, z_level = _level_stage(run, M1, lib1)
-        say(f"level law searched: {len(pool1.cands)} laws ({run.timings['level path'] + run.timings['level selection']:.1f} s)")
+        say(f"level law searched: {len(pool1.cands)} laws")
         t0 = time.perf_counter()
         pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
         if not pool.fits:
@@ -183,17 +183,17 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
             climb(pool)
         sel = finalize(pool, run.local_search)
         run.timings["selection"] = time.perf_counter() - t0
-        say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened ({run.timings['ripple path'] + run.timings['selection']:.1f} s)")
+        say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened")
         sel = _accept(run, pool, sel, validation, inertia)
-        say(f"acceptance: every term of the selected law tested on held-out data ({run.timings['acceptance']:.1f} s)")
+        say("acceptance: every term of the selected law tested on held-out data")
         run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
         cand_list, front, selected = _finish(run, pool, sel)
         inclusion = _inclusion(run, cand_list[selected].parts, (M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
         if run.n_models:
-            say(f"inclusion probabilities: {run.n_models} bootstrap replicates ({run.timings['bootstrap']:.1f} s)")
+            say(f"inclusion probabilities: {run.n_models} bootstrap replicates")
         refs, levels = _compare(data, run, cand_list[selected], references, published)
         if references or published:
-            say(f"{len(refs)} reference laws scored on the same folds ({run.timings['references']:.1f} s)")
+            say(f"{len(refs)} reference laws scored on the same folds")
         run.timings["total"] = time.perf_counter() - t_start
         run.settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
         return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, run.fold, run.settings,
@@ -260,7 +260,7 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     if ngroups < 3:
         raise InputError(f"the data has {ngroups} {by}(s): held-out errors need at least 3 (whole {by}s are held "
                          "out); record more constant-speed plateaus")
-    say(f"{M0.N} samples in {M0.S} segments reduced ({time.perf_counter() - t_start:.1f} s)")
+    say(f"{M0.N} samples in {M0.S} segments reduced")
     t0 = time.perf_counter()
     screen = screen_lines(data, [s["frequency"] for s in specs], fold_ids(M0, by, folds), M0.groups(by),
                           alpha=test_alpha, inertia=inertia, min_cycles=min_cycles) if specs else []
@@ -274,8 +274,7 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
                          f"{'alone' if r['round'] == 0 else 'beside the stronger lines'}): left out")
     kept = [s for s, r in zip(specs, screen) if r["passed"]]
     if specs:
-        say(f"{len(specs)} ripple lines screened on held-out data, {len(kept)} kept "
-            f"({time.perf_counter() - t0:.1f} s)")
+        say(f"{len(specs)} ripple lines screened on held-out data, {len(kept)} kept")
     t_screen = time.perf_counter() - t0
     M = moments(data, [s["frequency"] for s in kept], [s.get("label") for s in kept], inertia=inertia,
                 min_cycles=min_cycles)
@@ -441,26 +440,44 @@ def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
 
 
 def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.DataFrame:
-    """Inclusion probabilities: a bootstrap over segments (or runs) of each stage's path
-    (``(moments, library, path, design or None, held columns)``), at the largest threshold that
-    selects as many terms as the chosen law ``final`` has in that stage."""
+    """Inclusion probabilities of the terms of the selected law ``final``: the fraction of
+    bootstrap replicates over segments (or runs) in which each stage's sparse regression
+    (``(moments, library, path, design or None, held columns)``), at the largest threshold of its
+    path that selects as many terms as the law has in that stage, selects a column of the term's
+    slot (any of its shapes, either direction variant).  Only the selected law's terms are shown:
+    a term the law does not hold was rejected by the held-out rule, whatever a path picks."""
     t0 = time.perf_counter()
     inclusion = pd.DataFrame()
     if run.n_models:
-        tables = []
+        rows = []
         n_rip = sum(1 for p in final if p.fam.basis == "ripple")
         for stage, n, (Ms, lib, structs, X, nf) in (("level", len(final) - n_rip, level_path),
                                                    ("ripple", n_rip, ripple_path)):
-            if structs and n:
-                t = _threshold_for(structs, n)
-                X = lib.design(Ms) if X is None else X
-                prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
-                                           alpha=run.alpha, seed=run.seed, free=_free(X, nf))
-                tables.append(_inclusion_table(lib, prob[nf:], run.M, stage, t))
-                run.settings[f"bootstrap_threshold_{stage}"] = t
-        tables = [t for t in tables if len(t)]
-        if tables:
-            inclusion = pd.concat(tables, ignore_index=True)
+            mine = [p for p in final if (p.fam.basis == "ripple") == (stage == "ripple")]
+            if not (structs and n and mine):
+                continue
+            t = _threshold_for(structs, n)
+            X = lib.design(Ms) if X is None else X
+            slots = [_group_of(p) for p in mine]
+            ct = lib.column_terms()
+            cg = np.full(X.shape[1], -1)
+            for j in range(len(ct)):
+                tm = lib.terms[ct[j]]
+                slot = _group_of(Part(tm.family, tm.freq))
+                cg[nf + j] = slots.index(slot) if slot in slots else -1
+            if not np.any(cg >= 0):
+                continue
+            prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
+                                       alpha=run.alpha, seed=run.seed, free=_free(X, nf), column_groups=cg)
+            for k, p in enumerate(mine):
+                rows.append({"term": p.label(run.M.frequencies), "family": p.family,
+                             "variant": "direction-dependent" if p.split else "both directions",
+                             "frequency": None if p.freq is None else float(run.M.frequencies[p.freq]),
+                             "probability": float(prob[k]) if k < len(prob) else 0.0, "stage": stage,
+                             "threshold": t})
+            run.settings[f"bootstrap_threshold_{stage}"] = t
+        if rows:
+            inclusion = pd.DataFrame(rows).sort_values("probability", ascending=False).reset_index(drop=True)
     run.timings["bootstrap"] = time.perf_counter() - t0
     return inclusion
 
@@ -512,23 +529,3 @@ def _fixed_columns(M: Moments, keep, parts, z) -> np.ndarray:
 def _threshold_for(path_structs, n_parts: int) -> float:
     """The largest threshold of a path whose structure has at least ``n_parts`` terms."""
     return next((t for t, parts in path_structs if len(parts) >= n_parts), path_structs[-1][0])
-
-
-def _inclusion_table(lib: Library, prob: np.ndarray, M, stage: str = "", threshold=None) -> pd.DataFrame:
-    """Inclusion probability per library term (its columns merged: the larger of sin/cos)."""
-    ct = lib.column_terms()
-    rows = []
-    for i, t in enumerate(lib.terms):
-        pr = float(np.max(prob[ct == i]))
-        if pr <= 0:
-            continue
-        name = t.names(M.frequencies, M.t_ref)[0]
-        rows.append({"term": name, "family": t.family, "variant": t.variant,
-                     "frequency": None if t.freq is None else float(M.frequencies[t.freq]),
-                     "probability": pr, "stage": stage, "threshold": threshold})
-    df = pd.DataFrame(rows)
-    if len(df):
-        df = df.sort_values("probability", ascending=False).reset_index(drop=True)
-    return df
-
-
