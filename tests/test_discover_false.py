@@ -94,6 +94,9 @@ def test_decoy_lines_fail_the_line_screen_and_true_lines_pass():
     zc = critical_z(0.01, len(freqs), M0.S)
     assert res[0]["z"] > 2 * zc and res[1]["z"] > 2 * zc
     assert all(not r["passed"] for r in res[2:]), res
+    # ... each failing on its own (round 0): only lines that pass alone are fitted jointly, which
+    # keeps the screen's cost at rows x lines for the many lines a spectrum hands in
+    assert all(r["round"] == 0 for r in res[2:]), res
 
 
 def test_a_weak_real_line_is_kept_and_a_missing_one_is_not_invented():
@@ -145,3 +148,74 @@ def test_the_acceptance_defaults_are_the_closed_loops():
     d, e = inspect.signature(diagnose).parameters, inspect.signature(discover).parameters
     assert e["test_alpha"].default == d["alpha"].default == 0.01
     assert e["min_gain"].default == d["min_gain"].default
+
+
+def test_a_line_that_passes_alone_by_leakage_fails_beside_the_true_line():
+    # 0.002 cycles/rad above the motor-shaft line (0.24 cycles apart over a 120 rad plateau): alone,
+    # the strong line's leakage into its columns passes the screen; beside it, it adds nothing
+    data = twin(0)
+    M0 = moments(data)
+    fold = fold_ids(M0, "segment", 5)
+    res = screen_lines(data, [F2, F3, F3 + 0.002], fold, M0.groups("segment"), alpha=0.01)
+    assert res[0]["passed"] and res[1]["passed"]
+    assert not res[2]["passed"] and res[2]["round"] > 0, res[2]
+
+
+def _true_parts():
+    from gearspec.discover.law import Part
+
+    return [Part("coulomb", None, True), Part("viscous", None, True), Part("stribeck_exp", None, False, 3.0),
+            Part("ripple_exp", 0, True, 1e-3), Part("ripple_exp", 1, True, 5e-4)]
+
+
+def test_the_acceptance_test_removes_a_false_term_and_keeps_the_true_ones():
+    # the true law plus a sqrt-type power term the twin does not have: backward elimination by the
+    # held-out Z removes it, every true term (slot) stays
+    from gearspec.discover.accept import backward
+    from gearspec.discover.law import Part
+
+    data = twin(3)
+    M = moments(data, [F2, F3])
+    fold = fold_ids(M, "segment", 5)
+    parts = _true_parts() + [Part("power", None, False, 0.5)]
+    final, verdicts = backward(M, fold, M.groups("segment"), parts, alpha=0.01, min_gain=0.005, n_candidates=20,
+                               families={"ripple_const", "ripple_exp"})
+    slots = {(p.fam.slot, p.freq) for p in final}
+    assert slots == {("coulomb", None), ("viscous", None), ("stribeck", None), ("ripple", 0), ("ripple", 1)}
+    assert any(v.term.startswith("power") and not v.passed for v in verdicts)
+
+
+def test_the_independent_recording_removes_a_line_it_does_not_have():
+    # estimation twin with a line at 3x the worm shaft (0.3 mNm), validation twin without it: the
+    # line helps on the estimation data and not on the independent recording, so it goes
+    from gearspec.discover.accept import validate_law
+    from gearspec.discover.law import Part
+
+    extra = dict(frequency=3 * F2, amplitude=0.3e-3, decay=0.0, phase=0.3)
+    M = moments(twin(4, truth([extra])), [F2, F3, 3 * F2])
+    Mv = moments(twin(5), [F2, F3, 3 * F2]).restrict(M.basis)
+    parts = _true_parts() + [Part("ripple_const", 2, False)]
+    final, verdicts = validate_law(M, Mv, parts, alpha=0.01, min_gain=0.005, families={"ripple_const", "ripple_exp"})
+    assert all(p.freq != 2 for p in final)
+    assert {p.freq for p in final if p.freq is not None} == {0, 1}
+    assert any(v.data == "validation" and not v.passed and "@0.0341" in v.term for v in verdicts)
+
+
+def test_each_condition_of_the_rule_can_reject_a_true_term():
+    # the motor-shaft line of the twin (0.13 mNm, Z about 30): accepted at the default level; rejected
+    # when the critical Z is out of reach (the Z gate alone decides: gain and consistency pass), and
+    # when the minimum gain is out of reach (the gain alone decides: Z passes)
+    from gearspec.discover.accept import TERM, judge
+
+    data = twin(3)
+    M = moments(data, [F2, F3])
+    fold, groups = fold_ids(M, "segment", 5), M.groups("segment")
+    law = _true_parts()
+    without = law[:4]
+    ok = judge(M, fold, groups, law, without, z_crit=critical_z(0.01, 20, M.S), min_gain=0.005, term="F3",
+               move=TERM)
+    assert ok.passed and ok.gain > 0.005 and ok.consistency >= CONSISTENCY
+    no_z = judge(M, fold, groups, law, without, z_crit=10 * ok.z, min_gain=0.005, term="F3", move=TERM)
+    assert not no_z.passed
+    no_gain = judge(M, fold, groups, law, without, z_crit=ok.z_crit, min_gain=2 * ok.gain, term="F3", move=TERM)
+    assert not no_gain.passed and no_gain.z >= no_gain.z_crit

@@ -417,8 +417,21 @@ def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
     cand_list = [cands[s] for s in order]
     selected = order.index(sel)
     front = [order.index(s) for s in _front(cands)]
-    if selected not in front:   # (cannot happen with the selection rule; kept for safety)
-        front = sorted(set(front) | {selected})
+    if selected not in front:
+        # the acceptance test simplified the proposal off the front: the front shown runs through the
+        # selected law (laws simpler and better on held-out error hold a term that failed the test)
+        sel_c = cand_list[selected]
+        hidden = [i for i in front if cand_list[i].complexity <= sel_c.complexity
+                  and cand_list[i].rmse_holdout <= sel_c.rmse_holdout]
+        keep, best = [], math.inf
+        for i in sorted((set(front) - set(hidden)) | {selected}):    # (by complexity, then held-out error)
+            if i == selected or cand_list[i].rmse_holdout < best:
+                keep.append(i)
+                best = cand_list[i].rmse_holdout
+        front = keep
+        if hidden:
+            run.notes.append(f"{len(hidden)} law(s) simpler than the selected one predicted the held-out data "
+                             "better but hold a term that failed the acceptance test; not shown on the front")
     for i in front:
         c = cand_list[i]
         c.fit = fit_law(M, c.parts, z0=c.fit.z, se=True)
