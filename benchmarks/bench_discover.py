@@ -54,7 +54,8 @@ def bench_recording(args) -> int:
     df = pd.read_csv(args.recording)
     t_read = time.perf_counter() - t0
     size = float(df.memory_usage(deep=True).sum())
-    print(f"1. pandas.read_csv: {len(df)} rows x {df.shape[1]} columns in {t_read:.2f} s ({size / 1e6:.0f} MB in memory)")
+    print(f"1. pandas.read_csv: {len(df)} rows x {df.shape[1]} columns in {t_read:.2f} s "
+          f"({size / 1e6:.0f} MB in memory)")
     del df
     cmd = [sys.executable, "-m", "gearspec", "discover", args.recording, "--gear", args.gear]
     t0 = time.perf_counter()
@@ -63,7 +64,8 @@ def bench_recording(args) -> int:
     peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024.0
     print(f"2. {' '.join(cmd[2:])}: {t_disc:.1f} s, exit {run.returncode}, peak memory {peak / 1e6:.0f} MB")
     print("   " + "\n   ".join(run.stderr.strip().splitlines()[-14:]))
-    print(f"3. discover / read = {t_disc / t_read:.1f} (target <= 30: {'MET' if t_disc <= 30 * t_read else 'NOT MET'}); "
+    print(f"3. discover / read = {t_disc / t_read:.1f} "
+          f"(target <= 30: {'MET' if t_disc <= 30 * t_read else 'NOT MET'}); "
           f"peak memory / data = {peak / size:.1f} copies (target <= 3: {'MET' if peak <= 3 * size else 'NOT MET'}); "
           f"load average at the start {load[0]:.1f}, at the end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     if args.json:

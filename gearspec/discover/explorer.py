@@ -165,39 +165,48 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
                        folds=folds, by=by, n_models=n_models, max_parts=max_parts, se_rule=se_rule,
                        local_search=local_search, inertia=inertia, seed=seed, test_alpha=test_alpha, say=say)
         run.min_gain = min_gain
-        M, lib = run.M, run.lib
-        lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
-        lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
-        M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
-              if len(lib2) else M)
-        pool1, path1, level, z_level = _level_stage(run, M1, lib1)
-        say(f"level law searched: {len(pool1.cands)} laws")
-        t0 = time.perf_counter()
-        pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
-        if not pool.fits:
-            raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
-                             "zero or the library does not fit the data")
-        run.timings["ripple path"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        if run.local_search:
-            climb(pool)
-        sel = finalize(pool, run.local_search)
-        run.timings["selection"] = time.perf_counter() - t0
-        say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened")
+        pool, _, sel, stages = _search(run, say)
         sel = _accept(run, pool, sel, validation, inertia)
         say("acceptance: every term of the selected law tested on held-out data")
-        run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
         cand_list, front, selected = _finish(run, pool, sel)
-        inclusion = _inclusion(run, cand_list[selected].parts, (M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
+        inclusion = _inclusion(run, cand_list[selected].parts, *stages)
         if run.n_models:
             say(f"inclusion probabilities: {run.n_models} bootstrap replicates")
         refs, levels = _compare(data, run, cand_list[selected], references, published)
         if references or published:
             say(f"{len(refs)} reference laws scored on the same folds")
         run.timings["total"] = time.perf_counter() - t_start
-        run.settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
-        return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, run.fold, run.settings,
+        run.settings["level_law"] = "+".join(p.label(run.M.frequencies) for p in run.level)
+        return DiscoveryResult(cand_list, front, selected, refs, inclusion, run.lib, run.M, run.fold, run.settings,
                                run.notes, run.timings, levels, run.lines, run.verdicts)
+
+
+def _search(run: "_Run", say) -> tuple:
+    """The proposal: the level stage, the ripple stage, the hill climb and the selection rule.
+    Returns the pool of whole laws, the level stage's pool, the proposed signature and each
+    stage's (moments, library, path, design, held columns) for the bootstrap."""
+    M, lib = run.M, run.lib
+    lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
+    lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
+    M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
+          if len(lib2) else M)
+    pool1, path1, level, z_level = _level_stage(run, M1, lib1)
+    run.level = level
+    say(f"level law searched: {len(pool1.cands)} laws")
+    t0 = time.perf_counter()
+    pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
+    if not pool.fits:
+        raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
+                         "zero or the library does not fit the data")
+    run.timings["ripple path"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if run.local_search:
+        climb(pool)
+    sel = finalize(pool, run.local_search)
+    run.timings["selection"] = time.perf_counter() - t0
+    say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened")
+    run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
+    return pool, pool1, sel, ((M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
 
 
 @dataclass
@@ -225,6 +234,7 @@ class _Run:
     min_gain: float = 0.005
     lines: list = field(default_factory=list)
     verdicts: list = field(default_factory=list)
+    level: tuple = ()
 
     def pool(self, M: Moments, lib: Library) -> _Pool:
         return _Pool(M, self.fold, self.by, self.max_parts, self.se_rule, addable=_addable(lib))

@@ -146,7 +146,8 @@ class Moments(GroupNormals):
             b2[s] -= T @ b[s, Rs]
             yy2[s] -= b[s, Rs] @ iRR @ b[s, Rs]
         return replace(self, basis=tuple(self.basis[i] for i in L), G=G2, b=b2, yy=np.maximum(yy2, 0.0), P=None,
-                       q=None, rest=None, Gb=None, bb=None, yyb=None, notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
+                       q=None, rest=None, Gb=None, bb=None, yyb=None,
+                       notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
                                                                     + " profiled out per segment"])
 
     def restrict(self, names) -> "Moments":

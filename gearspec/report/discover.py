@@ -53,22 +53,7 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            f"every term of it must then pass the closed loop's held-out test (Z against the law without it, "
            f"level {result.settings.get('test_alpha', 0.01):g} over {result.settings.get('acceptance_candidates', 1)} "
            f"candidates, Bonferroni; rmse gain at least the minimum) or it is simplified away.", ""]
-    if result.acceptance:
-        md += ["### The acceptance test of each term", "",
-               markdown_table(pd.DataFrame([{"term": a["term"], "tested against": "without " + a["move"],
-                                             "data": a["data"], "Z": a["z"], "Z needed": a["z_crit"],
-                                             "rmse gain (%)": 100 * a["gain"],
-                                             "decision": "accepted" if a["passed"] else "rejected"}
-                                            for a in result.acceptance]), ".3g"), ""]
-    if result.lines:
-        md += ["### Ripple lines screened", "",
-               "Each line offered (declared by the gear, found by the spectrum, given) is tested on its own by "
-               "the held-out Z (each segment's level profiled out), then beside the stronger lines; only those "
-               "that pass enter the library.", "",
-               markdown_table(pd.DataFrame([{"frequency": ln["frequency"], "source": ln.get("source"),
-                                             "label": ln.get("label") or "", "Z": ln["z"], "Z needed": ln["z_crit"],
-                                             "kept": "yes" if ln["passed"] else "no"}
-                                            for ln in result.lines]), ".4g"), ""]
+    md += _acceptance_section(result)
     coef = _coefficients(sel, M.frequencies)
     md += [markdown_table(coef), "", f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
     if coef["at bound"].astype(bool).any():
@@ -128,6 +113,28 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            "independent recording.", ""]
     md += bullets(result.notes, "Notes:")
     return write_report(out, md + ["Timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()), ""])
+
+
+def _acceptance_section(result) -> list:
+    """The acceptance test's verdict on every term, and the line screen's on every line."""
+    md: list = []
+    if result.acceptance:
+        md += ["### The acceptance test of each term", "",
+               markdown_table(pd.DataFrame([{"term": a["term"], "tested against": "without " + a["move"],
+                                             "data": a["data"], "Z": a["z"], "Z needed": a["z_crit"],
+                                             "rmse gain (%)": 100 * a["gain"],
+                                             "decision": "accepted" if a["passed"] else "rejected"}
+                                            for a in result.acceptance]), ".3g"), ""]
+    if result.lines:
+        md += ["### Ripple lines screened", "",
+               "Each line offered (declared by the gear, found by the spectrum, given) is tested on its own by "
+               "the held-out Z (each segment's level profiled out), then beside the stronger lines; only those "
+               "that pass enter the library.", "",
+               markdown_table(pd.DataFrame([{"frequency": ln["frequency"], "source": ln.get("source"),
+                                             "label": ln.get("label") or "", "Z": ln["z"], "Z needed": ln["z_crit"],
+                                             "kept": "yes" if ln["passed"] else "no"}
+                                            for ln in result.lines]), ".4g"), ""]
+    return md
 
 
 def _dirs(M) -> list[str]:
