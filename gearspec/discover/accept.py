@@ -10,7 +10,7 @@ folds predict the held-out segments (``p0`` without, ``p1`` with); with ``r0 = y
 every held-out group one cluster or its :data:`~.moments.BLOCKS` blocks, the larger) must reach
 :func:`~gearspec.core.crossval.critical_z` at ``alpha`` over the candidates a forward round of the
 search tries (Bonferroni), the folds that improve must carry :data:`CONSISTENCY` of the change, and
-the held-out rmse must fall by ``min_gain``.  Where a term fails, the weakest (smallest Z) is
+-- for a whole term -- the held-out rmse must fall by ``min_gain``.  Where a term fails, the weakest (smallest Z) is
 simplified first and every term is tested again (backward elimination, as the loop does).
 
 Everything is computed on the pseudo rows of the segments' (and their blocks') normal equations:
@@ -29,10 +29,15 @@ from ..core.reduction import GroupNormals
 from .law import Part, canonical, cross_validate, fit_law
 from .moments import Moments
 
-__all__ = ["CONSISTENCY", "Verdict", "held_out_z", "simpler", "judge", "backward", "validate_law"]
+__all__ = ["CONSISTENCY", "TERM", "Verdict", "held_out_z", "simpler", "judge", "backward", "validate_law"]
 
 #: share of the absolute held-out change the improving folds must carry (the closed loop's value)
 CONSISTENCY = 0.9
+#: the move that removes a whole term (the minimum gain applies to it: a term must be worth its
+#: place); a term's form (direction dependence, decaying amplitude) needs the held-out Z and the
+#: fold consistency only -- the search already holds the term, and a form the data resolve at the
+#: test's level is kept even when it moves the rmse by less than the minimum gain
+TERM = "the term"
 
 
 @dataclass
@@ -55,7 +60,7 @@ class Verdict:
             why.append(f"held-out Z {self.z:.2f} below {self.z_crit:.2f}")
         if not self.consistency >= CONSISTENCY:
             why.append(f"improves in folds carrying only {100 * self.consistency:.0f} % of the change")
-        if not self.passed and self.z >= self.z_crit and self.consistency >= CONSISTENCY:
+        if not self.passed and self.z >= self.z_crit and self.consistency >= CONSISTENCY and self.move == TERM:
             why.append(f"held-out rmse falls by {100 * self.gain:.2f} % only")
         head = f"{self.term} ({self.move}, {self.data} data): "
         if self.passed:
@@ -113,7 +118,7 @@ def simpler(p: Part, families=()) -> tuple[Part | None, str]:
         return Part(p.family, p.freq, False, p.param0), "direction dependence"
     if p.fam.basis == "ripple" and p.family != "ripple_const" and "ripple_const" in families:
         return Part("ripple_const", p.freq, False, None), "amplitude decaying with speed"
-    return None, "the term"
+    return None, TERM
 
 
 def judge(M: Moments, fold, groups, with_parts, without_parts, *, z_crit: float, min_gain: float, term: str,
@@ -134,7 +139,7 @@ def judge(M: Moments, fold, groups, with_parts, without_parts, *, z_crit: float,
     cons = float(np.clip(fold_d, 0, None).sum() / tot) if tot > 0 else 0.0
     hb, ha = math.sqrt(float(sse0.sum()) / M.N), math.sqrt(float(sse1.sum()) / M.N)
     gain = (hb - ha) / hb if hb > 0 else 0.0
-    ok = bool(z >= z_crit and cons >= CONSISTENCY and gain >= min_gain)
+    ok = bool(z >= z_crit and cons >= CONSISTENCY and (gain >= min_gain or move != TERM))
     return Verdict(term, move, float(z), z_crit, gain, cons, ok)
 
 

@@ -165,7 +165,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     for i in range(F):
         z = _held_out_z(G1[:, i], g1[:, i], P1[:, i], q1[:, i], [], [0, 1], fold_of_segment, direction, order,
                         2 * bounds[:-1], 2 * bounds[1:])
-        out.append({"z": float(z), "z_crit": zc, "passed": True, "round": 0,
+        out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0,
                     "cycles": float(cyc[:, i].max()) if len(cyc) else 0.0})
     alive = [i for i in range(F) if out[i]["passed"]]
     if len(alive) < 2:
