@@ -219,3 +219,15 @@ def test_each_condition_of_the_rule_can_reject_a_true_term():
     assert not no_z.passed
     no_gain = judge(M, fold, groups, law, without, z_crit=ok.z_crit, min_gain=2 * ok.gain, term="F3", move=TERM)
     assert not no_gain.passed and no_gain.z >= no_gain.z_crit
+
+
+def test_no_more_lines_are_searched_than_a_law_can_hold():
+    # four real lines pass the screen; with at most 3 terms in a law, the 3 strongest (largest
+    # held-out Z) are searched and the note names the one left (bounded memory on long recordings)
+    extra = [dict(frequency=3 * F2, amplitude=0.3e-3, decay=0.0, phase=0.3),
+             dict(frequency=2 * F3, amplitude=0.2e-3, decay=0.0, phase=1.0)]
+    res = discover(twin(6, truth(extra)), gear="silo4-joint3", frequencies=[3 * F2, 2 * F3], references=(),
+                   n_models=0, max_parts=3, local_search=False)
+    assert sum(ln["passed"] for ln in res.lines) == 4
+    assert len(res.frequencies) == 3
+    assert any("passed the screen" in n for n in res.notes)

@@ -283,6 +283,13 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
                          else "") + f": held-out Z {r['z']:.2f} below {r['z_crit']:.2f} (line screen, "
                          f"{'alone' if r['round'] == 0 else 'beside the stronger lines'}): left out")
     kept = [s for s, r in zip(specs, screen) if r["passed"]]
+    if len(kept) > max_parts:   # a law holds at most max_parts terms: the strongest lines are searched
+        z = {id(s): r["z"] for s, r in zip(specs, screen)}
+        cut = sorted(kept, key=lambda s: -z[id(s)])[max_parts:]
+        notes.append(f"{len(kept)} ripple lines passed the screen; the {max_parts} with the largest held-out Z "
+                     f"are searched (a law holds at most {max_parts} terms), not "
+                     + ", ".join(f"{s['frequency']:.6g}" for s in cut) + f" cycles/{data.unit}")
+        kept = [s for s in kept if s not in cut]
     if specs:
         say(f"{len(specs)} ripple lines screened on held-out data, {len(kept)} kept")
     t_screen = time.perf_counter() - t0
