@@ -7,6 +7,8 @@ benchmarks/README.md).
     python benchmarks/bench_discover.py              # 10^6 samples
     python benchmarks/bench_discover.py --quick      # 2 x 10^5 samples
     python benchmarks/bench_discover.py --samples 3e6 --json out.json
+    python benchmarks/bench_discover.py --recording /tmp/s23/twin/silo4_twin.csv \
+        --gear /tmp/s23/twin/silo4_twin_gear.toml      # the command on a file, against pandas reading it
 
 Prints the recording, the library, the timings of each stage of the explorer, the baseline and
 their ratio, the law the explorer selected (a sanity check: the twin's true structure), and the
@@ -33,11 +35,50 @@ def _parse(argv=None):
     p.add_argument("--no-baseline", action="store_true", help="skip the dense lstsq baseline (it needs ~2 GB)")
     p.add_argument("--json", help="write every number here")
     p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--recording", help="instead: time `gearspec discover RECORDING --gear GEAR` (a subprocess, "
+                                       "with its peak memory) against pandas.read_csv of the same file")
+    p.add_argument("--gear", help="gear spec of --recording")
     return p.parse_args(argv)
+
+
+def bench_recording(args) -> int:
+    """``gearspec discover`` on a file as a user runs it (spectrum search for lines included),
+    against reading the file with pandas in the same run; peak memory against the data's size."""
+    import resource
+    import subprocess
+
+    import pandas as pd
+
+    load = os.getloadavg()
+    t0 = time.perf_counter()
+    df = pd.read_csv(args.recording)
+    t_read = time.perf_counter() - t0
+    size = float(df.memory_usage(deep=True).sum())
+    print(f"1. pandas.read_csv: {len(df)} rows x {df.shape[1]} columns in {t_read:.2f} s "
+          f"({size / 1e6:.0f} MB in memory)")
+    del df
+    cmd = [sys.executable, "-m", "gearspec", "discover", args.recording, "--gear", args.gear]
+    t0 = time.perf_counter()
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    t_disc = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024.0
+    print(f"2. {' '.join(cmd[2:])}: {t_disc:.1f} s, exit {run.returncode}, peak memory {peak / 1e6:.0f} MB")
+    print("   " + "\n   ".join(run.stderr.strip().splitlines()[-14:]))
+    print(f"3. discover / read = {t_disc / t_read:.1f} "
+          f"(target <= 30: {'MET' if t_disc <= 30 * t_read else 'NOT MET'}); "
+          f"peak memory / data = {peak / size:.1f} copies (target <= 3: {'MET' if peak <= 3 * size else 'NOT MET'}); "
+          f"load average at the start {load[0]:.1f}, at the end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"t_read": t_read, "t_discover": t_disc, "ratio": t_disc / t_read, "peak_bytes": peak,
+                       "data_bytes": size, "load": load, "stdout": run.stdout}, fh, indent=1)
+    return 0
 
 
 def main(argv=None) -> int:
     args = _parse(argv)
+    if args.recording:
+        return bench_recording(args)
     if args.threads:
         for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[k] = str(args.threads)

@@ -296,12 +296,16 @@ def test_emps_discovered_law_beats_the_papers_laws_and_idim_ls(data_dir):
     refs = {r.name: r for r in res.references}
     best = res.best
     # held-out error below the published IDIM-LS models (fitted by the data set's authors on this very
-    # recording, scored here on all of it) and well below Coulomb + viscous refitted on the same folds,
-    # which lacks the inertia that speed ripple on the plateaus makes visible
+    # recording, scored here on all of it).  The IDIM-LS structure refitted on the same folds has the
+    # same columns as the candidates, inertia included (issue 13: without it, 1.78 N against 1.02 N);
+    # the selected law's terms each passed the held-out test, so it cannot be worse than that
+    # structure by more than the noise of the comparison (its standard error, paired over segments)
     for name in ("IDIM-LS (published)", "IDIM-LS asymmetric (published)"):
         assert best.rmse_holdout < refs[name].rmse_holdout, (name, best.equation)
     cv = refs["Coulomb + viscous (IDIM-LS structure, per direction)"]
-    assert best.rmse_holdout < 0.7 * cv.rmse_holdout, best.equation
+    assert any(t["kind"] == "inertia" and 60 < t["inertia"] < 130 for t in cv.model.terms)
+    row = res.comparison().set_index("law").loc[cv.name]
+    assert row["delta_mse"] > -2 * row["delta_mse_se"], best.equation
     dirs = {p.family for p in best.parts if p.split}
     assert dirs & {"coulomb", "viscous"}                 # friction differs between the directions
     inertia = [v["value"] for v in best.fit.values() if best.parts[v["part"]].family == "inertia"]

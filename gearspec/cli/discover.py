@@ -54,6 +54,14 @@ def register(sub) -> None:
     s.add_argument("--se-rule", type=number(0), default=4.0,
                    help="select the simplest law within this many standard errors of the best held-out error "
                         "(default 4)")
+    s.add_argument("--test-alpha", type=PROBABILITY, default=0.01,
+                   help="level of the held-out test every line and every term of the selected law must pass "
+                        "(Bonferroni over the candidates tried; diagnose's --alpha, default 0.01)")
+    s.add_argument("--min-gain", type=number(0, 1, high_open=True), default=0.005,
+                   help="smallest relative fall of the held-out rmse worth a term (diagnose's, default 0.005)")
+    s.add_argument("--validate", metavar="RECORDING", nargs="+",
+                   help="an independent recording (same columns and gear): every term of the selected law must "
+                        "also lower the error there, or it is removed")
     s.add_argument("--max-terms", type=number(1, 200, integer=True), default=12, help="most terms in a law (default 12)")
     s.add_argument("--bootstrap", type=number(0, 10000, integer=True), default=50,
                    help="segment-bootstrap replicates for inclusion probabilities (default 50; 0: none)")
@@ -101,8 +109,16 @@ def run(args) -> int:
     if not args.no_spectrum and data.theta is not None:
         from ..spectrum import analyze
 
+        stages(args).done(f"{len(data)} samples in {data.n_segments} segments prepared")
         spectrum = analyze(rec, segmentation=seg, inertia=not args.no_inertia, keep_spectra=False, progress=False,
                            fap_threshold=args.spectrum_fap)
+        stages(args).done(f"spectrum of {len(spectrum.segments)} segments searched for lines")
+    validation = None
+    if args.validate:
+        vrec = load_from_args(args, args.validate)
+        vseg = segments_from_args(vrec, args)
+        validation = FitData.from_recording(vrec, free_motion(vrec, vseg, motion=args.motion),
+                                            inertia=not args.no_inertia)
     options = {"n_stribeck": args.stribeck_grid, "n_decay": args.decay_grid,
                "directions": "sym" if args.symmetric else "auto"}
     if args.families:
@@ -112,7 +128,8 @@ def run(args) -> int:
                       thresholds=args.thresholds, folds=args.folds, by=args.by, n_models=args.bootstrap,
                       max_parts=args.max_terms, se_rule=args.se_rule, local_search=not args.no_local_search,
                       references=compare, published=None if args.no_published else published_models(rec.gear),
-                      inertia=not args.no_inertia_term and "auto", seed=args.seed)
+                      inertia=not args.no_inertia_term and "auto", seed=args.seed, test_alpha=args.test_alpha,
+                      min_gain=args.min_gain, validation=validation, progress=stages(args).done)
     stages(args).done(f"{len(result.candidates)} laws scored")
     if args.json:
         result.to_json(args.json)

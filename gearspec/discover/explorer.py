@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -18,13 +18,15 @@ import pandas as pd
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
-from .law import LawFit, _design, _multipliers, equation, fit_law, fold_ids, to_model
+from .law import LawFit, Part, _design, _multipliers, equation, fit_law, fold_ids, to_model
 from .library import Library, default_library
 from .moments import Moments, moments
-from .pool import _addable, _front, _path_structures, _Pool, _signature, climb, finalize
+from .pool import _addable, _front, _group_of, _path_structures, _Pool, _signature, climb, finalize
 from .references import PAPER_LAWS, _paper_law, _published, _segment_mean
 from .results import Candidate, DiscoveryResult, Reference
+from .screen import screen_lines
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
+from .accept import backward, validate_law
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
@@ -92,7 +94,8 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
              thresholds: int | Sequence[float] = 24, folds: int = 5, by: str = "segment", n_models: int = 50,
              max_parts: int = 12, se_rule: float = 4.0, local_search: bool = True,
              references: Sequence[str] = PAPER_LAWS, published: Mapping[str, FrictionModel] | None = None,
-             inertia: bool | str = "auto", seed: int = 0) -> DiscoveryResult:
+             inertia: bool | str = "auto", seed: int = 0, test_alpha: float = 0.01, min_gain: float = 0.005,
+             validation: FitData | None = None, progress=None) -> DiscoveryResult:
     """Search a library of friction terms for the laws the data support.
 
     Parameters
@@ -135,6 +138,17 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
         Offer a signed acceleration (residual inertia) column.
     seed : int
         Of the bootstrap.
+    test_alpha, min_gain
+        The acceptance rule of the closed loop (:func:`gearspec.diagnose.diagnose`'s ``alpha`` and
+        ``min_gain``, same defaults): a ripple line enters the library only if its held-out Z
+        reaches the critical value at ``test_alpha`` over the lines tried (:mod:`.screen`), and every
+        term of the selected law must pass the held-out test against the law without it
+        (:mod:`.accept`): the selection rule above proposes, this rule decides.
+    validation : FitData, optional
+        An independent recording (same preparation): every term of the selected law must also
+        lower the error there (the closed loop's validation check), or it is simplified away.
+    progress : callable, optional
+        Called with one line of text as each stage ends.
 
     Returns
     -------
@@ -145,35 +159,54 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
     # the work is many small dense problems: BLAS threads only add overhead (and contend)
     with threadpool_limits(limits=1, user_api="blas"):
         t_start = time.perf_counter()
+        say = progress or (lambda text: None)
         run = _prepare(data, t_start, frequencies=frequencies, gear=gear, spectrum=spectrum, library=library,
                        library_options=library_options, optimizer=optimizer, alpha=alpha, thresholds=thresholds,
                        folds=folds, by=by, n_models=n_models, max_parts=max_parts, se_rule=se_rule,
-                       local_search=local_search, inertia=inertia, seed=seed)
-        M, lib = run.M, run.lib
-        lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
-        lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
-        M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
-              if len(lib2) else M)
-        pool1, path1, level, z_level = _level_stage(run, M1, lib1)
-        t0 = time.perf_counter()
-        pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
-        if not pool.fits:
-            raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
-                             "zero or the library does not fit the data")
-        run.timings["ripple path"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        if run.local_search:
-            climb(pool)
-        sel = finalize(pool, run.local_search)
-        run.timings["selection"] = time.perf_counter() - t0
-        run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
+                       local_search=local_search, inertia=inertia, seed=seed, test_alpha=test_alpha, say=say)
+        run.min_gain = min_gain
+        pool, _, sel, stages = _search(run, say)
+        sel = _accept(run, pool, sel, validation, inertia)
+        say("acceptance: every term of the selected law tested on held-out data")
         cand_list, front, selected = _finish(run, pool, sel)
-        inclusion = _inclusion(run, cand_list[selected].parts, (M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
+        inclusion = _inclusion(run, cand_list[selected].parts, *stages)
+        if run.n_models:
+            say(f"inclusion probabilities: {run.n_models} bootstrap replicates")
         refs, levels = _compare(data, run, cand_list[selected], references, published)
+        if references or published:
+            say(f"{len(refs)} reference laws scored on the same folds")
         run.timings["total"] = time.perf_counter() - t_start
-        run.settings["level_law"] = "+".join(p.label(M.frequencies) for p in level)
-        return DiscoveryResult(cand_list, front, selected, refs, inclusion, lib, M, run.fold, run.settings,
-                               run.notes, run.timings, levels)
+        run.settings["level_law"] = "+".join(p.label(run.M.frequencies) for p in run.level)
+        return DiscoveryResult(cand_list, front, selected, refs, inclusion, run.lib, run.M, run.fold, run.settings,
+                               run.notes, run.timings, levels, run.lines, run.verdicts)
+
+
+def _search(run: "_Run", say) -> tuple:
+    """The proposal: the level stage, the ripple stage, the hill climb and the selection rule.
+    Returns the pool of whole laws, the level stage's pool, the proposed signature and each
+    stage's (moments, library, path, design, held columns) for the bootstrap."""
+    M, lib = run.M, run.lib
+    lib1 = Library([t for t in lib.terms if t.fam.basis != "ripple"], lib.frequencies, lib.t_ref)
+    lib2 = Library([t for t in lib.terms if t.fam.basis == "ripple"], lib.frequencies, lib.t_ref)
+    M1 = (M.profile([b for b in M.basis if not b.startswith(("sin", "cos"))], min_cycles=run.min_cycles)
+          if len(lib2) else M)
+    pool1, path1, level, z_level = _level_stage(run, M1, lib1)
+    run.level = level
+    say(f"level law searched: {len(pool1.cands)} laws")
+    t0 = time.perf_counter()
+    pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
+    if not pool.fits:
+        raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
+                         "zero or the library does not fit the data")
+    run.timings["ripple path"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if run.local_search:
+        climb(pool)
+    sel = finalize(pool, run.local_search)
+    run.timings["selection"] = time.perf_counter() - t0
+    say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened")
+    run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
+    return pool, pool1, sel, ((M1, lib1, path1, None, 0), (M, lib2, path2, X2, nf))
 
 
 @dataclass
@@ -197,6 +230,11 @@ class _Run:
     settings: dict
     notes: list
     timings: dict
+    test_alpha: float = 0.01
+    min_gain: float = 0.005
+    lines: list = field(default_factory=list)
+    verdicts: list = field(default_factory=list)
+    level: tuple = ()
 
     def pool(self, M: Moments, lib: Library) -> _Pool:
         return _Pool(M, self.fold, self.by, self.max_parts, self.se_rule, addable=_addable(lib))
@@ -213,8 +251,9 @@ class _Run:
 
 
 def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_options, optimizer, alpha, thresholds,
-             folds, by, n_models, max_parts, se_rule, local_search, inertia, seed) -> _Run:
-    """The inputs checked, the moments of the data, the library, the thresholds and the folds."""
+             folds, by, n_models, max_parts, se_rule, local_search, inertia, seed, test_alpha, say) -> _Run:
+    """The inputs checked, the lines screened, the moments of the data, the library, the
+    thresholds and the folds."""
     if optimizer not in OPTIMIZERS:
         raise InputError(f"optimizer must be one of {', '.join(OPTIMIZERS)}, got '{optimizer}'")
     if by not in ("segment", "run"):
@@ -222,16 +261,42 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     specs = _frequency_specs(frequencies, gear, spectrum)
     if specs and data.theta is None:
         raise InputError("ripple frequencies were given but the fit data has no positions (theta)")
+    if not 0 < test_alpha < 1:
+        raise InputError(f"test_alpha must be a probability between 0 and 1, got {test_alpha}")
     lib_opts = dict(library_options or {})
     min_cycles = lib_opts.get("min_cycles", 1.0)
-    M = moments(data, [s["frequency"] for s in specs], [s.get("label") for s in specs], inertia=inertia,
-                min_cycles=min_cycles)
-    timings = {"moments": time.perf_counter() - t_start}
-    notes = list(M.notes)
-    ngroups = len(np.unique(M.groups(by)))
+    M0 = moments(data, [], inertia=inertia)          # the level bases alone: groups, folds
+    ngroups = len(np.unique(M0.groups(by)))
     if ngroups < 3:
         raise InputError(f"the data has {ngroups} {by}(s): held-out errors need at least 3 (whole {by}s are held "
                          "out); record more constant-speed plateaus")
+    say(f"{M0.N} samples in {M0.S} segments reduced")
+    t0 = time.perf_counter()
+    screen = screen_lines(data, [s["frequency"] for s in specs], fold_ids(M0, by, folds), M0.groups(by),
+                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles) if specs else []
+    notes: list = []
+    lines = []
+    for s, r in zip(specs, screen):
+        lines.append({**s, **r})
+        if not r["passed"] and r["cycles"] >= min_cycles:
+            notes.append(f"ripple line {s['frequency']:.6g} cycles/{data.unit}" + (f" ({s['label']})" if s.get("label")
+                         else "") + f": held-out Z {r['z']:.2f} below {r['z_crit']:.2f} (line screen, "
+                         f"{'alone' if r['round'] == 0 else 'beside the stronger lines'}): left out")
+    kept = [s for s, r in zip(specs, screen) if r["passed"]]
+    if len(kept) > max_parts:   # a law holds at most max_parts terms: the strongest lines are searched
+        z = {id(s): r["z"] for s, r in zip(specs, screen)}
+        cut = sorted(kept, key=lambda s: -z[id(s)])[max_parts:]
+        notes.append(f"{len(kept)} ripple lines passed the screen; the {max_parts} with the largest held-out Z "
+                     f"are searched (a law holds at most {max_parts} terms), not "
+                     + ", ".join(f"{s['frequency']:.6g}" for s in cut) + f" cycles/{data.unit}")
+        kept = [s for s in kept if s not in cut]
+    if specs:
+        say(f"{len(specs)} ripple lines screened on held-out data, {len(kept)} kept")
+    t_screen = time.perf_counter() - t0
+    M = moments(data, [s["frequency"] for s in kept], [s.get("label") for s in kept], inertia=inertia,
+                min_cycles=min_cycles)
+    timings = {"moments": time.perf_counter() - t_start - t_screen, "line screen": t_screen}
+    notes = list(M.notes) + notes
     lib = library if library is not None else default_library(M, **lib_opts)
     if len(lib) == 0:
         raise InputError("the candidate library is empty")
@@ -248,8 +313,9 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     settings = {"optimizer": optimizer, "alpha": alpha, "thresholds": [float(t) for t in ths], "folds": int(
         len(np.unique(fold))), "by": by, "n_models": n_models, "max_parts": max_parts, "se_rule": se_rule,
         "local_search": local_search, "library": lib.describe()}
+    settings.update(test_alpha=test_alpha)
     return _Run(M, lib, specs, fold, ths, optimizer, alpha, by, max_parts, se_rule, local_search, n_models, seed,
-                min_cycles, settings, notes, timings)
+                min_cycles, settings, notes, timings, test_alpha, lines=lines)
 
 
 def _level_stage(run: _Run, M1: Moments, lib1: Library) -> tuple:
@@ -316,6 +382,47 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
     return pool, path2, X2, nf
 
 
+def _accept(run: _Run, pool: _Pool, sel, validation, inertia):
+    """The closed loop's acceptance rule on the law the search selected (:mod:`.accept`): backward
+    elimination by the held-out test, then the independent recording's check; the signature of
+    the law that stands (added to the pool with its full held-out refit when it is new)."""
+    t0 = time.perf_counter()
+    M = run.M
+    cand = pool.cands[sel]
+    fams = {t.family for t in run.lib.terms}
+    splittable = sum(1 for p in cand.parts if not p.split and p.fam.basis != "acc") if len(M.directions) == 2 else 0
+    n_cand = max(len(_addable(run.lib)) + splittable, 1)
+    final, verdicts = backward(M, run.fold, M.groups(run.by), cand.parts, alpha=run.test_alpha,
+                               min_gain=run.min_gain, n_candidates=n_cand, families=fams)
+    if validation is not None:
+        Mv = _validation_moments(validation, M, inertia)
+        final, more = validate_law(M, Mv, final, alpha=run.test_alpha, min_gain=run.min_gain, families=fams)
+        verdicts += more
+        run.settings["validation_segments"] = Mv.S
+    run.verdicts = [v.to_dict() for v in verdicts]
+    run.settings["acceptance_candidates"] = n_cand
+    before = "+".join(p.label(M.frequencies) for p in cand.parts)
+    if _signature(final) != _signature(cand.parts):
+        gone = [v.reason() for v in verdicts if not v.passed]
+        run.notes.append(f"the search proposed {before}; the acceptance test simplified it: " + "; ".join(gone))
+        pool.consider(final, "the search's law simplified by the acceptance test", cand.threshold)
+        sel = _signature(final)
+        pool.screen()
+        pool.refit_holdout([sel])
+    run.timings["acceptance"] = time.perf_counter() - t0
+    return sel
+
+
+def _validation_moments(validation: FitData, M: Moments, inertia) -> Moments:
+    """The independent recording reduced on the estimation moments' bases and lines."""
+    Mv = moments(validation, M.frequencies, M.labels, inertia=inertia)
+    missing = [b for b in M.basis if b not in Mv.basis]
+    if missing:
+        raise InputError(f"the validation recording lacks the channel(s) {', '.join(missing)} that the estimation "
+                         "recording's law uses (acc: acceleration; load; temperature)")
+    return Mv.restrict(M.basis)
+
+
 def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
     """The laws with full held-out refits ordered by complexity then held-out error, the indices
     of the Pareto front and of the selected law; the front's laws refitted with standard errors,
@@ -327,8 +434,21 @@ def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
     cand_list = [cands[s] for s in order]
     selected = order.index(sel)
     front = [order.index(s) for s in _front(cands)]
-    if selected not in front:   # (cannot happen with the selection rule; kept for safety)
-        front = sorted(set(front) | {selected})
+    if selected not in front:
+        # the acceptance test simplified the proposal off the front: the front shown runs through the
+        # selected law (laws simpler and better on held-out error hold a term that failed the test)
+        sel_c = cand_list[selected]
+        hidden = [i for i in front if cand_list[i].complexity <= sel_c.complexity
+                  and cand_list[i].rmse_holdout <= sel_c.rmse_holdout]
+        keep, best = [], math.inf
+        for i in sorted((set(front) - set(hidden)) | {selected}):    # (by complexity, then held-out error)
+            if i == selected or cand_list[i].rmse_holdout < best:
+                keep.append(i)
+                best = cand_list[i].rmse_holdout
+        front = keep
+        if hidden:
+            run.notes.append(f"{len(hidden)} law(s) simpler than the selected one predicted the held-out data "
+                             "better but hold a term that failed the acceptance test; not shown on the front")
     for i in front:
         c = cand_list[i]
         c.fit = fit_law(M, c.parts, z0=c.fit.z, se=True)
@@ -350,26 +470,44 @@ def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
 
 
 def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.DataFrame:
-    """Inclusion probabilities: a bootstrap over segments (or runs) of each stage's path
-    (``(moments, library, path, design or None, held columns)``), at the largest threshold that
-    selects as many terms as the chosen law ``final`` has in that stage."""
+    """Inclusion probabilities of the terms of the selected law ``final``: the fraction of
+    bootstrap replicates over segments (or runs) in which each stage's sparse regression
+    (``(moments, library, path, design or None, held columns)``), at the largest threshold of its
+    path that selects as many terms as the law has in that stage, selects a column of the term's
+    slot (any of its shapes, either direction variant).  Only the selected law's terms are shown:
+    a term the law does not hold was rejected by the held-out rule, whatever a path picks."""
     t0 = time.perf_counter()
     inclusion = pd.DataFrame()
     if run.n_models:
-        tables = []
+        rows = []
         n_rip = sum(1 for p in final if p.fam.basis == "ripple")
         for stage, n, (Ms, lib, structs, X, nf) in (("level", len(final) - n_rip, level_path),
                                                    ("ripple", n_rip, ripple_path)):
-            if structs and n:
-                t = _threshold_for(structs, n)
-                X = lib.design(Ms) if X is None else X
-                prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
-                                           alpha=run.alpha, seed=run.seed, free=_free(X, nf))
-                tables.append(_inclusion_table(lib, prob[nf:], run.M, stage, t))
-                run.settings[f"bootstrap_threshold_{stage}"] = t
-        tables = [t for t in tables if len(t)]
-        if tables:
-            inclusion = pd.concat(tables, ignore_index=True)
+            mine = [p for p in final if (p.fam.basis == "ripple") == (stage == "ripple")]
+            if not (structs and n and mine):
+                continue
+            t = _threshold_for(structs, n)
+            X = lib.design(Ms) if X is None else X
+            slots = [_group_of(p) for p in mine]
+            ct = lib.column_terms()
+            cg = np.full(X.shape[1], -1)
+            for j in range(len(ct)):
+                tm = lib.terms[ct[j]]
+                slot = _group_of(Part(tm.family, tm.freq))
+                cg[nf + j] = slots.index(slot) if slot in slots else -1
+            if not np.any(cg >= 0):
+                continue
+            prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
+                                       alpha=run.alpha, seed=run.seed, free=_free(X, nf), column_groups=cg)
+            for k, p in enumerate(mine):
+                rows.append({"term": p.label(run.M.frequencies), "family": p.family,
+                             "variant": "direction-dependent" if p.split else "both directions",
+                             "frequency": None if p.freq is None else float(run.M.frequencies[p.freq]),
+                             "probability": float(prob[k]) if k < len(prob) else 0.0, "stage": stage,
+                             "threshold": t})
+            run.settings[f"bootstrap_threshold_{stage}"] = t
+        if rows:
+            inclusion = pd.DataFrame(rows).sort_values("probability", ascending=False).reset_index(drop=True)
     run.timings["bootstrap"] = time.perf_counter() - t0
     return inclusion
 
@@ -421,23 +559,3 @@ def _fixed_columns(M: Moments, keep, parts, z) -> np.ndarray:
 def _threshold_for(path_structs, n_parts: int) -> float:
     """The largest threshold of a path whose structure has at least ``n_parts`` terms."""
     return next((t for t, parts in path_structs if len(parts) >= n_parts), path_structs[-1][0])
-
-
-def _inclusion_table(lib: Library, prob: np.ndarray, M, stage: str = "", threshold=None) -> pd.DataFrame:
-    """Inclusion probability per library term (its columns merged: the larger of sin/cos)."""
-    ct = lib.column_terms()
-    rows = []
-    for i, t in enumerate(lib.terms):
-        pr = float(np.max(prob[ct == i]))
-        if pr <= 0:
-            continue
-        name = t.names(M.frequencies, M.t_ref)[0]
-        rows.append({"term": name, "family": t.family, "variant": t.variant,
-                     "frequency": None if t.freq is None else float(M.frequencies[t.freq]),
-                     "probability": pr, "stage": stage, "threshold": threshold})
-    df = pd.DataFrame(rows)
-    if len(df):
-        df = df.sort_values("probability", ascending=False).reset_index(drop=True)
-    return df
-
-

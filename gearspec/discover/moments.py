@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..core.reduction import GroupNormals, harmonic_columns, partial_out_last
+from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns, partial_out_last
 from ..errors import InputError
 from ..fitdata import FitData
 
@@ -57,6 +57,11 @@ class Moments(GroupNormals):
         Reference temperature (mean over the samples) of the temperature basis.
     unit : str
     notes : list of str
+    Gb, bb, yyb : ndarray, (S, B, K, K), (S, B, K), (S, B), or None
+        The same normal equations in ``B`` consecutive blocks of every segment's samples
+        (``np.array_split`` of them, as :func:`gearspec.core.crossval.z_statistic` splits a
+        held-out group): what the held-out Z's cluster-robust variance needs (:mod:`.accept`).
+        None in free motion (there the whole segment is one cluster).
     """
 
     basis: tuple = ()
@@ -77,10 +82,13 @@ class Moments(GroupNormals):
     vabs: np.ndarray | None = None
     unit: str = "rad"
     notes: list = field(default_factory=list)
+    Gb: np.ndarray | None = None
+    bb: np.ndarray | None = None
+    yyb: np.ndarray | None = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     per_group = GroupNormals.per_group + ("segment", "run", "direction", "speed", "P", "q", "rest", "load",
-                                          "temperature", "cycles", "noise", "vabs")
+                                          "temperature", "cycles", "noise", "vabs", "Gb", "bb", "yyb")
 
     def __post_init__(self):
         if self.P is None:
@@ -138,7 +146,8 @@ class Moments(GroupNormals):
             b2[s] -= T @ b[s, Rs]
             yy2[s] -= b[s, Rs] @ iRR @ b[s, Rs]
         return replace(self, basis=tuple(self.basis[i] for i in L), G=G2, b=b2, yy=np.maximum(yy2, 0.0), P=None,
-                       q=None, rest=None, notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
+                       q=None, rest=None, Gb=None, bb=None, yyb=None,
+                       notes=list(self.notes) + ["bases " + ", ".join(self.basis[i] for i in R)
                                                                     + " profiled out per segment"])
 
     def restrict(self, names) -> "Moments":
@@ -148,17 +157,27 @@ class Moments(GroupNormals):
         if key == self.basis:
             return self
         if key not in self._cache:
-            G, b = self.columns([self.index(b) for b in key])
-            self._cache[key] = replace(self, basis=key, G=G, b=b, P=None, q=None, rest=None)
+            cols = np.array([self.index(b) for b in key], dtype=int)
+            G, b = self.columns(cols)
+            blocks = {} if self.Gb is None else {"Gb": self.Gb[:, :, cols][:, :, :, cols], "bb": self.bb[:, :, cols]}
+            self._cache[key] = replace(self, basis=key, G=G, b=b, P=None, q=None, rest=None, **blocks)
         return self._cache[key]
 
     def rows(self, segment) -> np.ndarray:
         """Position in these moments of each of the segment ids ``segment`` (e.g. every sample's)."""
-        pos = {int(s): i for i, s in enumerate(self.segment)}
-        return np.array([pos[int(s)] for s in segment], dtype=int)
+        seg = np.asarray(self.segment)
+        order = np.argsort(seg, kind="stable")
+        k = np.searchsorted(seg[order], np.asarray(segment))
+        return order[np.minimum(k, len(seg) - 1)].astype(int)
 
     #: group id of each segment for held-out folds: ``"segment"`` or ``"run"`` (FitData's rule)
     groups = FitData.groups
+
+    def rss_of(self, beta: np.ndarray) -> np.ndarray:
+        """Residual sum of squares of every segment for per-segment coefficients ``beta`` (S, K) of
+        the sample bases (a prediction as :meth:`~.law.LawFit.basis_coefficients` gives it)."""
+        return (self.yy - 2.0 * np.einsum("sk,sk->s", self.b, beta)
+                + np.einsum("sk,skl,sl->s", beta, self.G, beta))
 
     def sse(self, X: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Residual sum of squares of each segment for the pseudo-row design ``X`` (S*K, p) and
@@ -223,8 +242,10 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
         Phi[sl, K0::2], Phi[sl, K0 + 1::2] = harmonic_columns(th[sl], freqs)   # phases about the segment's mean
     y, v, dirs = data.y[order], data.v[order], data.direction[order]
     change = data.speed_change()
+    blocks = {}
     if change is None:
         gn = GroupNormals.of(Phi, y, starts, [sl.stop for sl in segs])
+        blocks = _block_normals(Phi, y, segs)
     else:  # free motion: the first-order effect of the change of speed within each segment taken out
         ext = GroupNormals.of(np.column_stack([Phi, change[order]]), y, starts, [sl.stop for sl in segs])
         gn = GroupNormals(*partial_out_last(ext.G, ext.b, ext.yy), ext.n)
@@ -245,7 +266,24 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
                    run=data.run[order][starts].astype(np.int64), speed=np.abs(vm), vabs=seg_mean(np.abs(data.v)),
                    direction=np.array([int(np.sign(np.sum(dirs[sl]))) or int(dirs[sl][0]) for sl in segs], np.int64),
                    load=seg_mean(load), temperature=seg_mean(temp), cycles=cycles, noise=_fill_noise(noise),
-                   t_ref=t_ref, unit=data.unit, notes=notes)
+                   t_ref=t_ref, unit=data.unit, notes=notes, **blocks)
+
+
+#: blocks per segment of :attr:`Moments.Gb` (the ``blocks`` of :func:`gearspec.core.crossval.z_statistic`)
+BLOCKS = 8
+
+
+def _block_normals(Phi, y, segs) -> dict:
+    """:attr:`Moments.Gb`, ``bb``, ``yyb``: normal equations of :data:`BLOCKS` consecutive blocks of
+    every segment (``np.array_split`` of its rows; empty blocks of short segments are zeros)."""
+    a, z = [], []
+    for sl in segs:
+        edges = np.cumsum([0] + [len(x) for x in np.array_split(np.arange(sl.stop - sl.start), BLOCKS)]) + sl.start
+        a += list(edges[:-1])
+        z += list(edges[1:])
+    G, b, yy = group_normal_equations(Phi, y, a, z)
+    S, K = len(segs), Phi.shape[1]
+    return {"Gb": G.reshape(S, BLOCKS, K, K), "bb": b.reshape(S, BLOCKS, K), "yyb": yy.reshape(S, BLOCKS)}
 
 
 def _sample_bases(data: FitData, inertia, notes: list) -> tuple:

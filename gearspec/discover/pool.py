@@ -239,13 +239,13 @@ def finalize(pool: _Pool, local_search: bool = True):
 
 
 def _reachable(pool: _Pool) -> set:
-    """The screened Pareto front and the ten best laws within ``max(se_rule, 1)`` standard errors
+    """The screened Pareto front and the five best laws within ``max(se_rule, 1)`` standard errors
     of noise (:func:`_excess`) of the best."""
     b = pool.best()
     n_se = max(pool.se_rule, 1.0)
     near = sorted((s for s in pool.cands
                    if s == b or _excess(pool.cands[s], pool.cands[b], pool.M, pool.groups) <= n_se),
-                  key=lambda s: pool.cands[s].rmse_holdout)[:10]
+                  key=lambda s: pool.cands[s].rmse_holdout)[:5]
     return set(_front(pool.cands)) | set(near)
 
 

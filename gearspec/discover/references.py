@@ -56,7 +56,11 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
                   if s.get("source") != "found"] if law == "silo4" else None)
     if law == "silo4" and not harmonics:
         return Reference(label, "paper law", None, None, None, None, note="no ripple line declared; same as eq. 3")
-    kw = {"harmonics": harmonics, "weights": "uniform", "holdout": None}
+    # the same columns as the candidates: the inertia identified with the friction wherever the
+    # data carry an acceleration the explorer's laws may use (an IDIM-LS structure without its
+    # inertia is not IDIM-LS)
+    kw = {"harmonics": harmonics, "weights": "uniform", "holdout": None,
+          "inertia": "fit" if M.has("acc") else "none"}
     try:
         model = identify.fit(data, law, **kw)
     except InputError as exc:

@@ -89,6 +89,10 @@ class DiscoveryResult:
     timings: dict = field(default_factory=dict)
     #: mean friction of every segment (data, the selected law and each reference), for plots
     levels: dict = field(default_factory=dict)
+    #: every ripple line offered (declared, found, given) with its line-screen Z (:mod:`.screen`)
+    lines: list = field(default_factory=list)
+    #: the acceptance rule's verdicts on the selected law's terms (:mod:`.accept`)
+    acceptance: list = field(default_factory=list)
 
     @property
     def best(self) -> Candidate:
@@ -157,7 +161,8 @@ class DiscoveryResult:
                        "library": {"columns": self.library.names, "size": len(self.library)},
                        "n_candidates_evaluated": len(self.candidates),
                        "references": refs, "inclusion_probabilities": inc, "settings": self.settings,
-                       "notes": self.notes, "timings": self.timings})
+                       "notes": self.notes, "timings": self.timings, "line_screen": self.lines,
+                       "acceptance": self.acceptance})
 
     def to_json(self, path) -> Path:
         path = Path(path)

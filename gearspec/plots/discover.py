@@ -100,7 +100,8 @@ def plot_levels(result, path) -> Path:
 
 
 def plot_inclusion(result, path, top: int = 25) -> Path | None:
-    """Inclusion probabilities (segment bootstrap) of the library terms most often selected."""
+    """Inclusion probabilities (segment bootstrap) of the terms of the selected law (the law the
+    acceptance rule kept: nothing it rejected is shown)."""
     inc = result.inclusion
     if inc is None or len(inc) == 0:
         return None
@@ -111,8 +112,9 @@ def plot_inclusion(result, path, top: int = 25) -> Path | None:
     ax.set_yticks(np.arange(len(inc)))
     ax.set_yticklabels([textwrap.shorten(t, 60) for t in inc["term"]], fontsize=7.5)
     ax.set_xlim(0, 1)
-    ax.set_xlabel("inclusion probability (bootstrap over segments)")
-    ax.set_title("How often each library term is selected (blue: level terms, orange: ripple terms)", fontsize=10)
+    ax.set_xlabel(f"inclusion probability (bootstrap over {result.settings.get('by', 'segment')}s)")
+    ax.set_title("Terms of the selected law: how often the sparse regression picks each\n"
+                 "(any shape of its slot; blue: level terms, orange: ripple terms)", fontsize=10)
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
     return _save(fig, path)

@@ -48,8 +48,12 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
     md += ["## Selected law", "", "```", sel.equation, "```", "",
            f"Held-out RMSE {sel.rmse_holdout:.5g} {tu}, in-sample RMSE {sel.rmse:.5g} {tu}, complexity "
            f"{sel.complexity}. `(a | b)`: value for positive | negative motion; friction has the sign of v; "
-           f"`a` is the acceleration. Rule: the simplest law whose held-out error exceeds the best one's by at "
-           f"most {result.settings['se_rule']:g} standard errors of the noise in that difference.", ""]
+           f"`a` is the acceleration. Rule: the search proposes the simplest law whose held-out error exceeds the "
+           f"best one's by at most {result.settings['se_rule']:g} standard errors of the noise in that difference; "
+           f"every term of it must then pass the closed loop's held-out test (Z against the law without it, "
+           f"level {result.settings.get('test_alpha', 0.01):g} over {result.settings.get('acceptance_candidates', 1)} "
+           f"candidates, Bonferroni; rmse gain at least the minimum) or it is simplified away.", ""]
+    md += _acceptance_section(result)
     coef = _coefficients(sel, M.frequencies)
     md += [markdown_table(coef), "", f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
     if coef["at bound"].astype(bool).any():
@@ -76,9 +80,11 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            markdown_table(comp, ".5g"), "", f"![levels]({figs['levels'].name})", ""]
     md += ["## Inclusion probabilities", ""]
     if figs["inclusion"] is not None:
-        md += [f"Fraction of {result.settings['n_models']} bootstrap replicates (whole {result.settings['by']}s "
-               "resampled) in which the sparse regression selects each library term, at the largest threshold "
-               "of each stage's path that selects as many terms as the chosen law has there.", "",
+        md += [f"For each term of the selected law: the fraction of {result.settings['n_models']} bootstrap "
+               f"replicates (whole {result.settings['by']}s resampled) in which the sparse regression selects a "
+               "term of its slot (any of its shapes, either direction variant), at the largest threshold of each "
+               "stage's path that selects as many terms as the law has there. Terms the law does not hold are not "
+               "shown: the held-out test rejected them.", "",
                f"![inclusion]({figs['inclusion'].name})", "",
                markdown_table(result.inclusion.head(25)[["term", "family", "variant", "probability", "stage"]]), ""]
     else:
@@ -98,10 +104,37 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            "least squares (variable projection); a hill climb on held-out error adds, drops, splits by "
            "direction or reshapes terms around the best law.",
            "4. **Selection.** Held-out errors from refits on the other folds; the simplest law within the "
-           "standard-error margin of the best is selected; AIC and BIC are shown beside (they assume independent "
-           "samples).", ""]
+           "standard-error margin of the best is proposed; AIC and BIC are shown beside (they assume independent "
+           "samples).",
+           "5. **Acceptance.** The closed loop's rule (`gearspec diagnose`): every term of the proposed law must "
+           "pass the held-out Z test against the law without it (or without its direction dependence, or with a "
+           "constant ripple amplitude), Bonferroni over the candidates a search round tries, with a minimum rmse "
+           "gain; the weakest failing term is simplified first. With `--validate`, the same check on the "
+           "independent recording.", ""]
     md += bullets(result.notes, "Notes:")
     return write_report(out, md + ["Timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()), ""])
+
+
+def _acceptance_section(result) -> list:
+    """The acceptance test's verdict on every term, and the line screen's on every line."""
+    md: list = []
+    if result.acceptance:
+        md += ["### The acceptance test of each term", "",
+               markdown_table(pd.DataFrame([{"term": a["term"], "tested against": "without " + a["move"],
+                                             "data": a["data"], "Z": a["z"], "Z needed": a["z_crit"],
+                                             "rmse gain (%)": 100 * a["gain"],
+                                             "decision": "accepted" if a["passed"] else "rejected"}
+                                            for a in result.acceptance]), ".3g"), ""]
+    if result.lines:
+        md += ["### Ripple lines screened", "",
+               "Each line offered (declared by the gear, found by the spectrum, given) is tested on its own by "
+               "the held-out Z (each segment's level profiled out), then beside the stronger lines; only those "
+               "that pass enter the library.", "",
+               markdown_table(pd.DataFrame([{"frequency": ln["frequency"], "source": ln.get("source"),
+                                             "label": ln.get("label") or "", "Z": ln["z"], "Z needed": ln["z_crit"],
+                                             "kept": "yes" if ln["passed"] else "no"}
+                                            for ln in result.lines]), ".4g"), ""]
+    return md
 
 
 def _dirs(M) -> list[str]:

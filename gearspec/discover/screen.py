@@ -1,0 +1,199 @@
+"""The line screen: every ripple line (declared, found by the spectrum, given) tested on its own by
+the held-out rule of the closed loop before it may enter the library.
+
+Each segment's friction level (its own constant, and its own load, temperature, acceleration and
+speed-change coefficients) is profiled out per segment, so a line is judged by what it adds to any
+level law: ``sin`` / ``cos`` columns with one amplitude and phase per direction, fitted on the
+training folds, predicting the held-out segments.  The held-out Z of
+:func:`gearspec.core.crossval.z_statistic` (each held-out group one cluster) must reach
+:func:`~gearspec.core.crossval.critical_z` at ``alpha`` over the number of lines tried (Bonferroni).
+One pass over the samples, segment by segment: the cost grows with rows x lines, the memory with
+segments x lines, never with rows x lines.  A screen, not the verdict: a line that passes it
+still has to pass the same rule inside the selected law (:mod:`.accept`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.crossval import critical_z, z_statistic
+from ..core.reduction import harmonic_columns
+from ..fitdata import FitData
+from .moments import _sample_bases
+
+__all__ = ["line_statistics", "screen_lines"]
+
+#: rows x lines of sin/cos values held at once
+_CHUNK = 2_000_000
+
+
+def line_statistics(data: FitData, freqs, *, inertia="auto", min_cycles: float = 1.0):
+    """Per segment and line, the normal equations of the line's sin/cos columns with the
+    segment's level bases profiled out: ``(sids, G (S, F, 2, 2), g (S, F, 2), cycles (S, F))``;
+    ``G`` and ``g`` are 0 where the line completes fewer than ``min_cycles`` cycles (there it
+    cannot be told from the level)."""
+    freqs = np.asarray(freqs, dtype=float)
+    F = len(freqs)
+    order, starts, stops, chans = _segments(data, inertia)
+    sids = np.unique(data.segment)
+    S = len(sids)
+    G, g, cycles = np.zeros((S, F, 2, 2)), np.zeros((S, F, 2)), np.zeros((S, F))
+    th_all, y_all = np.asarray(data.theta, dtype=float), np.asarray(data.y, dtype=float)
+    for s, (a, z) in enumerate(zip(starts, stops)):
+        idx = order[a:z]
+        L = np.column_stack([c[idx] for c in chans])
+        y, th = y_all[idx], th_all[idx]
+        cycles[s] = freqs * float(np.ptp(th))
+        iL = np.linalg.pinv(L.T @ L, rcond=1e-10, hermitian=True)
+        ly = iL @ (L.T @ y)
+        step = max(1, _CHUNK // max(len(idx), 1))
+        for f0 in range(0, F, step):
+            sl = slice(f0, min(F, f0 + step))
+            sn, cs = harmonic_columns(th, freqs[sl])
+            for k, (u, v) in enumerate(((sn, sn), (sn, cs), (cs, cs))):
+                # profiled cross products: u'v - (L'u)' iL (L'v)
+                Lu, Lv = L.T @ u, L.T @ v
+                val = np.einsum("nf,nf->f", u, v) - np.einsum("kf,kl,lf->f", Lu, iL, Lv)
+                if k == 0:
+                    G[s, sl, 0, 0] = val
+                elif k == 1:
+                    G[s, sl, 0, 1] = G[s, sl, 1, 0] = val
+                else:
+                    G[s, sl, 1, 1] = val
+            g[s, sl, 0] = sn.T @ y - (L.T @ sn).T @ ly
+            g[s, sl, 1] = cs.T @ y - (L.T @ cs).T @ ly
+    bad = cycles < min_cycles
+    G[bad], g[bad] = 0.0, 0.0
+    return sids, G, g, cycles
+
+
+def joint_statistics(data: FitData, freqs, *, inertia="auto", min_cycles: float = 1.0):
+    """As :func:`line_statistics` for a few lines together: ``(G (S, 2F, 2F), g (S, 2F))``, columns
+    ``sin0, cos0, sin1, ...``, the level profiled out per segment; a line's rows and columns are 0
+    in the segments where it completes fewer than ``min_cycles`` cycles."""
+    freqs = np.asarray(freqs, dtype=float)
+    F = len(freqs)
+    order, starts, stops, chans = _segments(data, inertia)
+    S = len(starts)
+    G, g = np.zeros((S, 2 * F, 2 * F)), np.zeros((S, 2 * F))
+    th_all, y_all = np.asarray(data.theta, dtype=float), np.asarray(data.y, dtype=float)
+    for s, (a, z) in enumerate(zip(starts, stops)):
+        idx = order[a:z]
+        L = np.column_stack([c[idx] for c in chans])
+        y, th = y_all[idx], th_all[idx]
+        sn, cs = harmonic_columns(th, freqs)
+        H = np.empty((len(idx), 2 * F))
+        H[:, 0::2], H[:, 1::2] = sn, cs
+        live = np.repeat(freqs * float(np.ptp(th)) >= min_cycles, 2)
+        H[:, ~live] = 0.0
+        iL = np.linalg.pinv(L.T @ L, rcond=1e-10, hermitian=True)
+        LH = L.T @ H
+        G[s] = H.T @ H - LH.T @ iL @ LH
+        g[s] = H.T @ y - LH.T @ (iL @ (L.T @ y))
+    return G, g
+
+
+def _segments(data: FitData, inertia):
+    """Sample order by segment, segment bounds in it, and the level channels profiled out."""
+    order = np.argsort(data.segment, kind="stable")
+    _, starts = np.unique(data.segment[order], return_index=True)
+    stops = np.append(starts[1:], len(order))
+    _, load, temp, t_ref, acc = _sample_bases(data, inertia, [])
+    chans = [np.ones(len(data))] + [x for x in (load, None if temp is None else temp - t_ref, acc) if x is not None]
+    change = data.speed_change()
+    if change is not None:
+        chans.append(change)
+    return order, starts, stops, chans
+
+
+def _pseudo(G, g):
+    """Pseudo rows of per-segment normal equations (rows of P: P'P = G, P'q = g); zero rows where singular."""
+    lam, U = np.linalg.eigh(G)
+    top = np.maximum(lam[..., -1:], 0.0)
+    ok = lam > top * 1e-12
+    sq = np.where(ok, np.sqrt(np.where(ok, lam, 1.0)), 0.0)
+    P = sq[..., :, None] * np.swapaxes(U, -1, -2)
+    Ug = np.einsum("...ji,...j->...i", U, g)
+    q = np.where(ok, Ug / np.where(ok, sq, 1.0), 0.0)
+    return P, q
+
+
+def _held_out_z(G, g, P, q, cols0, cols1, fold, direction, order, starts, stops) -> float:
+    """Held-out Z (one cluster per held-out group) of the lines' columns ``cols1`` against
+    ``cols0`` (a subset), one coefficient set per direction fitted on the training folds."""
+    S, K = g.shape
+    beta0, beta1 = np.zeros((S, K)), np.zeros((S, K))
+    for f in np.unique(fold):
+        test = fold == f
+        for d in (1, -1):
+            tr, te = ~test & (direction == d), test & (direction == d)
+            if not te.any() or not tr.any():
+                continue
+            Gt, gt = G[tr].sum(0), g[tr].sum(0)
+            for cols, beta in ((cols0, beta0), (cols1, beta1)):
+                if len(cols):
+                    c = np.linalg.lstsq(Gt[np.ix_(cols, cols)], gt[cols], rcond=1e-10)[0]
+                    beta[np.ix_(te, cols)] = c
+    r0 = q - np.einsum("skl,sl->sk", P, beta0)
+    delta = np.einsum("skl,sl->sk", P, beta1 - beta0)
+    return z_statistic(r0[order].ravel(), delta[order].ravel(), (r0 - delta)[order].ravel(), starts, stops, blocks=1)
+
+
+def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_segment: np.ndarray, *,
+                 alpha: float, inertia="auto", min_cycles: float = 1.0) -> list[dict]:
+    """The held-out test of every line (module docstring): ``[{"z", "z_crit", "passed", "round", "cycles"}]``
+    (``cycles``: the most cycles of the line in a segment),
+    one per frequency.  First each line alone; then the lines that pass alone, in rounds: the one
+    with the largest Z that passes enters, the others are tested again beside the lines in (a weak
+    line next to a strong one is judged by what it adds to it, not by the strong one's leakage into
+    its columns over a short segment).  Bonferroni over the lines still in play.
+    ``fold_of_segment``, ``group_of_segment``: fold and held-out group of every segment, in the
+    order of the sorted segment ids."""
+    freqs = np.asarray(freqs, dtype=float)
+    F = len(freqs)
+    if F == 0:
+        return []
+    direction = _segment_direction(data)
+    order = np.argsort(group_of_segment, kind="stable")
+    ug, gstart = np.unique(group_of_segment[order], return_index=True)
+    n_groups, S = len(ug), len(group_of_segment)
+    bounds = np.append(gstart, S)
+    _, G1, g1, cyc = line_statistics(data, freqs, inertia=inertia, min_cycles=min_cycles)
+    P1, q1 = _pseudo(G1, g1)
+    zc = critical_z(alpha, F, n_groups)
+    out = []
+    for i in range(F):
+        z = _held_out_z(G1[:, i], g1[:, i], P1[:, i], q1[:, i], [], [0, 1], fold_of_segment, direction, order,
+                        2 * bounds[:-1], 2 * bounds[1:])
+        out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0,
+                    "cycles": float(cyc[:, i].max()) if len(cyc) else 0.0})
+    alive = [i for i in range(F) if out[i]["passed"]]
+    if len(alive) < 2:
+        return out
+    G, g = joint_statistics(data, freqs[alive], inertia=inertia, min_cycles=min_cycles)
+    P, q = _pseudo(G, g)
+    K = 2 * len(alive)
+    inside: list[int] = []
+    rest = list(range(len(alive)))
+    rnd = 0
+    while rest:
+        rnd += 1
+        zc = critical_z(alpha, F - len(inside), n_groups)
+        cols0 = [c for j in inside for c in (2 * j, 2 * j + 1)]
+        zs = {j: _held_out_z(G, g, P, q, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, order,
+                             K * bounds[:-1], K * bounds[1:]) for j in rest}
+        for j, z in zs.items():
+            out[alive[j]].update(z=float(z), z_crit=zc, passed=bool(z >= zc), round=rnd)
+        best = max(rest, key=lambda j: zs[j])
+        if not zs[best] >= zc:
+            break
+        inside.append(best)
+        rest.remove(best)
+    return out
+
+
+def _segment_direction(data: FitData) -> np.ndarray:
+    """Direction (+1 / -1) of every segment, sorted segment ids (the sign of its summed directions)."""
+    ids, inv = np.unique(data.segment, return_inverse=True)
+    d = np.sign(np.bincount(inv, weights=data.direction, minlength=len(ids)))
+    return np.where(d == 0, 1, d).astype(int)
