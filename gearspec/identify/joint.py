@@ -38,6 +38,7 @@ from ..terms.registry import basis as _basis
 from ..terms.shapes import amplitude_law, clamp_speed
 from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
 from .stats import speed_ranges
+from .covariance import SE_METHODS, clusters_of, fit_covariance, jacobian
 from .validate import _safe_rmse, holdout
 
 __all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous", "inverted_sign"]
@@ -54,6 +55,8 @@ class _Problem:
     weights: np.ndarray        # (S,)
     Lt: np.ndarray             # (S, P, P): sqrt(w) diag(sqrt(lambda)) U^T
     ranges: np.ndarray         # (K, 2): speed range of each amplitude law (:func:`speed_ranges`)
+    se: str = "independent"    # covariance method (:func:`~.covariance.fit_covariance`)
+    segments: object = None    # the FitData's segment table (run of each segment), for the clusters
 
     @property
     def K(self):
@@ -103,7 +106,11 @@ class _Problem:
         return np.einsum("spq,sq->sp", self.Lt, beta - self.stats.beta_hat).ravel()
 
 
-def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
+def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str, *, se: str = "independent",
+                  segments=None) -> _Problem:
+    """The problem of one direction; ``se``: the covariance method (``bootstrap``: the covariance's
+    errors are replaced later; its base covariance is cluster-robust too), ``segments``: the data's
+    segment table (the run of each segment: the clusters)."""
     S = len(stats.g)
     if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
         w = 1.0 / stats.sigma2
@@ -118,7 +125,8 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
         Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam, 0.0, None))[:, None] * U.T)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
     decay_free = np.array([a != "const" for a in amp_law], bool)
-    return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
+    method = "independent" if se == "independent" else "covariance"
+    return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats), method, segments)
 
 
 def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
@@ -199,31 +207,17 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
 
     z = np.concatenate([lin, x_opt])
     r = full(z)
-    J = _jacobian(full, z)
+    J = jacobian(full, z)
     p = len(z)
     # residual variance: the weighted rss of the fit plus the segments' own (pure error)
     s2 = (float(r @ r) + float(np.sum(prob.weights * st.rss_hat))) / max(int(np.sum(st.n)) - p, 1)
-    try:
-        cov = np.linalg.inv(J.T @ J) * s2
-    except np.linalg.LinAlgError:
-        cov = np.full((p, p), np.nan)
+    clusters, what = clusters_of(st.segment, prob.segments, p) if prob.se == "covariance" else (None, "")
+    cov, se_method = fit_covariance(J, r, s2, method=prob.se, segment_of_row=np.repeat(np.arange(len(st.g)),
+                                    st.g.shape[1]), cluster_of_segment=clusters, fallback=what)
     se = np.sqrt(np.clip(np.diag(cov), 0, None)) if np.all(np.isfinite(cov)) else np.full(p, np.nan)
     on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
     return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "status": status,
-            "sscale": sscale, "free": free}
-
-
-def _jacobian(fun, z):
-    f0 = fun(z)
-    J = np.empty((len(f0), len(z)))
-    for j in range(len(z)):
-        h = 1e-6 * max(abs(z[j]), 1e-8)
-        zp = z.copy()
-        zp[j] += h
-        zm = z.copy()
-        zm[j] -= h
-        J[:, j] = (fun(zp) - fun(zm)) / (2 * h)
-    return J
+            "sscale": sscale, "free": free, "se_method": se_method}
 
 
 def _direction_params(prob: _Problem, sol: dict) -> Direction:
@@ -233,6 +227,7 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
     nb = len(basis.lin)
     L = len(lin)
     P = Direction({})
+    P.se_method = sol.get("se_method") or None
     for j, name in enumerate(basis.lin):
         P.set(name, float(lin[j]), float(se[j]))
     # nonlinear base parameters are fitted as logs: delta method
@@ -368,7 +363,7 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
         raise ConvergenceError(f"law {law} has {need} parameters per direction but the {dname} direction has "
                                f"plateaus at only {distinct} speed(s); fit a simpler law "
                                f"(e.g. coulomb_viscous) or record more speeds")
-    prob = _make_problem(stats, law, specs, weights)
+    prob = _make_problem(stats, law, specs, weights, se=se, segments=sub.segments)
     try:
         sol = _fit_direction(prob, init=init)
     except (np.linalg.LinAlgError, ValueError) as exc:
@@ -400,7 +395,7 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
                    f"{V['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
                    f"{hump:.3g} +- {P.se[top]:.2g}); record slower plateaus")
             reduced = LAWS[law].degraded_for("v_s")
-            prob = _make_problem(stats, reduced.name, specs, weights)
+            prob = _make_problem(stats, reduced.name, specs, weights, se=se, segments=sub.segments)
             sol = _fit_direction(prob, init=init)
             P = _direction_params(prob, sol)
             for k in reduced.dropped:
@@ -477,8 +472,12 @@ class JointFit:
       ``harmonics`` only if given.
     - ``weights`` ("segment" or "uniform"): each segment weighted by the inverse of its own residual
       variance, or all samples alike.
-    - ``se`` ("covariance" or "bootstrap"): standard errors from the covariance of the weighted fit,
-      or from ``bootstrap`` refits on segments resampled with replacement (``seed`` seeds them).
+    - ``se`` ("covariance", "independent" or "bootstrap"): standard errors from the cluster-robust
+      covariance of the weighted fit over runs (CR2; over segments when the runs are too few, the
+      covariance of independent samples when both are: :mod:`.covariance`, the method in each
+      direction's ``se_method``), from the covariance of independent samples (``independent``:
+      gearspec 0.5's ``covariance``, too small when runs scatter), or from ``bootstrap`` refits on
+      segments resampled with replacement (``seed`` seeds them).
     - ``min_cycles``: a segment counts towards a harmonic where it covers at least this fraction of
       a cycle; the harmonic is identified when those segments cover one cycle together (a line too
       slow for any one segment, e.g. one joint turn, is fitted from many); every segment's level is
@@ -537,8 +536,8 @@ class JointFit:
         law = self.law
         if law not in LAWS:
             raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
-        if self.se not in ("covariance", "bootstrap"):
-            raise InputError(f"se must be 'covariance' or 'bootstrap', got '{self.se}'")
+        if self.se not in SE_METHODS:
+            raise InputError(f"se must be one of {', '.join(SE_METHODS)}, got '{self.se}'")
         if LAWS[law].needs_load and data.load is None:
             raise InputError(f"law {law} needs the output load torque: the data has no 'load' channel")
         if law == "silo4" and self.harmonics is None:
