@@ -28,8 +28,13 @@ regression with multi-stage samples, Survey Methodology 28(2); Cameron, A. C., M
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import stats
+
+from ..model import Direction
+from .stats import ConvergenceError
 
 __all__ = ["SE_METHODS", "CLUSTER_MARGIN", "jacobian", "clusters_of", "fit_covariance", "small_sample_factor"]
 
@@ -155,3 +160,42 @@ def fit_covariance(J: np.ndarray, r: np.ndarray, s2: float, *, method: str = "co
     except np.linalg.LinAlgError:
         cov = np.full((p, p), np.nan)
     return cov, (fallback if method == "covariance" else "covariance of independent samples")
+
+
+# ---------------------------------------------------------------------- the inertia of both directions
+def _common_inertia(inertias: dict, unit: str) -> tuple[float, float, str]:
+    """One inertia from the two directions' estimates ``{direction: (J, se)}``: their mean weighted
+    by the inverse variances, its standard error, and a note (that says when they disagree by more
+    than three standard errors of their difference: a torque or inertia that is not the same both
+    ways, e.g. gravity or a direction-dependent efficiency)."""
+    ok = {d: (J, se) for d, (J, se) in inertias.items() if np.isfinite(J) and np.isfinite(se) and se > 0}
+    if not ok:
+        raise ConvergenceError("the inertia could not be identified from the free motion (no finite estimate); "
+                               "give it in the gear spec (inertia = ...) or record faster changes of speed")
+    w = {d: 1.0 / se ** 2 for d, (_, se) in ok.items()}
+    J = sum(w[d] * ok[d][0] for d in ok) / sum(w.values())
+    J_se = math.sqrt(1.0 / sum(w.values()))
+    unit_J = "kg m^2" if unit == "rad" else "kg"
+    each = ", ".join(f"{d} {ok[d][0]:.4g} +- {ok[d][1]:.2g}" for d in ok)
+    note = (f"inertia identified with the friction from the free motion: {J:.4g} +- {J_se:.2g} {unit_J} "
+            f"({each}); the friction refitted with it held")
+    if len(ok) == 2:
+        (Ja, sa), (Jb, sb) = ok.values()
+        z = abs(Ja - Jb) / math.hypot(sa, sb)
+        if z > 3:
+            note += (f"; warning: the two directions disagree by {z:.1f} standard errors (a torque that is not the "
+                     f"same both ways, such as gravity, or a lag between torque and position?)")
+    return J, J_se, note
+
+
+def _carry_se(free: Direction, held: Direction) -> None:
+    """Standard errors of the fit with the inertia free onto the same parameters of the fit with it
+    held (where both fitted the same parameters and lines)."""
+    for k, se in free.se.items():
+        if held.values.get(k) is not None and free.values.get(k) is not None and se is not None:
+            held.set(k, held.values[k], max(se, held.se.get(k) or 0.0))
+    if len(free.harmonics) == len(held.harmonics):
+        for hf, hh in zip(free.harmonics, held.harmonics):
+            for key, se in hf.se.items():
+                if se is not None and np.isfinite(se):
+                    hh.se[key] = max(se, hh.se.get(key) or 0.0)

@@ -1,6 +1,7 @@
 """The joint fit: weighted nonlinear least squares of all parameters of a direction together, on
 the samples themselves (amplitudes fitted in the position domain, not through logs of noisy
-amplitudes), with standard errors from the covariance (or a bootstrap over segments); as an
+amplitudes), with standard errors cluster-robust over runs (:mod:`.covariance`; or a bootstrap over
+segments); as an
 estimator (:class:`JointFit`) and as a function (:func:`fit`).
 
 How it works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
@@ -38,8 +39,8 @@ from ..terms.registry import basis as _basis
 from ..terms.shapes import amplitude_law, clamp_speed
 from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
 from .stats import speed_ranges
-from .covariance import SE_METHODS, clusters_of, fit_covariance, jacobian
-from .validate import _safe_rmse, holdout
+from .covariance import SE_METHODS, _carry_se, _common_inertia, clusters_of, fit_covariance, jacobian
+from .validate import _safe_rmse, holdout, inverted_sign, negative_viscous
 
 __all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous", "inverted_sign"]
 
@@ -251,67 +252,6 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
                                     segments=int(prob.stats.active[:, k].sum()),
                                     se={"amplitude": a_se, "phase": p_se, "decay": decay_se}))
     return P
-
-
-def _flag(model: FrictionModel, key: str, msg: str) -> None:
-    """One sentence into ``model.meta["flags"][key]`` and ``model.notes`` (``warning: ...``)."""
-    model.meta.setdefault("flags", {})[key] = msg
-    if "warning: " + msg not in model.notes:
-        model.notes.append("warning: " + msg)
-
-
-def inverted_sign(model: FrictionModel, data: FitData) -> list[str]:
-    """Flag friction opposite to the velocity in most segments: a segment whose mean friction
-    magnitude (``level`` of :meth:`FitData.plateaus`) lies more than two standard errors below 0
-    counts, and more than half of the segments counting is no friction a drive can have (it
-    dissipates: the torque it needs has the sign of the motion) but a torque channel logged with
-    the opposite sign convention.  One sentence with the fix, flagged as :func:`negative_viscous`
-    does (``"sign"``); returns it in a list (empty when the data look right)."""
-    pl = data.plateaus()
-    if pl.empty:
-        return []
-    wrong = int(np.sum(pl["level"] + 2 * pl["level_se"].fillna(np.inf) < 0))
-    if not wrong > len(pl) / 2:
-        return []
-    tu = "Nm" if data.unit == "rad" else "N"
-    msg = (f"friction opposes the velocity in {wrong} of {len(pl)} segments (median level "
-           f"{float(np.median(pl['level'])):.3g} {tu}): the torque's sign is likely inverted relative to the "
-           f"velocity; rerun with --scale torque=-1")
-    _flag(model, "sign", msg)
-    return [msg]
-
-
-def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
-    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard errors
-    below 0) of each direction: friction that falls with speed over the whole measured range is
-    rarely physical, more often an inertia, a channel lag or aliasing the model does not hold, or
-    plateau speeds too close together to tell viscous from Stribeck friction.  Each flag is one
-    sentence, added to ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]``
-    (``"direction.parameter" -> sentence``); returns the sentences."""
-    out = []
-    model.meta.setdefault("flags", {})
-    su = "rad/s" if model.unit == "rad" else "m/s"
-    for dname, p in model.directions.items():
-        for k in ("viscous", "b"):
-            val = p.values.get(k)
-            if k not in model.law_spec.params or val is None or not val < 0:
-                continue
-            se = p.se.get(k)
-            # a value within two standard errors of 0 is no finding (and none without an error)
-            if se is None or not np.isfinite(se) or not val < -2 * se:
-                continue
-            sig = f" ({abs(val) / se:.1f} standard errors below 0)" if se > 0 else ""
-            rng = ""
-            if data is not None:
-                sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
-                if len(sp):
-                    rng = f" over {float(np.min(sp)):.3g}..{float(np.max(sp)):.3g} {su}"
-            msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
-                   f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
-                   f"tell viscous from Stribeck friction")
-            _flag(model, f"{dname}.{k}", msg)
-            out.append(msg)
-    return out
 
 
 def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
@@ -617,44 +557,6 @@ class JointFit:
             if J is not None:
                 inertias[dname] = J
         return directions, not_identified, notes, inertias
-
-
-def _common_inertia(inertias: dict, unit: str) -> tuple[float, float, str]:
-    """One inertia from the two directions' estimates ``{direction: (J, se)}``: their mean weighted
-    by the inverse variances, its standard error, and a note (that says when they disagree by more
-    than three standard errors of their difference: a torque or inertia that is not the same both
-    ways, e.g. gravity or a direction-dependent efficiency)."""
-    ok = {d: (J, se) for d, (J, se) in inertias.items() if np.isfinite(J) and np.isfinite(se) and se > 0}
-    if not ok:
-        raise ConvergenceError("the inertia could not be identified from the free motion (no finite estimate); "
-                               "give it in the gear spec (inertia = ...) or record faster changes of speed")
-    w = {d: 1.0 / se ** 2 for d, (_, se) in ok.items()}
-    J = sum(w[d] * ok[d][0] for d in ok) / sum(w.values())
-    J_se = math.sqrt(1.0 / sum(w.values()))
-    unit_J = "kg m^2" if unit == "rad" else "kg"
-    each = ", ".join(f"{d} {ok[d][0]:.4g} +- {ok[d][1]:.2g}" for d in ok)
-    note = (f"inertia identified with the friction from the free motion: {J:.4g} +- {J_se:.2g} {unit_J} "
-            f"({each}); the friction refitted with it held")
-    if len(ok) == 2:
-        (Ja, sa), (Jb, sb) = ok.values()
-        z = abs(Ja - Jb) / math.hypot(sa, sb)
-        if z > 3:
-            note += (f"; warning: the two directions disagree by {z:.1f} standard errors (a torque that is not the "
-                     f"same both ways, such as gravity, or a lag between torque and position?)")
-    return J, J_se, note
-
-
-def _carry_se(free: Direction, held: Direction) -> None:
-    """Standard errors of the fit with the inertia free onto the same parameters of the fit with it
-    held (where both fitted the same parameters and lines)."""
-    for k, se in free.se.items():
-        if held.values.get(k) is not None and free.values.get(k) is not None and se is not None:
-            held.set(k, held.values[k], max(se, held.se.get(k) or 0.0))
-    if len(free.harmonics) == len(held.harmonics):
-        for hf, hh in zip(free.harmonics, held.harmonics):
-            for key, se in hf.se.items():
-                if se is not None and np.isfinite(se):
-                    hh.se[key] = max(se, hh.se.get(key) or 0.0)
 
 
 #: the settings of :class:`JointFit`, in the order of its ``__init__``
