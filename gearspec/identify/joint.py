@@ -1,8 +1,7 @@
 """The joint fit: weighted nonlinear least squares of all parameters of a direction together, on
 the samples themselves (amplitudes fitted in the position domain, not through logs of noisy
-amplitudes), with standard errors cluster-robust over runs (:mod:`.covariance`; or a bootstrap over
-segments); as an
-estimator (:class:`JointFit`) and as a function (:func:`fit`).
+amplitudes), with standard errors cluster-robust over runs (:mod:`.covariance`; or a bootstrap
+over segments); as an estimator (:class:`JointFit`) and as a function (:func:`fit`).
 
 How it works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
 coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the level, and ``A_k g_k(|v_s|)``
