@@ -29,7 +29,7 @@ from typing import Iterable
 from .errors import InputError, warn
 
 __all__ = ["Stage", "Line", "GearTrain", "KINDS", "presets", "load_gear", "integer_hint", "integer_order",
-           "IntegerOrder", "alias_frequency", "alias_of", "HINT_COINCIDENCE"]
+           "IntegerOrder", "alias_frequency", "alias_of", "HINT_COINCIDENCE", "MAX_SLOW_SHAFT_MULTIPLE"]
 
 KINDS = ("planetary", "worm", "spur", "helical", "harmonic", "cycloidal", "ballscrew", "belt", "other")
 _CARRIER_KINDS = ("planetary", "harmonic", "cycloidal")
@@ -425,6 +425,13 @@ def load_gear(spec: "str | Path | GearTrain | dict | None") -> GearTrain | None:
 #: its integer multiples, for an integer-order hint (or an alias of one) to be given at all
 HINT_COINCIDENCE = 0.1
 
+#: the highest multiple of a shaft other than the fastest (the motor's) that a hint may name: a
+#: shaft's run-out, eccentricity and misalignment make its 1x and a few low harmonics; a tooth
+#: mesh makes a declared line (labelled as such, not hinted).  Only the motor shaft makes high
+#: integer orders of its own (pole pairs, slots, commutator segments: cogging, torque ripple), so
+#: "53x planetary output shaft" is no hint but a coincidence
+MAX_SLOW_SHAFT_MULTIPLE = 4
+
 
 @dataclass(frozen=True)
 class IntegerOrder:
@@ -448,8 +455,10 @@ def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_m
     Any multiple that ``tol`` tells from its neighbours is tried: an unrelated frequency lands
     within ``tol`` of a multiple of a shaft at ``f_s`` with probability ``2 tol / f_s``.  Shafts
     are tried fastest first while the summed chance stays at most ``coincidence`` (a union bound
-    on a false hint); a slow shaft thus needs a sharper frequency, which keeps hints such as "53x
-    planetary output shaft" out.
+    on a false hint); a slow shaft thus needs a sharper frequency.  And a multiple is named only
+    where a gear can plausibly make it: any of the fastest shaft (the motor: pole pairs, slots),
+    at most :data:`MAX_SLOW_SHAFT_MULTIPLE` of any other shaft (run-out and its low harmonics),
+    which keeps hints such as "53x planetary output shaft" out however sharp the frequency.
     """
     if gear is None or not (frequency > 0) or not (tol >= 0):
         return None
@@ -460,6 +469,8 @@ def integer_order(gear: GearTrain | None, frequency: float, tol: float, *, max_m
         if chance > coincidence:  # neighbouring multiples of this shaft (or slower) cannot be told apart reliably
             break
         m = round(frequency / ln.frequency)
+        if ln is not shafts[0] and m > MAX_SLOW_SHAFT_MULTIPLE:  # no high orders but the motor's
+            continue
         if m >= 2 and (max_multiple is None or m <= max_multiple) and abs(frequency - m * ln.frequency) <= tol:
             exact = m * ln.frequency
             return IntegerOrder(m, ln.label, exact, gear.order(exact))

@@ -37,6 +37,10 @@ def register(sub) -> None:
     _profile_option(s4)
     s4.add_argument("--top-speed-rpm", type=number(0, low_open=True), metavar="RPM",
                     help="with --profile: top motor speed, both directions (default 6500 rpm)")
+    s4.add_argument("--scatter", type=number(0, 0.5, high_open=True), default=0.0, metavar="FRACTION",
+                    help="repetition scatter: Coulomb, static and viscous friction and every line amplitude vary "
+                         "from run to run by this relative standard deviation, each on its own (e.g. 0.03; "
+                         "default 0); the truth JSON holds the run-mean model and every run's factors")
     s4.add_argument("--stick-slip", action="store_true",
                     help="instead, one creeping run at 1e-4 rad/s of the joint (the paper's Fig. 3), 30 s, "
                          "with the true velocity")
@@ -139,6 +143,9 @@ def _write(args, name: str, rec, truth, elapsed: float, extra=None) -> None:
     for e in truth.effects:
         f = "" if e["frequency"] is None else f" at {e['frequency']:.6g} cycles/rad"
         print(f"  effect: {e['kind']}{f}: {e['description']}")
+    if getattr(truth, "scatter", None):
+        print(f"  repetition scatter: {100 * truth.scatter['fraction']:.3g} % per run on "
+              f"{len(truth.scatter['parameters'])} parameters (truth: run-mean model and every run's factors)")
     for k, p in paths.items():
         print(f"{k}: {p}")
     print(f"read it with: gearspec spectrum {paths['recording']} --gear {paths['gear']}")
@@ -173,12 +180,13 @@ def run_silo4(args) -> int:
     effects, options = _effects(args), _options(args)
     t0 = time.perf_counter()
     if args.stick_slip:
-        rec, truth = stick_slip_run(duration=args.duration or 30.0, seed=args.seed, effects=effects)
+        rec, truth = stick_slip_run(duration=args.duration or 30.0, seed=args.seed, effects=effects,
+                                    scatter=args.scatter)
     else:
         extra = {} if args.profile == "plateaus" else {"profile": args.profile, "top_speed_rpm": args.top_speed_rpm,
                                                        "profile_options": options}
         rec, truth = silo4_twin(speeds, repetitions=args.repetitions, duration=args.duration, effects=effects,
-                                seed=args.seed, **extra)
+                                seed=args.seed, scatter=args.scatter, **extra)
     _write(args, args.name, rec, truth, time.perf_counter() - t0)
     return 0
 

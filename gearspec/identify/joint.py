@@ -1,7 +1,7 @@
 """The joint fit: weighted nonlinear least squares of all parameters of a direction together, on
 the samples themselves (amplitudes fitted in the position domain, not through logs of noisy
-amplitudes), with standard errors from the covariance (or a bootstrap over segments); as an
-estimator (:class:`JointFit`) and as a function (:func:`fit`).
+amplitudes), with standard errors cluster-robust over runs (:mod:`.covariance`; or a bootstrap
+over segments); as an estimator (:class:`JointFit`) and as a function (:func:`fit`).
 
 How it works.  Within a constant-speed segment ``s`` the model is *linear* in a few local
 coefficients ``beta_s = [level, a_1, c_1, ..., a_K, c_K]`` (the level, and ``A_k g_k(|v_s|)``
@@ -38,7 +38,8 @@ from ..terms.registry import basis as _basis
 from ..terms.shapes import amplitude_law, clamp_speed
 from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
 from .stats import speed_ranges
-from .validate import _safe_rmse, holdout
+from .covariance import SE_METHODS, _carry_se, _common_inertia, clusters_of, fit_covariance, jacobian
+from .validate import _safe_rmse, holdout, inverted_sign, negative_viscous
 
 __all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous", "inverted_sign"]
 
@@ -54,6 +55,8 @@ class _Problem:
     weights: np.ndarray        # (S,)
     Lt: np.ndarray             # (S, P, P): sqrt(w) diag(sqrt(lambda)) U^T
     ranges: np.ndarray         # (K, 2): speed range of each amplitude law (:func:`speed_ranges`)
+    se: str = "independent"    # covariance method (:func:`~.covariance.fit_covariance`)
+    segments: object = None    # the FitData's segment table (run of each segment), for the clusters
 
     @property
     def K(self):
@@ -103,7 +106,11 @@ class _Problem:
         return np.einsum("spq,sq->sp", self.Lt, beta - self.stats.beta_hat).ravel()
 
 
-def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str) -> _Problem:
+def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights: str, *, se: str = "independent",
+                  segments=None) -> _Problem:
+    """The problem of one direction; ``se``: the covariance method (``bootstrap``: the covariance's
+    errors are replaced later; its base covariance is cluster-robust too), ``segments``: the data's
+    segment table (the run of each segment: the clusters)."""
     S = len(stats.g)
     if weights == "segment" and np.all(np.isfinite(stats.sigma2)) and np.all(stats.sigma2 > 0):
         w = 1.0 / stats.sigma2
@@ -118,7 +125,8 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
         Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam, 0.0, None))[:, None] * U.T)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
     decay_free = np.array([a != "const" for a in amp_law], bool)
-    return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats))
+    method = "independent" if se == "independent" else "covariance"
+    return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats), method, segments)
 
 
 def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
@@ -199,31 +207,17 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
 
     z = np.concatenate([lin, x_opt])
     r = full(z)
-    J = _jacobian(full, z)
+    J = jacobian(full, z)
     p = len(z)
     # residual variance: the weighted rss of the fit plus the segments' own (pure error)
     s2 = (float(r @ r) + float(np.sum(prob.weights * st.rss_hat))) / max(int(np.sum(st.n)) - p, 1)
-    try:
-        cov = np.linalg.inv(J.T @ J) * s2
-    except np.linalg.LinAlgError:
-        cov = np.full((p, p), np.nan)
+    clusters, what = clusters_of(st.segment, prob.segments, p) if prob.se == "covariance" else (None, "")
+    cov, se_method = fit_covariance(J, r, s2, method=prob.se, segment_of_row=np.repeat(np.arange(len(st.g)),
+                                    st.g.shape[1]), cluster_of_segment=clusters, fallback=what)
     se = np.sqrt(np.clip(np.diag(cov), 0, None)) if np.all(np.isfinite(cov)) else np.full(p, np.nan)
     on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
     return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "status": status,
-            "sscale": sscale, "free": free}
-
-
-def _jacobian(fun, z):
-    f0 = fun(z)
-    J = np.empty((len(f0), len(z)))
-    for j in range(len(z)):
-        h = 1e-6 * max(abs(z[j]), 1e-8)
-        zp = z.copy()
-        zp[j] += h
-        zm = z.copy()
-        zm[j] -= h
-        J[:, j] = (fun(zp) - fun(zm)) / (2 * h)
-    return J
+            "sscale": sscale, "free": free, "se_method": se_method}
 
 
 def _direction_params(prob: _Problem, sol: dict) -> Direction:
@@ -233,6 +227,7 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
     nb = len(basis.lin)
     L = len(lin)
     P = Direction({})
+    P.se_method = sol.get("se_method") or None
     for j, name in enumerate(basis.lin):
         P.set(name, float(lin[j]), float(se[j]))
     # nonlinear base parameters are fitted as logs: delta method
@@ -256,67 +251,6 @@ def _direction_params(prob: _Problem, sol: dict) -> Direction:
                                     segments=int(prob.stats.active[:, k].sum()),
                                     se={"amplitude": a_se, "phase": p_se, "decay": decay_se}))
     return P
-
-
-def _flag(model: FrictionModel, key: str, msg: str) -> None:
-    """One sentence into ``model.meta["flags"][key]`` and ``model.notes`` (``warning: ...``)."""
-    model.meta.setdefault("flags", {})[key] = msg
-    if "warning: " + msg not in model.notes:
-        model.notes.append("warning: " + msg)
-
-
-def inverted_sign(model: FrictionModel, data: FitData) -> list[str]:
-    """Flag friction opposite to the velocity in most segments: a segment whose mean friction
-    magnitude (``level`` of :meth:`FitData.plateaus`) lies more than two standard errors below 0
-    counts, and more than half of the segments counting is no friction a drive can have (it
-    dissipates: the torque it needs has the sign of the motion) but a torque channel logged with
-    the opposite sign convention.  One sentence with the fix, flagged as :func:`negative_viscous`
-    does (``"sign"``); returns it in a list (empty when the data look right)."""
-    pl = data.plateaus()
-    if pl.empty:
-        return []
-    wrong = int(np.sum(pl["level"] + 2 * pl["level_se"].fillna(np.inf) < 0))
-    if not wrong > len(pl) / 2:
-        return []
-    tu = "Nm" if data.unit == "rad" else "N"
-    msg = (f"friction opposes the velocity in {wrong} of {len(pl)} segments (median level "
-           f"{float(np.median(pl['level'])):.3g} {tu}): the torque's sign is likely inverted relative to the "
-           f"velocity; rerun with --scale torque=-1")
-    _flag(model, "sign", msg)
-    return [msg]
-
-
-def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
-    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard errors
-    below 0) of each direction: friction that falls with speed over the whole measured range is
-    rarely physical, more often an inertia, a channel lag or aliasing the model does not hold, or
-    plateau speeds too close together to tell viscous from Stribeck friction.  Each flag is one
-    sentence, added to ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]``
-    (``"direction.parameter" -> sentence``); returns the sentences."""
-    out = []
-    model.meta.setdefault("flags", {})
-    su = "rad/s" if model.unit == "rad" else "m/s"
-    for dname, p in model.directions.items():
-        for k in ("viscous", "b"):
-            val = p.values.get(k)
-            if k not in model.law_spec.params or val is None or not val < 0:
-                continue
-            se = p.se.get(k)
-            # a value within two standard errors of 0 is no finding (and none without an error)
-            if se is None or not np.isfinite(se) or not val < -2 * se:
-                continue
-            sig = f" ({abs(val) / se:.1f} standard errors below 0)" if se > 0 else ""
-            rng = ""
-            if data is not None:
-                sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
-                if len(sp):
-                    rng = f" over {float(np.min(sp)):.3g}..{float(np.max(sp)):.3g} {su}"
-            msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
-                   f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
-                   f"tell viscous from Stribeck friction")
-            _flag(model, f"{dname}.{k}", msg)
-            out.append(msg)
-    return out
 
 
 def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *, weights, min_cycles, init, se,
@@ -368,7 +302,7 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
         raise ConvergenceError(f"law {law} has {need} parameters per direction but the {dname} direction has "
                                f"plateaus at only {distinct} speed(s); fit a simpler law "
                                f"(e.g. coulomb_viscous) or record more speeds")
-    prob = _make_problem(stats, law, specs, weights)
+    prob = _make_problem(stats, law, specs, weights, se=se, segments=sub.segments)
     try:
         sol = _fit_direction(prob, init=init)
     except (np.linalg.LinAlgError, ValueError) as exc:
@@ -400,7 +334,7 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
                    f"{V['v_s']:.3g} {sub.unit}/s, relative standard error {rel:.2g}, hump {top} - {base} = "
                    f"{hump:.3g} +- {P.se[top]:.2g}); record slower plateaus")
             reduced = LAWS[law].degraded_for("v_s")
-            prob = _make_problem(stats, reduced.name, specs, weights)
+            prob = _make_problem(stats, reduced.name, specs, weights, se=se, segments=sub.segments)
             sol = _fit_direction(prob, init=init)
             P = _direction_params(prob, sol)
             for k in reduced.dropped:
@@ -477,8 +411,12 @@ class JointFit:
       ``harmonics`` only if given.
     - ``weights`` ("segment" or "uniform"): each segment weighted by the inverse of its own residual
       variance, or all samples alike.
-    - ``se`` ("covariance" or "bootstrap"): standard errors from the covariance of the weighted fit,
-      or from ``bootstrap`` refits on segments resampled with replacement (``seed`` seeds them).
+    - ``se`` ("covariance", "independent" or "bootstrap"): standard errors from the cluster-robust
+      covariance of the weighted fit over runs (CR2; over segments when the runs are too few, the
+      covariance of independent samples when both are: :mod:`.covariance`, the method in each
+      direction's ``se_method``), from the covariance of independent samples (``independent``:
+      gearspec 0.5's ``covariance``, too small when runs scatter), or from ``bootstrap`` refits on
+      segments resampled with replacement (``seed`` seeds them).
     - ``min_cycles``: a segment counts towards a harmonic where it covers at least this fraction of
       a cycle; the harmonic is identified when those segments cover one cycle together (a line too
       slow for any one segment, e.g. one joint turn, is fitted from many); every segment's level is
@@ -537,8 +475,8 @@ class JointFit:
         law = self.law
         if law not in LAWS:
             raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
-        if self.se not in ("covariance", "bootstrap"):
-            raise InputError(f"se must be 'covariance' or 'bootstrap', got '{self.se}'")
+        if self.se not in SE_METHODS:
+            raise InputError(f"se must be one of {', '.join(SE_METHODS)}, got '{self.se}'")
         if LAWS[law].needs_load and data.load is None:
             raise InputError(f"law {law} needs the output load torque: the data has no 'load' channel")
         if law == "silo4" and self.harmonics is None:
@@ -618,44 +556,6 @@ class JointFit:
             if J is not None:
                 inertias[dname] = J
         return directions, not_identified, notes, inertias
-
-
-def _common_inertia(inertias: dict, unit: str) -> tuple[float, float, str]:
-    """One inertia from the two directions' estimates ``{direction: (J, se)}``: their mean weighted
-    by the inverse variances, its standard error, and a note (that says when they disagree by more
-    than three standard errors of their difference: a torque or inertia that is not the same both
-    ways, e.g. gravity or a direction-dependent efficiency)."""
-    ok = {d: (J, se) for d, (J, se) in inertias.items() if np.isfinite(J) and np.isfinite(se) and se > 0}
-    if not ok:
-        raise ConvergenceError("the inertia could not be identified from the free motion (no finite estimate); "
-                               "give it in the gear spec (inertia = ...) or record faster changes of speed")
-    w = {d: 1.0 / se ** 2 for d, (_, se) in ok.items()}
-    J = sum(w[d] * ok[d][0] for d in ok) / sum(w.values())
-    J_se = math.sqrt(1.0 / sum(w.values()))
-    unit_J = "kg m^2" if unit == "rad" else "kg"
-    each = ", ".join(f"{d} {ok[d][0]:.4g} +- {ok[d][1]:.2g}" for d in ok)
-    note = (f"inertia identified with the friction from the free motion: {J:.4g} +- {J_se:.2g} {unit_J} "
-            f"({each}); the friction refitted with it held")
-    if len(ok) == 2:
-        (Ja, sa), (Jb, sb) = ok.values()
-        z = abs(Ja - Jb) / math.hypot(sa, sb)
-        if z > 3:
-            note += (f"; warning: the two directions disagree by {z:.1f} standard errors (a torque that is not the "
-                     f"same both ways, such as gravity, or a lag between torque and position?)")
-    return J, J_se, note
-
-
-def _carry_se(free: Direction, held: Direction) -> None:
-    """Standard errors of the fit with the inertia free onto the same parameters of the fit with it
-    held (where both fitted the same parameters and lines)."""
-    for k, se in free.se.items():
-        if held.values.get(k) is not None and free.values.get(k) is not None and se is not None:
-            held.set(k, held.values[k], max(se, held.se.get(k) or 0.0))
-    if len(free.harmonics) == len(held.harmonics):
-        for hf, hh in zip(free.harmonics, held.harmonics):
-            for key, se in hf.se.items():
-                if se is not None and np.isfinite(se):
-                    hh.se[key] = max(se, hh.se.get(key) or 0.0)
 
 
 #: the settings of :class:`JointFit`, in the order of its ``__init__``

@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
 
-__all__ = ["holdout", "holdout_rmse", "segment_errors"]
+__all__ = ["holdout", "holdout_rmse", "segment_errors", "inverted_sign", "negative_viscous"]
 
 
 def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
@@ -95,3 +95,65 @@ def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
                      # in percent of the mean friction; undefined (NaN) where that mean is 0
                      "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")})
     return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------------- checks of a fitted model
+def _flag(model: FrictionModel, key: str, msg: str) -> None:
+    """One sentence into ``model.meta["flags"][key]`` and ``model.notes`` (``warning: ...``)."""
+    model.meta.setdefault("flags", {})[key] = msg
+    if "warning: " + msg not in model.notes:
+        model.notes.append("warning: " + msg)
+
+
+def inverted_sign(model: FrictionModel, data: FitData) -> list[str]:
+    """Flag friction opposite to the velocity in most segments: a segment whose mean friction
+    magnitude (``level`` of :meth:`FitData.plateaus`) lies more than two standard errors below 0
+    counts, and more than half of the segments counting is no friction a drive can have (it
+    dissipates: the torque it needs has the sign of the motion) but a torque channel logged with
+    the opposite sign convention.  One sentence with the fix, flagged as :func:`negative_viscous`
+    does (``"sign"``); returns it in a list (empty when the data look right)."""
+    pl = data.plateaus()
+    if pl.empty:
+        return []
+    wrong = int(np.sum(pl["level"] + 2 * pl["level_se"].fillna(np.inf) < 0))
+    if not wrong > len(pl) / 2:
+        return []
+    tu = "Nm" if data.unit == "rad" else "N"
+    msg = (f"friction opposes the velocity in {wrong} of {len(pl)} segments (median level "
+           f"{float(np.median(pl['level'])):.3g} {tu}): the torque's sign is likely inverted relative to the "
+           f"velocity; rerun with --scale torque=-1")
+    _flag(model, "sign", msg)
+    return [msg]
+
+
+def negative_viscous(model: FrictionModel, data: FitData | None = None) -> list[str]:
+    """Flag a negative viscous coefficient (``viscous``, Lola's ``b``; more than two standard errors
+    below 0) of each direction: friction that falls with speed over the whole measured range is
+    rarely physical, more often an inertia, a channel lag or aliasing the model does not hold, or
+    plateau speeds too close together to tell viscous from Stribeck friction.  Each flag is one
+    sentence, added to ``model.notes`` (``warning: ...``) and to ``model.meta["flags"]``
+    (``"direction.parameter" -> sentence``); returns the sentences."""
+    out = []
+    model.meta.setdefault("flags", {})
+    su = "rad/s" if model.unit == "rad" else "m/s"
+    for dname, p in model.directions.items():
+        for k in ("viscous", "b"):
+            val = p.values.get(k)
+            if k not in model.law_spec.params or val is None or not val < 0:
+                continue
+            se = p.se.get(k)
+            # a value within two standard errors of 0 is no finding (and none without an error)
+            if se is None or not np.isfinite(se) or not val < -2 * se:
+                continue
+            sig = f" ({abs(val) / se:.1f} standard errors below 0)" if se > 0 else ""
+            rng = ""
+            if data is not None:
+                sp = np.abs(data.v[data.direction == (1 if dname == "positive" else -1)])
+                if len(sp):
+                    rng = f" over {float(np.min(sp)):.3g}..{float(np.max(sp)):.3g} {su}"
+            msg = (f"{model.name}: the {dname} viscous coefficient ({k}) {val:.3g}{sig} is negative{rng}: likely an "
+                   f"inertia, a channel lag or aliasing the model does not hold, or a speed range too narrow to "
+                   f"tell viscous from Stribeck friction")
+            _flag(model, f"{dname}.{k}", msg)
+            out.append(msg)
+    return out

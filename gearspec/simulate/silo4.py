@@ -61,6 +61,7 @@ from ..terms import TERMS
 from .effects import Effect, apply_effects, effect_channels, effects_truth
 from .friction import _LoopFriction
 from .profiles import Reference, reference, tracking
+from .scatter import run_scatter
 
 __all__ = ["PAPER_TABLE2", "table2_model", "twin_gear", "silo4_twin", "stick_slip_run", "TwinTruth",
            "DEFAULT_SPEEDS_RPM", "RATIO", "PLANT", "FIG3_JOINT_SPEED", "default_hold", "PROFILE_DURATION"]
@@ -168,7 +169,8 @@ class TwinTruth:
     (effects applied), the ``gear`` spec to read the recording with (the twin's torque constant and
     inertia), the ground truth of the injected ``effects`` (:func:`~.effects.effects_truth`), one row
     per run (``runs``, see the twin's docstring), every setting of the bench (plant, controller,
-    sensors, seed) and the operating ``points`` (or None)."""
+    sensors, seed), the operating ``points`` (or None) and the repetition ``scatter`` (None: none;
+    else :meth:`~.scatter.RunScatter.truth`: its fraction, factors and the run-mean model)."""
 
     twin: str
     model: FrictionModel
@@ -177,6 +179,7 @@ class TwinTruth:
     runs: pd.DataFrame
     settings: dict
     points: pd.DataFrame | None = None
+    scatter: dict | None = None
 
     def to_dict(self) -> dict:
         def table(df):
@@ -184,7 +187,7 @@ class TwinTruth:
 
         return {"twin": self.twin, "model": self.model.to_dict(), "gear": self.gear.to_dict(),
                 "effects": self.effects, "settings": plain(self.settings), "runs": table(self.runs),
-                "points": table(self.points)}
+                "points": table(self.points), **({} if self.scatter is None else {"scatter": self.scatter})}
 
     def to_json(self, path) -> Path:
         path = Path(path)
@@ -243,7 +246,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                sample_interval: float | None = None, current_noise: float | None = None,
                repeatability: float | None = None, plant: dict | None = None, profile: str = "plateaus",
                profile_options: dict | None = None, top_speed_rpm: float | None = None,
-               feedforward: Callable | None = None) -> tuple[Recording, TwinTruth]:
+               feedforward: Callable | None = None, scatter: float = 0.0) -> tuple[Recording, TwinTruth]:
     """Simulate the SILO4 joint-3 bench: one closed-loop run per (speed, repetition) or of a ``profile``.
 
     Parameters
@@ -286,6 +289,12 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
         A friction compensation: at every control step, the torque (Nm at the motor) it returns for
         the encoder position (rad) and the reference velocity (rad/s), arrays over the runs, is added
         to the PID's command (times ``R / k_M`` in volts, before the saturation).  None: the loop as is.
+    scatter : float
+        Repetition scatter (relative sd, e.g. 0.03): every linear parameter of the base law (Coulomb,
+        static / Stribeck, viscous) and every line amplitude of each direction varies from run to run
+        by its own factor ``1 + scatter N(0, 1)`` (:func:`~.scatter.run_scatter`), on top of the
+        common ``repeatability`` factor.  ``truth.scatter`` then holds the factors and the run-mean
+        model (what a fit of all runs estimates).  Default 0: none (the random stream unchanged).
 
     Returns
     -------
@@ -316,6 +325,7 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
     base = truth if truth is not None else table2_model()
     model = apply_effects(base, effects)
     lf = _LoopFriction(model)
+    lf.scatter = run_scatter(model, scatter, runs.n, rng, np.sign(runs.w_cmd))
     bench = _Bench(P, lf.extra_inertia, runs.dt)
     channels = _Channels(effects, load, runs.t_start, runs.rep)
     ch0, recorded = channels.at(np.zeros(runs.n), np.arange(runs.n))
@@ -340,7 +350,9 @@ def silo4_twin(speeds_rpm: Sequence[float] | None = None, repetitions: int = 10,
                 "theta0": theta0 if not isinstance(theta0, str) else "auto",
                 "load": None if load is None or callable(load) else plain(np.asarray(load).tolist()),
                 "profile": {"kind": "plateaus"} if prof is None else prof.record()}
-    truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings)
+    settings["scatter"] = float(scatter)
+    truth_info = TwinTruth("silo4", model, gear, effects_truth(effects, gear), pd.DataFrame(rows), settings,
+                           scatter=None if lf.scatter is None else lf.scatter.truth(model))
     return rec, truth_info
 
 
@@ -540,7 +552,10 @@ def _closed_loop(runs: SimpleNamespace, bench: _Bench, lf: _LoopFriction, channe
                 drive = drive - lf.external(th, v, **kw)
             moving = v != 0
             v_eval = np.where(moving, v, np.sign(drive) * 1e-12)
-            F = SC[a] * lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
+            F = lf.friction(th, v_eval, turn_theta[a], last_sign[a], **kw)
+            if lf.scatter is not None:  # each run's own levels and amplitudes
+                F = F + lf.scatter.extra(th, v_eval, run_idx[a], **{kk: vv for kk, vv in kw.items() if kk != "run"})
+            F = SC[a] * F
             # record the state at the start of the step (filter output up to the previous step)
             if k % n_sub == 0 and k // n_sub < shape[0]:  # (a stop on a sample edge rounded up)
                 i = k // n_sub

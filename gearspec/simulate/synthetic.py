@@ -16,6 +16,7 @@ from ..errors import InputError
 from ..model import FrictionModel
 from ..recording import Recording
 from .profiles import position, velocity_profile
+from .scatter import run_scatter
 
 __all__ = ["Ripple", "plateau_recording", "model_recording", "quasi_static_recording", "excitation_recording",
            "motion_recording"]
@@ -180,7 +181,8 @@ def _per_plateau(value, idx, t, name, n_plateaus):
 
 def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_ripple=0.0,
                     speed_ripple_frequency=1.0, noise=0.0, load=None, temperature=None, inertia=0.0,
-                    one_run_per_plateau=True, quantum=0.0, gear=None, unit="rad", theta0=0.0, seed=None):
+                    one_run_per_plateau=True, quantum=0.0, gear=None, unit="rad", theta0=0.0, seed=None,
+                    scatter=0.0, noise_correlation=0.0):
     """A recording of plateaus whose friction is ``model`` (a FrictionModel, evaluated at every
     sample), with known truth.
 
@@ -189,10 +191,15 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
     sd of white torque noise (Nm); ``load`` (Nm), ``temperature`` (degC): a number, one per plateau
     or a callable of the time of each sample (restarting at 0 in each run when
     ``one_run_per_plateau``), recorded and passed to the model; ``inertia``: rotor inertia J, the
-    drive torque is ``friction + J thetadd``.
+    drive torque is ``friction + J thetadd``; ``scatter``: repetition scatter (relative sd): the
+    base law's linear parameters and the line amplitudes of each plateau (run) have their own factors
+    ``1 + scatter N(0, 1)`` (:func:`~.scatter.run_scatter`); ``noise_correlation``: the noise is
+    AR(1) with this coefficient between consecutive samples (0: white; its sd stays ``noise``).
 
     Returns the recording and, per plateau, ``direction``, ``speed``, ``run``, ``t0``, ``t1`` and
-    ``level`` (the model's position-averaged friction magnitude at the plateau speed).
+    ``level`` (the model's position-averaged friction magnitude at the plateau speed; with scatter,
+    also ``factors``: the plateau's factor of each parameter of ``scatter["parameters"]``).  With
+    ``scatter`` > 0 the truth is ``(plateaus, scatter)``: :meth:`~.scatter.RunScatter.truth`.
     """
     rng = np.random.default_rng(seed)
     speeds = list(speeds)
@@ -202,8 +209,11 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
     temp = _per_plateau(temperature, idx, t, "temperature", len(speeds))
     acc = np.gradient(v, 1.0 / fs)
     torque = model.evaluate(theta, v, load=ld, temperature=temp, t=t, acc=acc, run=run) + inertia * acc
+    scat = run_scatter(model, scatter, len(speeds), rng, np.sign(speeds))
+    if scat is not None:
+        torque = torque + scat.extra(theta, v, idx, load=ld, temperature=temp, t=t)
     if noise:
-        torque = torque + rng.normal(0.0, noise, len(t))
+        torque = torque + _ar1(rng, noise, len(t), noise_correlation)
     truth = []
     for j, sp in enumerate(speeds):
         held = (idx == j) & hold
@@ -211,10 +221,26 @@ def model_recording(model, speeds, *, duration=2.0, fs=1000.0, ramp=0.2, speed_r
         lvl = model.mean_level(abs(sp), d, load=None if ld is None else ld[held][:1])
         truth.append({"direction": d, "speed": abs(sp), "run": int(run[held][0]), "t0": float(t[held][0]),
                       "t1": float(t[held][-1]), "level": float(lvl[0])})
+        if scat is not None:
+            truth[-1]["factors"] = scat.factors[j].tolist()
     meas_theta = np.round(theta / quantum) * quantum if quantum else theta
     rec = Recording.from_arrays(t=t, theta=meas_theta, torque=torque, run=run, load=ld, temperature=temp, gear=gear,
                                 unit=unit, source="synthetic")
-    return rec, truth
+    return rec, (truth if scat is None else (truth, scat.truth(model)))
+
+
+def _ar1(rng: np.random.Generator, sd: float, n: int, rho: float) -> np.ndarray:
+    """``n`` samples of AR(1) noise with marginal standard deviation ``sd`` and lag-1 correlation
+    ``rho`` (0: white)."""
+    if not -1.0 < float(rho) < 1.0:
+        raise InputError(f"noise_correlation must lie between -1 and 1, got {rho}")
+    e = rng.normal(0.0, sd, n)
+    if rho == 0.0:
+        return e
+    from scipy.signal import lfilter
+
+    e[1:] *= math.sqrt(1.0 - rho * rho)
+    return lfilter([1.0], [1.0, -rho], e)
 
 
 # ---------------------------------------------------------------------- quasi-static maps
