@@ -45,8 +45,9 @@ def register(sub) -> None:
     g.add_argument("--holdout", default="segment", choices=("segment", "run"),
                    help="held-out error leaves out whole segments (default) or runs")
     g.add_argument("--folds", type=number(2, 100, integer=True), default=5, help="cross-validation folds (default 5)")
-    g.add_argument("--se", default="covariance", choices=("covariance", "bootstrap"),
-                   help="standard errors from the fit's covariance (default) or a bootstrap over segments")
+    g.add_argument("--se", default="covariance", choices=("covariance", "bootstrap", "independent"),
+                   help="standard errors: cluster-robust over runs (default), a bootstrap over segments, or "
+                        "'independent' (the covariance of independent samples, too small on real benches)")
     add_motion_option(g)
     g.add_argument("--no-published", action="store_true", help="skip the SILO4 published procedure")
     g.add_argument("--load-ratio", type=POSITIVE, metavar="N",
