@@ -119,7 +119,10 @@ def _load_kinova(ds: DataSet, paths: dict[str, Path], part) -> Recording:
     rec.meta.update(dataset=ds.name, commanded_velocity=commanded_velocity(rec))
     rec.notes.append("Kinova Gen3 joint 7: one run per commanded speed ("
                      + ", ".join(f"run {r}: {v:g} rad/s" for r, v in rec.meta["commanded_velocity"].items())
-                     + "); torque is the joint torque sensor, positive direction only")
+                     + "); torque is the joint torque sensor, positive direction only. The sensor sits after the gear: "
+                     "it reads the torque reaching the link (-0.14 to -0.26 Nm on the plateaus), not the gear's "
+                     "friction, which is torque_command - torque (= -friction_estimate, the source project's own "
+                     "estimate; 1.6 to 2.8 Nm)")
     return rec
 
 

@@ -121,7 +121,8 @@ def inverted_sign(model: FrictionModel, data: FitData) -> list[str]:
     tu = "Nm" if data.unit == "rad" else "N"
     msg = (f"friction opposes the velocity in {wrong} of {len(pl)} segments (median level "
            f"{float(np.median(pl['level'])):.3g} {tu}): the torque's sign is likely inverted relative to the "
-           f"velocity; rerun with --scale torque=-1")
+           f"velocity; rerun with --scale torque=-1 (or, if the column is an output-side torque sensor, it holds "
+           f"the load the gear drives, not the gear's friction: use the drive's torque minus it)")
     _flag(model, "sign", msg)
     return [msg]
 

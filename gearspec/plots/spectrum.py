@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -196,7 +197,7 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
                    .groupby("g").median().sort_values("v"))
             if len(med) < len(sub):  # repetitions: their median per speed, joined
                 ax.plot(med["v"], med["y"], "-", color=color, lw=1.0, label=f"{name}: median per speed")
-        ax.set_title(lab if len(lab) < 45 else lab[:42] + "...", fontsize=9)
+        ax.set_title(textwrap.fill(lab, 45), fontsize=9)
         ax.set_xlabel(f"speed ({unit}/s)")
         ax.set_ylabel("amplitude (% of mean friction)" if relative else f"amplitude ({tu})")
         if (df["speed"] > 0).all() and len(df) and df["speed"].max() / max(df["speed"].min(), 1e-300) > 20:
@@ -246,7 +247,7 @@ def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, s
             c = colors(k % 10)
             ax.plot(sub["speed"], sub["y"], ".", color=c, ms=3, alpha=0.5, rasterized=len(sub) > 2000)
             med = sub.groupby("group")[["speed", "y"]].median().sort_values("speed")
-            ax.plot(med["speed"], med["y"], "-o", color=c, ms=3, lw=1.2, label=lab.split(" = ")[0][:40])
+            ax.plot(med["speed"], med["y"], "-o", color=c, ms=3, lw=1.2, label=textwrap.fill(lab, 34))
         fs = found[found["direction"] == d]
         if len(fs):
             ax.plot(fs["speed"], fs["y"], "x", color="#d62728", ms=4, mew=0.8, alpha=0.7,
