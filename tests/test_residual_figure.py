@@ -40,13 +40,17 @@ def test_residual_spectra_extend_past_and_mark_every_candidate(tmp_path, monkeyp
         assert lo < 0.4775 and hi > 1.114 * 1.2                   # past every candidate line
         xs = sorted(round(float(ln.get_xdata()[0]), 4) for ln in ax.lines if len(set(ln.get_xdata())) == 1)
         assert xs == [0.4775, 1.114]                               # a marker for each candidate
-        texts = " | ".join(t.get_text() for t in ax.texts)
-        assert "7x motor shaft" in texts and "3x motor shaft" in texts
+        tags = sorted(t.get_text().split(" ")[0] for t in ax.texts)
+        assert tags == ["1", "2"]                                  # a numbered tag on each line
+    # the key below the axes names each tag: 1 = 0.4775 (3x motor shaft), 2 = 1.114 (7x motor shaft)
+    key = " | ".join(t.get_text() for t in fig.texts)
+    assert "1: 0.4775 cycles/rad, 3x motor shaft (rejected)" in key
+    assert "2: 1.114 cycles/rad, 7x motor shaft (accepted)" in key
     # the positive panel draws the slow pool that reaches the accepted line; the negative has none
     # and says the line is beyond its spectra
     assert any("31.4-31.4" in (ln.get_label() or "") for ln in axes[0].lines)
     assert "beyond the spectra" in " ".join(t.get_text() for t in axes[1].texts)
-    assert "beyond the spectra" not in " ".join(t.get_text() for t in axes[0].texts if "1.114" in t.get_text())
+    assert "beyond the spectra" not in " ".join(t.get_text() for t in axes[0].texts if t.get_text().startswith("2"))
 
 
 def test_fit_residuals_draw_repetitions_as_markers_and_join_only_medians(tmp_path, monkeypatch):

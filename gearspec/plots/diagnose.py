@@ -5,6 +5,7 @@ the held-out error per segment before and after."""
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +31,13 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
                         and s.frequency[-1] > 1.05 * m.frequency[-1]), key=lambda x: -x.frequency[-1])[:2]
              for d, m in per_dir.items()}
     rows = [d for d in (1, -1) if d in per_dir]
-    marks = [e for e in effects if getattr(e, "frequency", None) is not None and np.isfinite(e.frequency)
-             and e.frequency > 0]
-    fig, axes = plt.subplots(max(len(rows), 1), 1, figsize=(11, 3.6 * max(len(rows), 1)), squeeze=False)
+    marks = sorted((e for e in effects if getattr(e, "frequency", None) is not None and np.isfinite(e.frequency)
+                    and e.frequency > 0), key=lambda e: e.frequency)
+    # each candidate line is a numbered tag in the axes; the key below the axes names it (long
+    # names drawn beside the lines overlapped each other and ran below the axes)
+    key_rows = math.ceil(len(marks) / 2)
+    height = 3.6 * max(len(rows), 1) + 0.13 * key_rows + 0.1
+    fig, axes = plt.subplots(max(len(rows), 1), 1, figsize=(11, height), squeeze=False)
     for ax, d in zip(axes[:, 0], rows):
         s = per_dir[d]
         color = POS if s.direction > 0 else NEG
@@ -46,16 +51,16 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
         ax.set_xlim(min([x.frequency[0] for x in drawn] + [e.frequency / 1.5 for e in marks]),
                     max([x.frequency[-1] for x in drawn] + [e.frequency * 1.5 for e in marks]))
         ax.set_xscale("log")
-        # markers, labels staggered in height (axes fraction) so that neighbours do not overlap
-        for k, e in enumerate(sorted(marks, key=lambda e: e.frequency)):
-            c = "tab:green" if e.accepted else "0.55"
+        # numbered tags, staggered in height (axes fraction) so that neighbours do not overlap
+        for k, e in enumerate(marks):
+            c = "tab:green" if e.accepted else "0.45"
             beyond = not any(x.frequency[0] <= e.frequency <= x.frequency[-1] for x in drawn)
             ax.axvline(e.frequency, color=c, lw=1.2 if e.accepted else 0.9, ls="--" if beyond else "-",
                        alpha=0.9, zorder=0)
-            lab = e.label or getattr(e, "hint", None) or "unknown order"
-            note = " (beyond the spectra)" if beyond else ""
-            ax.annotate(f"{e.frequency:.5g} {lab}{note}", (e.frequency, 0.98 - 0.3 * (k % 3)),
-                        xycoords=("data", "axes fraction"), fontsize=7, color=c, rotation=90, va="top", ha="right")
+            ax.annotate(f"{k + 1}" + (" (beyond the spectra)" if beyond else ""), (e.frequency, 0.97 - 0.06 * (k % 3)),
+                        xycoords=("data", "axes fraction"),
+                        fontsize=7, color=c, va="top", ha="center", fontweight="bold" if e.accepted else "normal",
+                        bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
         ax.set_ylabel(f"amplitude ({torque_unit})")
         ax.set_title(s.label, fontsize=9)
         ax.grid(alpha=0.3, which="both")
@@ -64,8 +69,17 @@ def plot_spectra(spectra: list, effects: list, path, *, unit: str = "rad", torqu
         axes[0, 0].text(0.5, 0.5, "no residual spectrum (no positions, or segments too short)", ha="center",
                         transform=axes[0, 0].transAxes)
     axes[-1, 0].set_xlabel(f"frequency (cycles/{unit})")
+    bottom = 0.0
+    if marks and rows:
+        entries = [f"{k + 1}: {e.frequency:.5g} cycles/{unit}, {e.label or getattr(e, 'hint', None) or 'unknown order'}"
+                   f" ({'accepted' if e.accepted else 'rejected'})" for k, e in enumerate(marks)]
+        entries = [textwrap.shorten(x, 95) for x in entries]
+        half = key_rows
+        for col, chunk in enumerate((entries[:half], entries[half:])):
+            fig.text(0.02 + 0.5 * col, 0.01, "\n".join(chunk), fontsize=7, va="bottom", ha="left", family="monospace")
+        bottom = (0.1 + 0.13 * key_rows) / height
     fig.suptitle(title + " -- candidate lines: green accepted, grey rejected", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     return save(fig, path)
 
 
@@ -204,11 +218,15 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
 
 def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", unit: str = "rad") -> Path:
     """Held-out rmse of every group before and after (and in-sample), against speed per direction."""
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
-    for ax, (direction, name, color, _) in zip(axes, DIRS):
+    # one panel per direction that has groups (an empty panel for a direction never driven says
+    # nothing the title cannot)
+    present = [x for x in DIRS if (table["direction"] == x[0]).any()] or list(DIRS[:1])
+    fig, axes = plt.subplots(1, len(present), figsize=(6 * len(present), 4), sharey=True, squeeze=False)
+    axes = axes[0]
+    for ax, (direction, name, color, _) in zip(axes, present):
         t = table[table["direction"] == direction].sort_values("speed")
         if t.empty:
-            ax.text(0.5, 0.5, f"no {name} segment", ha="center", transform=ax.transAxes)
+            ax.text(0.5, 0.5, "no held-out group", ha="center", transform=ax.transAxes)
             ax.set_title(f"{name} direction")
             continue
         ax.plot(t["speed"], t["rmse_holdout_before"], "o--", color="0.5", mfc="none", label="held-out, before")
@@ -220,7 +238,8 @@ def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", u
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     axes[0].set_ylabel(f"rmse ({torque_unit})")
-    fig.suptitle("Error per held-out group, before and after the loop", fontsize=10)
+    only = "" if len(present) == 2 else f" ({present[0][1]} direction only: no group in the other)"
+    fig.suptitle("Error per held-out group, before and after the loop" + only, fontsize=10)
     fig.tight_layout()
     return save(fig, path)
 
