@@ -107,7 +107,12 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
         md += ["FFT of torque resampled over position (Hann window, amplitude-calibrated) in grey, Lomb-Scargle of "
                "the raw samples in green, the local noise level dotted (each curve drawn as its maximum over "
                "logarithmic frequency bins); dots are the jointly fitted amplitudes (purple: declared, orange: "
-               "harmonic/sideband, red: unexplained).", ""]
+               "harmonic/sideband, red: unexplained). Where the two curves part at high frequency (the green one far "
+               "above), the Lomb-Scargle periodogram, which has no taper, shows the leakage of strong lines and of "
+               "low-frequency content through its rectangular window (side lobes falling as 1/f); the Hann-windowed "
+               "FFT (side lobes falling as 1/f^3) shows the torque's own spectrum there. The local noise level, taken "
+               "from the Lomb-Scargle, is then conservative (errors and false-alarm probabilities too large, never "
+               "too small).", ""]
     md += [f"![spectra]({p.name})" for p in figs["spectra"]]
     md += ["", "## Method", "",
            "Friction magnitude y = direction x (torque - J thetadd) over position; joint least-squares fit of all "
