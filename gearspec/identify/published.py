@@ -128,8 +128,11 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
             P.set("tau_c", float(coef[0]), float(se[0]))
             P.set("viscous", float(coef[1]), float(se[1]))
         else:
-            ni[f"{dname}.tau_c"] = ni[f"{dname}.viscous"] = (f"needs two plateaus above {high_speed:.4g} "
-                                                               f"{data.unit}/s in the {dname} direction, has {len(hi)}")
+            where = (f"above {high_speed:.4g} {data.unit}/s" if data.unit == "rad" else
+                     f"above {high_speed:.4g} {data.unit}/s (the paper's split at 100 rpm is a speed of a rotary "
+                     f"shaft, read here as {data.unit}/s: the procedure does not carry over to a linear axis)")
+            ni[f"{dname}.tau_c"] = ni[f"{dname}.viscous"] = (f"needs two plateaus {where} in the {dname} direction, "
+                                                               f"has {len(hi)}")
         if P.values["tau_c"] is not None:
             excess = lo["level"].to_numpy() - P.values["tau_c"]
             ok = excess > 0
