@@ -11,12 +11,26 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained", "save", "plt",
-           "POS", "NEG", "DIRS"]
+           "POS", "NEG", "DIRS", "present_dirs"]
 
 #: colours of the positive and negative direction in every figure
 POS, NEG = "#1f77b4", "#d62728"
 #: direction, its name, colour and marker in every figure
 DIRS = ((1, "positive", POS, "o"), (-1, "negative", NEG, "s"))
+
+
+def present_dirs(directions) -> list:
+    """The entries of :data:`DIRS` whose direction occurs in ``directions`` (a column of +1/-1): one
+    panel per direction the data hold, never an empty panel for a direction never driven (the
+    positive one alone when there is none)."""
+    found = set(int(d) for d in directions)
+    return [x for x in DIRS if x[0] in found] or list(DIRS[:1])
+
+
+def one_direction_note(present) -> str:
+    """The caption addition when a figure has one direction's panel only."""
+    other = "negative" if present[0][0] > 0 else "positive"
+    return "" if len(present) == 2 else f" ({present[0][1]} direction only: no {other} segment)"
 
 
 def save(fig, path) -> Path:

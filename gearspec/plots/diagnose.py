@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import DIRS, NEG, POS, plt, save
+from . import DIRS, NEG, POS, one_direction_note, plt, present_dirs, save
 
 __all__ = ["plot_spectra", "plot_effect", "plot_segment_errors", "plot_time_series", "effect_curve"]
 
@@ -220,7 +220,7 @@ def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", u
     """Held-out rmse of every group before and after (and in-sample), against speed per direction."""
     # one panel per direction that has groups (an empty panel for a direction never driven says
     # nothing the title cannot)
-    present = [x for x in DIRS if (table["direction"] == x[0]).any()] or list(DIRS[:1])
+    present = present_dirs(table["direction"])
     fig, axes = plt.subplots(1, len(present), figsize=(6 * len(present), 4), sharey=True, squeeze=False)
     axes = axes[0]
     for ax, (direction, name, color, _) in zip(axes, present):
@@ -238,8 +238,7 @@ def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", u
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     axes[0].set_ylabel(f"rmse ({torque_unit})")
-    only = "" if len(present) == 2 else f" ({present[0][1]} direction only: no group in the other)"
-    fig.suptitle("Error per held-out group, before and after the loop" + only, fontsize=10)
+    fig.suptitle("Error per held-out group, before and after the loop" + one_direction_note(present), fontsize=10)
     fig.tight_layout()
     return save(fig, path)
 

@@ -11,7 +11,7 @@ import pandas as pd
 from ..fitdata import FitData
 from ..model import RPM, FrictionModel
 from ..terms import amplitude_law, clamp_speed
-from . import DIRS, NEG, POS, plt, save
+from . import DIRS, NEG, POS, one_direction_note, plt, present_dirs, save
 from .ordermap import _scale
 
 __all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
@@ -29,9 +29,11 @@ def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path
     """Plateau friction against speed per direction (error bars: 2 se) with each model's
     position-averaged friction (SILO4 Fig. 4)."""
     xl, xs, tu = _units(unit)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), sharey=True)
+    present = present_dirs(plateaus["direction"])
+    fig, axes = plt.subplots(1, len(present), figsize=(6 * len(present), 4.2), sharey=True, squeeze=False)
+    axes = axes[0]
     has_load = "load" in plateaus and plateaus["load"].nunique() > 1
-    for ax, (d, name, color, mk) in zip(axes, DIRS):
+    for ax, (d, name, color, mk) in zip(axes, present):
         pl = plateaus[plateaus["direction"] == d]
         if pl.empty:
             ax.text(0.5, 0.5, f"no {name} segment", transform=ax.transAxes, ha="center")
@@ -53,7 +55,8 @@ def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     axes[0].set_ylabel(f"mean friction ({tu})")
-    fig.suptitle("Friction against speed (Stribeck curve): data and fitted laws", fontsize=11)
+    fig.suptitle("Friction against speed (Stribeck curve): data and fitted laws" + one_direction_note(present),
+                 fontsize=11)
     fig.tight_layout()
     return save(fig, path)
 
@@ -120,7 +123,8 @@ def plot_model_vs_data(data: FitData, model: FrictionModel, segments: list[int],
         ax.plot(x[keep], d * pred, "-", color=POS if d > 0 else NEG, lw=1.2, label=model.name)
         sp = float(np.mean(np.abs(sub.v)))
         ax.set_title(f"segment {sid}: {'+' if d > 0 else '-'}{sp:.4g} {unit}/s"
-                     + (f" ({sp / RPM:.0f} rpm)" if unit == "rad" else ""), fontsize=9, loc="left")
+                     + (f" ({sp / RPM:.0f} rpm)" if unit == "rad" and sp / RPM >= 10 else
+                        f" ({sp / RPM:.2g} rpm)" if unit == "rad" else ""), fontsize=9, loc="left")
         ax.set_ylabel(f"friction ({tu})")
         ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel(f"travel from the segment start ({unit})")
