@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_unexplained", "save", "plt",
-           "POS", "NEG", "DIRS", "present_dirs"]
+           "POS", "NEG", "DIRS", "present_dirs", "plain_log_axis"]
 
 #: colours of the positive and negative direction in every figure
 POS, NEG = "#1f77b4", "#d62728"
@@ -25,6 +25,14 @@ def present_dirs(directions) -> list:
     positive one alone when there is none)."""
     found = set(int(d) for d in directions)
     return [x for x in DIRS if x[0] in found] or list(DIRS[:1])
+
+
+def plain_log_axis(axis) -> None:
+    """A logarithmic axis labelled 0.02, 0.05, 0.1 (not 2 x 10^-2): majors and the 2 and 5 minors."""
+    from matplotlib.ticker import FuncFormatter
+
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.0e}"[0] in "25" else ""))
 
 
 def one_direction_note(present) -> str:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import DIRS, NEG, POS, one_direction_note, plt, present_dirs, save
+from . import DIRS, NEG, POS, one_direction_note, plain_log_axis, plt, present_dirs, save
 
 __all__ = ["plot_spectra", "plot_effect", "plot_segment_errors", "plot_time_series", "effect_curve"]
 
@@ -206,6 +206,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
         ax.plot(s["x"], s["contribution"], "-", color=s["color"], lw=1.3, label=f"{s['name']}: the term")
     if effect.kind == "hysteresis" or (effect.kind in ("speed_law", "asymmetry") and dd.kind == "plateaus"):
         ax.set_xscale("log")
+        plain_log_axis(ax.xaxis)
     ax.axhline(0, color="k", lw=0.6)
     ax.set_xlabel(cur["xlabel"])
     ax.set_ylabel(f"{'drive torque' if effect.kind == 'inertia' else 'friction'} ({tu})")
@@ -233,6 +234,7 @@ def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", u
         ax.plot(t["speed"], t["rmse_holdout_after"], "o-", color=color, label="held-out, after")
         ax.plot(t["speed"], t["rmse_after"], "x", color=color, label="in-sample, after")
         ax.set_xscale("log")
+        plain_log_axis(ax.xaxis)
         ax.set_xlabel(f"speed ({unit}/s)")
         ax.set_title(f"{name} direction", fontsize=10)
         ax.grid(alpha=0.3, which="both")

@@ -11,7 +11,7 @@ import pandas as pd
 from ..fitdata import FitData
 from ..model import RPM, FrictionModel
 from ..terms import amplitude_law, clamp_speed
-from . import DIRS, NEG, POS, one_direction_note, plt, present_dirs, save
+from . import DIRS, NEG, POS, one_direction_note, plain_log_axis, plt, present_dirs, save
 from .ordermap import _scale
 
 __all__ = ["plot_stribeck", "plot_amplitude_fit", "plot_model_vs_data", "plot_residuals"]
@@ -50,6 +50,7 @@ def plot_stribeck(plateaus: pd.DataFrame, models: dict[str, FrictionModel], path
                 continue
             ax.plot(grid * xs, y, ls, color="k", lw=1.0, label=label + (" (median load)" if has_load else ""))
         ax.set_xscale("log")
+        plain_log_axis(ax.xaxis)
         ax.set_xlabel(xl)
         ax.set_title(f"{name} direction")
         ax.grid(alpha=0.3, which="both")
@@ -163,6 +164,7 @@ def plot_residuals(errors: dict[str, pd.DataFrame], path, unit: str = "rad") -> 
     axes[1].set_ylabel(f"rmse per segment ({tu})")
     for ax in axes:
         ax.set_xscale("log")
+        plain_log_axis(ax.xaxis)
         ax.set_xlabel(xl)
         ax.grid(alpha=0.3, which="both")
         ax.ticklabel_format(axis="y", style="plain", useOffset=False)

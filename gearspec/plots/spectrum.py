@@ -12,7 +12,7 @@ import pandas as pd
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import DIRS, NEG as _NEG, POS as _POS, plt, save as _save
+from . import DIRS, NEG as _NEG, POS as _POS, plain_log_axis, plt, save as _save
 from .ordermap import _scale
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_spectrum_summary",
@@ -253,10 +253,10 @@ def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, s
             ax.plot(fs["speed"], fs["y"], "x", color="#d62728", ms=4, mew=0.8, alpha=0.7,
                     label=f"not declared: {strongest} strongest per segment (fap <= {max_fap:g})")
         ax.set_yscale("log")
-        _plain_log_axis(ax.yaxis)
+        plain_log_axis(ax.yaxis)
         if (t["speed"] > 0).all() and t["speed"].max() / max(t["speed"].min(), 1e-300) > 20:
             ax.set_xscale("log")
-            _plain_log_axis(ax.xaxis)
+            plain_log_axis(ax.xaxis)
         ax.set_xlabel(f"segment speed ({unit}/s)")
         n_seg = int((np.array([s.direction for s in result.segments]) == d).sum())
         ax.set_title(f"{name} direction: {n_seg} segments", fontsize=10)
@@ -269,14 +269,6 @@ def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, s
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4), 1, 1))
     return _save(fig, path)
-
-
-def _plain_log_axis(axis) -> None:
-    """A logarithmic axis labelled 0.02, 0.05, 0.1 (not 2 x 10^-2): majors and the 2 and 5 minors."""
-    from matplotlib.ticker import FuncFormatter
-
-    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-    axis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if f"{v:.0e}"[0] in "25" else ""))
 
 
 def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Path | None:
