@@ -141,3 +141,21 @@ def test_segment_errors_cut_once_equal_the_whole_data_loop(recording_csv):
     t = cut["truth"]
     assert (np.abs(t["e"]) < 4 * 1e-3 / np.sqrt(t["n"])).all()
     assert t["rmse"].to_numpy() == pytest.approx(1e-3, rel=0.15)
+
+
+def test_no_inertia_reaches_the_fit(recording_csv, monkeypatch):
+    """``--no-inertia`` is a common option of every command; ``fit`` accepted it and dropped it
+    (J thetadd subtracted anyway). The option must reach the data the fit reads."""
+    import gearspec.identify.pipeline as pipeline
+
+    seen = []
+    real = pipeline.FitData.from_recording
+
+    def spy(*a, **k):
+        seen.append(k.get("inertia", True))
+        return real(*a, **k)
+
+    monkeypatch.setattr(pipeline.FitData, "from_recording", spy)
+    assert main(["fit", str(recording_csv), "--law", "coulomb_viscous", "--no-inertia", "--quiet"]) == 0
+    assert main(["fit", str(recording_csv), "--law", "coulomb_viscous", "--quiet"]) == 0
+    assert seen == [False, True]

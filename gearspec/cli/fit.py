@@ -64,7 +64,8 @@ def run(args) -> int:
     harmonics = parse_lines(args.lines)
     result = identify_recording(rec, args.law, segmentation=seg, harmonics=harmonics,
                                 published=False if args.no_published else None, holdout=args.holdout,
-                                folds=args.folds, se=args.se, load_ratio=args.load_ratio, motion=args.motion)
+                                folds=args.folds, se=args.se, load_ratio=args.load_ratio, motion=args.motion,
+                                inertia=not args.no_inertia)
     st = stages(args)
     st.done(f"fitted {args.law}")
     if args.json:

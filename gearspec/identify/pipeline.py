@@ -104,7 +104,7 @@ def _motion_note(seg) -> str:
 def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None, harmonics=None,
                        published: bool | None = None, holdout: str = "segment", folds: int = 5,
                        se: str = "covariance", load_ratio: float | None = None,
-                       compare_with=None, motion: str = "auto") -> FitResult:
+                       compare_with=None, motion: str = "auto", inertia: bool = True) -> FitResult:
     """Identify ``law`` (a key of :data:`gearspec.model.LAWS`) from a recording ``rec``, beside the
     published procedure and simpler laws.
 
@@ -116,7 +116,8 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     when the recording has a load); ``compare_with``: other laws fitted to the same data (default:
     the simpler ones); ``motion``: what the fit uses (:func:`~gearspec.segment.free_motion`:
     "auto" adds free motion -- ramps, moves, chirps -- where it is a large part of the recording,
-    and then identifies the inertia with the friction unless the gear spec gives it).
+    and then identifies the inertia with the friction unless the gear spec gives it); ``inertia``:
+    False leaves the torque as measured (no ``J thetadd`` subtracted even when the spec gives J).
     """
     gear = load_gear(gear) if gear is not None else rec.gear
     seg = free_motion(rec, segmentation if segmentation is not None else find_segments(rec), motion=motion)
@@ -124,7 +125,7 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     if law in ("lola8", "lola11") and load_ratio is None and "load" in rec.data and gear is not None and gear.stages:
         load_ratio = gear.total_ratio
         notes.append(f"friction = drive torque - |load| / {load_ratio:g} (Lola eq. 12; the load opposes the motion)")
-    data = FitData.from_recording(rec, seg, load_ratio=load_ratio)
+    data = FitData.from_recording(rec, seg, load_ratio=load_ratio, inertia=inertia)
     if published is None:
         published = law in ("silo4", "stribeck")
     lines = harmonic_specs(harmonics, gear) if law == "silo4" else (harmonic_specs(harmonics) if harmonics else [])
