@@ -41,10 +41,11 @@ def one_direction_note(present) -> str:
     return "" if len(present) == 2 else f" ({present[0][1]} direction only: no {other} segment)"
 
 
-def save(fig, path) -> Path:
-    """Save a figure as PNG (110 dpi) and close it."""
+def save(fig, path, *, tight: bool = True) -> Path:
+    """Save a figure as PNG (110 dpi) and close it.  ``tight``: crop to the drawn content (matplotlib
+    then draws the figure twice); False for a figure laid out already (one draw: long pages of spectra)."""
     path = Path(path)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.savefig(path, dpi=110, **({"bbox_inches": "tight"} if tight else {}))
     plt.close(fig)
     return path
 

@@ -55,7 +55,7 @@ def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 20_
     height = 1.9 * nrow + 0.8
     fig.subplots_adjust(left=0.08 if ncol == 1 else 0.06, right=0.98, top=1 - 0.95 / height, bottom=0.5 / height,
                         hspace=0.5, wspace=0.18)
-    return _save_once(fig, path)
+    return _save(fig, path, tight=False)
 
 
 def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int = 8, indices=None,
@@ -79,15 +79,8 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
         top = 1 - 0.75 / (3.0 * nrow + 0.9)
         fig.subplots_adjust(left=0.07, right=0.98, bottom=0.45 / (3.0 * nrow + 0.9) + 0.03, top=top - 0.03,
                             hspace=0.55, wspace=0.2)
-        paths.append(_save_once(fig, Path(path_pattern.format(page + 1))))
+        paths.append(_save(fig, Path(path_pattern.format(page + 1)), tight=False))
     return paths
-
-
-def _save_once(fig, path: Path) -> Path:
-    """Save a figure laid out already (one draw: no tight bounding box) at the package's dpi, and close it."""
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 def _envelope(f: np.ndarray, a: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:
