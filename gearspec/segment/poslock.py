@@ -79,6 +79,12 @@ def locked_acceleration(t: np.ndarray, theta: np.ndarray, frequencies) -> np.nda
         ``-v^3 t''(theta)`` per sample, ``v = 1 / t'(theta)``, of the least-squares fit of
         ``t(theta)`` (module docstring).
     """
+    return _time_fit(t, theta, frequencies)[0]
+
+
+def _time_fit(t, theta, frequencies):
+    """``(acc, v, r)``: the locked acceleration and velocity at each sample and the residual time
+    ``t - t(theta)`` (s) of the fit of :func:`locked_acceleration`."""
     t = np.asarray(t, dtype=float)
     th = np.asarray(theta, dtype=float)
     lo, hi = float(th.min()), float(th.max())
@@ -88,13 +94,14 @@ def locked_acceleration(t: np.ndarray, theta: np.ndarray, frequencies) -> np.nda
     ph = th[:, None] * w[None, :]
     s, c = np.sin(ph), np.cos(ph)
     X = np.column_stack([np.ones_like(u), u, u * u, s, c])
-    coef = np.linalg.lstsq(X, t - t.mean(), rcond=None)[0]
+    tc = t - t.mean()
+    coef = np.linalg.lstsq(X, tc, rcond=None)[0]
     m = len(w)
     a, b = coef[3:3 + m], coef[3 + m:]
     d1 = (coef[1] + 2 * coef[2] * u) / half + c @ (w * a) - s @ (w * b)
     d2 = 2 * coef[2] / half ** 2 - s @ (w * w * a) - c @ (w * w * b)
     v = 1.0 / d1
-    return -v ** 3 * d2
+    return -v ** 3 * d2, v, tc - X @ coef
 
 
 def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray) -> tuple[np.ndarray, int, int]:
