@@ -94,8 +94,13 @@ def _time_fit(t, theta, frequencies):
     ph = th[:, None] * w[None, :]
     s, c = np.sin(ph), np.cos(ph)
     X = np.column_stack([np.ones_like(u), u, u * u, s, c])
+    # the straight line first (t spans seconds, the lines' part microseconds), then the normal
+    # equations of the rest (p x p, p = 3 + 2 lines: no LAPACK call on the N rows)
     tc = t - t.mean()
-    coef = np.linalg.lstsq(X, tc, rcond=None)[0]
+    slope = float(np.dot(u - u.mean(), tc) / np.dot(u - u.mean(), u - u.mean()))
+    rest = tc - slope * u
+    coef = np.linalg.lstsq(X.T @ X, X.T @ rest, rcond=None)[0]
+    coef[1] += slope
     m = len(w)
     a, b = coef[3:3 + m], coef[3 + m:]
     d1 = (coef[1] + 2 * coef[2] * u) / half + c @ (w * a) - s @ (w * b)
