@@ -132,6 +132,19 @@ def test_the_rule_less_than_a_cycle_or_above_the_position_nyquist_keeps_the_filt
         assert n_seg == 0 and np.array_equal(got, sg), f
 
 
+def test_a_plateau_with_fewer_than_two_rows_per_coefficient_keeps_the_filter():
+    # 3 s at 120 rpm, 24 cycles per turn: the line and its second multiple below the Nyquist, 7
+    # coefficients: 14 rows needed.  A 13-row plateau (0.05 s, 0.63 rad: 2.4 cycles) keeps the
+    # filter; 14 rows get the fit
+    t, enc, th, acc = _plateau()
+    rec = _recording(t, enc)
+    sg = derivatives(rec)[1]
+    for n, want in ((13, 0), (14, 1)):
+        seg = [Segment(0, 100, 100 + n, 1, 4 * math.pi)]
+        _, got, n_seg, _ = fit_derivatives(rec, seg, [F])
+        assert n_seg == want and np.array_equal(got, sg) == (want == 0)
+
+
 def test_free_motion_and_sweeps_keep_the_filter():
     t, enc, th, acc = _plateau()
     rec = _recording(t, enc)

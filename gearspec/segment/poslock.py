@@ -135,7 +135,7 @@ def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray) -> tuple[n
         return out, 0, 0
     t, theta = rec.t, rec.theta
     for s in segments:
-        if s.kind != "plateau" or s.n < 8:
+        if s.kind != "plateau":
             continue
         th = theta[s.start:s.stop]
         f = locked_frequencies(th, frequencies)
