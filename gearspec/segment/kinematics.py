@@ -1,7 +1,7 @@
 """Kinematics of a recording: velocity and acceleration by a Savitzky-Golay filter, piece by piece
 (on plateaus with a line of the fit, the acceleration of the position-locked motion instead:
-:func:`fit_derivatives`, :mod:`gearspec.segment.poslock`), and the friction torque ``tau - J thetadd`` (SILO4 eq. 2), whole or one segment at a time
-(:class:`FrictionTorque`)."""
+:func:`fit_derivatives`, :mod:`gearspec.segment.poslock`), and the friction torque ``tau - J thetadd``
+(SILO4 eq. 2), whole or one segment at a time (:class:`FrictionTorque`)."""
 
 from __future__ import annotations
 
