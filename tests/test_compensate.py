@@ -302,7 +302,7 @@ def test_readme_numbers_from_the_command_line(tmp_path, capsys):
                 # 280 rpm and above: the locked part below 35 % (measured 1-2 % at 280 rpm, 4-12 % at
                 # 560-3000 rpm, where the fitted lines' phase and amplitude errors weigh more; 17-24 %
                 # with the Savitzky-Golay acceleration of 0.6) and the ripple below 75 % (measured
-                # 12-74 %: at 280 rpm what is left is the encoder's jitter, 0.33 rpm +- 10 %)
+                # 14-74 %: at 280 rpm what is left is the encoder's jitter, 0.33 rpm +- 10 %)
                 assert full.locked_rpm < 0.35 * none.locked_rpm and full.ripple_std_rpm < 0.75 * none.ripple_std_rpm
 
 
