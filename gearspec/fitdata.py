@@ -11,7 +11,8 @@ import pandas as pd
 
 from .errors import InputError
 from .recording import Recording
-from .segment import Segmentation, derivatives, find_segments, free_motion
+from .segment import Segmentation, find_segments, free_motion
+from .segment.kinematics import fit_derivatives
 
 __all__ = ["FitData"]
 
@@ -69,7 +70,7 @@ class FitData:
     @classmethod
     def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, velocity: str = "segment",
                        inertia: bool = True, load_ratio: float | None = None, motion: str = "plateaus",
-                       **segment_options) -> "FitData":
+                       lines=None, **segment_options) -> "FitData":
         """Samples inside the segments of ``rec`` (``segmentation`` default:
         :func:`~gearspec.segment.find_segments` with ``segment_options``, then free-motion blocks by
         :func:`~gearspec.segment.free_motion` with ``motion``: "plateaus", "auto" or "free").
@@ -79,7 +80,10 @@ class FitData:
         as the papers do) or ``"measured"`` (the ``velocity`` channel, else a Savitzky-Golay
         derivative).  ``inertia``: subtract ``J thetadd`` when the gear gives ``J``.  ``load_ratio``:
         subtract ``|load| / load_ratio`` against the motion (Lola/CROPS eq. 12: a brake opposing the
-        motion, torque measured at the motor of a gear of that ratio).
+        motion, torque measured at the motor of a gear of that ratio).  ``lines``: the frequencies
+        (cycles per unit of theta) of the lines the fit models: on plateaus where one makes a full
+        cycle the acceleration is that of the position-locked motion
+        (:func:`~gearspec.segment.kinematics.fit_derivatives`); None: the Savitzky-Golay one everywhere.
         """
         if velocity not in ("segment", "measured"):
             raise InputError(f"velocity must be 'segment' or 'measured', got '{velocity}'")
@@ -88,7 +92,7 @@ class FitData:
         if len(seg) == 0:
             raise InputError(f"{', '.join(rec.sources)}: no constant-speed segment or free motion found "
                              f"(rows: {dict(seg.excluded)})")
-        vel, acc = derivatives(rec)
+        vel, acc, n_locked, rows_locked = fit_derivatives(rec, seg.segments, lines)
         J = rec.gear.inertia if (inertia and rec.gear is not None and rec.gear.inertia) else None
         tau = rec.tau
         idx = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
@@ -133,6 +137,9 @@ class FitData:
                          f"no acceleration there, inertia not removed")
         if J:
             notes.append(f"inertia removed: tau - {J:g} x thetadd" + (" (plateaus only)" if n_qs else ""))
+        if n_locked:
+            notes.append(f"acceleration of the position-locked motion on {n_locked} plateaus ({rows_locked} rows; "
+                         f"time fitted over position at the lines), a Savitzky-Golay derivative elsewhere")
         return cls(theta=rec.theta[idx], v=v, y=y, acc=a, load=get("load"), temperature=get("temperature"),
                    t=rec.t[idx], run=rec.run[idx], segment=sid, direction=d, group=group, unit=rec.unit,
                    speed=np.where(qs | np.isnan(vel[idx]), np.abs(v), np.abs(vel[idx])),

@@ -125,10 +125,11 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     if law in ("lola8", "lola11") and load_ratio is None and "load" in rec.data and gear is not None and gear.stages:
         load_ratio = gear.total_ratio
         notes.append(f"friction = drive torque - |load| / {load_ratio:g} (Lola eq. 12; the load opposes the motion)")
-    data = FitData.from_recording(rec, seg, load_ratio=load_ratio, inertia=inertia)
+    lines = harmonic_specs(harmonics, gear) if law == "silo4" else (harmonic_specs(harmonics) if harmonics else [])
+    data = FitData.from_recording(rec, seg, load_ratio=load_ratio, inertia=inertia,
+                                  lines=[h["frequency"] for h in lines])
     if published is None:
         published = law in ("silo4", "stribeck")
-    lines = harmonic_specs(harmonics, gear) if law == "silo4" else (harmonic_specs(harmonics) if harmonics else [])
     amplitudes = line_amplitudes(data, lines) if lines and not data.free_motion else None
     model = fit(data, law, harmonics=harmonics, gear=gear, holdout=holdout, folds=folds, se=se,
                 name=f"{law} (joint fit)")

@@ -42,6 +42,10 @@ def plot_ripple(result: CompensationResult, path) -> Path:
         ax.set_title(f"{'positive' if d > 0 else 'negative'} direction")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("velocity ripple, std (% of the speed)")
+    pct = t["ripple_std_pct"].to_numpy(dtype=float)
+    pct = pct[pct > 0]
+    if len(pct):                     # a margin above and below the points (no marker cut by the frame)
+        axes[0].set_ylim(pct.min() / 1.25, pct.max() * 1.25)
     # within about a decade every minor tick is labelled (else only 2 and 5 x a power of ten)
     lo, hi = axes[0].get_ylim()
     every = math.log10(hi / lo) < 1.2

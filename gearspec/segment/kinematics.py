@@ -1,6 +1,7 @@
-"""Kinematics of a recording: velocity and acceleration by a Savitzky-Golay filter, piece by piece,
-and the friction torque ``tau - J thetadd`` (SILO4 eq. 2), whole or one segment at a time
-(:class:`FrictionTorque`)."""
+"""Kinematics of a recording: velocity and acceleration by a Savitzky-Golay filter, piece by piece
+(on plateaus with a line of the fit, the acceleration of the position-locked motion instead:
+:func:`fit_derivatives`, :mod:`gearspec.segment.poslock`), and the friction torque ``tau - J thetadd``
+(SILO4 eq. 2), whole or one segment at a time (:class:`FrictionTorque`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from scipy.signal import savgol_filter
 
 from ..recording import Recording
 
-__all__ = ["derivatives", "friction_torque", "FrictionTorque"]
+__all__ = ["derivatives", "fit_derivatives", "friction_torque", "FrictionTorque"]
 
 
 def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -32,6 +33,29 @@ def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.nda
         vel[a:b] = _savgol(tt, th, dt, w, uniform, 1)
         acc[a:b] = _savgol(tt, th, dt, w, uniform, 2)
     return vel, acc
+
+
+def fit_derivatives(rec: Recording, segments, lines=None, deriv_window: int | None = None):
+    """Velocity and acceleration (unit/s, unit/s^2, one per row) for a fit on ``segments``.
+
+    The velocity is :func:`derivatives`'; so is the acceleration, except on plateau segments where a
+    line of ``lines`` (cycles per unit of theta: the lines the fit models) or one of its multiples
+    makes a full cycle below the position Nyquist: there it is the acceleration of the
+    position-locked motion (:func:`gearspec.segment.poslock.plateau_acceleration`), which a
+    derivative filter attenuates at high frequency.  ``lines`` None or empty: :func:`derivatives`.
+
+    Returns
+    -------
+    (velocity, acceleration, plateaus, rows)
+        The two arrays and how many plateaus and rows have the position-locked acceleration.
+    """
+    from .poslock import plateau_acceleration
+
+    vel, acc = derivatives(rec, deriv_window)
+    if lines is None or not len(lines):
+        return vel, acc, 0, 0
+    acc, n_seg, n_rows = plateau_acceleration(rec, segments, lines, acc)
+    return vel, acc, n_seg, n_rows
 
 
 def _savgol(tt, th, dt, w, uniform, deriv):
