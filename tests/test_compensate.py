@@ -14,6 +14,7 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
+from readme_numbers import check
 
 from gearspec.cli import main
 from gearspec.errors import InputError
@@ -313,6 +314,18 @@ def test_readme_numbers_from_the_command_line(tmp_path, capsys):
                 gone = full.locked_rpm < 0.05 * none.locked_rpm
                 assert full.ripple_std_rpm < (max(0.75 * none.ripple_std_rpm, 1.3 * rest) if gone else
                                               0.75 * none.ripple_std_rpm)
+    # the README's paragraph "compensate-silo4" quotes these runs (issue 16: numbers that cannot go stale)
+    r = {(s, d, c): _row(t, s, d, c) for s in (280, 1000) for d in (1, -1) for c in ("none", "model")}
+
+    def pair(s, c, field, fmt):
+        return " / ".join(format(getattr(r[(s, d, c)], field), fmt) for d in (1, -1))
+
+    check("compensate-silo4",
+          f"{pair(280, 'none', 'ripple_std_rpm', '.3f')} rpm without compensation to "
+          f"{pair(280, 'model', 'ripple_std_rpm', '.3f')} rpm with the full model",
+          f"from {pair(280, 'none', 'locked_rpm', '.3f')} to {pair(280, 'model', 'locked_rpm', '.3f')} rpm",
+          f"at 1000 rpm from {pair(1000, 'none', 'ripple_std_rpm', '.2f')} to "
+          f"{pair(1000, 'model', 'ripple_std_rpm', '.2f')} rpm")
 
 
 # ------------------------------------------------------------------ the direct drive's cogging phase (issue 14)
