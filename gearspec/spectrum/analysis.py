@@ -30,7 +30,7 @@ from .search import _fft_residual_power, _Grid, _LocalNoise, _search, _significa
 
 __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "analyze", "position_nyquist",
            "MEASURABLE_FRACTION", "LS_MAX_SAMPLES", "relabel_aliases", "quantisation_step", "quantisation_limit",
-           "QUANTISATION_FRACTION"]
+           "QUANTISATION_FRACTION", "quantisation_lines", "QUANTISATION_HARMONICS"]
 
 _GUARD = 3.0  # resolution steps kept clear around fitted lines when searching for peaks
 _MAX_ROUNDS = 6  # search -> joint fit -> search the residual of all lines found, at most this often
@@ -90,7 +90,8 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
                                note=f"{n} samples are too few for {n_terms} terms", quantisation_step=step,
                                quantisation_limit=q_limit)
     a = _Analysis(theta, y, gear, fitted, deg, lo, hi, nyquist, f_search_max, min_cycles=min_cycles,
-                  fap_threshold=fap_threshold, max_peaks=max_peaks, oversample=oversample, method=method)
+                  fap_threshold=fap_threshold, max_peaks=max_peaks, oversample=oversample, method=method,
+                  step=step)
     # 1. the declared lines: one pass over the samples
     out = SegmentSpectrum(segment, [], level=a.eq.y0, sigma=a.fit0.sigma, span=span, nyquist=nyquist,
                           degree=deg, skipped=skipped, fit=a.fit0, quantisation_step=step, quantisation_limit=q_limit)
@@ -137,12 +138,13 @@ class _Analysis:
     """The steps of :func:`analyze_segment` on one segment, and the state they share."""
 
     def __init__(self, theta, y, gear, fitted, deg, lo, hi, nyquist, f_search_max, *, min_cycles, fap_threshold,
-                 max_peaks, oversample, method):
+                 max_peaks, oversample, method, step=0.0):
         self.theta, self.y, self.gear, self.fitted, self.deg = theta, y, gear, fitted, deg
         self.lo, self.hi, self.span, self.nyquist, self.f_search_max = lo, hi, hi - lo, nyquist, f_search_max
         self.min_cycles, self.fap_threshold, self.max_peaks = min_cycles, fap_threshold, max_peaks
         self.oversample, self.method = oversample, method
         self.n = len(theta)
+        self.step = step
         self.declared_f = [ln.frequency for ln in fitted]
         self.n_dec = len(self.declared_f)
         self.eq = NormalEquations.accumulate(theta, y, self.declared_f, deg)
@@ -255,7 +257,7 @@ class _Analysis:
         spacing = span / (self.n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
         peaks = []
         for k, (j, f) in enumerate(zip(keep, fit.frequency)):
-            aliased = exact = None
+            aliased = exact = q_m = None
             if j < self.n_dec:
                 label, declared = self.fitted[j].label, True
             else:
@@ -265,6 +267,9 @@ class _Analysis:
                     if line is None:  # a line above the position Nyquist frequency, seen at its alias
                         line = gear.label(f, max(0.5 / span, 3 * f_se[k]), spacing=spacing, nyquist=nyquist)
                 label = line.label if line is not None else None
+                q_m = self.quantisation_harmonic(f, max(1.0 / span, 3 * f_se[k])) if label is None else None
+                if q_m is not None:  # one of the encoder staircase's own lines
+                    label = f"encoder count rate x{q_m}, folded by the sampling"
                 if line is not None and line.kind == "alias":
                     aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
                 elif label is None and gear is not None:
@@ -277,8 +282,17 @@ class _Analysis:
                               snr=float(z_fit[k]), hint=None if exact is None else exact.hint,
                               frequency_se=float(f_se[k]),
                               frequency_exact=None if exact is None else exact.frequency,
-                              order_exact=None if exact is None else exact.order, aliased_from=aliased))
+                              order_exact=None if exact is None else exact.order, aliased_from=aliased,
+                              quantisation_harmonic=q_m))
         return peaks, fit
+
+    def quantisation_harmonic(self, f: float, tolerance: float) -> int | None:
+        """The lowest harmonic ``m`` of the count rate whose line of the segment's encoder staircase
+        (:func:`quantisation_lines`) lies within ``tolerance`` of ``f``, else None."""
+        if not self.step > 0:
+            return None
+        lines = quantisation_lines(self.step, _travel_per_sample(self.theta))
+        return min((m for g, m in lines if abs(g - f) <= tolerance), default=None)
 
     def spectra_for_figures(self, out: SegmentSpectrum, grid: _Grid, nbin: int, enbw: float, power_first) -> None:
         """Step 5: the spectra of the figures into ``out``, on the first round's ``grid``."""
@@ -386,6 +400,42 @@ def quantisation_limit(step: float) -> float:
     whole number (e.g. 2.05 samples per count: at 0.05 / step); see the README's limits.
     """
     return QUANTISATION_FRACTION / step if step > 0 else math.inf
+
+
+#: harmonics of the encoder's count rate whose folds :func:`quantisation_lines` lists (a sawtooth's
+#: m-th harmonic has 1/m of its fundamental's amplitude)
+QUANTISATION_HARMONICS = 8
+
+
+def quantisation_lines(step: float, spacing: float, harmonics: int = QUANTISATION_HARMONICS) -> list[tuple[float, int]]:
+    """Where an encoder's staircase puts lines of its own in a segment: ``(frequency, m)``, frequency in
+    cycles per unit of theta of the ``m``-th harmonic of the count rate, ``m = 1 .. harmonics``.
+
+    A closed loop on a quantised position reacts to every count: a torque periodic in time at the
+    count rate, ``spacing / step`` counts per sample (``spacing``: travel per sample, unit of theta).
+    Its ``m``-th harmonic, ``m spacing / step`` cycles per sample, is folded by the sampling to its
+    distance ``x`` to the nearest whole number, ``x / spacing`` per unit of theta, and once more onto
+    the positions' lattice of ``step`` (``f`` and ``1 / step - f`` look the same there).  At constant
+    speed these are fixed frequencies over position in one segment (a position-locked line looks the
+    same) that move with the speed from segment to segment.  Empty when ``step`` or ``spacing`` is 0.
+    """
+    if not (step > 0 and spacing > 0):
+        return []
+    out = []
+    for m in range(1, int(harmonics) + 1):
+        c = m * spacing / step
+        f = abs(c - round(c)) / spacing
+        lattice = abs(f - round(f * step) / step)
+        out += [(f, m)] + ([(lattice, m)] if abs(lattice - f) > 1e-9 * (f + lattice) else [])
+    return out
+
+
+def _travel_per_sample(theta: np.ndarray) -> float:
+    """Mean travel per sample (unit of theta): the least-squares slope of ``theta`` over the sample
+    index (a quantised segment's end points are off by up to a step; its slope is not)."""
+    n = len(theta)
+    i = np.arange(n, dtype=float) - 0.5 * (n - 1)
+    return abs(float(np.dot(i, theta - theta.mean()) / np.dot(i, i))) if n > 1 else 0.0
 
 
 def rows_position_nyquist(rows: np.ndarray, length: np.ndarray) -> np.ndarray:

@@ -44,6 +44,9 @@ class Peak:
     frequency_exact: float | None = None  # with a hint: the exact frequency of that multiple
     order_exact: float | None = None      # ... and its exact order
     aliased_from: dict | None = None  # a peak labelled 'alias of X': X's label, frequency and order
+    #: a peak where the encoder's staircase has a line of its own (spectrum.quantisation_lines): the
+    #: harmonic m of the count rate; not a position-locked line (it moves with the speed)
+    quantisation_harmonic: int | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
