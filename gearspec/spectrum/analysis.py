@@ -352,6 +352,8 @@ QUANTISATION_FRACTION = 0.125
 _LATTICE_SHARE = 0.99
 #: ... within this fraction of the step (plus the rounding of the values)
 _LATTICE_TOL = 0.02
+#: ... and changes of other sizes than the commonest (in counts, 0 included) are at least this share
+_OTHER_SIZES = 0.005
 
 
 def quantisation_step(theta: np.ndarray) -> float:
@@ -360,16 +362,20 @@ def quantisation_step(theta: np.ndarray) -> float:
     The positions are quantised with step ``q`` when at least 99 % of their nonzero changes are
     whole multiples of ``q`` (within 2 % of ``q`` plus the float rounding of the values): ``q`` is
     the smallest change divided by 1, 2, ..., 8 (a fine encoder moves several counts per sample),
-    the first that fits, refined as the ratio of the changes' sum to their sum in counts.  Timing
-    jitter and dithering by whole counts keep the lattice; a position in floating point (filtered,
-    interpolated, simulated without encoder) has no lattice and gives 0.
+    the first that fits, refined as the ratio of the changes' sum to their sum in counts.  The
+    changes must take at least two sizes in counts (0 included; the rarer ones at least 0.5 % of
+    them): a position sampled exactly at a uniform spacing has one size only, and no quantisation
+    error.  Timing jitter and dithering by whole counts keep the lattice; a position in floating
+    point (filtered, interpolated, simulated without encoder) has no lattice and gives 0.
     """
     theta = np.asarray(theta, dtype=float)
     if len(theta) < 3:
         return 0.0
     d = np.abs(np.diff(theta))
     rounding = 16 * np.finfo(float).eps * float(np.max(np.abs(theta)))
+    n_zero = len(d)
     d = d[d > rounding]
+    n_zero -= len(d)
     if len(d) < 16:
         return 0.0
     d_min = float(d.min())
@@ -378,6 +384,14 @@ def quantisation_step(theta: np.ndarray) -> float:
         counts = np.rint(d / qc)
         on = np.abs(d / qc - counts) <= _LATTICE_TOL + rounding / qc
         if np.count_nonzero(on) >= _LATTICE_SHARE * len(d):
+            # a lattice is evidence of quantisation only when the changes take two or more sizes in
+            # counts (0 and 1 on a staircase, 8 and 9 on a fine encoder): a uniformly sampled exact
+            # position changes by one same amount every sample, and any spacing is its 'step'
+            _, times = np.unique(counts[on], return_counts=True)
+            times = np.append(times, n_zero)
+            others = int(times.sum() - times.max())
+            if others < max(2, _OTHER_SIZES * times.sum()):
+                return 0.0
             return float(np.sum(d[on]) / np.sum(counts[on]))
     return 0.0
 
