@@ -75,7 +75,8 @@ def test_the_encoder_step_is_read_from_the_positions_and_only_from_a_lattice():
     assert quantisation_step(true) == 0.0 and quantisation_limit(0.0) == math.inf
     # an exact position sampled at a uniform spacing changes by one amount only: not an encoder
     assert quantisation_step(3.0 + 0.05 * np.arange(4000)) == 0.0
-    assert quantisation_limit(Q_COARSE) == pytest.approx(QUANTISATION_FRACTION / Q_COARSE) == pytest.approx(39.79, abs=0.01)
+    assert quantisation_limit(Q_COARSE) == pytest.approx(QUANTISATION_FRACTION / Q_COARSE)
+    assert quantisation_limit(Q_COARSE) == pytest.approx(39.79, abs=0.01)
 
 
 def test_a_coarse_encoder_at_2_rpm_makes_no_line_the_truth_lacks():
@@ -117,7 +118,7 @@ def test_the_folded_count_rate_is_labelled_where_the_arithmetic_puts_it():
             if p.quantisation_harmonic is not None:
                 n_labelled += 1
                 m = p.quantisation_harmonic
-                assert p.label == f"encoder count rate x{m}, folded by the sampling"
+                assert p.label == f"encoder counts x{m}, folded"
                 assert min(abs(f - p.frequency) for f, mm in predicted if mm == m) < 0.07 * m
         # the motor shaft line (declared) is still measured: 0.133 mNm in the truth, 1 % scatter
         # between runs and se ~ 4e-6 Nm: within 10 %
@@ -156,3 +157,11 @@ def test_no_false_alarm_probability_or_standard_error_of_zero_by_underflow():
     fit = harmonic_fit(theta, 2e-3 * np.sin(2 * math.pi * 1.3 * theta), [1.3]).scaled([0.0])
     assert fit.amplitude_se[0] == pytest.approx(np.finfo(float).eps * 2e-3, rel=1e-6, abs=0)
     assert fit.phase_se[0] > 0
+
+
+def test_the_report_states_the_limit_where_it_limits():
+    from gearspec.report.spectrum import _quantisation_sentence
+
+    text = " ".join(_quantisation_sentence(_twin_spectrum(2000, 2.0)))
+    assert "encoder step 0.003142 rad" in text and "segments 0-1" in text and "(39.79 cycles/rad)" in text
+    assert _quantisation_sentence(_twin_spectrum(65536, 2.0)) == []   # above the Nyquist frequency: not stated

@@ -269,7 +269,7 @@ class _Analysis:
                 label = line.label if line is not None else None
                 q_m = self.quantisation_harmonic(f, max(1.0 / span, 3 * f_se[k])) if label is None else None
                 if q_m is not None:  # one of the encoder staircase's own lines
-                    label = f"encoder count rate x{q_m}, folded by the sampling"
+                    label = f"encoder counts x{q_m}, folded"  # the count rate's harmonic, folded by the sampling
                 if line is not None and line.kind == "alias":
                     aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
                 elif label is None and gear is not None:
