@@ -56,8 +56,8 @@ SPACING_2RPM = 2 * 2 * math.pi / 60 * 4e-3   # rad per 4 ms sample at 2 rpm
 
 
 @lru_cache(maxsize=None)
-def _twin_spectrum(counts_per_rev: int, rpm: float):
-    rec, _ = silo4_twin([rpm], repetitions=2, seed=1, plant={"counts_per_rev": counts_per_rev})
+def _twin_spectrum(counts_per_rev: int, rpm: float, repetitions: int = 2):
+    rec, _ = silo4_twin([rpm], repetitions=repetitions, seed=1, plant={"counts_per_rev": counts_per_rev})
     return analyze(rec, twin_gear())
 
 
@@ -165,3 +165,19 @@ def test_the_report_states_the_limit_where_it_limits():
     text = " ".join(_quantisation_sentence(_twin_spectrum(2000, 2.0)))
     assert "encoder step 0.003142 rad" in text and "segments 0-1" in text and "(39.79 cycles/rad)" in text
     assert _quantisation_sentence(_twin_spectrum(65536, 2.0)) == []   # above the Nyquist frequency: not stated
+
+
+def test_the_speed_ripple_sidebands_of_a_folded_count_line_are_labelled():
+    # 50 rpm: 6.67 counts per sample, the count rate folds to 1/(3 spacing) = 15.92 cycles/rad; the
+    # speed ripple at the motor shaft's frequency (1/(2 pi) = 0.159 cycles/rad) modulates it: lines at
+    # 15.92 +- j 0.159 (fap 1e-5..1e-14 without a label before), labelled as its sidebands
+    res = _twin_spectrum(2000, 50.0, repetitions=1)
+    s = res.segments[0]
+    carrier = [p for p in s.peaks if p.label == "encoder counts x1, folded"]
+    assert len(carrier) == 1 and carrier[0].frequency == pytest.approx(2000 / (2 * math.pi) / 20, abs=1 / s.span)
+    side = [p for p in s.peaks if p.label is not None and p.label.startswith("encoder counts x1, folded, ")]
+    assert len(side) >= 3
+    for p in side:
+        j = int(p.label.split(", ")[2].split("x")[0])
+        assert p.frequency == pytest.approx(carrier[0].frequency + j / (2 * math.pi), abs=1 / s.span)
+    assert res.unexplained(max_fap=1e-3).empty

@@ -34,6 +34,7 @@ __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "anal
 
 _GUARD = 3.0  # resolution steps kept clear around fitted lines when searching for peaks
 _MAX_ROUNDS = 6  # search -> joint fit -> search the residual of all lines found, at most this often
+_Q_SIDEBANDS = 3  # sidebands of a staircase's line labelled, each side (_Analysis.staircase_labels)
 
 #: segments up to this many samples search the Lomb-Scargle periodogram of the raw residual;
 #: longer ones the Hann spectrum of the residual resampled over position (see analyze_segment)
@@ -255,6 +256,8 @@ class _Analysis:
         ph_se = np.hypot(ph_se, 2 * np.pi * 0.5 * (self.lo + self.hi) * f_se) if len(f_se) else ph_se
         gear, span, nyquist = self.gear, self.span, self.nyquist
         spacing = span / (self.n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
+        staircase = self.staircase_labels([f if j >= self.n_dec else math.nan for j, f in zip(keep, fit.frequency)],
+                                          [max(1.0 / span, 3 * e) for e in f_se])
         peaks = []
         for k, (j, f) in enumerate(zip(keep, fit.frequency)):
             aliased = exact = q_m = None
@@ -267,9 +270,8 @@ class _Analysis:
                     if line is None:  # a line above the position Nyquist frequency, seen at its alias
                         line = gear.label(f, max(0.5 / span, 3 * f_se[k]), spacing=spacing, nyquist=nyquist)
                 label = line.label if line is not None else None
-                q_m = self.quantisation_harmonic(f, max(1.0 / span, 3 * f_se[k])) if label is None else None
-                if q_m is not None:  # one of the encoder staircase's own lines
-                    label = f"encoder counts x{q_m}, folded"  # the count rate's harmonic, folded by the sampling
+                if label is None and staircase[k] is not None:  # the encoder staircase's line, or its sideband
+                    q_m, label = staircase[k]
                 if line is not None and line.kind == "alias":
                     aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
                 elif label is None and gear is not None:
@@ -286,13 +288,30 @@ class _Analysis:
                               quantisation_harmonic=q_m))
         return peaks, fit
 
-    def quantisation_harmonic(self, f: float, tolerance: float) -> int | None:
-        """The lowest harmonic ``m`` of the count rate whose line of the segment's encoder staircase
-        (:func:`quantisation_lines`) lies within ``tolerance`` of ``f``, else None."""
+    def staircase_labels(self, freqs, tolerances) -> list[tuple[int, str] | None]:
+        """For each frequency: ``(m, label)`` when it is within its tolerance of a line of the segment's
+        encoder staircase (:func:`quantisation_lines`, the lowest harmonic ``m`` of the count rate), or
+        of a sideband ``j = +-1 .. +-_Q_SIDEBANDS`` times a declared line fitted in the segment around
+        such a line found here (the speed ripple at a shaft's frequency modulates the count rate);
+        else None."""
+        out: list[tuple[int, str] | None] = [None] * len(freqs)
         if not self.step > 0:
-            return None
-        lines = quantisation_lines(self.step, _travel_per_sample(self.theta))
-        return min((m for g, m in lines if abs(g - f) <= tolerance), default=None)
+            return out
+        lines = sorted(quantisation_lines(self.step, _travel_per_sample(self.theta)), key=lambda x: x[1])
+        carriers = []
+        for i, (f, tol) in enumerate(zip(freqs, tolerances)):
+            m = next((m for g, m in lines if abs(g - f) <= tol), None)
+            if m is not None:
+                out[i] = (m, f"encoder counts x{m}, folded")  # the count rate's harmonic, folded by the sampling
+                carriers.append((f, m))
+        for i, (f, tol) in enumerate(zip(freqs, tolerances)):
+            if not math.isfinite(f):
+                continue
+            for (g, m), ln in ((c, ln) for c in carriers for ln in self.fitted if ln.frequency > tol):
+                j = round((f - g) / ln.frequency)
+                if out[i] is None and 1 <= abs(j) <= _Q_SIDEBANDS and abs(g + j * ln.frequency - f) <= tol:
+                    out[i] = (m, f"encoder counts x{m}, folded, {j:+d}x {ln.label}")
+        return out
 
     def spectra_for_figures(self, out: SegmentSpectrum, grid: _Grid, nbin: int, enbw: float, power_first) -> None:
         """Step 5: the spectra of the figures into ``out``, on the first round's ``grid``."""
