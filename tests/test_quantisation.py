@@ -181,3 +181,14 @@ def test_the_speed_ripple_sidebands_of_a_folded_count_line_are_labelled():
         j = int(p.label.split(", ")[2].split("x")[0])
         assert p.frequency == pytest.approx(carrier[0].frequency + j / (2 * math.pi), abs=1 / s.span)
     assert res.unexplained(max_fap=1e-3).empty
+
+
+def test_a_count_line_at_the_limit_leaks_below_it_and_is_labelled():
+    # 20 rpm, one of the default twin's speeds: 8/3 counts per sample folds the count rate to
+    # 1/(3 spacing) = 1/(8 q) = 39.79 cycles/rad, exactly the quantisation limit; its leakage into
+    # the last bins searched (39.71, fap 1e-11 and 1e-18) is that line, within 3 resolution steps
+    res = _twin_spectrum(2000, 20.0)
+    edge = [p for s in res.segments for p in s.peaks
+            if p.frequency > s.quantisation_limit - 3 / s.span and not p.declared]
+    assert len(edge) >= 1 and all(p.label == "encoder counts x1, folded" for p in edge)
+    assert res.unexplained(max_fap=1e-3).empty

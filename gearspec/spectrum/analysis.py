@@ -292,15 +292,18 @@ class _Analysis:
         """For each frequency: ``(m, label)`` when it is within its tolerance of a line of the segment's
         encoder staircase (:func:`quantisation_lines`, the lowest harmonic ``m`` of the count rate), or
         of a sideband ``j = +-1 .. +-_Q_SIDEBANDS`` times a declared line fitted in the segment around
-        such a line found here (the speed ripple at a shaft's frequency modulates the count rate);
-        else None."""
+        such a line found here, or predicted at or above the highest frequency searched (the speed
+        ripple at a shaft's frequency modulates the count rate); else None."""
         out: list[tuple[int, str] | None] = [None] * len(freqs)
         if not self.step > 0:
             return out
         lines = sorted(quantisation_lines(self.step, _travel_per_sample(self.theta)), key=lambda x: x[1])
-        carriers = []
+        # a staircase line at or above the highest frequency searched is not found there: its leakage into
+        # the last _GUARD resolution steps searched, and its lower sidebands, are
+        edge = self.f_search_max - 1.0 / self.span
+        carriers = [(g, m) for g, m in lines if g >= edge]
         for i, (f, tol) in enumerate(zip(freqs, tolerances)):
-            m = next((m for g, m in lines if abs(g - f) <= tol), None)
+            m = next((m for g, m in lines if abs(g - f) <= (max(tol, _GUARD / self.span) if g >= edge else tol)), None)
             if m is not None:
                 out[i] = (m, f"encoder counts x{m}, folded")  # the count rate's harmonic, folded by the sampling
                 carriers.append((f, m))
