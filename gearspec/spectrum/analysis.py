@@ -401,15 +401,21 @@ def quantisation_step(theta: np.ndarray) -> float:
     if len(d) < 16:
         return 0.0
     d_min = float(d.min())
+    few = d[::max(1, len(d) // 4096)]  # a candidate is tried on a few thousand changes first
     for j in range(1, 9):
         qc = d_min / j
+        r = few / qc
+        if np.count_nonzero(np.abs(r - np.rint(r)) <= _LATTICE_TOL + rounding / qc) < _LATTICE_SHARE * len(few):
+            continue
         counts = np.rint(d / qc)
         on = np.abs(d / qc - counts) <= _LATTICE_TOL + rounding / qc
         if np.count_nonzero(on) >= _LATTICE_SHARE * len(d):
             # a lattice is evidence of quantisation only when the changes take two or more sizes in
             # counts (0 and 1 on a staircase, 8 and 9 on a fine encoder): a uniformly sampled exact
             # position changes by one same amount every sample, and any spacing is its 'step'
-            _, times = np.unique(counts[on], return_counts=True)
+            c = counts[on].astype(np.int64)
+            lo_c, hi_c = int(c.min()), int(c.max())
+            times = np.bincount(c - lo_c) if hi_c - lo_c < 65536 else np.unique(c, return_counts=True)[1]
             times = np.append(times, n_zero)
             others = int(times.sum() - times.max())
             if others < max(2, _OTHER_SIZES * times.sum()):
