@@ -146,16 +146,21 @@ def _lines_sections(result: SpectrumResult, table: pd.DataFrame, figs: dict) -> 
                         median_snr=("snr", "median"))
                    .reset_index())
         md += [markdown_table(summary), ""]
-    slow, above = {}, {}
+    slow, above, coarse = {}, {}, {}
     for i, s in enumerate(result.segments):
         for k in s.skipped:
-            (above if k.get("kind") == "above_nyquist" else slow).setdefault(k["label"], []).append(i)
+            kind = k.get("kind")
+            (above if kind == "above_nyquist" else coarse if kind == "above_quantisation_limit" else slow).setdefault(
+                k["label"], []).append(i)
     for lines, text in ((slow, "Lines not fitted in some segments because they complete less than a cycle there: "),
                         (above, "Lines above the position Nyquist frequency of some segments -- **not measured there** "
                                 "(never fitted; a peak found at the frequency where such a line aliases is labelled "
-                                "`alias of <label>`): ")):
+                                "`alias of <label>`): "),
+                        (coarse, "Lines above the quantisation limit of some segments -- **not measured there** "
+                                 "(never fitted): ")):
         if lines:
             md += [text + "; ".join(f"{k} (segments {_ranges(v)})" for k, v in lines.items()) + ".", ""]
+    md += _quantisation_sentence(result)
     md += ["## Peaks no declared line explains", ""]
     found = table[~table["declared"]] if not table.empty else table
     if found.empty:
@@ -175,6 +180,23 @@ def _lines_sections(result: SpectrumResult, table: pd.DataFrame, figs: dict) -> 
                "clue, not an explanation; given only when the uncertainty tells neighbouring multiples apart, with "
                "the exact order in `order_exact` beside the measured one.", ""]
     return md
+
+
+def _quantisation_sentence(result: SpectrumResult) -> list[str]:
+    """The quantisation limit, stated where it limits a segment (below its position Nyquist frequency)."""
+    lim = [(i, s) for i, s in enumerate(result.segments) if s.quantisation_limit < s.nyquist]
+    if not lim:
+        return []
+    unit = result.unit
+    steps = sorted({float(f"{s.quantisation_step:.4g}") for _, s in lim})
+    limits = [s.quantisation_limit for _, s in lim]
+    return [f"Position quantised (encoder step {', '.join(f'{q:g}' for q in steps)} {unit}) in segments "
+            f"{_ranges([i for i, _ in lim])}: nothing above the quantisation limit, 1/8 of the inverse step "
+            f"({min(limits):.4g} cycles/{unit}), is searched or fitted there (a line loses 2.6 % of its amplitude "
+            "to the staircase at that limit, and the encoder's counts make lines of their own). A peak labelled "
+            "`encoder counts xm, folded` sits where the m-th harmonic of the count rate, "
+            "folded by the sampling, falls: the drive's reaction to the counts, which moves with the speed, not "
+            "a position-locked line.", ""]
 
 
 def _pages_sentence(drawn: list[int], n_all: int, pages: str) -> str:

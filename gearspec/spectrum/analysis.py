@@ -7,8 +7,10 @@ peaks no declared line explains (:mod:`.search`) and their joint fit, repeated o
 every line found; steps in :func:`analyze_segment`.  Nothing above the segment's position Nyquist
 frequency (:func:`position_nyquist`) is searched, fitted or reported as measured: such declared
 lines are listed (``above_nyquist``) with where they alias, and a peak found there is labelled
-``alias of <label>``.  A declared line's ``fap`` is for that one frequency; a found peak's counts
-every independent frequency searched.
+``alias of <label>``.  On a quantised position (an encoder's staircase, :func:`quantisation_step`)
+nothing above the quantisation limit (:func:`quantisation_limit`) is searched or fitted either:
+such declared lines are listed (``above_quantisation_limit``) as not measured.  A declared line's
+``fap`` is for that one frequency; a found peak's counts every independent frequency searched.
 """
 
 from __future__ import annotations
@@ -27,10 +29,12 @@ from .results import Peak, SegmentSpectrum, SpectrumResult
 from .search import _fft_residual_power, _Grid, _LocalNoise, _search, _significant
 
 __all__ = ["Peak", "SegmentSpectrum", "SpectrumResult", "analyze_segment", "analyze", "position_nyquist",
-           "MEASURABLE_FRACTION", "LS_MAX_SAMPLES", "relabel_aliases"]
+           "MEASURABLE_FRACTION", "LS_MAX_SAMPLES", "relabel_aliases", "quantisation_step", "quantisation_limit",
+           "QUANTISATION_FRACTION", "quantisation_lines", "QUANTISATION_HARMONICS"]
 
 _GUARD = 3.0  # resolution steps kept clear around fitted lines when searching for peaks
 _MAX_ROUNDS = 6  # search -> joint fit -> search the residual of all lines found, at most this often
+_Q_SIDEBANDS = 3  # sidebands of a staircase's line labelled, each side (_Analysis.staircase_labels)
 
 #: segments up to this many samples search the Lomb-Scargle periodogram of the raw residual;
 #: longer ones the Hann spectrum of the residual resampled over position (see analyze_segment)
@@ -71,22 +75,27 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
         return SegmentSpectrum(segment, [], float(np.mean(y)) if n else float("nan"), float("nan"), span,
                                float("nan"), 0, [], None, note="too few samples to analyse")
     nyquist = position_nyquist(theta)
+    step = quantisation_step(theta)
+    q_limit = quantisation_limit(step)
     # nothing above the position Nyquist frequency is searched (nor fitted, nor reported as
-    # measured): with jittered spacing it is below the mean spacing's 0.5 (n - 1) / span
-    f_search_max = min(0.5 * (n - 1) / span, nyquist)
+    # measured): with jittered spacing it is below the mean spacing's 0.5 (n - 1) / span; nor above
+    # the quantisation limit of an encoder's staircase
+    f_search_max = min(0.5 * (n - 1) / span, nyquist, q_limit)
     if max_frequency is not None:
         f_search_max = min(f_search_max, float(max_frequency))
-    fitted, skipped, slow_cycles = _declared_lines(gear, harmonics, span, n, nyquist, min_cycles)
+    fitted, skipped, slow_cycles = _declared_lines(gear, harmonics, span, n, nyquist, min_cycles, q_limit)
     deg = (max(1, min_degree_for_cycles(max(slow_cycles))) if slow_cycles else 1) if degree == "auto" else int(degree)
     n_terms = deg + 1 + 2 * len(fitted)
     if n <= n_terms + 8:
         return SegmentSpectrum(segment, [], float(np.mean(y)), float("nan"), span, nyquist, deg, skipped, None,
-                               note=f"{n} samples are too few for {n_terms} terms")
+                               note=f"{n} samples are too few for {n_terms} terms", quantisation_step=step,
+                               quantisation_limit=q_limit)
     a = _Analysis(theta, y, gear, fitted, deg, lo, hi, nyquist, f_search_max, min_cycles=min_cycles,
-                  fap_threshold=fap_threshold, max_peaks=max_peaks, oversample=oversample, method=method)
+                  fap_threshold=fap_threshold, max_peaks=max_peaks, oversample=oversample, method=method,
+                  step=step)
     # 1. the declared lines: one pass over the samples
     out = SegmentSpectrum(segment, [], level=a.eq.y0, sigma=a.fit0.sigma, span=span, nyquist=nyquist,
-                          degree=deg, skipped=skipped, fit=a.fit0)
+                          degree=deg, skipped=skipped, fit=a.fit0, quantisation_step=step, quantisation_limit=q_limit)
     # 2. periodogram of the residual
     use_ls = periodogram == "lombscargle" or (periodogram == "auto" and n <= LS_MAX_SAMPLES)
     a.first_spectrum(use_ls, out if keep_spectra else None)
@@ -102,9 +111,9 @@ def analyze_segment(theta: np.ndarray, y: np.ndarray, gear: GearTrain | None = N
 
 
 def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int, nyquist: float,
-                    min_cycles: float):
+                    min_cycles: float, q_limit: float = math.inf):
     """The gear's declared lines in a segment of ``n`` samples over ``span``: ``(fitted, skipped
-    with the reason, cycles of the too-slow ones)``."""
+    with the reason, cycles of the too-slow ones)``; ``q_limit``: :func:`quantisation_limit`."""
     fitted, skipped, slow_cycles = [], [], []
     for ln in (gear.declared_lines(max_harmonic=harmonics) if gear is not None else []):
         cycles = ln.frequency * span
@@ -117,6 +126,10 @@ def _declared_lines(gear: GearTrain | None, harmonics: int, span: float, n: int,
                             "alias": alias_frequency(ln.frequency, span / (n - 1)) if ln.frequency > nyquist else None,
                             "reason": f"above {MEASURABLE_FRACTION:g} x the position Nyquist frequency ({nyquist:.4g}): "
                                       "not measured"})
+        elif ln.frequency >= q_limit:
+            skipped.append({"label": ln.label, "frequency": ln.frequency, "kind": "above_quantisation_limit",
+                            "reason": f"above the quantisation limit ({q_limit:.4g} = {QUANTISATION_FRACTION:g} / the "
+                                      "encoder step): not measured"})
         else:
             fitted.append(ln)
     return fitted, skipped, slow_cycles
@@ -126,12 +139,13 @@ class _Analysis:
     """The steps of :func:`analyze_segment` on one segment, and the state they share."""
 
     def __init__(self, theta, y, gear, fitted, deg, lo, hi, nyquist, f_search_max, *, min_cycles, fap_threshold,
-                 max_peaks, oversample, method):
+                 max_peaks, oversample, method, step=0.0):
         self.theta, self.y, self.gear, self.fitted, self.deg = theta, y, gear, fitted, deg
         self.lo, self.hi, self.span, self.nyquist, self.f_search_max = lo, hi, hi - lo, nyquist, f_search_max
         self.min_cycles, self.fap_threshold, self.max_peaks = min_cycles, fap_threshold, max_peaks
         self.oversample, self.method = oversample, method
         self.n = len(theta)
+        self.step = step
         self.declared_f = [ln.frequency for ln in fitted]
         self.n_dec = len(self.declared_f)
         self.eq = NormalEquations.accumulate(theta, y, self.declared_f, deg)
@@ -242,9 +256,11 @@ class _Analysis:
         ph_se = np.hypot(ph_se, 2 * np.pi * 0.5 * (self.lo + self.hi) * f_se) if len(f_se) else ph_se
         gear, span, nyquist = self.gear, self.span, self.nyquist
         spacing = span / (self.n - 1)  # mean position spacing: where lines above the Nyquist frequency alias
+        staircase = self.staircase_labels([f if j >= self.n_dec else math.nan for j, f in zip(keep, fit.frequency)],
+                                          [max(1.0 / span, 3 * e) for e in f_se])
         peaks = []
         for k, (j, f) in enumerate(zip(keep, fit.frequency)):
-            aliased = exact = None
+            aliased = exact = q_m = None
             if j < self.n_dec:
                 label, declared = self.fitted[j].label, True
             else:
@@ -254,6 +270,8 @@ class _Analysis:
                     if line is None:  # a line above the position Nyquist frequency, seen at its alias
                         line = gear.label(f, max(0.5 / span, 3 * f_se[k]), spacing=spacing, nyquist=nyquist)
                 label = line.label if line is not None else None
+                if label is None and staircase[k] is not None:  # the encoder staircase's line, or its sideband
+                    q_m, label = staircase[k]
                 if line is not None and line.kind == "alias":
                     aliased = {"label": line.parents[0], "frequency": line.frequency, "order": line.order}
                 elif label is None and gear is not None:
@@ -266,8 +284,37 @@ class _Analysis:
                               snr=float(z_fit[k]), hint=None if exact is None else exact.hint,
                               frequency_se=float(f_se[k]),
                               frequency_exact=None if exact is None else exact.frequency,
-                              order_exact=None if exact is None else exact.order, aliased_from=aliased))
+                              order_exact=None if exact is None else exact.order, aliased_from=aliased,
+                              quantisation_harmonic=q_m))
         return peaks, fit
+
+    def staircase_labels(self, freqs, tolerances) -> list[tuple[int, str] | None]:
+        """For each frequency: ``(m, label)`` when it is within its tolerance of a line of the segment's
+        encoder staircase (:func:`quantisation_lines`, the lowest harmonic ``m`` of the count rate), or
+        of a sideband ``j = +-1 .. +-_Q_SIDEBANDS`` times a declared line fitted in the segment around
+        such a line found here, or predicted at or above the highest frequency searched (the speed
+        ripple at a shaft's frequency modulates the count rate); else None."""
+        out: list[tuple[int, str] | None] = [None] * len(freqs)
+        if not self.step > 0:
+            return out
+        lines = sorted(quantisation_lines(self.step, _travel_per_sample(self.theta)), key=lambda x: x[1])
+        # a staircase line at or above the highest frequency searched is not found there: its leakage into
+        # the last _GUARD resolution steps searched, and its lower sidebands, are
+        edge = self.f_search_max - 1.0 / self.span
+        carriers = [(g, m) for g, m in lines if g >= edge]
+        for i, (f, tol) in enumerate(zip(freqs, tolerances)):
+            m = next((m for g, m in lines if abs(g - f) <= (max(tol, _GUARD / self.span) if g >= edge else tol)), None)
+            if m is not None:
+                out[i] = (m, f"encoder counts x{m}, folded")  # the count rate's harmonic, folded by the sampling
+                carriers.append((f, m))
+        for i, (f, tol) in enumerate(zip(freqs, tolerances)):
+            if not math.isfinite(f):
+                continue
+            for (g, m), ln in ((c, ln) for c in carriers for ln in self.fitted if ln.frequency > tol):
+                j = round((f - g) / ln.frequency)
+                if out[i] is None and 1 <= abs(j) <= _Q_SIDEBANDS and abs(g + j * ln.frequency - f) <= tol:
+                    out[i] = (m, f"encoder counts x{m}, folded, {j:+d}x {ln.label}")
+        return out
 
     def spectra_for_figures(self, out: SegmentSpectrum, grid: _Grid, nbin: int, enbw: float, power_first) -> None:
         """Step 5: the spectra of the figures into ``out``, on the first round's ``grid``."""
@@ -319,6 +366,118 @@ def position_nyquist(theta: np.ndarray) -> float:
     a = float(sp[k])
     b = float(sp[k + 1]) if len(kth) == 2 else a
     return 0.5 / (a + (b - a) * frac)
+
+
+#: the quantisation limit is this fraction of the inverse encoder step: 1 / (8 step), see quantisation_limit
+QUANTISATION_FRACTION = 0.125
+#: a position is quantised when at least this fraction of its nonzero steps are whole multiples of one step
+_LATTICE_SHARE = 0.99
+#: ... within this fraction of the step (plus the rounding of the values)
+_LATTICE_TOL = 0.02
+#: ... and changes of other sizes than the commonest (in counts, 0 included) are at least this share
+_OTHER_SIZES = 0.005
+
+
+def quantisation_step(theta: np.ndarray) -> float:
+    """The encoder step of positions ``theta`` (unit of theta), 0 when they are not quantised.
+
+    The positions are quantised with step ``q`` when at least 99 % of their nonzero changes are
+    whole multiples of ``q`` (within 2 % of ``q`` plus the float rounding of the values): ``q`` is
+    the smallest change divided by 1, 2, ..., 8 (a fine encoder moves several counts per sample),
+    the first that fits, refined as the ratio of the changes' sum to their sum in counts.  The
+    changes must take at least two sizes in counts (0 included; the rarer ones at least 0.5 % of
+    them): a position sampled exactly at a uniform spacing has one size only, and no quantisation
+    error.  Timing jitter and dithering by whole counts keep the lattice; a position in floating
+    point (filtered, interpolated, simulated without encoder) has no lattice and gives 0.
+    """
+    theta = np.asarray(theta, dtype=float)
+    if len(theta) < 3:
+        return 0.0
+    d = np.abs(np.diff(theta))
+    rounding = 16 * np.finfo(float).eps * float(np.max(np.abs(theta)))
+    n_zero = len(d)
+    d = d[d > rounding]
+    n_zero -= len(d)
+    if len(d) < 16:
+        return 0.0
+    d_min = float(d.min())
+    few = d[::max(1, len(d) // 4096)]  # a candidate is tried on a few thousand changes first
+    for j in range(1, 9):
+        qc = d_min / j
+        r = few / qc
+        if np.count_nonzero(np.abs(r - np.rint(r)) <= _LATTICE_TOL + rounding / qc) < _LATTICE_SHARE * len(few):
+            continue
+        counts = np.rint(d / qc)
+        on = np.abs(d / qc - counts) <= _LATTICE_TOL + rounding / qc
+        if np.count_nonzero(on) >= _LATTICE_SHARE * len(d):
+            # a lattice is evidence of quantisation only when the changes take two or more sizes in
+            # counts (0 and 1 on a staircase, 8 and 9 on a fine encoder): a uniformly sampled exact
+            # position changes by one same amount every sample, and any spacing is its 'step'
+            c = counts[on].astype(np.int64)
+            lo_c, hi_c = int(c.min()), int(c.max())
+            times = np.bincount(c - lo_c) if hi_c - lo_c < 65536 else np.unique(c, return_counts=True)[1]
+            times = np.append(times, n_zero)
+            others = int(times.sum() - times.max())
+            if others < max(2, _OTHER_SIZES * times.sum()):
+                return 0.0
+            return float(np.sum(d[on]) / np.sum(counts[on]))
+    return 0.0
+
+
+def quantisation_limit(step: float) -> float:
+    """The highest frequency (cycles per unit of theta) a position quantised with ``step`` measures:
+    ``QUANTISATION_FRACTION / step`` (inf when ``step`` is 0: not quantised).
+
+    Each quantised position is off the true one by up to half a step.  A line at frequency ``f`` is
+    then seen through the phase error ``2 pi f e``, with ``e`` spread over ``[-step/2, step/2]``: its
+    amplitude shrinks by ``sinc(f step)`` and the rest of its power goes to sidebands at ``f +- m /
+    step``; at ``1 / (8 step)`` the loss is 2.6 % (``sinc(1/8) = 0.974``), at ``1 / (4 step)`` already
+    10 %.  And the staircase has lines of its own in the torque: a closed loop on the encoder reacts
+    to every count, a signal periodic at the count rate ``v / step`` whose harmonics the sampling
+    folds to ``|m / step - k / spacing|`` per unit of theta (``spacing`` the travel per sample): on
+    the SILO4 twin at 2 rpm (a 2000-count encoder, 3.75 samples per count) at ``1 / (4 step)`` and
+    ``1 / (2 step)``, significant in every segment (false-alarm probabilities 1e-7 to 1e-15).
+    Below ``1 / (8 step)`` the analysis measures lines; above it neither searches nor fits.  Folded
+    harmonics of the count rate can still fall lower when the samples per count are close to a
+    whole number (e.g. 2.05 samples per count: at 0.05 / step); see the README's limits.
+    """
+    return QUANTISATION_FRACTION / step if step > 0 else math.inf
+
+
+#: harmonics of the encoder's count rate whose folds :func:`quantisation_lines` lists (a sawtooth's
+#: m-th harmonic has 1/m of its fundamental's amplitude)
+QUANTISATION_HARMONICS = 8
+
+
+def quantisation_lines(step: float, spacing: float, harmonics: int = QUANTISATION_HARMONICS) -> list[tuple[float, int]]:
+    """Where an encoder's staircase puts lines of its own in a segment: ``(frequency, m)``, frequency in
+    cycles per unit of theta of the ``m``-th harmonic of the count rate, ``m = 1 .. harmonics``.
+
+    A closed loop on a quantised position reacts to every count: a torque periodic in time at the
+    count rate, ``spacing / step`` counts per sample (``spacing``: travel per sample, unit of theta).
+    Its ``m``-th harmonic, ``m spacing / step`` cycles per sample, is folded by the sampling to its
+    distance ``x`` to the nearest whole number, ``x / spacing`` per unit of theta, and once more onto
+    the positions' lattice of ``step`` (``f`` and ``1 / step - f`` look the same there).  At constant
+    speed these are fixed frequencies over position in one segment (a position-locked line looks the
+    same) that move with the speed from segment to segment.  Empty when ``step`` or ``spacing`` is 0.
+    """
+    if not (step > 0 and spacing > 0):
+        return []
+    out = []
+    for m in range(1, int(harmonics) + 1):
+        c = m * spacing / step
+        f = abs(c - round(c)) / spacing
+        lattice = abs(f - round(f * step) / step)
+        out += [(f, m)] + ([(lattice, m)] if abs(lattice - f) > 1e-9 * (f + lattice) else [])
+    return out
+
+
+def _travel_per_sample(theta: np.ndarray) -> float:
+    """Mean travel per sample (unit of theta): the least-squares slope of ``theta`` over the sample
+    index (a quantised segment's end points are off by up to a step; its slope is not)."""
+    n = len(theta)
+    i = np.arange(n, dtype=float) - 0.5 * (n - 1)
+    return abs(float(np.dot(i, theta - theta.mean()) / np.dot(i, i))) if n > 1 else 0.0
 
 
 def rows_position_nyquist(rows: np.ndarray, length: np.ndarray) -> np.ndarray:

@@ -29,6 +29,8 @@ __all__ = ["HarmonicFit", "NormalEquations", "harmonic_fit", "refine_frequencies
 
 _TWO_PI = 2.0 * np.pi
 _CHUNK = 1 << 16
+#: relative precision of a double: the least standard error a fitted amplitude (relative) or phase (rad) has
+_EPS = float(np.finfo(float).eps)
 
 
 def min_degree_for_cycles(cycles: float) -> int:
@@ -72,7 +74,8 @@ class HarmonicFit:
         amp = np.maximum(self.amplitude, 1e-300)
         vcc, vss, vcs = self._blocks()
         var = (a * a * vcc + b * b * vss + 2 * a * b * vcs) / amp**2
-        return np.sqrt(np.maximum(var, 0))
+        # never 0 by rounding: at least the float precision of the amplitude itself
+        return np.maximum(np.sqrt(np.maximum(var, 0)), _EPS * self.amplitude)
 
     @property
     def phase_se(self) -> np.ndarray:
@@ -80,7 +83,7 @@ class HarmonicFit:
         amp2 = np.maximum(a * a + b * b, 1e-300)
         vcc, vss, vcs = self._blocks()
         var = (b * b * vcc + a * a * vss - 2 * a * b * vcs) / amp2**2
-        return np.sqrt(np.maximum(var, 0))
+        return np.maximum(np.sqrt(np.maximum(var, 0)), _EPS * np.pi)  # at least the precision of a phase
 
     def _blocks(self):
         """Per frequency: var(cos), var(sin), cov(cos, sin)."""

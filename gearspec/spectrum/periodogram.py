@@ -198,6 +198,10 @@ def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = 
     return centres[good], levels[good], counts[good]
 
 
+#: the smallest positive normal double: a false-alarm probability below it is not 0 but unknown
+_TINY = float(np.finfo(float).tiny)
+
+
 def false_alarm_probability(z, n_independent: float = 1.0, noise_bins=None, oversample: float = 1.0):
     """Probability that noise alone reaches ``z = power / local noise`` at least once among
     ``n_independent`` frequencies (1 for a frequency chosen in advance).
@@ -206,6 +210,8 @@ def false_alarm_probability(z, n_independent: float = 1.0, noise_bins=None, over
     When the level is itself the mean of ``noise_bins`` periodogram bins (``noise_bins /
     oversample`` independent ones, k), the ratio follows an F(2, 2k) law instead:
     ``P(> z) = (1 + z/k)^(-k)``, which has the heavier tail that an estimated level deserves.
+    A probability that underflows is returned as the smallest positive double (about 2.2e-308): 0
+    only for an infinite ``z``.
     """
     z = np.asarray(z, dtype=float)
     if noise_bins is None:
@@ -215,4 +221,7 @@ def false_alarm_probability(z, n_independent: float = 1.0, noise_bins=None, over
         single = np.exp(-k * np.log1p(z / k))
     m = max(1.0, float(n_independent))
     with np.errstate(divide="ignore"):
-        return -np.expm1(m * np.log1p(-np.minimum(single, 1 - 1e-16)))
+        fap = -np.expm1(m * np.log1p(-np.minimum(single, 1 - 1e-16)))
+    # 0 only for an infinite ratio; a finite one whose probability underflows gets the smallest
+    # positive double instead (the float precision of the estimate, not a certainty)
+    return np.where(np.isfinite(z) & (fap < _TINY), _TINY, fap)[()]

@@ -44,6 +44,9 @@ class Peak:
     frequency_exact: float | None = None  # with a hint: the exact frequency of that multiple
     order_exact: float | None = None      # ... and its exact order
     aliased_from: dict | None = None  # a peak labelled 'alias of X': X's label, frequency and order
+    #: a peak where the encoder's staircase has a line of its own (spectrum.quantisation_lines): the
+    #: harmonic m of the count rate; not a position-locked line (it moves with the speed)
+    quantisation_harmonic: int | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -69,6 +72,10 @@ class SegmentSpectrum:
     ls_residual_amplitude: np.ndarray | None = None
     noise_amplitude: np.ndarray | None = None
     note: str = ""
+    #: encoder step of the positions (unit of theta; 0: not quantised) and the highest frequency it
+    #: lets the analysis measure (cycles per unit; inf: no limit), see spectrum.quantisation_limit
+    quantisation_step: float = 0.0
+    quantisation_limit: float = float("inf")
 
     @property
     def direction(self) -> int:
@@ -90,6 +97,10 @@ class SegmentSpectrum:
                 "span": self.span, "nyquist": self.nyquist, "nuisance_degree": self.degree,
                 "peaks": [p.to_dict() for p in self.peaks], "skipped_lines": self.skipped,
                 "above_nyquist": [d["label"] for d in self.skipped if d.get("kind") == "above_nyquist"],
+                "quantisation_step": self.quantisation_step,
+                "quantisation_limit": self.quantisation_limit if np.isfinite(self.quantisation_limit) else None,
+                "above_quantisation_limit": [d["label"] for d in self.skipped
+                                             if d.get("kind") == "above_quantisation_limit"],
                 **({"note": self.note} if self.note else {})}
 
 
