@@ -18,6 +18,9 @@ from .ordermap import _scale
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_spectrum_summary",
            "plot_unexplained"]
 
+#: colour of the encoder's own lines (count rate folded by the sampling) and of the quantisation limit
+_ENCODER = "#8c564b"
+
 
 def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 20_000, max_rows: int = 12) -> Path:
     """Position-derived speed over time for every run (at most ``2 max_rows`` runs, spread evenly over
@@ -111,7 +114,8 @@ def _spectrum_panel(ax, i: int, s, unit: str, points: int) -> None:
         f, a = _envelope(s.ls_frequency, s.noise_amplitude, points)
         ax.loglog(f, a, color="k", lw=0.8, ls=":", label="local noise level")
     for p in s.peaks:
-        color = ("#9467bd" if p.declared else "#17becf" if p.aliased_from else "#ff7f0e" if p.label else "#d62728")
+        color = ("#9467bd" if p.declared else "#17becf" if p.aliased_from else
+                 _ENCODER if p.quantisation_harmonic is not None else "#ff7f0e" if p.label else "#d62728")
         ax.errorbar([p.frequency], [max(p.amplitude, 1e-12)], yerr=[[0], [p.amplitude_se]], fmt="o",
                     ms=4, color=color, mfc=color if p.fap < 0.01 else "none", zorder=5)
     # the three strongest peaks named, one a frequency band (a factor 3: labels of close peaks overlap),
@@ -128,6 +132,9 @@ def _spectrum_panel(ax, i: int, s, unit: str, points: int) -> None:
                     textcoords="offset points", ha="right" if left else "left")
     if np.isfinite(s.nyquist) and s.nyquist > 0:  # nothing beyond is measured
         ax.axvline(s.nyquist, color="k", lw=0.8, ls="-.", alpha=0.6, label="position Nyquist frequency")
+    ql = getattr(s, "quantisation_limit", float("inf"))
+    if np.isfinite(ql) and ql > 0 and not (np.isfinite(s.nyquist) and ql >= s.nyquist):
+        ax.axvline(ql, color=_ENCODER, lw=0.8, ls="--", alpha=0.8, label="quantisation limit: 1/(8 encoder steps)")
     ax.set_title(f"segment {i}: run {s.segment.run}, dir {s.direction:+d}, "
                  f"{s.speed:.4g} {unit}/s, {s.segment.n} samples", fontsize=8, loc="left")
     ax.set_xlabel(f"frequency (cycles/{unit})", fontsize=8)
@@ -148,9 +155,11 @@ def _spectra_legend(fig, ax) -> None:
     handles += [Line2D([], [], marker="o", ls="", color="#9467bd", label="declared line (fit, +1 s.e.)"),
                 Line2D([], [], marker="o", ls="", color="#ff7f0e", label="found: harmonic/sideband"),
                 Line2D([], [], marker="o", ls="", color="#17becf", label="found: alias of a line above Nyquist"),
+                Line2D([], [], marker="o", ls="", color=_ENCODER, label="found: encoder count rate, folded"),
                 Line2D([], [], marker="o", ls="", color="#d62728", label="found: unexplained"),
                 Line2D([], [], marker="o", ls="", color="0.3", mfc="none", label="hollow: fap >= 0.01")]
     fig.legend(handles=handles, loc="upper center", ncol=5, fontsize=8, frameon=False)
+
 
 
 def _spread(items: list, k: int) -> list:
@@ -283,13 +292,17 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
     lim = float(v.max()) * 1.15 if v.max() > 0 else 1.0
     ax.set_xlim(-lim if (t["direction"] < 0).any() else 0, lim if (t["direction"] > 0).any() else 0)
-    for lab, color in ((True, "#ff7f0e"), (False, "#d62728")):
-        sub = t[t["label"].notna() == lab]
+    enc = (t["quantisation_harmonic"].notna() if "quantisation_harmonic" in t
+           else pd.Series(False, index=t.index))
+    kinds = ((enc, _ENCODER, "encoder count rate, folded by the sampling (not position-locked)"),
+             (~enc & t["label"].notna(), "#ff7f0e", "harmonic or sideband of a declared line"),
+             (~enc & t["label"].isna(), "#d62728", "unexplained"))
+    for rows, color, name in kinds:
+        sub = t[rows]
         if sub.empty:
             continue
         ax.scatter(sub["speed"] * np.sign(sub["direction"]), sub["frequency"], s=15 + 300 * sub["amplitude"] / amax,
-                   color=color, alpha=0.6, edgecolor="k", lw=0.3,
-                   label="harmonic or sideband of a declared line" if lab else "unexplained")
+                   color=color, alpha=0.6, edgecolor="k", lw=0.3, label=name)
     # one annotation per frequency band (a factor 1.4: closer labels overlap), at its strongest peak
     done: list[float] = []
     for _, r in t.sort_values("amplitude", ascending=False).iterrows():
