@@ -121,7 +121,9 @@ def relabel_aliases(segments: list[SegmentSpectrum], gear: GearTrain | None = No
     known: list[tuple[float, str]] = []
     for s in segments:
         for p in s.peaks:
-            if p.declared or p.aliased_from is not None or p.fap >= 0.01:
+            # the encoder's own count-rate lines move with the speed: not a position-locked line
+            # another segment could alias
+            if p.declared or p.aliased_from is not None or p.fap >= 0.01 or p.quantisation_harmonic is not None:
                 continue
             name = (p.label.split(" = ")[0] if p.label else p.hint) or f"line at {p.frequency:.6g} cycles/{unit}"
             if not any(abs(f - p.frequency) <= 1e-4 * p.frequency for f, _ in known):
