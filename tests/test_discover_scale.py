@@ -1,0 +1,105 @@
+"""discover at scale (issue 13): the sparse-regression path and its bootstrap run on the normal
+equations of the library's columns, folded a block of segments at a time
+(:mod:`gearspec.discover.blocks`), and give what the dense pseudo-row design gives."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gearspec.discover import blocks
+from gearspec.discover.blocks import SegmentDesign, running_qr
+from gearspec.discover.library import default_library
+from gearspec.discover.moments import moments
+from gearspec.discover.search import Scaled, bootstrap_inclusion, path
+from gearspec.fitdata import FitData
+from gearspec.model import RPM, FrictionModel
+from gearspec.simulate import model_recording
+
+F2, F3 = 1 / (2 * np.pi * 14), 1 / (2 * np.pi)      # SILO4 worm-shaft and motor-shaft lines, cycles/rad
+
+
+def _silo4_eq11() -> FrictionModel:
+    """SILO4 eq. 11 (Table 2, direction-dependent Coulomb, viscous and ripple), as in test_discover."""
+    p = {"tau_c": 7.106e-3, "tau_s": 8.596e-3, "v_s": 28.18 * RPM, "viscous": 0.0134e-3 / RPM,
+         "harmonics": [dict(frequency=F2, amplitude=0.576e-3, decay=1.27e-4 / RPM, phase=np.pi / 2),
+                       dict(frequency=F3, amplitude=0.133e-3, decay=5.28e-5 / RPM, phase=np.pi)]}
+    n = {"tau_c": 7.909e-3, "tau_s": 9.399e-3, "v_s": 28.18 * RPM, "viscous": 0.0138e-3 / RPM,
+         "harmonics": [dict(frequency=F2, amplitude=0.526e-3, decay=1.12e-4 / RPM, phase=np.pi / 2),
+                       dict(frequency=F3, amplitude=0.152e-3, decay=7.49e-6 / RPM, phase=np.pi)]}
+    return FrictionModel("silo4", p, n)
+
+
+@pytest.fixture(scope="module")
+def twin():
+    """8 motor speeds 1..600 rad/s per direction, 1.5 s each at 1 kHz, 0.1 mNm white noise: 24k
+    samples in 16 segments, the library of both SILO4 lines (95 columns)."""
+    speeds = [s * d for s in np.geomspace(1.0, 600, 8) for d in (1, -1)]
+    rec, _ = model_recording(_silo4_eq11(), speeds, duration=1.5, fs=1000, noise=0.1e-3, gear="silo4-joint3",
+                             seed=5, one_run_per_plateau=False)
+    data = FitData.from_recording(rec)
+    M = moments(data, [F2, F3], inertia=True)
+    return M, default_library(M)
+
+
+def test_running_qr_gives_the_normal_equations_of_all_blocks():
+    # an exact identity: R^T R = X^T X and R^T t = X^T y, to rounding (1e-12 of the entries' scale)
+    rng = np.random.default_rng(1)
+    X, y = rng.normal(size=(300, 20)) * np.geomspace(1, 1e4, 20), rng.normal(size=300)
+    R, t = running_qr((X[a:a + 7], y[a:a + 7]) for a in range(0, 300, 7))   # blocks narrower than the columns
+    G = X.T @ X
+    scale = np.sqrt(np.outer(np.diag(G), np.diag(G)))
+    assert R.shape == (20, 20)
+    assert np.max(np.abs(R.T @ R - G) / scale) < 1e-12
+    assert np.max(np.abs(R.T @ t - X.T @ y) / np.sqrt(np.diag(G) * (y @ y))) < 1e-12
+
+
+def test_reduced_path_equals_the_dense_path(twin, monkeypatch):
+    """The path on the folded normal equations (blocks of 3 segments) selects the same columns with
+    the same coefficients as on the whole pseudo-row design.  Both are exact reductions of the same
+    least-squares problems, so they agree to rounding: 1e-9 of the largest standardised coefficient
+    leaves room for the conditioning of the near-collinear ripple shapes (condition ~1e5)."""
+    M, lib = twin
+    design = SegmentDesign.of(lib, M)
+    monkeypatch.setattr(blocks, "_BLOCK_CELLS", 3 * M.K * design.shape[1])
+    ths = np.geomspace(1.0, 1e-5, 12)
+    dense = path(Scaled(design.dense(), M.q.reshape(-1), M.N, float(np.sum(M.yy))), ths)
+    reduced = path(Scaled(*design.reduce()), ths)
+    assert design.shape[1] > 80 and len(dense) == len(reduced)
+    n_selected = []
+    for wd, wr in zip(dense, reduced):
+        assert np.array_equal(wd != 0, wr != 0)
+        assert np.max(np.abs(wd - wr)) <= 1e-9 * max(np.max(np.abs(wd)), 1e-300)
+        n_selected.append(int(np.count_nonzero(wd)))
+    assert n_selected[0] < n_selected[-1]          # the path goes from sparse to dense: not a trivial comparison
+
+
+def test_reduced_bootstrap_equals_the_dense_bootstrap(twin):
+    """A bootstrap replicate draws segments with replacement: the reduction weights a segment drawn c
+    times by c, as the dense design repeats its rows c times; same seed, same inclusion fractions."""
+    M, lib = twin
+    design = SegmentDesign.of(lib, M)
+    X = design.dense()
+    t = 1e-3
+    a = bootstrap_inclusion(X, M, t, n_models=12, seed=3)
+    b = bootstrap_inclusion(design, M, t, n_models=12, seed=3)
+    assert np.array_equal(a, b)
+    assert 0 < np.count_nonzero(a) < len(a)
+
+
+def test_held_columns_come_first_and_are_never_thresholded(twin):
+    """A design with held-in columns: its reduction is that of ``[fixed | library]`` (checked against
+    the dense stack to 1e-12), and the path keeps the held columns at every threshold."""
+    M, lib = twin
+    fixed = SegmentDesign.of(lib, M).dense()[:, :3]
+    design = SegmentDesign.of(lib, M, fixed)
+    X = design.dense()
+    assert np.array_equal(X[:, :3], fixed)
+    R, t, N, yy = design.reduce()
+    G = X.T @ X
+    scale = np.sqrt(np.outer(np.diag(G), np.diag(G)))
+    assert np.max(np.abs(R.T @ R - G) / scale) < 1e-12
+    assert N == M.N and yy == pytest.approx(float(np.sum(M.yy)), rel=1e-15)
+    free = np.arange(design.shape[1]) >= 3
+    for w in path(Scaled(R, t, N, yy), [10.0, 1.0], free=free):     # thresholds above every coefficient
+        assert np.all(w[:3] != 0) and not np.any(w[3:])
