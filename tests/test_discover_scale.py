@@ -103,3 +103,38 @@ def test_held_columns_come_first_and_are_never_thresholded(twin):
     free = np.arange(design.shape[1]) >= 3
     for w in path(Scaled(R, t, N, yy), [10.0, 1.0], free=free):     # thresholds above every coefficient
         assert np.all(w[:3] != 0) and not np.any(w[3:])
+
+
+def test_screen_z_from_normal_equations_equals_z_statistic_on_the_rows():
+    """The line screen's held-out Z, computed from each segment's normal equations of the columns it
+    uses (cost segments x columns^2, whatever the number of lines), equals
+    gearspec.core.crossval.z_statistic (one block per held-out group) on the rows themselves: an
+    identity, to rounding (1e-10)."""
+    from gearspec.core.crossval import z_statistic
+    from gearspec.discover.screen import _held_out_z
+
+    rng = np.random.default_rng(7)
+    S, k = 30, 6
+    n = rng.integers(20, 60, S)
+    direction = np.where(np.arange(S) % 2 == 0, 1, -1)
+    group = np.arange(S) // 3                        # runs of 3 segments held out together
+    fold = group % 5
+    X = [rng.normal(size=(m, k)) for m in n]
+    y = [x @ np.array([0.3, -0.2, 0.1, 0.05, 0.0, 0.0]) + rng.normal(size=len(x)) for x in X]
+    G = np.array([x.T @ x for x in X])
+    g = np.array([x.T @ v for x, v in zip(X, y)])
+    cols0, cols1 = [0, 1], [0, 1, 4, 5]
+    z = _held_out_z(G, g, cols0, cols1, fold, direction, group)
+    r0, dl = [], []
+    for s in range(S):
+        tr = (fold != fold[s]) & (direction == direction[s])
+        b1 = np.linalg.lstsq(G[tr].sum(0)[np.ix_(cols1, cols1)], g[tr].sum(0)[cols1], rcond=None)[0]
+        b0 = np.linalg.lstsq(G[tr].sum(0)[np.ix_(cols0, cols0)], g[tr].sum(0)[cols0], rcond=None)[0]
+        f0, f1 = X[s][:, cols0] @ b0, X[s][:, cols1] @ b1
+        r0.append(y[s] - f0)
+        dl.append(f1 - f0)
+    r0, dl = np.concatenate(r0), np.concatenate(dl)
+    bounds = np.concatenate(([0], np.cumsum(n)))[::3]          # groups are consecutive segments
+    z_rows = z_statistic(r0, dl, r0 - dl, bounds[:-1], bounds[1:], blocks=1)
+    assert abs(z) > 1.0                               # a real change, not a comparison of zeros
+    assert z == pytest.approx(z_rows, rel=1e-10)

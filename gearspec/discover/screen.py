@@ -14,9 +14,11 @@ still has to pass the same rule inside the selected law (:mod:`.accept`).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from ..core.crossval import critical_z, z_statistic
+from ..core.crossval import critical_z
 from ..core.reduction import harmonic_columns
 from ..fitdata import FitData
 from .moments import _sample_bases
@@ -106,37 +108,40 @@ def _segments(data: FitData, inertia):
     return order, starts, stops, chans
 
 
-def _pseudo(G, g):
-    """Pseudo rows of per-segment normal equations (rows of P: P'P = G, P'q = g); zero rows where singular."""
-    lam, U = np.linalg.eigh(G)
-    top = np.maximum(lam[..., -1:], 0.0)
-    ok = lam > top * 1e-12
-    sq = np.where(ok, np.sqrt(np.where(ok, lam, 1.0)), 0.0)
-    P = sq[..., :, None] * np.swapaxes(U, -1, -2)
-    Ug = np.einsum("...ji,...j->...i", U, g)
-    q = np.where(ok, Ug / np.where(ok, sq, 1.0), 0.0)
-    return P, q
-
-
-def _held_out_z(G, g, P, q, cols0, cols1, fold, direction, order, starts, stops) -> float:
-    """Held-out Z (one cluster per held-out group) of the lines' columns ``cols1`` against
-    ``cols0`` (a subset), one coefficient set per direction fitted on the training folds."""
-    S, K = g.shape
-    beta0, beta1 = np.zeros((S, K)), np.zeros((S, K))
+def _held_out_z(G, g, cols0, cols1, fold, direction, group) -> float:
+    """Held-out Z (one cluster per held-out group, :func:`~gearspec.core.crossval.z_statistic` with
+    one block) of the lines' columns ``cols1`` against ``cols0`` (a subset), one coefficient set per
+    direction fitted on the training folds; from the segments' normal equations ``G`` (S, K, K),
+    ``g`` (S, K) of those columns alone: with ``d`` the change of a segment's coefficients, its
+    ``<r0, delta> = g.d - b0' G d`` and ``|delta|^2 = d' G d`` (cost segments x columns used^2).
+    ``group``: the held-out group (0..n-1) of every segment."""
+    cols = list(cols1)
+    pos0 = [cols.index(c) for c in cols0]
+    Gc, gc = G[:, cols][:, :, cols], g[:, cols]
+    S, k = gc.shape
+    beta0, beta1 = np.zeros((S, k)), np.zeros((S, k))
     for f in np.unique(fold):
         test = fold == f
         for d in (1, -1):
             tr, te = ~test & (direction == d), test & (direction == d)
             if not te.any() or not tr.any():
                 continue
-            Gt, gt = G[tr].sum(0), g[tr].sum(0)
-            for cols, beta in ((cols0, beta0), (cols1, beta1)):
-                if len(cols):
-                    c = np.linalg.lstsq(Gt[np.ix_(cols, cols)], gt[cols], rcond=1e-10)[0]
-                    beta[np.ix_(te, cols)] = c
-    r0 = q - np.einsum("skl,sl->sk", P, beta0)
-    delta = np.einsum("skl,sl->sk", P, beta1 - beta0)
-    return z_statistic(r0[order].ravel(), delta[order].ravel(), (r0 - delta)[order].ravel(), starts, stops, blocks=1)
+            Gt, gt = Gc[tr].sum(0), gc[tr].sum(0)
+            beta1[te] = np.linalg.lstsq(Gt, gt, rcond=1e-10)[0]
+            if pos0:
+                beta0[np.ix_(te, pos0)] = np.linalg.lstsq(Gt[np.ix_(pos0, pos0)], gt[pos0], rcond=1e-10)[0]
+    dl = beta1 - beta0
+    Gd = np.einsum("skl,sl->sk", Gc, dl)
+    a = np.einsum("sk,sk->s", gc, dl) - np.einsum("sk,sk->s", beta0, Gd)     # <r0, delta> per segment
+    c = np.einsum("sk,sk->s", dl, Gd)                                           # |delta|^2 per segment
+    n_groups = int(group.max()) + 1 if len(group) else 0
+    num = np.bincount(group, weights=a, minlength=n_groups)
+    e = num - np.bincount(group, weights=c, minlength=n_groups)                # <r0 - delta, delta> per group
+    var = float(np.sum(e * e))
+    total = float(np.sum(num))
+    if var > 0:
+        return total / math.sqrt(var)
+    return math.copysign(math.inf, total) if total != 0 else 0.0
 
 
 def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_segment: np.ndarray, *,
@@ -154,25 +159,19 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     if F == 0:
         return []
     direction = _segment_direction(data)
-    order = np.argsort(group_of_segment, kind="stable")
-    ug, gstart = np.unique(group_of_segment[order], return_index=True)
-    n_groups, S = len(ug), len(group_of_segment)
-    bounds = np.append(gstart, S)
+    ug, group = np.unique(group_of_segment, return_inverse=True)
+    n_groups = len(ug)
     _, G1, g1, cyc = line_statistics(data, freqs, inertia=inertia, min_cycles=min_cycles)
-    P1, q1 = _pseudo(G1, g1)
     zc = critical_z(alpha, F, n_groups)
     out = []
     for i in range(F):
-        z = _held_out_z(G1[:, i], g1[:, i], P1[:, i], q1[:, i], [], [0, 1], fold_of_segment, direction, order,
-                        2 * bounds[:-1], 2 * bounds[1:])
+        z = _held_out_z(G1[:, i], g1[:, i], [], [0, 1], fold_of_segment, direction, group)
         out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0,
                     "cycles": float(cyc[:, i].max()) if len(cyc) else 0.0})
     alive = [i for i in range(F) if out[i]["passed"]]
     if len(alive) < 2:
         return out
     G, g = joint_statistics(data, freqs[alive], inertia=inertia, min_cycles=min_cycles)
-    P, q = _pseudo(G, g)
-    K = 2 * len(alive)
     inside: list[int] = []
     rest = list(range(len(alive)))
     rnd = 0
@@ -180,8 +179,8 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
         rnd += 1
         zc = critical_z(alpha, F - len(inside), n_groups)
         cols0 = [c for j in inside for c in (2 * j, 2 * j + 1)]
-        zs = {j: _held_out_z(G, g, P, q, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, order,
-                             K * bounds[:-1], K * bounds[1:]) for j in rest}
+        zs = {j: _held_out_z(G, g, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, group)
+              for j in rest}
         for j, z in zs.items():
             out[alive[j]].update(z=float(z), z_crit=zc, passed=bool(z >= zc), round=rnd)
         best = max(rest, key=lambda j: zs[j])
