@@ -39,7 +39,24 @@ def twin():
                              seed=5, one_run_per_plateau=False)
     data = FitData.from_recording(rec)
     M = moments(data, [F2, F3], inertia=True)
-    return M, default_library(M)
+    return M, default_library(M), data
+
+
+def test_moments_reduced_a_chunk_of_segments_at_a_time_are_those_of_the_whole(twin, monkeypatch):
+    """The sample bases are built for a chunk of whole segments at a time (memory bounded by the
+    chunk, not rows x bases of the recording): the same per-segment arithmetic, so the same numbers
+    exactly, whether the chunks hold one segment or all of them."""
+    from gearspec.discover import moments as mod
+
+    M, _, data = twin
+    monkeypatch.setattr(mod, "_CHUNK_CELLS", 1)                 # one segment per chunk
+    M1 = moments(data, [F2, F3], inertia=True)
+    monkeypatch.setattr(mod, "_CHUNK_CELLS", 3 * 1500 * M.K)     # about 3 segments per chunk
+    M3 = moments(data, [F2, F3], inertia=True)
+    assert len(list(mod._chunks(M.n, M.K))) >= 5
+    for k in ("G", "b", "yy", "n", "Gb", "bb", "yyb", "noise"):
+        assert np.array_equal(getattr(M1, k), getattr(M, k)), k
+        assert np.array_equal(getattr(M3, k), getattr(M, k)), k
 
 
 def test_running_qr_gives_the_normal_equations_of_all_blocks():
@@ -59,7 +76,7 @@ def test_reduced_path_equals_the_dense_path(twin, monkeypatch):
     the same coefficients as on the whole pseudo-row design.  Both are exact reductions of the same
     least-squares problems, so they agree to rounding: 1e-9 of the largest standardised coefficient
     leaves room for the conditioning of the near-collinear ripple shapes (condition ~1e5)."""
-    M, lib = twin
+    M, lib, _ = twin
     design = SegmentDesign.of(lib, M)
     monkeypatch.setattr(blocks, "_BLOCK_CELLS", 3 * M.K * design.shape[1])
     ths = np.geomspace(1.0, 1e-5, 12)
@@ -77,7 +94,7 @@ def test_reduced_path_equals_the_dense_path(twin, monkeypatch):
 def test_reduced_bootstrap_equals_the_dense_bootstrap(twin):
     """A bootstrap replicate draws segments with replacement: the reduction weights a segment drawn c
     times by c, as the dense design repeats its rows c times; same seed, same inclusion fractions."""
-    M, lib = twin
+    M, lib, _ = twin
     design = SegmentDesign.of(lib, M)
     X = design.dense()
     t = 1e-3
@@ -90,7 +107,7 @@ def test_reduced_bootstrap_equals_the_dense_bootstrap(twin):
 def test_held_columns_come_first_and_are_never_thresholded(twin):
     """A design with held-in columns: its reduction is that of ``[fixed | library]`` (checked against
     the dense stack to 1e-12), and the path keeps the held columns at every threshold."""
-    M, lib = twin
+    M, lib, _ = twin
     fixed = SegmentDesign.of(lib, M).dense()[:, :3]
     design = SegmentDesign.of(lib, M, fixed)
     X = design.dense()
