@@ -155,3 +155,21 @@ def test_screen_z_from_normal_equations_equals_z_statistic_on_the_rows():
     z_rows = z_statistic(r0, dl, r0 - dl, bounds[:-1], bounds[1:], blocks=1)
     assert abs(z) > 1.0                               # a real change, not a comparison of zeros
     assert z == pytest.approx(z_rows, rel=1e-10)
+
+
+def test_the_screen_rounds_stop_once_a_law_is_full(twin):
+    """Both true lines of the twin pass the screen and enter its rounds, one per round; with
+    ``max_lines=1`` (a law that holds one line) the rounds stop after the first: the line that
+    entered first is in, the other keeps its verdict of round 1 and is not taken in."""
+    from gearspec.discover.law import fold_ids
+    from gearspec.discover.screen import screen_lines
+
+    M, _, data = twin
+    fold, groups = fold_ids(M, "segment", 5), M.groups("segment")
+    full = screen_lines(data, [F3, F2], fold, groups, alpha=0.01)
+    one = screen_lines(data, [F3, F2], fold, groups, alpha=0.01, max_lines=1)
+    assert [r["inside"] for r in full] == [True, True] and all(r["passed"] for r in full)
+    assert sorted(r["round"] for r in full) == [1, 2]
+    first = [r["round"] for r in full].index(1)
+    assert [r["inside"] for r in one] == [i == first for i in range(2)]
+    assert [r["round"] for r in one] == [1, 1] and all(r["passed"] for r in one)

@@ -275,7 +275,7 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     say(f"{M0.N} samples in {M0.S} segments reduced")
     t0 = time.perf_counter()
     screen = screen_lines(data, [s["frequency"] for s in specs], fold_ids(M0, by, folds), M0.groups(by),
-                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles) if specs else []
+                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles, max_lines=max_parts) if specs else []
     notes: list = []
     lines = []
     for s, r in zip(specs, screen):
@@ -286,10 +286,12 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
                          f"{'alone' if r['round'] == 0 else 'beside the stronger lines'}): left out")
     kept = [s for s, r in zip(specs, screen) if r["passed"]]
     if len(kept) > max_parts:   # a law holds at most max_parts terms: the strongest lines are searched
-        z = {id(s): r["z"] for s, r in zip(specs, screen)}
-        cut = sorted(kept, key=lambda s: -z[id(s)])[max_parts:]
-        notes.append(f"{len(kept)} ripple lines passed the screen; the {max_parts} with the largest held-out Z "
-                     f"are searched (a law holds at most {max_parts} terms), not "
+        # the lines that entered the screen's rounds first (each the strongest beside those before it)
+        z = {id(s): (not r.get("inside", False), -r["z"]) for s, r in zip(specs, screen)}
+        cut = sorted(kept, key=lambda s: z[id(s)])[max_parts:]
+        notes.append(f"{len(kept)} ripple lines passed the screen; the {max_parts} that entered its rounds first "
+                     f"(each the strongest beside those before it) are searched (a law holds at most {max_parts} "
+                     "terms), not "
                      + ", ".join(f"{s['frequency']:.6g}" for s in cut) + f" cycles/{data.unit}")
         kept = [s for s in kept if s not in cut]
     if specs:

@@ -145,13 +145,15 @@ def _held_out_z(G, g, cols0, cols1, fold, direction, group) -> float:
 
 
 def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_segment: np.ndarray, *,
-                 alpha: float, inertia="auto", min_cycles: float = 1.0) -> list[dict]:
+                 alpha: float, inertia="auto", min_cycles: float = 1.0, max_lines: int | None = None) -> list[dict]:
     """The held-out test of every line (module docstring): ``[{"z", "z_crit", "passed", "round", "cycles"}]``
     (``cycles``: the most cycles of the line in a segment),
     one per frequency.  First each line alone; then the lines that pass alone, in rounds: the one
     with the largest Z that passes enters, the others are tested again beside the lines in (a weak
     line next to a strong one is judged by what it adds to it, not by the strong one's leakage into
-    its columns over a short segment).  Bonferroni over the lines still in play.
+    its columns over a short segment).  Bonferroni over the lines still in play.  ``inside``: the
+    line entered in a round.  ``max_lines``: the rounds stop once that many lines are in (a law holds
+    no more; the lines still out keep the verdict of the last round, beside the lines in).
     ``fold_of_segment``, ``group_of_segment``: fold and held-out group of every segment, in the
     order of the sorted segment ids."""
     freqs = np.asarray(freqs, dtype=float)
@@ -166,7 +168,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     out = []
     for i in range(F):
         z = _held_out_z(G1[:, i], g1[:, i], [], [0, 1], fold_of_segment, direction, group)
-        out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0,
+        out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0, "inside": False,
                     "cycles": float(cyc[:, i].max()) if len(cyc) else 0.0})
     alive = [i for i in range(F) if out[i]["passed"]]
     if len(alive) < 2:
@@ -175,7 +177,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     inside: list[int] = []
     rest = list(range(len(alive)))
     rnd = 0
-    while rest:
+    while rest and (max_lines is None or len(inside) < max_lines):
         rnd += 1
         zc = critical_z(alpha, F - len(inside), n_groups)
         cols0 = [c for j in inside for c in (2 * j, 2 * j + 1)]
@@ -188,6 +190,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
             break
         inside.append(best)
         rest.remove(best)
+        out[alive[best]]["inside"] = True
     return out
 
 
