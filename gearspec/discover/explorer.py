@@ -200,6 +200,7 @@ def _search(run: "_Run", say) -> tuple:
         raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
                          "zero or the library does not fit the data")
     run.timings["ripple path"] = time.perf_counter() - t0
+    say(f"ripple terms searched: {len(pool.cands)} laws")
     t0 = time.perf_counter()
     if run.local_search:
         climb(pool)
@@ -275,7 +276,8 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     say(f"{M0.N} samples in {M0.S} segments reduced")
     t0 = time.perf_counter()
     screen = screen_lines(data, [s["frequency"] for s in specs], fold_ids(M0, by, folds), M0.groups(by),
-                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles, max_lines=max_parts) if specs else []
+                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles, max_lines=max_parts,
+                          progress=say) if specs else []
     notes: list = []
     lines = []
     for s, r in zip(specs, screen):

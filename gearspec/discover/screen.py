@@ -145,7 +145,8 @@ def _held_out_z(G, g, cols0, cols1, fold, direction, group) -> float:
 
 
 def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_segment: np.ndarray, *,
-                 alpha: float, inertia="auto", min_cycles: float = 1.0, max_lines: int | None = None) -> list[dict]:
+                 alpha: float, inertia="auto", min_cycles: float = 1.0, max_lines: int | None = None,
+                 progress=None) -> list[dict]:
     """The held-out test of every line (module docstring): ``[{"z", "z_crit", "passed", "round", "cycles"}]``
     (``cycles``: the most cycles of the line in a segment),
     one per frequency.  First each line alone; then the lines that pass alone, in rounds: the one
@@ -154,6 +155,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     its columns over a short segment).  Bonferroni over the lines still in play.  ``inside``: the
     line entered in a round.  ``max_lines``: the rounds stop once that many lines are in (a law holds
     no more; the lines still out keep the verdict of the last round, beside the lines in).
+    ``progress``: called with a line of text after the lines alone are tested.
     ``fold_of_segment``, ``group_of_segment``: fold and held-out group of every segment, in the
     order of the sorted segment ids."""
     freqs = np.asarray(freqs, dtype=float)
@@ -171,6 +173,9 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
         out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0, "inside": False,
                     "cycles": float(cyc[:, i].max()) if len(cyc) else 0.0})
     alive = [i for i in range(F) if out[i]["passed"]]
+    if progress is not None:
+        progress(f"line screen: {F} lines tested alone, {len(alive)} pass" + (
+            "; testing them beside each other" if len(alive) > 1 else ""))
     if len(alive) < 2:
         return out
     G, g = joint_statistics(data, freqs[alive], inertia=inertia, min_cycles=min_cycles)
