@@ -102,6 +102,14 @@ def test_reduced_bootstrap_equals_the_dense_bootstrap(twin):
     b = bootstrap_inclusion(design, M, t, n_models=12, seed=3)
     assert np.array_equal(a, b)
     assert 0 < np.count_nonzero(a) < len(a)
+    # the normal equations of one replicate: segments drawn twice or three times weigh as much
+    pick = np.array([0, 0, 1, 2, 2, 2, 5, 7, 7, 11])
+    R, t, N, yy = design.reduce(pick)
+    Xp = X.reshape(M.S, M.K, -1)[pick].reshape(len(pick) * M.K, -1)
+    G = Xp.T @ Xp
+    scale = np.sqrt(np.outer(np.diag(G), np.diag(G)))
+    assert np.max(np.abs(R.T @ R - G) / np.where(scale > 0, scale, 1.0)) < 1e-12
+    assert N == float(np.sum(M.n[pick])) and yy == pytest.approx(float(np.sum(M.yy[pick])), rel=1e-15)
 
 
 def test_held_columns_come_first_and_are_never_thresholded(twin):
