@@ -57,6 +57,11 @@ def bench_recording(args) -> int:
     print(f"1. pandas.read_csv: {len(df)} rows x {df.shape[1]} columns in {t_read:.2f} s "
           f"({size / 1e6:.0f} MB in memory)")
     del df
+    # what the interpreter with gearspec's discover and CLI imported holds before reading anything
+    probe = ("import resource, gearspec.cli, gearspec.discover, gearspec.spectrum; "
+             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)")
+    imports = float(subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True).stdout.strip()
+                    or "nan")
     cmd = [sys.executable, "-m", "gearspec", "discover", args.recording, "--gear", args.gear]
     t0 = time.perf_counter()
     run = subprocess.run(cmd, capture_output=True, text=True)
@@ -68,11 +73,23 @@ def bench_recording(args) -> int:
           f"(target <= 30: {'MET' if t_disc <= 30 * t_read else 'NOT MET'}); "
           f"peak memory / data = {peak / size:.1f} copies (target <= 3: {'MET' if peak <= 3 * size else 'NOT MET'}); "
           f"load average at the start {load[0]:.1f}, at the end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(f"   of the peak, {imports / 1e6:.0f} MB is the interpreter with gearspec imported (before any data): "
+          f"(peak - imports) / data = {(peak - imports) / size:.1f} copies")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"t_read": t_read, "t_discover": t_disc, "ratio": t_disc / t_read, "peak_bytes": peak,
-                       "data_bytes": size, "load": load, "stdout": run.stdout}, fh, indent=1)
+                       "data_bytes": size, "import_bytes": imports, "load": load,
+                       "stdout": run.stdout}, fh, indent=1)
     return 0
+
+
+def _rss() -> float:
+    """Resident memory of this process now (bytes; Linux /proc, else NaN)."""
+    try:
+        with open("/proc/self/status") as fh:
+            return next(float(line.split()[1]) * 1024 for line in fh if line.startswith("VmRSS"))
+    except (OSError, StopIteration):
+        return float("nan")
 
 
 def main(argv=None) -> int:
@@ -120,6 +137,12 @@ def main(argv=None) -> int:
     out.update(samples=N, segments=data.n_segments, t_recording=t_rec, t_fitdata=t_fitdata)
 
     # ---- the explorer
+    import resource
+
+    data_bytes = float(sum(a.nbytes for a in (data.y, data.v, data.theta, data.segment, data.run, data.direction)
+                           if a is not None))
+    rss_before = _rss()
+    peak_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0
     best = None
     for _ in range(max(args.repeat, 1)):
         t0 = time.perf_counter()
@@ -134,6 +157,12 @@ def main(argv=None) -> int:
         if k != "total":
             print(f"     {k:<18} {v:7.2f} s")
     out.update(library_columns=len(lib), t_explorer=best, timings=res.timings, laws_scored=len(res.candidates))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0
+    grew = max(peak - rss_before, 0.0) if peak > peak_before else float("nan")
+    print(f"   memory: the samples the explorer reads (y, v, theta, ids) {data_bytes / 1e6:.0f} MB; the process's peak "
+          f"grew by {grew / 1e6:.0f} MB during the explorer: {grew / data_bytes:.2f} x the data "
+          f"(peak {peak / 1e6:.0f} MB including the interpreter and the recording)")
+    out.update(data_bytes=data_bytes, explorer_peak_growth=grew, peak_bytes=peak)
 
     # ---- the baseline: one dense least-squares fit of the same library on the same samples
     if not args.no_baseline:

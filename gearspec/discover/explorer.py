@@ -27,6 +27,7 @@ from .results import Candidate, DiscoveryResult, Reference
 from .screen import screen_lines
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
 from .accept import backward, validate_law
+from .blocks import SegmentDesign
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
@@ -199,6 +200,7 @@ def _search(run: "_Run", say) -> tuple:
         raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
                          "zero or the library does not fit the data")
     run.timings["ripple path"] = time.perf_counter() - t0
+    say(f"ripple terms searched: {len(pool.cands)} laws")
     t0 = time.perf_counter()
     if run.local_search:
         climb(pool)
@@ -239,15 +241,16 @@ class _Run:
     def pool(self, M: Moments, lib: Library) -> _Pool:
         return _Pool(M, self.fold, self.by, self.max_parts, self.se_rule, addable=_addable(lib))
 
-    def path(self, M: Moments, lib: Library, X: np.ndarray, fixed: np.ndarray | None = None) -> tuple:
-        """``(threshold, structure)`` along the sparse-regression path over ``lib``'s columns ``X``
-        (pseudo rows of ``M``) with the columns ``fixed`` held in (never thresholded); and the
-        design it ran on (``fixed`` first)."""
-        nf = 0 if fixed is None else fixed.shape[1]
-        X = X if fixed is None else np.hstack([fixed, X])
-        coefs = path(Scaled(X, M.q.reshape(-1), M.N, float(np.sum(M.yy))), self.ths, self.optimizer, self.alpha,
-                     free=_free(X, nf), max_columns=nf + 2 * self.max_parts)
-        return _path_structures(lib, coefs, self.ths, offset=nf), X
+    def path(self, M: Moments, lib: Library, fixed: np.ndarray | None = None) -> tuple:
+        """``(threshold, structure)`` along the sparse-regression path over ``lib``'s columns on the
+        pseudo rows of ``M`` with the columns ``fixed`` (S*K, nf) held in (never thresholded); and
+        the design it ran on (``fixed`` first), a :class:`~.blocks.SegmentDesign`: the path runs on
+        its normal equations, reduced a block of segments at a time."""
+        design = SegmentDesign.of(lib, M, fixed)
+        nf = design.nf
+        coefs = path(Scaled(*design.reduce()), self.ths, self.optimizer, self.alpha,
+                     free=_free(design.shape[1], nf), max_columns=nf + 2 * self.max_parts)
+        return _path_structures(lib, coefs, self.ths, offset=nf), design
 
 
 def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_options, optimizer, alpha, thresholds,
@@ -273,7 +276,8 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     say(f"{M0.N} samples in {M0.S} segments reduced")
     t0 = time.perf_counter()
     screen = screen_lines(data, [s["frequency"] for s in specs], fold_ids(M0, by, folds), M0.groups(by),
-                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles) if specs else []
+                          alpha=test_alpha, inertia=inertia, min_cycles=min_cycles, max_lines=max_parts,
+                          progress=say) if specs else []
     notes: list = []
     lines = []
     for s, r in zip(specs, screen):
@@ -284,10 +288,12 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
                          f"{'alone' if r['round'] == 0 else 'beside the stronger lines'}): left out")
     kept = [s for s, r in zip(specs, screen) if r["passed"]]
     if len(kept) > max_parts:   # a law holds at most max_parts terms: the strongest lines are searched
-        z = {id(s): r["z"] for s, r in zip(specs, screen)}
-        cut = sorted(kept, key=lambda s: -z[id(s)])[max_parts:]
-        notes.append(f"{len(kept)} ripple lines passed the screen; the {max_parts} with the largest held-out Z "
-                     f"are searched (a law holds at most {max_parts} terms), not "
+        # the lines that entered the screen's rounds first (each the strongest beside those before it)
+        z = {id(s): (not r.get("inside", False), -r["z"]) for s, r in zip(specs, screen)}
+        cut = sorted(kept, key=lambda s: z[id(s)])[max_parts:]
+        notes.append(f"{len(kept)} ripple lines passed the screen; the {max_parts} that entered its rounds first "
+                     f"(each the strongest beside those before it) are searched (a law holds at most {max_parts} "
+                     "terms), not "
                      + ", ".join(f"{s['frequency']:.6g}" for s in cut) + f" cycles/{data.unit}")
         kept = [s for s in kept if s not in cut]
     if specs:
@@ -327,7 +333,7 @@ def _level_stage(run: _Run, M1: Moments, lib1: Library) -> tuple:
     pool1 = run.pool(M1, lib1)
     path1 = []
     if len(lib1):
-        path1, _ = run.path(M1, lib1, lib1.design(M1))
+        path1, _ = run.path(M1, lib1)
         for t, parts in path1:
             pool1.consider(parts, f"level path t={t:.3g}", t)
     run.timings["level path"] = time.perf_counter() - t0
@@ -352,8 +358,6 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
     path2, X2, nf = [], None, 0
     if not len(lib2):
         return pool, path2, X2, nf
-    X2lib = lib2.design(M)
-    X1full = lib1.design(M) if len(lib1) else None
     current, z_cur = tuple(level), z_level
     seen: set = set()
     for rnd in range(2):
@@ -363,15 +367,15 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
         seen.add(("level", _signature(lvl)))
         Xf = _fixed_columns(M, lvl, current, z_cur)      # ripple path given the level law
         nf = Xf.shape[1]
-        path2, X2 = run.path(M, lib2, X2lib, Xf)
+        path2, X2 = run.path(M, lib2, Xf)
         for t, rparts in path2:
             pool.consider(lvl + tuple(rparts), f"ripple path t={t:.3g} (round {rnd + 1})", t)
         pool.screen()
         best = pool.cands[pool.best()]
         rip = tuple(p for p in best.parts if p.fam.basis == "ripple")
-        if X1full is not None and rip and ("ripple", _signature(rip)) not in seen:    # level path given the ripple
+        if len(lib1) and rip and ("ripple", _signature(rip)) not in seen:    # level path given the ripple
             seen.add(("ripple", _signature(rip)))
-            path1, _ = run.path(M, lib1, X1full, _fixed_columns(M, rip, best.parts, best.fit.z))
+            path1, _ = run.path(M, lib1, _fixed_columns(M, rip, best.parts, best.fit.z))
             for t, lparts in path1:
                 pool.consider(tuple(lparts) + rip, f"level path t={t:.3g} given the ripple (round {rnd + 1})", t)
             pool.screen()
@@ -487,7 +491,7 @@ def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.Da
             if not (structs and n and mine):
                 continue
             t = _threshold_for(structs, n)
-            X = lib.design(Ms) if X is None else X
+            X = SegmentDesign.of(lib, Ms) if X is None else X
             slots = [_group_of(p) for p in mine]
             ct = lib.column_terms()
             cg = np.full(X.shape[1], -1)
@@ -498,7 +502,7 @@ def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.Da
             if not np.any(cg >= 0):
                 continue
             prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
-                                       alpha=run.alpha, seed=run.seed, free=_free(X, nf), column_groups=cg)
+                                       alpha=run.alpha, seed=run.seed, free=_free(X.shape[1], nf), column_groups=cg)
             for k, p in enumerate(mine):
                 rows.append({"term": p.label(run.M.frequencies), "family": p.family,
                              "variant": "direction-dependent" if p.split else "both directions",
@@ -539,10 +543,10 @@ def _mean_prediction(fit: LawFit, M: Moments) -> np.ndarray:
     return np.sum(A * sums * fit.w[None, :], axis=1) / M.n
 
 
-def _free(X: np.ndarray, nf: int) -> np.ndarray:
-    """Columns of ``X`` a path may threshold: all but the ``nf`` held-in columns first (all of them,
-    to the optimisers, is the same as no mask)."""
-    return np.arange(X.shape[1]) >= nf
+def _free(p: int, nf: int) -> np.ndarray:
+    """Which of a design's ``p`` columns a path may threshold: all but the ``nf`` held-in columns
+    first (all of them, to the optimisers, is the same as no mask)."""
+    return np.arange(p) >= nf
 
 
 def _fixed_columns(M: Moments, keep, parts, z) -> np.ndarray:

@@ -235,21 +235,14 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     K0, F = len(basis), len(freqs)
     basis += [f"{sc}{i}" for i in range(F) for sc in ("sin", "cos")]
     chans = [np.ones(len(data))] + [x for x in (load, None if temp is None else temp - t_ref, acc) if x is not None]
-    Phi = np.empty((len(order), len(basis)))
-    Phi[:, :K0] = np.column_stack(chans)[order]
     cycles = np.outer(span, freqs) if F else np.zeros((len(segs), 0))
-    for sl in segs if F else ():
-        Phi[sl, K0::2], Phi[sl, K0 + 1::2] = harmonic_columns(th[sl], freqs)   # phases about the segment's mean
     y, v, dirs = data.y[order], data.v[order], data.direction[order]
     change = data.speed_change()
-    blocks = {}
-    if change is None:
-        gn = GroupNormals.of(Phi, y, starts, [sl.stop for sl in segs])
-        blocks = _block_normals(Phi, y, segs)
-    else:  # free motion: the first-order effect of the change of speed within each segment taken out
-        ext = GroupNormals.of(np.column_stack([Phi, change[order]]), y, starts, [sl.stop for sl in segs])
-        gn = GroupNormals(*partial_out_last(ext.G, ext.b, ext.yy), ext.n)
-    noise = np.array([_noise_variance(Phi[sl], y[sl], gn.G[s], gn.b[s]) for s, sl in enumerate(segs)])
+    parts = [_reduce_chunk(chans, change, th, y, order, segs[a:z], K0, freqs)
+             for a, z in _chunks(np.array([sl.stop - sl.start for sl in segs]), len(basis))]
+    gn = GroupNormals(*(np.concatenate([c[0][k] for c in parts]) for k in range(4)))
+    blocks = {} if change is not None else {k: np.concatenate([c[1][k] for c in parts]) for k in ("Gb", "bb", "yyb")}
+    noise = np.concatenate([c[2] for c in parts])
     vm = np.array([np.mean(v[sl]) for sl in segs])
     varying = sum(np.ptp(v[sl]) > 1e-9 * max(abs(m), 1e-300) for sl, m in zip(segs, vm))
     if varying:
@@ -267,6 +260,48 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
                    direction=np.array([int(np.sign(np.sum(dirs[sl]))) or int(dirs[sl][0]) for sl in segs], np.int64),
                    load=seg_mean(load), temperature=seg_mean(temp), cycles=cycles, noise=_fill_noise(noise),
                    t_ref=t_ref, unit=data.unit, notes=notes, **blocks)
+
+
+#: samples x sample bases held at once while reducing (a chunk of whole segments; at least one)
+_CHUNK_CELLS = 4_000_000
+
+
+def _chunks(sizes: np.ndarray, K: int):
+    """``(first, stop)`` indices of consecutive segments holding about :data:`_CHUNK_CELLS` / ``K``
+    samples together (at least one segment each)."""
+    per = max(_CHUNK_CELLS // max(K, 1), 1)
+    a, S = 0, len(sizes)
+    cum = np.cumsum(sizes)
+    while a < S:
+        before = cum[a - 1] if a else 0
+        z = max(int(np.searchsorted(cum, before + per, side="right")), a + 1)
+        yield a, min(z, S)
+        a = min(z, S)
+
+
+def _reduce_chunk(chans, change, th, y, order, segs, K0: int, freqs) -> tuple:
+    """The normal equations (``G, b, yy, n``), block normal equations and noise variances of the
+    segments ``segs`` (slices of the sorted samples, consecutive): the sample bases of these
+    samples alone are built, never those of the whole recording."""
+    a0, z0 = segs[0].start, segs[-1].stop
+    local = [slice(sl.start - a0, sl.stop - a0) for sl in segs]
+    idx = order[a0:z0]
+    F = len(freqs)
+    Phi = np.empty((z0 - a0, K0 + 2 * F))
+    Phi[:, :K0] = np.column_stack([c[idx] for c in chans])
+    for sl in local if F else ():
+        Phi[sl, K0::2], Phi[sl, K0 + 1::2] = harmonic_columns(th[a0:z0][sl], freqs)   # phases about the segment's mean
+    yc = y[a0:z0]
+    starts, stops = [sl.start for sl in local], [sl.stop for sl in local]
+    blocks = {}
+    if change is None:
+        gn = GroupNormals.of(Phi, yc, starts, stops)
+        blocks = _block_normals(Phi, yc, local)
+    else:  # free motion: the first-order effect of the change of speed within each segment taken out
+        ext = GroupNormals.of(np.column_stack([Phi, change[idx]]), yc, starts, stops)
+        gn = GroupNormals(*partial_out_last(ext.G, ext.b, ext.yy), ext.n)
+    noise = np.array([_noise_variance(Phi[sl], yc[sl], gn.G[s], gn.b[s]) for s, sl in enumerate(local)])
+    return (gn.G, gn.b, gn.yy, gn.n), blocks, noise
 
 
 #: blocks per segment of :attr:`Moments.Gb` (the ``blocks`` of :func:`gearspec.core.crossval.z_statistic`)

@@ -14,9 +14,11 @@ still has to pass the same rule inside the selected law (:mod:`.accept`).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from ..core.crossval import critical_z, z_statistic
+from ..core.crossval import critical_z
 from ..core.reduction import harmonic_columns
 from ..fitdata import FitData
 from .moments import _sample_bases
@@ -106,47 +108,54 @@ def _segments(data: FitData, inertia):
     return order, starts, stops, chans
 
 
-def _pseudo(G, g):
-    """Pseudo rows of per-segment normal equations (rows of P: P'P = G, P'q = g); zero rows where singular."""
-    lam, U = np.linalg.eigh(G)
-    top = np.maximum(lam[..., -1:], 0.0)
-    ok = lam > top * 1e-12
-    sq = np.where(ok, np.sqrt(np.where(ok, lam, 1.0)), 0.0)
-    P = sq[..., :, None] * np.swapaxes(U, -1, -2)
-    Ug = np.einsum("...ji,...j->...i", U, g)
-    q = np.where(ok, Ug / np.where(ok, sq, 1.0), 0.0)
-    return P, q
-
-
-def _held_out_z(G, g, P, q, cols0, cols1, fold, direction, order, starts, stops) -> float:
-    """Held-out Z (one cluster per held-out group) of the lines' columns ``cols1`` against
-    ``cols0`` (a subset), one coefficient set per direction fitted on the training folds."""
-    S, K = g.shape
-    beta0, beta1 = np.zeros((S, K)), np.zeros((S, K))
+def _held_out_z(G, g, cols0, cols1, fold, direction, group) -> float:
+    """Held-out Z (one cluster per held-out group, :func:`~gearspec.core.crossval.z_statistic` with
+    one block) of the lines' columns ``cols1`` against ``cols0`` (a subset), one coefficient set per
+    direction fitted on the training folds; from the segments' normal equations ``G`` (S, K, K),
+    ``g`` (S, K) of those columns alone: with ``d`` the change of a segment's coefficients, its
+    ``<r0, delta> = g.d - b0' G d`` and ``|delta|^2 = d' G d`` (cost segments x columns used^2).
+    ``group``: the held-out group (0..n-1) of every segment."""
+    cols = list(cols1)
+    pos0 = [cols.index(c) for c in cols0]
+    Gc, gc = G[:, cols][:, :, cols], g[:, cols]
+    S, k = gc.shape
+    beta0, beta1 = np.zeros((S, k)), np.zeros((S, k))
     for f in np.unique(fold):
         test = fold == f
         for d in (1, -1):
             tr, te = ~test & (direction == d), test & (direction == d)
             if not te.any() or not tr.any():
                 continue
-            Gt, gt = G[tr].sum(0), g[tr].sum(0)
-            for cols, beta in ((cols0, beta0), (cols1, beta1)):
-                if len(cols):
-                    c = np.linalg.lstsq(Gt[np.ix_(cols, cols)], gt[cols], rcond=1e-10)[0]
-                    beta[np.ix_(te, cols)] = c
-    r0 = q - np.einsum("skl,sl->sk", P, beta0)
-    delta = np.einsum("skl,sl->sk", P, beta1 - beta0)
-    return z_statistic(r0[order].ravel(), delta[order].ravel(), (r0 - delta)[order].ravel(), starts, stops, blocks=1)
+            Gt, gt = Gc[tr].sum(0), gc[tr].sum(0)
+            beta1[te] = np.linalg.lstsq(Gt, gt, rcond=1e-10)[0]
+            if pos0:
+                beta0[np.ix_(te, pos0)] = np.linalg.lstsq(Gt[np.ix_(pos0, pos0)], gt[pos0], rcond=1e-10)[0]
+    dl = beta1 - beta0
+    Gd = np.einsum("skl,sl->sk", Gc, dl)
+    a = np.einsum("sk,sk->s", gc, dl) - np.einsum("sk,sk->s", beta0, Gd)     # <r0, delta> per segment
+    c = np.einsum("sk,sk->s", dl, Gd)                                           # |delta|^2 per segment
+    n_groups = int(group.max()) + 1 if len(group) else 0
+    num = np.bincount(group, weights=a, minlength=n_groups)
+    e = num - np.bincount(group, weights=c, minlength=n_groups)                # <r0 - delta, delta> per group
+    var = float(np.sum(e * e))
+    total = float(np.sum(num))
+    if var > 0:
+        return total / math.sqrt(var)
+    return math.copysign(math.inf, total) if total != 0 else 0.0
 
 
 def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_segment: np.ndarray, *,
-                 alpha: float, inertia="auto", min_cycles: float = 1.0) -> list[dict]:
+                 alpha: float, inertia="auto", min_cycles: float = 1.0, max_lines: int | None = None,
+                 progress=None) -> list[dict]:
     """The held-out test of every line (module docstring): ``[{"z", "z_crit", "passed", "round", "cycles"}]``
     (``cycles``: the most cycles of the line in a segment),
     one per frequency.  First each line alone; then the lines that pass alone, in rounds: the one
     with the largest Z that passes enters, the others are tested again beside the lines in (a weak
     line next to a strong one is judged by what it adds to it, not by the strong one's leakage into
-    its columns over a short segment).  Bonferroni over the lines still in play.
+    its columns over a short segment).  Bonferroni over the lines still in play.  ``inside``: the
+    line entered in a round.  ``max_lines``: the rounds stop once that many lines are in (a law holds
+    no more; the lines still out keep the verdict of the last round, beside the lines in).
+    ``progress``: called with a line of text after the lines alone are tested.
     ``fold_of_segment``, ``group_of_segment``: fold and held-out group of every segment, in the
     order of the sorted segment ids."""
     freqs = np.asarray(freqs, dtype=float)
@@ -154,34 +163,31 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     if F == 0:
         return []
     direction = _segment_direction(data)
-    order = np.argsort(group_of_segment, kind="stable")
-    ug, gstart = np.unique(group_of_segment[order], return_index=True)
-    n_groups, S = len(ug), len(group_of_segment)
-    bounds = np.append(gstart, S)
+    ug, group = np.unique(group_of_segment, return_inverse=True)
+    n_groups = len(ug)
     _, G1, g1, cyc = line_statistics(data, freqs, inertia=inertia, min_cycles=min_cycles)
-    P1, q1 = _pseudo(G1, g1)
     zc = critical_z(alpha, F, n_groups)
     out = []
     for i in range(F):
-        z = _held_out_z(G1[:, i], g1[:, i], P1[:, i], q1[:, i], [], [0, 1], fold_of_segment, direction, order,
-                        2 * bounds[:-1], 2 * bounds[1:])
-        out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0,
+        z = _held_out_z(G1[:, i], g1[:, i], [], [0, 1], fold_of_segment, direction, group)
+        out.append({"z": float(z), "z_crit": zc, "passed": bool(z >= zc), "round": 0, "inside": False,
                     "cycles": float(cyc[:, i].max()) if len(cyc) else 0.0})
     alive = [i for i in range(F) if out[i]["passed"]]
+    if progress is not None:
+        progress(f"line screen: {F} lines tested alone, {len(alive)} pass" + (
+            "; testing them beside each other" if len(alive) > 1 else ""))
     if len(alive) < 2:
         return out
     G, g = joint_statistics(data, freqs[alive], inertia=inertia, min_cycles=min_cycles)
-    P, q = _pseudo(G, g)
-    K = 2 * len(alive)
     inside: list[int] = []
     rest = list(range(len(alive)))
     rnd = 0
-    while rest:
+    while rest and (max_lines is None or len(inside) < max_lines):
         rnd += 1
         zc = critical_z(alpha, F - len(inside), n_groups)
         cols0 = [c for j in inside for c in (2 * j, 2 * j + 1)]
-        zs = {j: _held_out_z(G, g, P, q, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, order,
-                             K * bounds[:-1], K * bounds[1:]) for j in rest}
+        zs = {j: _held_out_z(G, g, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, group)
+              for j in rest}
         for j, z in zs.items():
             out[alive[j]].update(z=float(z), z_crit=zc, passed=bool(z >= zc), round=rnd)
         best = max(rest, key=lambda j: zs[j])
@@ -189,6 +195,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
             break
         inside.append(best)
         rest.remove(best)
+        out[alive[best]]["inside"] = True
     return out
 
 

@@ -95,27 +95,29 @@ def path(sc: Scaled, thresholds, method: str = "stlsq", alpha: float = 1e-4, fre
     return out
 
 
-def bootstrap_inclusion(X: np.ndarray, m, threshold: float, *, by: str = "segment", n_models: int = 50,
+def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models: int = 50,
                         method: str = "stlsq", alpha: float = 1e-4, seed: int = 0, free=None,
                         column_groups=None) -> np.ndarray:
     """Fraction of segment-bootstrap replicates in which each column is selected.
 
-    ``X``: the library design on the pseudo rows of ``m`` (S*K, p).  Groups (segments or runs)
-    are drawn with replacement; each replicate is scaled afresh and fitted at ``threshold``.
-    ``column_groups`` (p,): a group index per column (-1: none); then the fraction of replicates
-    in which any column of each group is selected, (max group + 1,).
+    ``X``: the library design on the pseudo rows of ``m``, a
+    :class:`~.blocks.SegmentDesign` (reduced a block of segments at a time) or an array (S*K, p).
+    Groups (segments or runs) are drawn with replacement; each replicate is scaled afresh and
+    fitted at ``threshold``.  ``column_groups`` (p,): a group index per column (-1: none); then the
+    fraction of replicates in which any column of each group is selected, (max group + 1,).
     """
+    from .blocks import SegmentDesign
+
     rng = np.random.default_rng(seed)
     g = m.groups(by)
     ug = np.unique(g)
     members = [np.flatnonzero(g == u) for u in ug]
-    Xs = X.reshape(m.S, m.K, -1)
+    design = X if isinstance(X, SegmentDesign) else SegmentDesign(m, np.ones((m.S, 0)), np.zeros(0, int), X)
     cg = None if column_groups is None else np.asarray(column_groups, dtype=int)
-    hits = np.zeros(X.shape[1] if cg is None else int(cg.max()) + 1)
+    hits = np.zeros(design.shape[1] if cg is None else int(cg.max()) + 1)
     for _ in range(n_models):
         pick = np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))])
-        sc = Scaled(Xs[pick].reshape(len(pick) * m.K, -1), m.q[pick].reshape(-1), float(np.sum(m.n[pick])),
-                    float(np.sum(m.yy[pick])))
+        sc = Scaled(*design.reduce(pick))
         sel = _fit(method, threshold, alpha, sc, free) != 0
         if cg is None:
             hits += sel
