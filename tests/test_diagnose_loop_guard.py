@@ -16,6 +16,7 @@ import json
 import numpy as np
 import pytest
 
+import gearspec.diagnose.guard as guard
 import gearspec.diagnose.loop as loop
 from gearspec.cli import main
 from gearspec.diagnose.loop import Evaluation
@@ -69,7 +70,7 @@ def test_step_whose_settled_model_is_worse_is_undone(data_dir, tmp_path, capsys,
     """The rule for every kind: with the old settle (every nonlinear parameter refitted on all data)
     the same step leaves a model worse held-out (0.2297 against 0.2122 Nm): it is undone, recorded as
     rejected with that reason (one verdict: console, report and JSON), and not accepted again."""
-    monkeypatch.setattr(loop, "_settle_holding", lambda state, dd, held: loop._settle(state, dd))
+    monkeypatch.setattr(guard, "settle_holding", lambda state, dd, held: loop._settle(state, dd))
     rep = tmp_path / "rep"
     d, console = _kinova(data_dir, tmp_path, capsys, "--out", str(rep))
     base, final = d["baseline"]["rmse_holdout"], d["final"]["rmse_holdout"]
@@ -93,27 +94,22 @@ def _passing_eval() -> Evaluation:
                       rmse_holdout_after=0.9, gain=0.1, n_params=2, passed=True, reason="accepted", gate="passes")
 
 
-class _Cand:
-    kind = "speed_law"
-    name = "amplitude law of line A"
-
-
 def test_no_candidate_accepted_twice():
     """A candidate passing again while its effect is in the model is not accepted again (the loop
     before the fix accepted the same amplitude law in all 8 rounds); one whose step was undone is not
     tried again; any other passes through."""
-    e = Effect(kind="speed_law", name=_Cand.name, accepted=True, evidence="", rmse_holdout_before=1.0,
+    e = Effect(kind="speed_law", name="amplitude law of line A", accepted=True, evidence="", rmse_holdout_before=1.0,
                rmse_holdout_after=0.9, round=1)
     e.verdict = Verdict("accepted", "held-out", "passes", 7.0, 3.0, 0.1, 0.005, 1.0, 0.9, 1)
-    key = f"{_Cand.kind}: {_Cand.name}"
+    key = "speed_law: amplitude law of line A"
     ev = _passing_eval()
-    loop._bar_repeat({key: e}, {}, _Cand(), ev)
+    guard.bar_repeat(e, key, {}, ev)
     assert not ev.passed and ev.test == "re-entry" and "in the model already (accepted in round 1)" in ev.gate
     ev = _passing_eval()
-    loop._bar_repeat({}, {key: (2, _Cand.name)}, _Cand(), ev)
+    guard.bar_repeat(None, key, {key: (2, "amplitude law of line A")}, ev)
     assert not ev.passed and ev.test == "settled model" and "undone in round 2" in ev.gate
     ev = _passing_eval()
     e.accepted = False
-    loop._bar_repeat({key: e}, {}, _Cand(), ev)
+    guard.bar_repeat(e, key, {}, ev)
     assert ev.passed                                          # rejected before: may pass now
     assert verdict_line(e)                                    # the record still renders

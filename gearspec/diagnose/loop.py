@@ -15,7 +15,7 @@ An independent recording (``validation``) is the final judge (:mod:`.validate`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -32,6 +32,7 @@ from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
 from .detectors import analyse, propose
+from .guard import accept_first, bar_repeat, undone_in
 from .results import Diagnosis, Effect, Verdict
 from .validate import validate
 
@@ -348,26 +349,22 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
         for c, ev in evals:
             _bar_reentry(effects, c, ev)
-            _bar_repeat(effects, undone, c, ev)
+            bar_repeat(effects.get(_effect_key(effects, c)), _effect_key(effects, c), undone, ev)
             _record(effects, c, ev, k, rnd)
             trace.append({"round": k, "candidate": c.name, "kind": c.kind, "z": ev.z, "z_crit": z_crit,
                           "gain": ev.gain, "consistency": ev.consistency, "passed": ev.passed})
         passing = [(c, ev) for c, ev in evals if ev.passed]
-        if not passing:
-            rounds.append({"round": k, "candidates": len(cands), "accepted": None, "z_crit": z_crit})
-            say(f"round {k}: {len(cands)} candidates, none accepted")
-            break
-        step = _accept_first(rnd, passing, effects, k, z_crit=z_crit, min_gain=min_gain, held=held, undone=undone,
-                             say=say)
-        if step is None:
-            rounds.append({"round": k, "candidates": len(cands), "accepted": None, "z_crit": z_crit,
-                           "undone": _undone_in(undone, k)})
-            say(f"round {k}: {len(cands)} candidates, none kept (every passing step undone: see above)")
+        step = accept_first(rnd, passing, effects, k, z_crit=z_crit, min_gain=min_gain, held=held, undone=undone,
+                            say=say) if passing else None
+        if step is None:   # nothing passed, or every passing step was undone (accept_first said which)
+            rounds.append({"round": k, "candidates": len(cands), "accepted": None, "z_crit": z_crit}
+                          | ({"undone": undone_in(undone, k)} if passing else {}))
+            say(f"round {k}: {len(cands)} candidates, " + ("none kept" if passing else "none accepted"))
             break
         rnd, ev, e, gone, ho_now = step
         rounds.append({"round": k, "candidates": len(cands), "accepted": e.name, "z_crit": z_crit,
                        "rmse": rnd.fitted.rmse, "rmse_holdout_step": ev.rmse_holdout_after,
-                       "rmse_holdout_model": ho_now, "removed": gone, "undone": _undone_in(undone, k)})
+                       "rmse_holdout_model": ho_now, "removed": gone, "undone": undone_in(undone, k)})
         say(f"round {k}: {len(cands)} candidates, accepted {e.name} (held-out rmse {ev.rmse_holdout_before:.4g} -> "
             f"{ev.rmse_holdout_after:.4g}; the model with it refitted: {ho_now:.4g})"
             + (f"; removed again: {', '.join(gone)}" if gone else ""))
@@ -510,98 +507,6 @@ def _settle(state: State, dd: DiagnoseData) -> State:
     """Nonlinear parameters of a state where all data want them: :func:`.polish`, then
     :func:`.refine` (a candidate's held-out gain is then its own, not a better-tuned base law's)."""
     return refine(polish(state, dd), dd, steps=8)
-
-
-def _settle_holding(state: State, dd: DiagnoseData, held) -> State:
-    """:func:`_settle` with the nonlinear parameters of the blocks ``held`` (uids) kept as they are:
-    those a candidate's own held-out search chose (an amplitude law and its decay).  Settled on all
-    data they would return to the in-sample optimum the model had before (Kinova joint 7: a decay of
-    3.3 back to 69 per rad/s), and the model kept would not be the model the held-out test judged."""
-    if not held:
-        return _settle(state, dd)
-    only = {b.uid for b in state.blocks} - set(held)
-    return refine(polish(state, dd, only=only), dd, only=only, steps=8)
-
-
-def _accept_first(rnd: Round, passing: list, effects: dict, k: int, *, z_crit: float, min_gain: float, held: set,
-                  undone: dict, say):
-    """Take the passing candidates of round ``k`` in order of their held-out SSE drop; the first whose
-    step leaves a better model is kept: its proposal added, the model settled (:func:`_settle_holding`,
-    ``held`` grows by the blocks whose parameters the candidate chose), backward elimination run, and
-    the settled model's held-out rmse (:meth:`Round.baseline_holdout`, the number the final model
-    reports) below the one before the step.  A step that fails this is undone (``effects`` restored)
-    and its candidate recorded as rejected (:func:`_mark_undone`).  Returns ``(round, evaluation,
-    effect, names removed by backward elimination, held-out rmse)`` or None when no step is kept."""
-    dd = rnd.dd
-    ho_before = rnd.baseline_holdout()["rmse"]
-    for c, ev in sorted(passing, key=lambda x: x[1].drop, reverse=True):
-        prop = c.propose(rnd, rnd.all_groups())
-        if prop is None:
-            continue
-        saved = {key: _copy_effect(x) for key, x in effects.items()}
-        hold = held | ({b.uid for b in prop.add} if getattr(c, "holds_parameters", False) else set())
-        new_state = _settle_holding(rnd.state.replaced(prop.drop, prop.add), dd, hold)
-        new = Round(dd, new_state, rnd.fold)
-        e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new_state, new, k)
-        was_in = {x.name for x in effects.values() if x.accepted}
-        new = _backward(new, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k) or new
-        gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
-        # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
-        # data, refitted in every fold as the baseline's are): what the final model reports
-        ho_now = new.baseline_holdout()["rmse"]
-        if ho_now < ho_before:
-            held |= hold
-            return new, ev, e, gone, ho_now
-        effects.clear()
-        effects.update(saved)
-        key = _effect_key(effects, c)
-        line = _mark_undone(effects[key], ev, k, ho_before, ho_now, gone)
-        undone[key] = (k, c.name)
-        say(f"round {k}: {c.name} passes the held-out test but its step is undone: {line}")
-    return None
-
-
-def _copy_effect(e: Effect) -> Effect:
-    """A copy of ``e`` that the loop's later changes do not reach (its lists copied; arrays shared)."""
-    detail = {key: (list(v) if isinstance(v, list) else v) for key, v in e.detail.items()}
-    return replace(e, detail=detail, history=list(e.history))
-
-
-def _mark_undone(e: Effect, ev: Evaluation, k: int, ho_before: float, ho_after: float, gone: list) -> str:
-    """Record on ``e`` (as it was before round ``k``'s step) that its step was undone: the settled model
-    with it has held-out rmse ``ho_after``, not below ``ho_before``.  Returns the reason."""
-    reason = (f"the model with it settled has held-out rmse {ho_after:.4g}, not below {ho_before:.4g} before the "
-              f"step (its own search in the folds gave {ev.rmse_holdout_after:.4g})"
-              + (f" (backward elimination had removed {', '.join(gone)})" if gone else "") + ": step undone")
-    gain = (ho_before - ho_after) / ho_before if ho_before > 0 else 0.0
-    e.accepted = False
-    e.decision = "rejected: " + reason
-    e.verdict = Verdict("rejected", "settled model", reason, ev.z, ev.z_crit, gain, ev.min_gain, ho_before, ho_after, k)
-    e.history.append(f"round {k}: passes the held-out test, but {reason}")
-    return reason
-
-
-def _bar_repeat(effects: dict, undone: dict, c: Candidate, ev: Evaluation) -> None:
-    """No candidate is accepted twice: one whose effect is in the model already, or whose step was
-    undone in an earlier round (:func:`_accept_first`), is marked failing."""
-    key = _effect_key(effects, c)
-    prev = effects.get(key)
-    if not ev.passed:
-        return
-    if prev is not None and prev.accepted:
-        why = f"in the model already (accepted in round {prev.verdict.round if prev.verdict else prev.round})"
-    elif key in undone:
-        why = f"its step was undone in round {undone[key][0]} (the model with it was not better): not tried again"
-    else:
-        return
-    ev.passed = False
-    ev.reason = ev.gate = why
-    ev.test = "re-entry" if prev is not None and prev.accepted else "settled model"
-
-
-def _undone_in(undone: dict, k: int) -> list:
-    """Names of the candidates whose step was undone in round ``k``."""
-    return sorted(name for r, name in undone.values() if r == k)
 
 
 def _effect_key(effects: dict, c: Candidate) -> str:
