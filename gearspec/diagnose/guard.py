@@ -1,14 +1,12 @@
 """A step of the closed loop is kept only when it leaves a better model (README, "The closed loop",
-Acceptance): the model kept is the model the held-out test judged, its held-out rmse after the step
-is below the one before, and no candidate is accepted twice.
+Acceptance): the model kept is the model the held-out test judged, its held-out rmse with the
+candidate is below the one before, and no candidate is accepted twice.
 
 The loop (:mod:`.loop`) calls :func:`accept_first` with the passing candidates of a round and
 :func:`bar_repeat` on every evaluation before it records it.
 """
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 from .context import Round
 from .data import DiagnoseData
@@ -35,13 +33,13 @@ def settle_holding(state: State, dd: DiagnoseData, held) -> State:
 def accept_first(rnd, passing: list, effects: dict, k: int, *, z_crit: float, min_gain: float, held: set,
                  undone: dict, say):
     """Take the passing candidates of round ``k`` in order of their held-out SSE drop; keep the
-    first whose step leaves a better model.  A step: its proposal added, the model settled
-    (:func:`settle_step`; ``held`` grows by the blocks whose parameters a candidate with
-    ``holds_parameters`` chose, when they are kept), backward elimination run; kept when the
-    settled model's held-out rmse (:meth:`~.context.Round.baseline_holdout`, Nm: the number the
-    final model reports) is below the one before the step.  Otherwise the step is undone
-    (``effects`` restored), the candidate recorded as rejected (:func:`mark_undone`) and
-    ``undone[key] = (k, name)``.
+    first whose step leaves a better model.  A step: its proposal added and the model settled
+    (:func:`settle_step`); it is kept when that model's held-out rmse
+    (:meth:`~.context.Round.baseline_holdout`, Nm, the same folds and refit as the baseline's) is
+    below the one before the step: then ``held`` grows by the blocks the candidate holds, the effect
+    is marked accepted and backward elimination runs (its removals are its own test's, as before).
+    Otherwise the step is undone, the candidate recorded as rejected (:func:`mark_undone`) and
+    ``undone[key] = (k, name)``; the next passing candidate is tried.
 
     Returns ``(round, evaluation, effect, names removed by backward elimination, held-out rmse)``,
     or None when no step is kept."""
@@ -52,24 +50,22 @@ def accept_first(rnd, passing: list, effects: dict, k: int, *, z_crit: float, mi
         prop = c.propose(rnd, rnd.all_groups())
         if prop is None:
             continue
-        saved = {key: copy_effect(x) for key, x in effects.items()}
         new, hold = settle_step(rnd, prop, held, getattr(c, "holds_parameters", False))
-        e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new.state, new, k)
+        # the held-out rmse of the model with the candidate (its nonlinear parameters settled on all
+        # data, refitted in every fold as the baseline's are): it must be below the one before
+        ho_new = new.baseline_holdout()["rmse"]
+        key = _effect_key(effects, c)
+        if not ho_new < ho_before:
+            line = mark_undone(effects[key], ev, k, ho_before, ho_new)
+            undone[key] = (k, c.name)
+            say(f"round {k}: {c.name} passes the held-out test but its step is undone: {line}")
+            continue
+        held |= hold
+        e = _mark_accepted(effects[key], c, ev, prop, new.state, new, k)
         was_in = {x.name for x in effects.values() if x.accepted}
         new = _backward(new, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k) or new
         gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
-        # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
-        # data, refitted in every fold as the baseline's are): what the final model reports
-        ho_now = new.baseline_holdout()["rmse"]
-        if ho_now < ho_before:
-            held |= hold
-            return new, ev, e, gone, ho_now
-        effects.clear()
-        effects.update(saved)
-        key = _effect_key(effects, c)
-        line = mark_undone(effects[key], ev, k, ho_before, ho_now, gone)
-        undone[key] = (k, c.name)
-        say(f"round {k}: {c.name} passes the held-out test but its step is undone: {line}")
+        return new, ev, e, gone, (new.baseline_holdout()["rmse"] if gone else ho_new)
     return None
 
 
@@ -92,19 +88,12 @@ def settle_step(rnd, prop, held: set, holds: bool):
     return free, held
 
 
-def copy_effect(e: Effect) -> Effect:
-    """A copy of ``e`` that the loop's later changes do not reach (its lists copied; arrays shared)."""
-    detail = {key: (list(v) if isinstance(v, list) else v) for key, v in e.detail.items()}
-    return replace(e, detail=detail, history=list(e.history))
-
-
-def mark_undone(e: Effect, ev, k: int, ho_before: float, ho_after: float, gone: list) -> str:
+def mark_undone(e: Effect, ev, k: int, ho_before: float, ho_after: float) -> str:
     """Record on ``e`` (as it was before round ``k``'s step; ``ev``: its held-out evaluation) that
     its step was undone: the settled model with it has held-out rmse ``ho_after`` (Nm), not below
     ``ho_before``.  Returns the reason."""
     reason = (f"the model with it settled has held-out rmse {ho_after:.4g}, not below {ho_before:.4g} before the "
-              f"step (its own search in the folds gave {ev.rmse_holdout_after:.4g})"
-              + (f" (backward elimination had removed {', '.join(gone)})" if gone else "") + ": step undone")
+              f"step (its own search in the folds gave {ev.rmse_holdout_after:.4g}): step undone")
     gain = (ho_before - ho_after) / ho_before if ho_before > 0 else 0.0
     e.accepted = False
     e.decision = "rejected: " + reason
