@@ -32,6 +32,7 @@ from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
 from .detectors import analyse, propose
+from .guard import accept_first, bar_repeat, undone_in
 from .results import Diagnosis, Effect, Verdict
 from .validate import validate
 
@@ -332,6 +333,8 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     rounds = []
     trace = []
     first_analyses = None
+    held: set = set()        # blocks whose nonlinear parameters a candidate's own search chose (never re-settled)
+    undone: dict = {}        # effect key -> (round, name): steps undone (the model with them was not better)
     for k in range(1, max_rounds + 1):
         analyses = analyse(rnd, fap=fap, per_segment=per_segment_spectra and k == 1)
         if first_analyses is None:
@@ -346,30 +349,22 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         evals = _evaluate_round(rnd, cands, z_crit=z_crit, min_gain=min_gain)
         for c, ev in evals:
             _bar_reentry(effects, c, ev)
+            bar_repeat(effects.get(_effect_key(effects, c)), _effect_key(effects, c), undone, ev)
             _record(effects, c, ev, k, rnd)
             trace.append({"round": k, "candidate": c.name, "kind": c.kind, "z": ev.z, "z_crit": z_crit,
                           "gain": ev.gain, "consistency": ev.consistency, "passed": ev.passed})
         passing = [(c, ev) for c, ev in evals if ev.passed]
-        if not passing:
-            rounds.append({"round": k, "candidates": len(cands), "accepted": None, "z_crit": z_crit})
-            say(f"round {k}: {len(cands)} candidates, none accepted")
+        step = accept_first(rnd, passing, effects, k, z_crit=z_crit, min_gain=min_gain, held=held, undone=undone,
+                            say=say) if passing else None
+        if step is None:   # nothing passed, or every passing step was undone (accept_first said which)
+            rounds.append({"round": k, "candidates": len(cands), "accepted": None, "z_crit": z_crit}
+                          | ({"undone": undone_in(undone, k)} if passing else {}))
+            say(f"round {k}: {len(cands)} candidates, " + ("none kept" if passing else "none accepted"))
             break
-        c, ev = max(passing, key=lambda x: x[1].drop)
-        prop = c.propose(rnd, rnd.all_groups())
-        if prop is None:
-            break
-        new_state = _settle(rnd.state.replaced(prop.drop, prop.add), dd)
-        rnd = Round(dd, new_state, fold)
-        e = _mark_accepted(effects[_effect_key(effects, c)], c, ev, prop, new_state, rnd, k)
-        was_in = {x.name for x in effects.values() if x.accepted}
-        rnd = _backward(rnd, effects, e, z_crit=z_crit, min_gain=min_gain, round_no=k) or rnd
-        gone = sorted(was_in - {x.name for x in effects.values() if x.accepted})
-        # the held-out rmse of the model as it now stands (its nonlinear parameters settled on all
-        # data, refitted in every fold as the baseline's are): what the final model reports
-        ho_now = rnd.baseline_holdout()["rmse"]
+        rnd, ev, e, gone, ho_now = step
         rounds.append({"round": k, "candidates": len(cands), "accepted": e.name, "z_crit": z_crit,
                        "rmse": rnd.fitted.rmse, "rmse_holdout_step": ev.rmse_holdout_after,
-                       "rmse_holdout_model": ho_now, "removed": gone})
+                       "rmse_holdout_model": ho_now, "removed": gone, "undone": undone_in(undone, k)})
         say(f"round {k}: {len(cands)} candidates, accepted {e.name} (held-out rmse {ev.rmse_holdout_before:.4g} -> "
             f"{ev.rmse_holdout_after:.4g}; the model with it refitted: {ho_now:.4g})"
             + (f"; removed again: {', '.join(gone)}" if gone else ""))

@@ -123,11 +123,16 @@ def line_amplitude_law(rnd: Round, analyses: dict, *, gate: float) -> list[Candi
                 return [replace(blk, law=law_t, decay=dec_t)], [blk]
 
             lab = blk.label or f"{blk.frequency:.6g}"
-            out.append(GridCandidate(
+            cand = GridCandidate(
                 "speed_law", f"amplitude law of {lab}" + ("" if x == 0 else f" ({DIRECTION_NAMES[x]})"), make,
                 _law_grid(cur),
                 evidence=(f"the residual still holds the line {lab} (power {zmax:.1f} x local noise, p {p_line:.2g}): "
                           f"its amplitude does not follow the model's {cur} law at every speed"),
                 detail={"analysis": "spectrum", "frequency": blk.frequency}, gate_p=p_line,
-                describe_value=lambda v: f"{v[0]}" + ("" if v[0] == "const" else f" ({v[1]:g})")))
+                describe_value=lambda v: f"{v[0]}" + ("" if v[0] == "const" else f" ({v[1]:g})"))
+            # the law and decay are what this candidate's held-out search chose: the model kept holds
+            # them (settled on all data the decay would return to the in-sample optimum of the law it
+            # replaces, a model the held-out test did not judge; README, "The closed loop")
+            cand.holds_parameters = True
+            out.append(cand)
     return out
