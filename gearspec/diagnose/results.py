@@ -16,7 +16,7 @@ from .design import FittedState
 __all__ = ["Effect", "Diagnosis", "Verdict", "verdict_line"]
 
 #: the tests that decide a candidate's fate, in the order the loop applies them
-TESTS = ("held-out", "re-entry", "backward elimination", "validation")
+TESTS = ("held-out", "settled model", "re-entry", "backward elimination", "validation")
 
 
 def _num(x):
