@@ -15,6 +15,7 @@ import json
 
 import numpy as np
 import pytest
+from readme_numbers import check
 
 import gearspec.diagnose.guard as guard
 import gearspec.diagnose.loop as loop
@@ -63,6 +64,9 @@ def test_kinova_amplitude_law_accepted_once_and_kept_as_judged(data_dir, tmp_pat
     for r in d["rounds"]:
         if r.get("accepted"):
             assert r["rmse_holdout_model"] <= base and not r["undone"]
+    z = e["verdict"]
+    check("kinova-loop", f"held-out runs to {base:.4f} Nm", f"ends at {final:.4f} Nm ({100 * (final / base - 1):.0f} %)",
+          f"held-out Z {z['z']:.2f} against {z['z_crit']:.2f}")
 
 
 @pytest.mark.realdata

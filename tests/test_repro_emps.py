@@ -97,6 +97,8 @@ def test_kinova_loop_finds_the_seven_per_motor_turn_line_growing_with_speed(data
     h = e.terms[0]["harmonic"]
     assert h["decay"] < 0 or h["law"] == "const"                           # grows with speed (not SILO4's decay)
     assert d.final_model.rmse_holdout < d.baseline_model.rmse_holdout
+    check("kinova-sensor", f"{e.frequency:.2f} cycles/rad = 7x the motor shaft",
+          f"held-out rmse {d.baseline_model.rmse_holdout:.4f} -> {d.final_model.rmse_holdout:.4f} Nm")
     # the declared gear lines (2x and 4x wave generator) are in the baseline: not found again as new lines
     labels = {hh.get("label") for hh in d.baseline_model.harmonics("positive")}
     assert {"strain-wave 2x wave generator", "strain-wave 4x wave generator"} <= labels
