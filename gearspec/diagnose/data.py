@@ -16,6 +16,7 @@ from ..errors import InputError
 from ..fitdata import FitData
 from ..recording import Recording
 from ..segment import Segmentation, find_segments, free_motion
+from ..segment.trim import trim_edges
 from ..signals import butter_filtfilt, central_difference, decimate, decimation_index
 
 __all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves", "per_speed"]
@@ -170,14 +171,17 @@ class DiagnoseData:
     @classmethod
     def from_recording(cls, rec: Recording, segmentation: Segmentation | None = None, *, by: str = "segment",
                        inertia: bool = True, load_ratio: float | None = None, motion: str = "plateaus",
-                       **segment_options) -> "DiagnoseData":
+                       trim: bool = True, **segment_options) -> "DiagnoseData":
         """Samples inside the constant-speed segments of ``rec`` (laws evaluated at each segment's
         mean velocity, as :func:`gearspec.identify.fit`) and, by ``motion``
         (:func:`~gearspec.segment.free_motion`), blocks of its free motion; held out by whole
         segments (stretches of free motion) or runs, with the travel since the last reversal from
-        the whole recording."""
+        the whole recording.  ``trim``: without the rows at a plateau's edges whose acceleration
+        filter reaches into the ramp beside it (:func:`~gearspec.segment.trim.trim_edges`)."""
         seg = free_motion(rec, segmentation if segmentation is not None else find_segments(rec, **segment_options),
                           motion=motion)
+        if trim:
+            seg = trim_edges(rec, seg)
         fd = FitData.from_recording(rec, seg, inertia=inertia, load_ratio=load_ratio)
         travel = reversal_travel(rec, seg)
         name = ", ".join(rec.sources) if rec.sources else ""
