@@ -31,6 +31,7 @@ from .context import Round
 from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
+from .nuisance import with_unresolved_lines
 from .detectors import analyse, propose
 from .results import Diagnosis, Effect, Verdict
 from .validate import validate
@@ -319,7 +320,10 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         raise InputError(f"the data hold {dd.n_groups} held-out group(s) ({dd.by}s); the loop needs at least 3 "
                          "to hold whole groups out")
     fold = folds_of(dd, folds)
-    state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
+    state = state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2)
+    # declared lines seen in partial cycles only stay in the null model (:mod:`.nuisance`)
+    state = _settle(with_unresolved_lines(state, model, dd, harmonics=harmonics,
+                                          gear=gear if gear is not None else dd.gear), dd)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
     base_h = rnd.baseline_holdout()
