@@ -85,6 +85,7 @@ def test_a_declared_line_seen_in_partial_cycles_stays_in_the_null_model():
     # not written into any model: it stays not identified
     assert "positive.output shaft" in d.final_model.not_identified
     assert all(h.label != "output shaft" for h in d.final_model.harmonics(1))
+    assert any("output shaft" in n and "partial cycles only" in n for n in d.notes)   # the user is told
     assert d.baseline_model.rmse_holdout == pytest.approx(NOISE, rel=0.1)
     assert [e.name for e in d.accepted] == []
     # a model that has the line (fitted elsewhere) gets no partial line

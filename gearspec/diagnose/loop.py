@@ -31,7 +31,7 @@ from .context import Round
 from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
-from .nuisance import with_unresolved_lines
+from .nuisance import partial_line_notes, with_unresolved_lines
 from .detectors import analyse, propose
 from .results import Diagnosis, Effect, Verdict
 from .validate import validate
@@ -391,6 +391,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain, say=say)
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
+    diag.notes += partial_line_notes(state)
     # what each accepted term wrote, from the final model (after backward elimination and the
     # validation data): the numbers final_model.json holds
     for e in diag.effects:

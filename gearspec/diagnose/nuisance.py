@@ -25,7 +25,7 @@ from .coverage import resolved
 from .data import DiagnoseData
 from .design import Block, State
 
-__all__ = ["PartialLineBlock", "unresolved_lines", "with_unresolved_lines"]
+__all__ = ["PartialLineBlock", "unresolved_lines", "with_unresolved_lines", "partial_line_notes"]
 
 _TWO_PI = 2.0 * math.pi
 _DNAME = {1: "positive", -1: "negative"}
@@ -96,3 +96,10 @@ def with_unresolved_lines(state: State, model, dd: DiagnoseData, *, harmonics=No
     """``state`` with :func:`unresolved_lines` added (the loop's null model)."""
     extra = unresolved_lines(model, dd, harmonics=harmonics, gear=gear)
     return state.replaced((), extra) if extra else state
+
+
+def partial_line_notes(state: State) -> list[str]:
+    """One note per :class:`PartialLineBlock` of ``state``, for the console and the report."""
+    return [f"{b.describe()} ({', '.join(_DNAME[d] for d in b.dirs)}): its partial cycle is fitted with every "
+            f"model the loop tests, so no term is accepted in its place"
+            for b in state.blocks if isinstance(b, PartialLineBlock)]
