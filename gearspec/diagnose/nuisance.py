@@ -73,7 +73,8 @@ class PartialLineBlock(Block):
 def unresolved_lines(model, dd: DiagnoseData, *, harmonics=None, gear=None) -> list[PartialLineBlock]:
     """One :class:`PartialLineBlock` per declared line (``harmonics`` / ``gear`` as
     :func:`gearspec.identify.fit` takes them) that ``model`` lists as not identified in a direction
-    where ``dd`` has data (there: its segments cover less than one cycle of it together); lines the model has (at 1e-9 relative) are skipped."""
+    where ``dd`` has data (there: its segments cover less than one cycle of it together); lines
+    the model has (at 1e-9 relative) are skipped."""
     if dd.fit.theta is None or not model.not_identified:
         return []
     specs = harmonic_specs(harmonics, gear) if (harmonics is not None or gear is not None) else []
