@@ -31,7 +31,7 @@ from .context import Round
 from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
 from .nonlinear import polish, refine
-from .nuisance import partial_line_notes, with_unresolved_lines
+from .nuisance import admit_partial_lines
 from .detectors import analyse, propose
 from .results import Diagnosis, Effect, Verdict
 from .validate import validate
@@ -320,10 +320,10 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         raise InputError(f"the data hold {dd.n_groups} held-out group(s) ({dd.by}s); the loop needs at least 3 "
                          "to hold whole groups out")
     fold = folds_of(dd, folds)
-    state = state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2)
-    # declared lines seen in partial cycles only stay in the null model (:mod:`.nuisance`)
-    state = _settle(with_unresolved_lines(state, model, dd, harmonics=harmonics,
-                                          gear=gear if gear is not None else dd.gear), dd)
+    state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
+    # declared lines seen in partial cycles only join the null model when the held-out test wants them
+    state, partial_notes = admit_partial_lines(state, model, dd, fold, _settle, evaluate_candidate, alpha=alpha, min_gain=min_gain,
+                                harmonics=harmonics, gear=gear if gear is not None else dd.gear)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
     base_h = rnd.baseline_holdout()
@@ -391,7 +391,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
         validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain, say=say)
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
-    diag.notes += partial_line_notes(state)
+    diag.notes += partial_notes
     # what each accepted term wrote, from the final model (after backward elimination and the
     # validation data): the numbers final_model.json holds
     for e in diag.effects:

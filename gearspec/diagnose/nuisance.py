@@ -8,8 +8,9 @@ from, any term that can follow those plateau levels (a second Stribeck term, a d
 "discovered" in its place.  So the loop keeps every such line in its null model as a
 :class:`PartialLineBlock`: two columns per direction (``sin`` and ``cos`` of ``2 pi f theta``, a
 constant amplitude: a decay cannot be measured from partial cycles), fitted with the rest in every
-fold, never written into the model (it stays ``not_identified``).  A candidate must then explain
-more than the declared line's partial cycle to pass.
+fold and written into the model as fitted (``partial_cycles``; it stays listed in ``not_identified``),
+when the held-out test wants it (:func:`admit_partial_lines`).  A candidate must then explain more
+than the declared line's partial cycle to pass.
 """
 
 from __future__ import annotations
@@ -23,9 +24,9 @@ from ..errors import InputError
 from ..identify.stats import harmonic_specs
 from .coverage import resolved
 from .data import DiagnoseData
-from .design import Block, State
+from .design import Block, HarmonicBlock, State
 
-__all__ = ["PartialLineBlock", "unresolved_lines", "with_unresolved_lines", "partial_line_notes"]
+__all__ = ["PartialLineBlock", "unresolved_lines", "admit_partial_lines"]
 
 _TWO_PI = 2.0 * math.pi
 _DNAME = {1: "positive", -1: "negative"}
@@ -34,8 +35,8 @@ _DNAME = {1: "positive", -1: "negative"}
 @dataclass(frozen=True, eq=False)
 class PartialLineBlock(Block):
     """A declared line seen in partial cycles only: ``(a sin + c cos)(2 pi f theta)`` with the sign
-    of the motion, per direction in ``dirs``; part of the null model, not of the fitted model
-    (:meth:`write` writes nothing)."""
+    of the motion, per direction in ``dirs`` (not a :class:`HarmonicBlock`: no candidate changes
+    its law, lag or sidebands)."""
 
     frequency: float = 1.0
     label: str = ""
@@ -63,11 +64,22 @@ class PartialLineBlock(Block):
         return np.column_stack(cols)
 
     def write(self, model, coef, se) -> None:
-        """Nothing: the line is not identified by these data (the model says so in ``not_identified``)."""
+        """The line into ``model``'s harmonics as fitted (constant amplitude, ``partial_cycles``
+        True), so that the model evaluates as the loop fitted it; its ``not_identified`` entries
+        say that it was seen in partial cycles only."""
+        blk = HarmonicBlock(frequency=self.frequency, label=self.label, dirs=self.dirs,
+                            law=tuple((d, "const") for d in self.dirs), decay=tuple((d, 0.0) for d in self.dirs),
+                            extra=tuple((d, {"partial_cycles": True}) for d in self.dirs))
+        blk.write(model, coef, se)
+        for d in self.dirs:
+            key = f"{_DNAME[d]}.{self.label}"
+            if key in model.not_identified and "partial cycle" not in model.not_identified[key]:
+                model.not_identified[key] += ("; the closed loop fits it as a partial cycle (constant amplitude), "
+                                              "its amplitude traded against the base law's levels")
 
     def describe(self) -> str:
-        return (f"declared line {self.label} at {self.frequency:.6g} cycles/unit, seen in partial cycles only: "
-                f"in the null model, not identified")
+        return (f"declared line {self.label} at {self.frequency:.6g} cycles/unit, seen in partial cycles only "
+                f"(constant amplitude)")
 
 
 def unresolved_lines(model, dd: DiagnoseData, *, harmonics=None, gear=None) -> list[PartialLineBlock]:
@@ -93,14 +105,31 @@ def unresolved_lines(model, dd: DiagnoseData, *, harmonics=None, gear=None) -> l
     return out
 
 
-def with_unresolved_lines(state: State, model, dd: DiagnoseData, *, harmonics=None, gear=None) -> State:
-    """``state`` with :func:`unresolved_lines` added (the loop's null model)."""
+def admit_partial_lines(state: State, model, dd: DiagnoseData, fold, settle, evaluate, *, alpha: float,
+                        min_gain: float, harmonics=None, gear=None) -> tuple[State, list[str]]:
+    """``(state, notes)``: ``state`` with the :func:`unresolved_lines` of ``model`` added when they
+    pass the loop's held-out test together (``evaluate``:
+    :func:`~gearspec.diagnose.loop.evaluate_candidate`, one candidate at level ``alpha``, gain
+    ``min_gain``), then settled (``settle``); else ``state`` as it is.  A declared line is
+    expected, but its partial-cycle columns are poorly determined: where the data do not want it,
+    it would only blur the held-out test of every other term.  ``notes``: one line for the user."""
+    from ..core.crossval import critical_z
+    from .candidates import FixedCandidate
+    from .context import Round
+
     extra = unresolved_lines(model, dd, harmonics=harmonics, gear=gear)
-    return state.replaced((), extra) if extra else state
-
-
-def partial_line_notes(state: State) -> list[str]:
-    """One note per :class:`PartialLineBlock` of ``state``, for the console and the report."""
-    return [f"{b.describe()} ({', '.join(_DNAME[d] for d in b.dirs)}): its partial cycle is fitted with every "
-            f"model the loop tests, so no term is accepted in its place"
-            for b in state.blocks if isinstance(b, PartialLineBlock)]
+    if not extra:
+        return state, []
+    ev = evaluate(Round(dd, state, fold), FixedCandidate("periodic", "declared lines seen in partial cycles", extra),
+                  z_crit=critical_z(alpha, 1, dd.n_groups), min_gain=min_gain, repolish=False)
+    what = "; ".join(f"{b.label} at {b.frequency:.6g} cycles/{dd.unit} ({', '.join(_DNAME[d] for d in b.dirs)})"
+                     for b in extra)
+    numbers = f"held-out Z {ev.z:.2f} (needs {ev.z_crit:.2f}), rmse {-100 * ev.gain:+.2f} % (needs a fall of " \
+              f"{100 * min_gain:.2g} %)"
+    if ev.passed:
+        return settle(state.replaced((), extra), dd), [
+            f"declared line(s) seen in partial cycles only, not identified: {what}; kept in the model every term is "
+            f"tested against ({numbers}), so no term is accepted in their place; written with a constant amplitude"]
+    return state, [f"declared line(s) seen in partial cycles only, not identified: {what}; left out of the model "
+                   f"the loop tests against: the data do not want them ({ev.gate}; rmse "
+                   f"{-100 * ev.gain:+.2f} %)"]
