@@ -29,7 +29,8 @@ from .baseline import _as_data, baseline_model, idim_model, relative_error, resi
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
+from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal
+from .frommodel import state_from_model
 from .nonlinear import polish, refine
 from .nuisance import admit_partial_lines
 from .detectors import analyse, propose
@@ -321,9 +322,9 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
                          "to hold whole groups out")
     fold = folds_of(dd, folds)
     state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
-    # declared lines seen in partial cycles only join the null model when the held-out test wants them
-    state, partial_notes = admit_partial_lines(state, model, dd, fold, _settle, evaluate_candidate, alpha=alpha, min_gain=min_gain,
-                                harmonics=harmonics, gear=gear if gear is not None else dd.gear)
+    state, partial_notes = admit_partial_lines(state, model, dd, fold, _settle, evaluate_candidate, alpha=alpha,
+                                               min_gain=min_gain, harmonics=harmonics,
+                                               gear=gear if gear is not None else dd.gear)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
     base_h = rnd.baseline_holdout()
@@ -392,8 +393,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
     diag.notes += partial_notes
-    # what each accepted term wrote, from the final model (after backward elimination and the
-    # validation data): the numbers final_model.json holds
+    # what each accepted term wrote, from the final model (after backward elimination, validation)
     for e in diag.effects:
         if e.accepted:
             e.terms = _written_terms(e, diag.final)
