@@ -1,4 +1,5 @@
-"""Plateau edges the loop leaves out (gearspec.segment.trim) and accelerations that are round-off.
+"""Plateau edges the loop leaves out (gearspec.segment.trim, DiagnoseData.without_edges) and
+accelerations that are round-off.
 
 Test data: the SILO4 twin's truth (``table2_model``) on plateaus at 500 Hz joined by linear ramps,
 the twin's inertia in the drive torque and removed again as the gear declares it, without noise:
@@ -42,14 +43,14 @@ def _edge_error(dd):
 def test_plateau_edges_whose_acceleration_sees_the_ramp_are_cut():
     rec = _twin()
     seg = find_segments(rec)
-    h = edge_rows(rec, seg.segments[0].start, seg.segments[0].stop)
+    h = edge_rows(rec.t[seg.segments[0].rows])
     assert h == 5    # SG window max(7, round(0.02 s * 500 Hz) | 1) = 11 samples: 5 on each side of a row
     cut = trim_edges(rec, seg)
     assert [s.n for s in cut.segments] == [s.n - 10 for s in seg.segments]
     assert cut.excluded["edge"] == 10 * len(seg)
     cut.check_ledger()
-    kept = dg.DiagnoseData.from_recording(rec)
-    whole = dg.DiagnoseData.from_recording(rec, trim=False)
+    whole = dg.DiagnoseData.from_recording(rec)
+    kept = whole.without_edges()        # what diagnose works on
     assert len(whole) - len(kept) == 10 * len(seg)
     e_edge, e_mid = _edge_error(kept)
     assert e_edge < 1e-9 and e_mid < 1e-9     # what is kept is the friction (noise-free data)
@@ -61,13 +62,13 @@ def test_accelerations_at_round_off_make_no_inertia_evidence():
     """On trimmed exact plateaus the accelerations are round-off (~1e-9 rad/s^2): a residual with a
     trend in time would otherwise give a 'slope against acceleration' of 1e6 kg m^2 at high t."""
     rec = _twin()
-    dd = dg.DiagnoseData.from_recording(rec)
+    dd = dg.DiagnoseData.from_recording(rec).without_edges()
     assert np.max(np.abs(dd.at("acc"))) < 1e-6
     r = 1e-4 * dd.at("t") + np.random.default_rng(1).normal(0, 1e-5, len(dd))   # a drift in time
     table, st = acceleration_analysis(dd, r)
     assert st["roundoff"] and st["p"] == 1.0 and len(table) == 0
     # with the ramps' rows the accelerations are data again and the analysis tests them
-    whole = dg.DiagnoseData.from_recording(rec, trim=False)
+    whole = dg.DiagnoseData.from_recording(rec)
     _, st2 = acceleration_analysis(whole, 1e-4 * whole.at("t"))
     assert "roundoff" not in st2 and np.isfinite(st2["slope"])
 

@@ -304,7 +304,7 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
 
 def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,
               kinds, validation, per_segment_spectra, progress) -> Diagnosis:
-    dd = _as_data(data, by, gear)
+    dd = _as_data(data, by, gear).without_edges()
     if gear is not None and dd.gear is None:
         from ..gears import load_gear
         dd.gear = load_gear(gear)
@@ -389,7 +389,7 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
                       "max_rounds": max_rounds, "kinds": sorted(kinds), "symmetric": bool(state.symmetric)})
     diag.trace = pd.DataFrame(trace)
     if validation is not None:
-        validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain, say=say)
+        validate(diag, rnd, _as_data(validation, by, gear).without_edges(), alpha=alpha, min_gain=min_gain, say=say)
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
     diag.notes += partial_notes
