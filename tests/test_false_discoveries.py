@@ -19,8 +19,8 @@ accepted a second Stribeck term standing in for the truth's output-shaft line (o
 levels of its partial cycle, 0.1-0.27 mNm at 79-218 rad/s, made a speed law); seed 16 one fitting
 the ramp rows at the plateaus' edges (inertia torque of the ramp in the first and last 5 samples, up
 to 3.5 mNm at 600 rad/s).  The fixes: the declared line stays in the null model
-(:mod:`gearspec.diagnose.nuisance`) and the edge rows are cut (:mod:`gearspec.segment.trim`); each
-alone leaves 22-23 of 24.
+when the held-out test wants it (:mod:`gearspec.diagnose.nuisance`), and the edge rows are cut
+(:meth:`DiagnoseData.without_edges`).  Trimming alone left 22 of 24.
 """
 
 from __future__ import annotations
@@ -73,11 +73,11 @@ def test_diagnose_accepts_nothing_on_complete_model_twins():
 def test_a_declared_line_seen_in_partial_cycles_stays_in_the_null_model():
     """Seed 3: the truth's output-shaft line (one cycle per 2 pi 287 rad) is not identified from
     plateaus covering 0.27 of its cycle; the held-out test wants it (Z 6.1, needs 2.6), so the loop
-    keeps it as a partial line in its null model, and
-    its baseline's held-out rmse is the noise's (0.2 mNm: 402 - 10 rows a plateau, 16 plateaus,
-    ~30 parameters, so sigma sqrt(1 + p/n) = 1.002 sigma; 10 % allows the fold-to-fold spread of
-    an rmse over 6272 samples, 1 %, many times).  Without the line the held-out rmse was 0.45 mNm
-    and a second Stribeck term was accepted in its place (Z 6.9, needs 3.5)."""
+    keeps it as a partial line in its null model, and its baseline's held-out rmse is 0.219 mNm:
+    the noise (0.2 mNm) plus the error of predicting a held-out plateau's level from the others
+    (~0.09 mNm rms).  Without the line it was 0.45 mNm and a second Stribeck term was accepted in
+    its place (Z 6.9, needs 3.5).  The bound 1.25 sigma lies between the two with a margin on
+    each side (the recording is fixed: the number is deterministic)."""
     rec, gear = complete_twin(3)
     d = dg.diagnose(rec, law="silo4", gear=gear, per_segment_spectra=False)
     partial = [b for b in d.baseline.state.blocks if isinstance(b, PartialLineBlock)]
@@ -91,7 +91,7 @@ def test_a_declared_line_seen_in_partial_cycles_stays_in_the_null_model():
     pred = dg.predict_model(d.final_model, d.data)
     assert np.sqrt(np.mean((d.data.y - pred) ** 2)) == pytest.approx(d.final.rmse, rel=1e-6)
     assert any("output shaft" in n and "partial cycles only" in n and "kept in the model" in n for n in d.notes)
-    assert d.baseline_model.rmse_holdout == pytest.approx(NOISE, rel=0.1)
+    assert d.baseline_model.rmse_holdout < 1.25 * NOISE
     assert [e.name for e in d.accepted] == []
     # a model that has the line (fitted elsewhere) gets no partial line
     assert unresolved_lines(table2_model(), d.data, gear=gear) == []
