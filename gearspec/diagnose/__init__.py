@@ -11,7 +11,8 @@ import sys
 
 from .. import _CallablePackage
 from .data import DiagnoseData, trajectory_data
-from .design import fit_state, predict_model, state_from_model
+from .design import fit_state
+from .frommodel import predict_model, state_from_model
 from .loop import KINDS, Diagnosis, Effect, baseline_model, diagnose, idim_model, relative_error, residual_analysis
 from .residual import position_spectra
 

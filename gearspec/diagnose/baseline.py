@@ -13,7 +13,8 @@ from ..fitdata import FitData
 from ..model import FrictionModel
 from ..recording import Recording
 from .data import DiagnoseData
-from .design import fit_state, predict_model, state_from_model
+from .design import fit_state
+from .frommodel import predict_model, state_from_model
 from .detectors.analyses import residual_analyses
 
 __all__ = ["baseline_model", "idim_model", "residual_analysis", "relative_error"]

@@ -6,7 +6,7 @@ filtering and decimation, :func:`trajectory_data`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -16,6 +16,7 @@ from ..errors import InputError
 from ..fitdata import FitData
 from ..recording import Recording
 from ..segment import Segmentation, find_segments, free_motion
+from ..segment.trim import edge_rows
 from ..signals import butter_filtfilt, central_difference, decimate, decimation_index
 
 __all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves", "per_speed"]
@@ -190,6 +191,31 @@ class DiagnoseData:
         if travel is None and fd.theta is not None:
             travel = travel_since_reversal(fd.theta, fd.v, fd.run)
         return cls(fd, by=by, travel=travel, kind="plateaus", notes=list(fd.notes), gear=gear)
+
+    def without_edges(self) -> "DiagnoseData":
+        """These data without the rows at each plateau's ends whose acceleration filter reaches
+        into the transient beside it (:func:`~gearspec.segment.trim.edge_rows`: half the
+        Savitzky-Golay window, 5 rows at 500 Hz); the closed loop works on these.  Plateaus that
+        would lose more than half their rows, quasi-static sweeps, free-motion blocks and reduced
+        (trajectory) data are kept whole."""
+        f = self.fit
+        if self.kind != "plateaus" or self.reduce is not None or f.t is None or not len(f):
+            return self
+        kinds = dict(zip(f.segments["segment"], f.segments["kind"])) if "kind" in f.segments else {}
+        seg = f.segment
+        bounds = np.flatnonzero(np.diff(seg) != 0) + 1
+        keep = np.ones(len(f), bool)
+        for a, z in zip(np.r_[0, bounds], np.r_[bounds, len(f)]):
+            h = edge_rows(f.t[a:z]) if kinds.get(seg[a], "plateau") == "plateau" else 0
+            if h and (z - a) - 2 * h >= (z - a) / 2:
+                keep[a:a + h] = keep[z - h:z] = False
+        if keep.all():
+            return self
+        note = (f"{int((~keep).sum())} rows at the ends of plateaus left out: their acceleration filter reaches into "
+                f"the ramp beside them")
+        return DiagnoseData(replace(f.subset(keep), cache={}), by=self.by, kind=self.kind, name=self.name,
+                            travel=None if self.travel is None else np.asarray(self.travel)[keep],
+                            notes=self.notes + [note], gear=self.gear)
 
     # ------------------------------------------------------------------ views
     def R(self, a) -> np.ndarray:

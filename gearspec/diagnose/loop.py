@@ -29,8 +29,10 @@ from .baseline import _as_data, baseline_model, idim_model, relative_error, resi
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal, state_from_model
+from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal
+from .frommodel import state_from_model
 from .nonlinear import polish, refine
+from .nuisance import admit_partial_lines
 from .detectors import analyse, propose
 from .guard import accept_first, bar_repeat, undone_in
 from .results import Diagnosis, Effect, Verdict
@@ -303,7 +305,7 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
 
 def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,
               kinds, validation, per_segment_spectra, progress) -> Diagnosis:
-    dd = _as_data(data, by, gear)
+    dd = _as_data(data, by, gear).without_edges()
     if gear is not None and dd.gear is None:
         from ..gears import load_gear
         dd.gear = load_gear(gear)
@@ -321,6 +323,9 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
                          "to hold whole groups out")
     fold = folds_of(dd, folds)
     state = _settle(state_from_model(model, dd, symmetric=bool(symmetric) and len(dd.directions()) == 2), dd)
+    state, partial_notes = admit_partial_lines(state, model, dd, fold, _settle, evaluate_candidate, alpha=alpha,
+                                               min_gain=min_gain, harmonics=harmonics,
+                                               gear=gear if gear is not None else dd.gear)
     rnd = Round(dd, state, fold)
     base_fit = rnd.fitted
     base_h = rnd.baseline_holdout()
@@ -379,11 +384,11 @@ def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha,
                       "max_rounds": max_rounds, "kinds": sorted(kinds), "symmetric": bool(state.symmetric)})
     diag.trace = pd.DataFrame(trace)
     if validation is not None:
-        validate(diag, rnd, _as_data(validation, by, gear), alpha=alpha, min_gain=min_gain, say=say)
+        validate(diag, rnd, _as_data(validation, by, gear).without_edges(), alpha=alpha, min_gain=min_gain, say=say)
     if not (diag.validation or {}).get("removed"):
         diag.notes += _holdout_notes(rounds, base_ho, final_ho)
-    # what each accepted term wrote, from the final model (after backward elimination and the
-    # validation data): the numbers final_model.json holds
+    diag.notes += partial_notes
+    # what each accepted term wrote, from the final model (after backward elimination, validation)
     for e in diag.effects:
         if e.accepted:
             e.terms = _written_terms(e, diag.final)

@@ -19,7 +19,7 @@ from ..spectrum import MEASURABLE_FRACTION, LombScargle, false_alarm_probability
 from .data import DiagnoseData
 
 __all__ = ["ResidualSpectrum", "position_spectra", "speed_groups", "speed_analysis", "channel_analysis",
-           "acceleration_analysis", "reversal_analysis", "magnitude_residual"]
+           "acceleration_analysis", "acc_roundoff", "reversal_analysis", "magnitude_residual"]
 
 
 def magnitude_residual(dd: DiagnoseData, r: np.ndarray) -> np.ndarray:
@@ -309,14 +309,41 @@ def _cluster_slope(dd: DiagnoseData, x: np.ndarray, y: np.ndarray) -> tuple | No
     return b, se, (b / se if se > 0 else 0.0)
 
 
+#: accelerations within the groups smaller than this many float64 round-offs of the position,
+#: over the squared sampling step, are the derivative filter's round-off on exact plateaus: no data
+ACC_ROUNDOFF = 1e3
+
+
+def acc_roundoff(dd: DiagnoseData) -> float:
+    """The acceleration (unit/s^2) below which a derivative of ``dd``'s positions is round-off:
+    ``ACC_ROUNDOFF * eps * max|theta| / dt^2`` with ``dt`` the median sampling step (0 without
+    positions or times)."""
+    th, t = dd.at("theta"), dd.at("t")
+    if th is None or t is None or len(t) < 2:
+        return 0.0
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if not len(steps):
+        return 0.0
+    dt = float(np.median(steps))
+    return ACC_ROUNDOFF * float(np.finfo(float).eps) * float(np.max(np.abs(th))) / (dt * dt)
+
+
 def acceleration_analysis(dd: DiagnoseData, r: np.ndarray, bins: int = 15) -> tuple[pd.DataFrame, dict] | None:
     """Residual (drive torque, signed) against acceleration, both taken relative to their group
     means (so that a level misfit does not count): binned means for the figure, and the slope
-    (a missing inertia, kg m^2 or kg) with a cluster-robust t statistic over groups."""
+    (a missing inertia, kg m^2 or kg) with a cluster-robust t statistic over groups; None without
+    accelerations.  When the accelerations within the groups are round-off (:func:`acc_roundoff`:
+    exact plateaus, their ramps trimmed) a slope against them would be one against numerical
+    noise: no test is made (empty table, slope NaN, ``p`` 1, ``roundoff`` True)."""
     acc = dd.at("acc")
     if acc is None or not np.any(np.abs(acc) > 0):
         return None
     a_d, r_d = _within(dd, acc), _within(dd, r)
+    if float(np.max(np.abs(a_d))) <= acc_roundoff(dd):
+        # no test made: no evidence of a missing inertia (and no inertia candidate, ``roundoff``)
+        return (pd.DataFrame(columns=["acc", "mean", "se", "n"]),
+                {"slope": float("nan"), "se": float("nan"), "t": 0.0, "p": 1.0, "roundoff": True})
     fit = _cluster_slope(dd, a_d, r_d)
     if fit is None:
         return None

@@ -13,7 +13,7 @@ def inertia(rnd: Round, analyses: dict, *, gate: float) -> list[Candidate]:
     """An inertia term whenever the data have accelerations (the held-out test decides) and the
     model has none."""
     ac = analyses.get("acc")
-    if ac is None or "inertia" in rnd.keys:
+    if ac is None or ac[1].get("roundoff") or "inertia" in rnd.keys:   # round-off accelerations: nothing to fit
         return []
     st = ac[1]
     return [GridCandidate("inertia", "inertia J thetadd",
