@@ -46,7 +46,9 @@ def _accepted_per_round(d) -> list:
 def test_kinova_amplitude_law_accepted_once_and_kept_as_judged(data_dir, tmp_path, capsys):
     d, _ = _kinova(data_dir, tmp_path, capsys)
     base, final = d["baseline"]["rmse_holdout"], d["final"]["rmse_holdout"]
-    assert base == pytest.approx(0.2122, abs=5e-4)          # measured: the baseline of the issue
+    # measured: the baseline of the issue was 0.2122; 0.2052 since diagnose leaves out the plateau
+    # edges whose acceleration filter reaches into the ramps (gearspec.segment.trim)
+    assert base == pytest.approx(0.2052, abs=5e-4)
     acc = _accepted_per_round(d)
     assert acc[0] == MOTOR_LAW
     assert len(acc) == len(set(acc))                         # no candidate accepted twice
@@ -86,7 +88,8 @@ def test_step_whose_settled_model_is_worse_is_undone(data_dir, tmp_path, capsys,
     assert e["status"] == "rejected" and v["test"] == "settled model" and v["round"] == 1
     assert "not below" in v["reason"] and "step undone" in v["reason"]
     assert v["rmse_before"] == pytest.approx(base, rel=1e-9)
-    assert v["rmse_after"] == pytest.approx(0.2297, abs=5e-4)   # the settled model measured before the fix
+    # the settled model measured before the fix (0.2297 before the plateau edges were trimmed)
+    assert v["rmse_after"] == pytest.approx(0.2215, abs=5e-4)
     assert v["rmse_after"] > v["rmse_before"] and v["gain"] < 0
     assert v["line"] in console                              # the console prints the JSON's line
     report = " ".join((rep / "report.md").read_text().split())
