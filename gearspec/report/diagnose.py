@@ -306,7 +306,8 @@ def analysis_table(analyses: dict) -> pd.DataFrame:
     ac = analyses.get("acc")
     if ac is not None:
         rows.append({"analysis": "against acceleration (inertia)",
-                     "statistic": f"slope {ac[1]['slope']:.3g} (t {ac[1]['t']:.2f})", "p": ac[1]["p"]})
+                     "statistic": ("accelerations are round-off (exact plateaus): no test" if ac[1].get("roundoff")
+                                   else f"slope {ac[1]['slope']:.3g} (t {ac[1]['t']:.2f})"), "p": ac[1]["p"]})
     rv = analyses.get("reversal")
     if rv is not None:
         rows.append({"analysis": "near reversals (presliding profile)",
