@@ -163,3 +163,22 @@ def test_amplitude_law_settled_freely_when_that_predicts_better():
     held = Round(dd, guard.settle_holding(rnd.state.replaced(prop.drop, prop.add), dd, {off.uid}), rnd.fold)
     assert [d for _, d in held.lines()[0].decay] == [0.05, 0.05]
     assert held.baseline_holdout()["rmse"] > 2 * new.baseline_holdout()["rmse"]
+
+
+def test_a_candidate_whose_fold_fits_diverge_is_said_so():
+    """Issue 16: on the Kinova sensor column two Stribeck candidates printed 'held-out rmse 0.0969
+    -> 21.25 Nm' as if a measured size; the verdict line now says the fold fits diverged.  At 1.1x
+    the model's rmse (a plain rejection) nothing is added."""
+    from gearspec.diagnose.results import DIVERGED
+
+    e = Effect(kind="speed_law", name="Stribeck term (exp)", accepted=False, evidence="", rmse_holdout_before=0.0969,
+               rmse_holdout_after=21.25, round=1)
+    e.verdict = Verdict("rejected", "held-out", "held-out Z -0.00 below 4.62", 0.0, 4.62, -218.3, 0.005, 0.0969,
+                        21.25, 1)
+    line = verdict_line(e, torque_unit="Nm")
+    assert "its fold fits diverge (219x the model's held-out rmse)" in line
+    e.verdict = Verdict("rejected", "held-out", "held-out Z 0.1 below 4.62", 0.1, 4.62, -0.1, 0.005, 0.0969,
+                        0.0969 * 1.1, 1)
+    assert "diverge" not in verdict_line(e, torque_unit="Nm")
+    e.verdict = Verdict("rejected", "held-out", "x", 0.0, 4.62, -9.0, 0.005, 0.1, 0.1 * (DIVERGED - 0.5), 1)
+    assert "diverge" not in verdict_line(e, torque_unit="Nm")

@@ -132,7 +132,20 @@ def verdict_line(e: Effect, unit: str | None = None, torque_unit: str = "") -> s
     nums = (f"{v.test} test: Z {_fmt(v.z, '.2f')} (needs {_fmt(v.z_crit, '.2f')}), {where} rmse "
             f"{_fmt(v.rmse_before, '.4g')} -> {_fmt(v.rmse_after, '.4g')}{tu} ({_fmt(-100 * v.gain, '+.2f')} %, "
             f"needs a fall of {_fmt(100 * v.min_gain, '.2g')} %)")
+    if (v.rmse_before is not None and v.rmse_after is not None and math.isfinite(v.rmse_after)
+            and v.rmse_before > 0 and v.rmse_after > DIVERGED * v.rmse_before):
+        # a term that makes the held-out error many times the model's is no weak effect: its fold
+        # fits ran away (a shape the training groups do not pin down); said, so the number is not
+        # read as a measured size of the effect
+        nums += (f"; its fold fits diverge ({v.rmse_after / v.rmse_before:.0f}x the model's held-out rmse): the "
+                 f"data do not identify its shape")
     return f"{head}: {v.reason} [{nums}]" + (f"; {v.note}" if v.note else "")
+
+
+#: a candidate whose held-out rmse is more than this many times the model's is said to diverge
+#: (:func:`verdict_line`): an effect the loop tests is a small part of the error, so a ratio of 10
+#: is no effect of the data but fold fits that ran away
+DIVERGED = 10.0
 
 
 @dataclass
