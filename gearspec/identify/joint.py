@@ -303,9 +303,8 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
 def _faint_lines_held(prob: _Problem, stats, law, specs, weights, se, sub, dname, ni, init) -> _Problem:
     """The problem with every line whose amplitude is not distinguishable from zero at fixed shapes
     (:func:`~.jointlines.faint_lines`) held at a constant amplitude, said in ``ni``."""
-    starts, dec0, _ = grid_starts(prob, init)
-    faint = faint_lines(prob, starts[0], dec0)
-    for k, amp, a_se in faint:
+    faint = faint_lines(prob, _fit_direction, init)
+    for k, (amp, a_se) in faint.items():
         hold_constant(specs[k], dname, ni, f"the line is not distinguishable from zero (amplitude {amp:.2g} +- "
                       f"{a_se:.2g} {'Nm' if sub.unit == 'rad' else 'N'} with its shape held, below {SIGNIFICANT:g} "
                       f"standard errors), so its decay is not identified")

@@ -16,13 +16,14 @@ Units: speeds rad/s (m/s), amplitudes Nm (N), decays s/rad (s/m; dimensionless f
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from .covariance import clusters_of, fit_covariance
 from .stats import SIGNIFICANT, SegmentStats, pair_se
 
-__all__ = ["shape_free", "hold_constant", "few_speeds", "faint_lines", "residual_variance", "covariance",
+__all__ = ["shape_free", "hold_constant", "few_speeds", "held", "faint_lines", "residual_variance", "covariance",
            "grid_starts", "not_converged"]
 
 
@@ -75,28 +76,43 @@ def covariance(prob, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, str]:
                           cluster_of_segment=clusters, fallback=what)
 
 
-def faint_lines(prob, nonlin: list, decays: np.ndarray) -> list[tuple[int, float, float]]:
-    """The lines with a shape to fit whose amplitude, fitted with the shapes held (the linear stage of
-    the fit at the nonlinear start ``nonlin``, ``decays``: a decay 0 is a constant amplitude), is not
-    distinguishable from zero: below :data:`~.stats.SIGNIFICANT` standard errors.  ``[(k, amplitude,
-    se)]``, amplitudes in Nm (N)."""
-    ks = [k for k in np.flatnonzero(prob.decay_free)]
-    if not ks:
-        return []
-    lin, r = prob.solve_linear(nonlin, decays)
-    M = prob.design(nonlin, decays)
-    A = np.einsum("spq,sql->spl", prob.Lt, M).reshape(-1, M.shape[2])
-    cov, _ = covariance(prob, A, r)
+def held(prob, lines):
+    """The problem with the amplitude of every line in ``lines`` (indices) held constant."""
+    free = prob.decay_free.copy()
+    free[list(lines)] = False
+    return replace(prob, decay_free=free, amp_law=["const" if k in lines else a for k, a in enumerate(prob.amp_law)])
+
+
+def _below(prob, sol: dict, lines) -> dict[int, tuple[float, float]]:
+    """``{k: (amplitude, se)}`` of the lines among ``lines`` whose amplitude in the solution ``sol`` is
+    below :data:`~.stats.SIGNIFICANT` standard errors (a zero amplitude, whose se is NaN, too)."""
+    lin, cov = sol["lin"], sol["cov"]
     nb = len(prob.basis.lin)
-    out = []
-    for k in ks:
+    out = {}
+    for k in lines:
         ia = nb + 2 * int(k)
         amp = math.hypot(lin[ia], lin[ia + 1])
-        se = pair_se(lin[ia], lin[ia + 1], cov[ia:ia + 2, ia:ia + 2])[0] if np.all(np.isfinite(cov)) else math.nan
-        # a zero amplitude (pair_se NaN) is not distinguishable from zero either
+        with np.errstate(all="ignore"):   # a denormal amplitude: its se is NaN or inf, it stays below
+            se = pair_se(lin[ia], lin[ia + 1], cov[ia:ia + 2, ia:ia + 2])[0] if np.all(np.isfinite(cov)) else math.nan
         if not amp > SIGNIFICANT * se:
-            out.append((int(k), amp, se))
+            out[int(k)] = (amp, se)
     return out
+
+
+def faint_lines(prob, fit_direction, init=None) -> dict[int, tuple[float, float]]:
+    """The lines of ``prob`` with a shape to fit whose amplitude, fitted as a constant, is not
+    distinguishable from zero (below :data:`~.stats.SIGNIFICANT` standard errors): ``{k: (amplitude,
+    se)}``, Nm (N).  First every shape is held (no decay can run away); then each line found above
+    is tested again with only its own shape held (and those of the faint lines): holding the decay
+    of a line that does decay would leak its misfit into the others.  ``fit_direction``:
+    :func:`~.joint._fit_direction` (one more fit per line that has an amplitude)."""
+    free = [int(k) for k in np.flatnonzero(prob.decay_free)]
+    if not free:
+        return {}
+    faint = _below(prob, fit_direction(held(prob, free), init=init), free)
+    for k in [k for k in free if k not in faint]:
+        faint.update(_below(prob, fit_direction(held(prob, set(faint) | {k}), init=init), [k]))
+    return dict(sorted(faint.items()))
 
 
 def grid_starts(prob, init=None) -> tuple[list[list[float]], np.ndarray, tuple[float, float]]:
