@@ -130,12 +130,13 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
     return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats), method, segments)
 
 
-def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
-    """Variable projection from a grid start, then one joint least-squares pass for the covariance."""
+def _fit_direction(prob: _Problem, *, init: Mapping | None = None, at=None) -> dict:
+    """Variable projection from a grid start (``at``: from these nonlinear base values instead), then
+    one joint least-squares pass for the covariance."""
     st = prob.stats
     nb_nl = len(prob.basis.nonlin)
     free = np.flatnonzero(prob.decay_free)
-    starts, dec0, vs_bounds = grid_starts(prob, init)
+    starts, dec0, vs_bounds = grid_starts(prob, init, at)
     # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
     sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
 

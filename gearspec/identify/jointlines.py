@@ -109,17 +109,23 @@ def faint_lines(prob, fit_direction, init=None) -> dict[int, tuple[float, float]
     free = [int(k) for k in np.flatnonzero(prob.decay_free)]
     if not free:
         return {}
-    faint = _below(prob, fit_direction(held(prob, free), init=init), free)
+    first = fit_direction(held(prob, free), init=init)
+    faint = _below(prob, first, free)
     for k in [k for k in free if k not in faint]:
-        faint.update(_below(prob, fit_direction(held(prob, set(faint) | {k}), init=init), [k]))
+        lines = set(faint) | {k}
+        if lines == set(free):     # the first fit is that fit (one line above the noise, e.g.)
+            continue
+        # started where the first fit ended
+        faint.update(_below(prob, fit_direction(held(prob, lines), init=init, at=first["nonlin"]), [k]))
     return dict(sorted(faint.items()))
 
 
-def grid_starts(prob, init=None) -> tuple[list[list[float]], np.ndarray, tuple[float, float]]:
+def grid_starts(prob, init=None, at=None) -> tuple[list[list[float]], np.ndarray, tuple[float, float]]:
     """Where the nonlinear least squares starts: ``(starts, decays, log_bounds)``.  ``starts``: the
     nonlinear base parameters (the Stribeck velocity, m/s or rad/s) at the best three local minima of
-    the registry's grid, with every decay at ``decays`` (0, or ``init``'s); ``log_bounds``: the
-    bounds of the log of the Stribeck velocity (outside them it is not identifiable)."""
+    the registry's grid (``at``: these values instead, no grid), with every decay at ``decays`` (0,
+    or ``init``'s); ``log_bounds``: the bounds of the log of the Stribeck velocity (outside them it
+    is not identifiable)."""
     st = prob.stats
     nb_nl = len(prob.basis.nonlin)
     spd = st.speed[st.speed > 0]
@@ -139,6 +145,8 @@ def grid_starts(prob, init=None) -> tuple[list[list[float]], np.ndarray, tuple[f
         for k, h in enumerate(init.get("harmonics", [])[:prob.K]):
             if h.get("decay") is not None and prob.decay_free[k]:
                 dec0[k] = float(h["decay"])
+    if at is not None:
+        return [list(at)], dec0, (math.log(nl_lo), math.log(nl_hi))
     costs = []
     for vs in grid_vs:
         _, r = prob.solve_linear([] if vs is None else [vs], dec0)
