@@ -83,40 +83,50 @@ def held(prob, lines):
     return replace(prob, decay_free=free, amp_law=["const" if k in lines else a for k, a in enumerate(prob.amp_law)])
 
 
-def _below(prob, sol: dict, lines) -> dict[int, tuple[float, float]]:
-    """``{k: (amplitude, se)}`` of the lines among ``lines`` whose amplitude in the solution ``sol`` is
-    below :data:`~.stats.SIGNIFICANT` standard errors (a zero amplitude, whose se is NaN, too)."""
-    lin, cov = sol["lin"], sol["cov"]
+def _amplitudes(prob, sol: dict, lines) -> dict[int, tuple[float, float]]:
+    """``{k: (amplitude, se)}`` of the lines ``lines`` in the solution ``sol`` of ``prob``, Nm (N); the
+    standard errors from the linear stage at the solution's nonlinear values (always finite, also
+    where a decay that the data do not pin down left the joint covariance singular)."""
+    lin, r = prob.solve_linear(sol["nonlin"], sol["decays"])
+    M = prob.design(sol["nonlin"], sol["decays"])
+    cov, _ = covariance(prob, np.einsum("spq,sql->spl", prob.Lt, M).reshape(-1, M.shape[2]), r)
     nb = len(prob.basis.lin)
     out = {}
     for k in lines:
         ia = nb + 2 * int(k)
-        amp = math.hypot(lin[ia], lin[ia + 1])
-        with np.errstate(all="ignore"):   # a denormal amplitude: its se is NaN or inf, it stays below
-            se = pair_se(lin[ia], lin[ia + 1], cov[ia:ia + 2, ia:ia + 2])[0] if np.all(np.isfinite(cov)) else math.nan
-        if not amp > SIGNIFICANT * se:
-            out[int(k)] = (amp, se)
+        with np.errstate(all="ignore"):   # a denormal amplitude: its se is NaN or inf
+            out[int(k)] = (math.hypot(lin[ia], lin[ia + 1]), pair_se(lin[ia], lin[ia + 1], cov[ia:ia + 2, ia:ia + 2])[0])
     return out
+
+
+def _faint(amp: float, se: float) -> bool:
+    """Not distinguishable from zero: below :data:`~.stats.SIGNIFICANT` standard errors (a zero
+    amplitude, whose se is NaN, too)."""
+    return not amp > SIGNIFICANT * se
 
 
 def faint_lines(prob, fit_direction, init=None) -> dict[int, tuple[float, float]]:
     """The lines of ``prob`` with a shape to fit whose amplitude, fitted as a constant, is not
-    distinguishable from zero (below :data:`~.stats.SIGNIFICANT` standard errors): ``{k: (amplitude,
-    se)}``, Nm (N).  First every shape is held (no decay can run away); then each line found above
-    is tested again with only its own shape held (and those of the faint lines): holding the decay
-    of a line that does decay would leak its misfit into the others.  ``fit_direction``:
-    :func:`~.joint._fit_direction` (one more fit per line that has an amplitude)."""
+    distinguishable from zero (:func:`_faint`): ``{k: (amplitude, se)}``, Nm (N).  First every shape
+    is held (no decay can run away); then each line found above is tested again, the weakest first,
+    with only its own shape held and those of the faint lines found so far: holding the decay of a
+    line that does decay can lift an empty line above the threshold.  ``fit_direction``:
+    :func:`~.joint._fit_direction` (one more fit per line above the noise but the strongest)."""
     free = [int(k) for k in np.flatnonzero(prob.decay_free)]
     if not free:
         return {}
-    first = fit_direction(held(prob, free), init=init)
-    faint = _below(prob, first, free)
-    for k in [k for k in free if k not in faint]:
+    hold = held(prob, free)
+    first = fit_direction(hold, init=init)
+    found = _amplitudes(hold, first, free)
+    faint = {k: v for k, v in found.items() if _faint(*v)}
+    for k in sorted((k for k in free if k not in faint), key=lambda k: found[k][0] / found[k][1]):
         lines = set(faint) | {k}
-        if lines == set(free):     # the first fit is that fit (one line above the noise, e.g.)
+        if lines == set(free):     # the first fit is that fit
             continue
-        # started where the first fit ended
-        faint.update(_below(prob, fit_direction(held(prob, lines), init=init, at=first["nonlin"]), [k]))
+        hold = held(prob, lines)    # started where the first fit ended
+        amp = _amplitudes(hold, fit_direction(hold, init=init, at=first["nonlin"]), [k])[k]
+        if _faint(*amp):
+            faint[k] = amp
     return dict(sorted(faint.items()))
 
 
