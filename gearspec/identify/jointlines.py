@@ -108,9 +108,9 @@ def _faint(amp: float, se: float) -> bool:
 def faint_lines(prob, fit_direction, init=None) -> dict[int, tuple[float, float]]:
     """The lines of ``prob`` with a shape to fit whose amplitude, fitted as a constant, is not
     distinguishable from zero (:func:`_faint`): ``{k: (amplitude, se)}``, Nm (N).  First every shape
-    is held (no decay can run away); then each line found above is tested again, the weakest first,
-    with only its own shape held and those of the faint lines found so far: holding the decay of a
-    line that does decay can lift an empty line above the threshold.  ``fit_direction``:
+    is held (no decay can run away); then each line found above is tested again with only its own
+    shape held and those of the faint lines found so far: holding the decay of a line that does
+    decay can lift an empty line above the threshold.  ``fit_direction``:
     :func:`~.joint._fit_direction` (one more fit per line above the noise but the strongest)."""
     free = [int(k) for k in np.flatnonzero(prob.decay_free)]
     if not free:
@@ -119,7 +119,7 @@ def faint_lines(prob, fit_direction, init=None) -> dict[int, tuple[float, float]
     first = fit_direction(hold, init=init)
     found = _amplitudes(hold, first, free)
     faint = {k: v for k, v in found.items() if _faint(*v)}
-    for k in sorted((k for k in free if k not in faint), key=lambda k: found[k][0] / found[k][1]):
+    for k in [k for k in free if k not in faint]:
         lines = set(faint) | {k}
         if lines == set(free):     # the first fit is that fit
             continue
