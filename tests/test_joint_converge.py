@@ -174,4 +174,4 @@ def test_a_fit_that_does_not_converge_says_where_it_stopped(monkeypatch):
         fit(data, "silo4", harmonics=[{"frequency": MESH, "label": "mesh"}], holdout=None)
     text = str(err.value)
     assert text.startswith("the silo4 fit did not converge in the positive direction (it used its 1 evaluations")
-    assert "v_s = " in text and "decay of mesh = " in text and "\n" not in text
+    assert "rad/s" in text and "decay of mesh = " in text and " s/rad" in text and "\n" not in text

@@ -263,7 +263,8 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
         raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}); the lines "
                                f"asked for may be too close to each other or to the Nyquist frequency") from exc
     if sol["status"] <= 0:
-        raise ConvergenceError(not_converged(law, dname, prob, sol["stop"], sol["nonlin"], sol["decays"]))
+        raise ConvergenceError(not_converged(law, dname, prob, sol["stop"], sol["nonlin"], sol["decays"],
+                                               sub.unit))
     P = _direction_params(prob, sol)
     for h in P.harmonics:
         if np.isfinite(h.se["amplitude"]) and h.amplitude < SIGNIFICANT * h.se["amplitude"]:

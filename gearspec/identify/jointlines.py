@@ -95,7 +95,8 @@ def _amplitudes(prob, sol: dict, lines) -> dict[int, tuple[float, float]]:
     for k in lines:
         ia = nb + 2 * int(k)
         with np.errstate(all="ignore"):   # a denormal amplitude: its se is NaN or inf
-            out[int(k)] = (math.hypot(lin[ia], lin[ia + 1]), pair_se(lin[ia], lin[ia + 1], cov[ia:ia + 2, ia:ia + 2])[0])
+            se = pair_se(lin[ia], lin[ia + 1], cov[ia:ia + 2, ia:ia + 2])[0]
+        out[int(k)] = (math.hypot(lin[ia], lin[ia + 1]), se)
     return out
 
 
@@ -177,11 +178,13 @@ def grid_starts(prob, init=None, at=None) -> tuple[list[list[float]], np.ndarray
     return starts, dec0, (math.log(nl_lo), math.log(nl_hi))
 
 
-def not_converged(law: str, dname: str, prob, res, nonlin: list, decays: np.ndarray) -> str:
+def not_converged(law: str, dname: str, prob, res, nonlin: list, decays: np.ndarray, unit: str = "rad") -> str:
     """The sentence of a least squares that stopped without converging (``res``: its result): where
-    it stopped (``nonlin``: the Stribeck velocity; ``decays``) and why."""
-    where = [f"{nm} = {v:.3g}" for nm, v in zip(prob.basis.nonlin, nonlin)]
-    where += [f"decay of {label(prob.harmonics[k])} = {decays[k]:.3g}" for k in np.flatnonzero(prob.decay_free)]
+    it stopped (``nonlin``: the Stribeck velocity, ``unit``/s; ``decays``: s/``unit``, dimensionless
+    for a ``power`` law) and why."""
+    where = [f"{nm} = {v:.3g} {unit}/s" for nm, v in zip(prob.basis.nonlin, nonlin)]
+    where += [f"decay of {label(prob.harmonics[k])} = {decays[k]:.3g}"
+              + ("" if prob.amp_law[k] == "power" else f" s/{unit}") for k in np.flatnonzero(prob.decay_free)]
     why = (f"it used its {res.nfev} evaluations" if res.status == 0 else f"status {res.status}: {res.message}")
     return (f"the {law} fit did not converge in the {dname} direction ({why} and stopped at "
             f"{', '.join(where) or 'its start'}): a parameter the data do not pin down may still be moving; "
