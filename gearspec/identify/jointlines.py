@@ -85,11 +85,13 @@ def held(prob, lines):
 
 def _amplitudes(prob, sol: dict, lines) -> dict[int, tuple[float, float]]:
     """``{k: (amplitude, se)}`` of the lines ``lines`` in the solution ``sol`` of ``prob``, Nm (N); the
-    standard errors from the linear stage at the solution's nonlinear values (always finite, also
-    where a decay that the data do not pin down left the joint covariance singular)."""
-    lin, r = prob.solve_linear(sol["nonlin"], sol["decays"])
-    M = prob.design(sol["nonlin"], sol["decays"])
-    cov, _ = covariance(prob, np.einsum("spq,sql->spl", prob.Lt, M).reshape(-1, M.shape[2]), r)
+    standard errors from the solution's covariance (all parameters), or where a decay that the data
+    do not pin down left it singular, from the linear stage at the solution's nonlinear values."""
+    lin, cov = sol["lin"], sol["cov"]
+    if not np.all(np.isfinite(cov)):
+        M = prob.design(sol["nonlin"], sol["decays"])
+        cov, _ = covariance(prob, np.einsum("spq,sql->spl", prob.Lt, M).reshape(-1, M.shape[2]),
+                            prob.solve_linear(sol["nonlin"], sol["decays"])[1])
     nb = len(prob.basis.lin)
     out = {}
     for k in lines:
