@@ -36,9 +36,10 @@ from ..model import LAWS, Direction, FrictionModel, Harmonic
 from ..terms.registry import Basis as _Basis
 from ..terms.registry import basis as _basis
 from ..terms.shapes import amplitude_law, clamp_speed
-from .stats import MIN_CYCLES, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
+from .stats import MIN_CYCLES, SIGNIFICANT, ConvergenceError, SegmentStats, harmonic_specs, pair_se, segment_stats
 from .stats import speed_ranges
-from .covariance import SE_METHODS, _carry_se, _common_inertia, clusters_of, fit_covariance, jacobian
+from .covariance import SE_METHODS, _carry_se, _common_inertia, jacobian
+from .jointlines import covariance, faint_lines, few_speeds, grid_starts, hold_constant, not_converged
 from .validate import _safe_rmse, holdout, inverted_sign, negative_viscous
 
 __all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous", "inverted_sign"]
@@ -129,47 +130,13 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
     return _Problem(stats, _basis(law), harmonics, decay_free, amp_law, w, Lt, speed_ranges(stats), method, segments)
 
 
-def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
-    """Variable projection from a grid start, then one joint least-squares pass for the covariance."""
+def _fit_direction(prob: _Problem, *, init: Mapping | None = None, at=None) -> dict:
+    """Variable projection from a grid start (``at``: from these nonlinear base values instead), then
+    one joint least-squares pass for the covariance."""
     st = prob.stats
     nb_nl = len(prob.basis.nonlin)
     free = np.flatnonzero(prob.decay_free)
-    spd = st.speed[st.speed > 0]
-    # grids for the start: Stribeck velocity over the plateau speeds, decays from 0
-    lo, hi = (spd.min(), spd.max()) if len(spd) else (1e-3, 1.0)
-    # the Stribeck velocity is searched within the bounds and from the grid the registry declares
-    # (:class:`gearspec.terms.Nonlinear`: outside [lo/10, 2 hi] it is not identifiable); a result
-    # on a bound is reported as not identified
-    nl_lo, nl_hi = prob.basis.search[0].bounds(lo, hi) if nb_nl else (1.0, 1.0)
-    vs_bounds = (math.log(nl_lo), math.log(nl_hi))
-    if nb_nl:
-        grid_vs = prob.basis.search[0].grid(lo, hi)
-        if init and init.get("v_s") and nl_lo < float(init["v_s"]) < nl_hi:
-            grid_vs = np.append(grid_vs, float(init["v_s"]))
-    else:
-        grid_vs = [None]
-    dec0 = np.zeros(prob.K)
-    if init:
-        for k, h in enumerate(init.get("harmonics", [])[:prob.K]):
-            if h.get("decay") is not None and prob.decay_free[k]:
-                dec0[k] = float(h["decay"])
-    costs = []
-    for vs in grid_vs:
-        nl = [] if vs is None else [vs]
-        _, r = prob.solve_linear(nl, dec0)
-        costs.append(float(r @ r))
-    # starts: every local minimum of the grid cost (the best three), not only the lowest grid
-    # point -- a sharp minimum (noiseless or precise points) can fall between two grid points and
-    # cost more there than a broad local minimum elsewhere does
-    costs = np.asarray(costs)
-    if nb_nl and len(costs) > 2:
-        order = np.argsort(np.asarray(grid_vs, dtype=float), kind="stable")
-        c_o = costs[order]
-        is_min = np.r_[c_o[0] <= c_o[1], (c_o[1:-1] <= c_o[:-2]) & (c_o[1:-1] <= c_o[2:]), c_o[-1] <= c_o[-2]]
-        mins = order[is_min]
-        starts = [[float(grid_vs[i])] for i in mins[np.argsort(costs[mins], kind="stable")][:3]]
-    else:
-        starts = [[] if grid_vs[int(np.argmin(costs))] is None else [float(grid_vs[int(np.argmin(costs))])]]
+    starts, dec0, vs_bounds = grid_starts(prob, init, at)
     # outer problem over log(nonlinear base) and free decays (scaled by the speed range)
     sscale = 1.0 / max(float(np.max(st.speed)), 1e-12) if len(st.speed) else 1.0
 
@@ -195,9 +162,9 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
                     res = r_
         if not np.all(np.isfinite(res.x)):
             raise ConvergenceError("the friction fit did not converge (non-finite parameters)")
-        x_opt, status = res.x, res.status
+        x_opt, status, stop = res.x, res.status, res
     else:
-        x_opt, status = np.zeros(0), 1
+        x_opt, status, stop = np.zeros(0), 1, None
     nl, dec = unpack(x_opt)
     lin, _ = prob.solve_linear(nl, dec)
     # joint pass over all parameters: covariance from the Jacobian at the optimum
@@ -209,15 +176,11 @@ def _fit_direction(prob: _Problem, *, init: Mapping | None = None) -> dict:
     r = full(z)
     J = jacobian(full, z)
     p = len(z)
-    # residual variance: the weighted rss of the fit plus the segments' own (pure error)
-    s2 = (float(r @ r) + float(np.sum(prob.weights * st.rss_hat))) / max(int(np.sum(st.n)) - p, 1)
-    clusters, what = clusters_of(st.segment, prob.segments, p) if prob.se == "covariance" else (None, "")
-    cov, se_method = fit_covariance(J, r, s2, method=prob.se, segment_of_row=np.repeat(np.arange(len(st.g)),
-                                    st.g.shape[1]), cluster_of_segment=clusters, fallback=what)
+    cov, se_method = covariance(prob, J, r)
     se = np.sqrt(np.clip(np.diag(cov), 0, None)) if np.all(np.isfinite(cov)) else np.full(p, np.nan)
     on_bound = bool(nb_nl and (x_opt[0] <= vs_bounds[0] + 1e-3 or x_opt[0] >= vs_bounds[1] - 1e-3))
     return {"on_bound": on_bound, "lin": lin, "nonlin": nl, "decays": dec, "cov": cov, "se": se, "status": status,
-            "sscale": sscale, "free": free, "se_method": se_method}
+            "sscale": sscale, "free": free, "se_method": se_method, "stop": stop}
 
 
 def _direction_params(prob: _Problem, sol: dict) -> Direction:
@@ -272,25 +235,15 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     if len(keep) < len(specs):
         specs = [specs[k] for k in keep]
         stats = segment_stats(sub, [h["frequency"] for h in specs], min_cycles=min_cycles, acc=acc)
-    # a decay needs the line measured on its own (a whole cycle in a segment) at two speeds or
-    # more: a line seen only in partial cycles shifts segment levels, which the speed law could
-    # trade against a speed-dependent amplitude; it keeps a constant amplitude (SILO4 eq. 6)
     specs = [dict(h) for h in specs]
     if len(sub.segments) and "kind" in sub.segments and bool((sub.segments["kind"] == "quasi_static").all()):
         return (*_quasi_static_direction(sub, segment_stats(sub, [h["frequency"] for h in specs],
                                                             min_cycles=min_cycles), law, specs, dname, ni, notes,
                                          weights), None)
-    ranges = speed_ranges(stats)
-    for k, h in enumerate(specs):
-        whole = stats.sampled[:, k] & (stats.cycles[:, k] >= 1.0)
-        speeds = np.unique(np.round(stats.speed[whole], 9))
-        # free motion: a cycle of the line at each end of a range of speeds is two speeds
-        pooled = stats.free is not None and np.isfinite(ranges[k, 1]) and ranges[k, 1] > ranges[k, 0]
-        if len(speeds) < 2 and not pooled and h.get("decay", True) is not False and h.get("law", "exp") != "const":
-            h["decay"] = False
-            lab = h.get("label") or f"{h['frequency']:.6g}"
-            ni[f"{dname}.{lab}.decay"] = (f"the line completes a cycle within a segment at {len(speeds)} speed(s) "
-                                          f"only: its amplitude is held constant")
+    # a decay needs the line measured on its own (a whole cycle in a segment) at two speeds or more,
+    # and an amplitude distinguishable from zero (below: :func:`_faint_lines_held`); else the line
+    # keeps a constant amplitude (SILO4 eq. 6), said in not_identified (:mod:`.jointlines`)
+    few_speeds(stats, specs, speed_ranges(stats), dname, ni)
     basis = _basis(law)
     distinct = len(np.unique(np.round(stats.speed, 9)))
     need = len(basis.lin) + len(basis.nonlin)
@@ -304,15 +257,17 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
                                f"(e.g. coulomb_viscous) or record more speeds")
     prob = _make_problem(stats, law, specs, weights, se=se, segments=sub.segments)
     try:
+        prob = _faint_lines_held(prob, stats, law, specs, weights, se, sub, dname, ni, init)
         sol = _fit_direction(prob, init=init)
     except (np.linalg.LinAlgError, ValueError) as exc:
         raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction ({exc}); the lines "
                                f"asked for may be too close to each other or to the Nyquist frequency") from exc
     if sol["status"] <= 0:
-        raise ConvergenceError(f"the {law} fit did not converge in the {dname} direction")
+        raise ConvergenceError(not_converged(law, dname, prob, sol["stop"], sol["nonlin"], sol["decays"],
+                                               sub.unit))
     P = _direction_params(prob, sol)
     for h in P.harmonics:
-        if np.isfinite(h.se["amplitude"]) and h.amplitude < 2 * h.se["amplitude"]:
+        if np.isfinite(h.se["amplitude"]) and h.amplitude < SIGNIFICANT * h.se["amplitude"]:
             notes.append(f"{dname}: amplitude of {h.label or h.frequency} not significant "
                          f"({h.amplitude:.3g} +- {h.se['amplitude']:.2g})")
     if se == "bootstrap":
@@ -345,6 +300,17 @@ def _fit_one_direction(sub: FitData, law: str, specs: list[dict], dname: str, *,
     j = len(sol["lin"]) - 1
     inertia = (float(sol["lin"][j]), float(sol["se"][j])) if acc else None
     return P, ni, notes, inertia
+
+
+def _faint_lines_held(prob: _Problem, stats, law, specs, weights, se, sub, dname, ni, init) -> _Problem:
+    """The problem with every line whose amplitude is not distinguishable from zero at fixed shapes
+    (:func:`~.jointlines.faint_lines`) held at a constant amplitude, said in ``ni``."""
+    faint = faint_lines(prob, _fit_direction, init)
+    for k, (amp, a_se) in faint.items():
+        hold_constant(specs[k], dname, ni, f"the line is not distinguishable from zero (amplitude {amp:.2g} +- "
+                      f"{a_se:.2g} {'Nm' if sub.unit == 'rad' else 'N'} with its shape held, below {SIGNIFICANT:g} "
+                      f"standard errors), so its decay is not identified")
+    return _make_problem(stats, law, specs, weights, se=se, segments=sub.segments) if faint else prob
 
 
 def _quasi_static_direction(sub: FitData, stats: SegmentStats, law: str, specs: list[dict], dname: str,

@@ -20,12 +20,18 @@ from ..gears import GearTrain, load_gear
 from ..spectrum import MEASURABLE_FRACTION
 from ..spectrum.analysis import group_position_nyquist
 
-__all__ = ["MIN_CYCLES", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges",
+__all__ = ["MIN_CYCLES", "SIGNIFICANT", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges",
            "pair_se"]
 
 #: a segment counts towards a line where it covers at least this fraction of a cycle (the default
 #: of :func:`fit`; the closed loop uses the same rule for the speed range of an amplitude law)
 MIN_CYCLES = 0.1
+
+
+#: an amplitude is distinguishable from zero when it exceeds this many standard errors (the fit's
+#: note on a line that is not significant; a line below it keeps a constant amplitude:
+#: :func:`gearspec.identify.jointlines.faint_lines`)
+SIGNIFICANT = 2.0
 
 
 #: the speed range of an amplitude law over free motion reaches the speeds below (above) which the
