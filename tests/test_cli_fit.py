@@ -159,3 +159,15 @@ def test_no_inertia_reaches_the_fit(recording_csv, monkeypatch):
     assert main(["fit", str(recording_csv), "--law", "coulomb_viscous", "--no-inertia", "--quiet"]) == 0
     assert main(["fit", str(recording_csv), "--law", "coulomb_viscous", "--quiet"]) == 0
     assert seen == [False, True]
+
+
+@pytest.mark.realdata
+def test_silo4_on_a_gear_without_lines_says_so_not_that_the_gear_is_missing(data_dir, capsys):
+    """Issue 16: `fit --law silo4 --gear emps` warned 'without a gear spec'; the spec is there and
+    declares no line (a ball screw as modelled), which is what the warning now says."""
+    path = data_dir / "emps" / "DATA_EMPS.mat"
+    assert main(["fit", str(path), "--gear", "emps", "--map", "theta=qm,torque=vir", "--scale", "torque=gtau",
+                 "--law", "silo4", "--no-published", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "without a gear spec" not in err
+    assert "declares no line and no harmonics (--lines) were given: fitting eq. 3 only" in err

@@ -448,7 +448,9 @@ class JointFit:
         if law == "silo4" and self.harmonics is None:
             specs = harmonic_specs(None, self.gear)
             if not specs:
-                _warn("law silo4 without a gear spec or harmonics: fitting eq. 3 only")
+                _warn("law silo4 without a gear spec or harmonics: fitting eq. 3 only" if self.gear is None else
+                      f"law silo4: the gear spec '{getattr(self.gear, 'name', self.gear)}' declares no line and no "
+                      f"harmonics (--lines) were given: fitting eq. 3 only")
         else:
             specs = harmonic_specs(self.harmonics, self.gear) if self.harmonics is not None else []
         acc = self._identifies_inertia(data)
