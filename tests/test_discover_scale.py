@@ -13,21 +13,17 @@ from gearspec.discover.library import default_library
 from gearspec.discover.moments import moments
 from gearspec.discover.search import Scaled, bootstrap_inclusion, path
 from gearspec.fitdata import FitData
-from gearspec.model import RPM, FrictionModel
+from gearspec.model import FrictionModel
 from gearspec.simulate import model_recording
 
 F2, F3 = 1 / (2 * np.pi * 14), 1 / (2 * np.pi)      # SILO4 worm-shaft and motor-shaft lines, cycles/rad
 
 
 def _silo4_eq11() -> FrictionModel:
-    """SILO4 eq. 11 (Table 2, direction-dependent Coulomb, viscous and ripple), as in test_discover."""
-    p = {"tau_c": 7.106e-3, "tau_s": 8.596e-3, "v_s": 28.18 * RPM, "viscous": 0.0134e-3 / RPM,
-         "harmonics": [dict(frequency=F2, amplitude=0.576e-3, decay=1.27e-4 / RPM, phase=np.pi / 2),
-                       dict(frequency=F3, amplitude=0.133e-3, decay=5.28e-5 / RPM, phase=np.pi)]}
-    n = {"tau_c": 7.909e-3, "tau_s": 9.399e-3, "v_s": 28.18 * RPM, "viscous": 0.0138e-3 / RPM,
-         "harmonics": [dict(frequency=F2, amplitude=0.526e-3, decay=1.12e-4 / RPM, phase=np.pi / 2),
-                       dict(frequency=F3, amplitude=0.152e-3, decay=7.49e-6 / RPM, phase=np.pi)]}
-    return FrictionModel("silo4", p, n)
+    """SILO4 eq. 11 with Table 2's direction-dependent values (the twin's truth, three shaft lines)."""
+    from gearspec.simulate.silo4 import table2_model
+
+    return table2_model()
 
 
 @pytest.fixture(scope="module")
