@@ -77,3 +77,21 @@ def test_fit_residuals_draw_repetitions_as_markers_and_join_only_medians(tmp_pat
     rm = [ln for ln in fig.axes[1].lines if len(ln.get_xdata()) == 3][0]
     # the median rmse of the first speed's three repetitions (k = 0, 1, 2 on the positive side): 0.31 mNm
     assert float(rm.get_ydata()[0]) == pytest.approx(0.31, rel=1e-9)
+
+
+def test_diagnose_segment_errors_join_only_medians_and_draw_present_directions(tmp_path, monkeypatch):
+    """Issue 16: diagnose's segment_errors.png joined every held-out group in speed order (a vertical
+    tangle at a repeated speed) and drew an empty panel for a direction never driven.  3 speeds x 3
+    repetitions in one direction: one panel; the lines go through the 3 medians only."""
+    import pandas as pd
+
+    speeds = np.repeat([0.04, 0.08, 0.12], 3) * (1 + np.tile([-0.01, 0.0, 0.01], 3))
+    t = pd.DataFrame({"direction": 1, "speed": speeds, "rmse_holdout_before": np.linspace(1, 2, 9),
+                      "rmse_holdout_after": np.linspace(0.5, 1, 9), "rmse_after": np.linspace(0.4, 0.9, 9)})
+    figs = []
+    monkeypatch.setattr(dplots, "save", lambda fig, path: figs.append(fig) or path)
+    dplots.plot_segment_errors(t, tmp_path / "s.png", torque_unit="N", unit="m")
+    (fig,) = figs
+    assert len(fig.axes) == 1 and "positive direction only" in fig._suptitle.get_text()
+    joined = [ln for ln in fig.axes[0].lines if ln.get_linestyle() in ("-", "--")]
+    assert len(joined) == 2 and all(len(ln.get_xdata()) == 3 for ln in joined)

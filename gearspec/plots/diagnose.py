@@ -219,6 +219,8 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
 
 def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", unit: str = "rad") -> Path:
     """Held-out rmse of every group before and after (and in-sample), against speed per direction."""
+    from ..spectrum.results import speed_groups
+
     # one panel per direction that has groups (an empty panel for a direction never driven says
     # nothing the title cannot)
     present = present_dirs(table["direction"])
@@ -230,9 +232,21 @@ def plot_segment_errors(table: pd.DataFrame, path, *, torque_unit: str = "Nm", u
             ax.text(0.5, 0.5, "no held-out group", ha="center", transform=ax.transAxes)
             ax.set_title(f"{name} direction")
             continue
-        ax.plot(t["speed"], t["rmse_holdout_before"], "o--", color="0.5", mfc="none", label="held-out, before")
-        ax.plot(t["speed"], t["rmse_holdout_after"], "o-", color=color, label="held-out, after")
+        # each group a marker; a line only through the median of the groups at one speed (joining the
+        # repetitions of a speed in speed order drew a tangle)
+        med = (t.assign(g=speed_groups(t["speed"], t["direction"]))
+               .groupby("g")[["speed", "rmse_holdout_before", "rmse_holdout_after"]].median().sort_values("speed"))
+        ax.plot(t["speed"], t["rmse_holdout_before"], "o", color="0.5", mfc="none", label="held-out, before")
+        ax.plot(t["speed"], t["rmse_holdout_after"], "o", color=color, ms=5, label="held-out, after")
         ax.plot(t["speed"], t["rmse_after"], "x", color=color, label="in-sample, after")
+        if len(med) < len(t):
+            ax.plot(med["speed"], med["rmse_holdout_before"], "--", color="0.5", lw=1.0,
+                    label="held-out, before (median per speed)")
+            ax.plot(med["speed"], med["rmse_holdout_after"], "-", color=color, lw=1.2,
+                    label="held-out, after (median per speed)")
+        else:
+            ax.plot(t["speed"], t["rmse_holdout_before"], "--", color="0.5", lw=1.0)
+            ax.plot(t["speed"], t["rmse_holdout_after"], "-", color=color, lw=1.2)
         ax.set_xscale("log")
         plain_log_axis(ax.xaxis)
         ax.set_xlabel(f"speed ({unit}/s)")
