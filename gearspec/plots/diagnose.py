@@ -173,6 +173,7 @@ def plot_effect(dd, effect, residual, contribution, path, *, spectrum=None) -> P
                        label=f"{f:.6g} cycles/{dd.unit}")
             ax.set_xlim(max(spectrum.frequency[0], f / 4), min(spectrum.frequency[-1], f * 4))
             ax.set_xscale("log")
+            plain_log_axis(ax.xaxis)
             ax.set_title(f"residual spectrum of the baseline: {spectrum.label}", fontsize=9)
         ax.set_xlabel(f"frequency (cycles/{dd.unit})")
         ax.set_ylabel(f"amplitude ({tu})")
