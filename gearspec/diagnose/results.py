@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..jsonsafe import finite_or_none
 from ..model import FrictionModel
 from .data import DiagnoseData
 from .design import FittedState
@@ -17,10 +18,6 @@ __all__ = ["Effect", "Diagnosis", "Verdict", "verdict_line"]
 
 #: the tests that decide a candidate's fate, in the order the loop applies them
 TESTS = ("held-out", "settled model", "re-entry", "backward elimination", "validation")
-
-
-def _num(x):
-    return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
 
 
 @dataclass
@@ -49,9 +46,10 @@ class Verdict:
     note: str = ""
 
     def to_dict(self) -> dict:
-        return {"status": self.status, "test": self.test, "reason": self.reason, "z": _num(self.z),
-                "z_crit": _num(self.z_crit), "gain": _num(self.gain), "min_gain": _num(self.min_gain),
-                "rmse_before": _num(self.rmse_before), "rmse_after": _num(self.rmse_after), "round": self.round,
+        num = finite_or_none
+        return {"status": self.status, "test": self.test, "reason": self.reason, "z": num(self.z),
+                "z_crit": num(self.z_crit), "gain": num(self.gain), "min_gain": num(self.min_gain),
+                "rmse_before": num(self.rmse_before), "rmse_after": num(self.rmse_after), "round": self.round,
                 "note": self.note}
 
 
