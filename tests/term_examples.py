@@ -27,3 +27,15 @@ TERM_EXAMPLES = {
 def example_term(kind: str) -> dict:
     """A term of ``kind`` with the parameters above."""
     return {"kind": kind, **TERM_EXAMPLES.get(kind, {p: 0.5 for p in TERMS[kind].params})}
+
+
+def law_parameters(spec, rng, degraded: bool = False) -> dict:
+    """Parameters of the size a fit gives for a law of the registry (``gearspec.model.LAWS[law]``),
+    drawn from ``rng``; ``degraded``: its optional parameters None (not identified)."""
+    vals = {}
+    for k, u in zip(spec.params, spec.units):
+        vals[k] = rng.uniform(0.5, 3.0) if k == "v_s" else rng.uniform(0.05, 0.3) if u == "Nm" else \
+            rng.uniform(1e-4, 2e-3) if k in ("viscous", "b") else rng.uniform(0.005, 0.02)
+        if degraded and k in spec.optional:
+            vals[k] = None
+    return vals

@@ -16,7 +16,7 @@ import pytest
 from gearspec.errors import InputError
 from gearspec.model import LAWS, FrictionModel, Harmonic
 from gearspec.terms import TERMS, AMPLITUDE_LAWS, evaluate_term
-from term_examples import example_term
+from term_examples import example_term, law_parameters
 
 
 
@@ -43,12 +43,7 @@ def law_model(law, seed=0, degraded=False):
     spec = LAWS[law]
     dirs = {}
     for d in ("positive", "negative"):
-        vals = {}
-        for k, u in zip(spec.params, spec.units):
-            vals[k] = rng.uniform(0.5, 3.0) if k == "v_s" else rng.uniform(0.05, 0.3) if u == "Nm" else \
-                rng.uniform(1e-4, 2e-3) if k in ("viscous", "b") else rng.uniform(0.005, 0.02)
-            if degraded and d == "negative" and k in spec.optional:
-                vals[k] = None
+        vals = law_parameters(spec, rng, degraded and d == "negative")
         dirs[d] = {**vals, "harmonics": _lines(rng, spec.needs_load)[: 5 - 2 * (d == "negative")]}
     return FrictionModel(law, dirs["positive"], dirs["negative"], name=f"test {law}")
 

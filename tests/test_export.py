@@ -22,7 +22,7 @@ from gearspec.export.c import C_LAWS, C_TERMS
 from gearspec.export.table import locked_parts, position_locked
 from gearspec.model import LAWS, FrictionModel
 from gearspec.terms import TERMS, evaluate_term
-from term_examples import example_term
+from term_examples import example_term, law_parameters
 
 CC = shutil.which("cc")
 needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc) on this machine to build the exported C")
@@ -60,12 +60,7 @@ def _law_model(law, seed=0, degraded=False):
     spec = LAWS[law]
     dirs = {}
     for d in ("positive", "negative"):
-        vals = {}
-        for k, u in zip(spec.params, spec.units):
-            vals[k] = rng.uniform(0.5, 3.0) if k == "v_s" else rng.uniform(0.05, 0.3) if u == "Nm" else \
-                rng.uniform(1e-4, 2e-3) if k in ("viscous", "b") else rng.uniform(0.005, 0.02)
-            if degraded and k in spec.optional:
-                vals[k] = None
+        vals = law_parameters(spec, rng, degraded)
         dirs[d] = {**vals, "harmonics": _lines(rng, 1.0), **{k + "_se": 1e-3 for k in vals}}
     return FrictionModel(law, dirs["positive"], dirs["negative"], name=f"test {law}")
 
