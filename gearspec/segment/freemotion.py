@@ -92,9 +92,10 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
         raise InputError(f"the speed band of a free-motion block must be between 0 and 1, got {band}")
     if motion == "plateaus" or any(s.kind == "free" for s in seg.segments):
         return seg
-    keep = [s for s in seg.segments if motion == "auto" or s.kind == "quasi_static"]
+    kept = [motion == "auto" or s.kind == "quasi_static" for s in seg.segments]
+    keep = [s for s, k in zip(seg.segments, kept) if k]
     excluded = Counter(seg.excluded)
-    excluded["transient"] += sum(s.n for s in seg.segments if s not in keep)
+    excluded["transient"] += sum(s.n for s, k in zip(seg.segments, kept) if not k)
     taken = np.zeros(len(rec), bool)
     for s in keep:
         taken[s.start:s.stop] = True
