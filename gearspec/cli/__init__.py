@@ -17,11 +17,28 @@ from pathlib import Path
 from .. import __version__
 from ..errors import GearspecWarning, InputError
 
-__all__ = ["main", "build_parser", "COMMANDS", "number", "check_outputs", "analysis_parser"]
+__all__ = ["main", "build_parser", "COMMANDS", "COMMAND_HELP", "number", "check_outputs", "analysis_parser"]
 
-#: command modules of this package, in the order ``gearspec --help`` lists them
-COMMANDS = ("spectrum", "fit", "diagnose", "discover", "simulate", "repro", "gears", "data", "demo", "export",
-            "compensate", "batch", "formats")
+#: command modules of this package, in the order ``gearspec --help`` lists them, with the line it
+#: gives each (the module's ``register`` passes it to ``add_parser``; :func:`main` lists the
+#: commands without importing their modules)
+COMMAND_HELP = {
+    "spectrum": "constant-speed segments and their order spectra",
+    "fit": "identify a friction law (SILO4 eq. 11, eq. 3, Lola laws 8 and 11)",
+    "diagnose": "find what the model misses: residual -> effect -> new term -> held-out error",
+    "discover": "search a library of friction terms for the laws the data support",
+    "simulate": "twin recordings with known friction (SILO4 joint 3, Lola/CROPS testbed)",
+    "repro": "reproduce a paper's figures and tables (silo4, lola, emps)",
+    "gears": "list gear presets or describe a gear spec",
+    "data": "the registry of real data sets",
+    "demo": "run the main analysis on built-in data and write a report",
+    "export": "export a fitted model for a controller: C99, YAML, lookup tables, JSON",
+    "compensate": "a fitted model as friction feed-forward in a twin's speed loop: ripple and tracking error "
+                  "without / Coulomb+viscous / the model",
+    "batch": "fit many recordings and joints (on Dask) and report the fleet",
+    "formats": "the input and output formats (recording columns, gear spec, JSON)",
+}
+COMMANDS = tuple(COMMAND_HELP)
 #: longest message printed for a refusal (a message listing thousands of names helps nobody)
 MAX_MESSAGE = 600
 
@@ -290,12 +307,55 @@ def print_outputs(args, as_path: bool = False) -> None:
         print(f"json: {args.json}")
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Commands(argparse._SubParsersAction):
+    """The sub-commands, each parser built from its module when first needed: ``gearspec --help``
+    lists them from :data:`COMMAND_HELP` (no command module imported), ``gearspec NAME ...`` imports
+    the module of NAME alone.  The parsers and their help are those of the eager build."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._pending: set[str] = set()
+
+    def add_pending(self, name: str) -> None:
+        """List ``name`` with its help line; its parser is built by :meth:`load`."""
+        self.add_parser(name, help=COMMAND_HELP[name])
+        self._pending.add(name)
+
+    def load(self, name: str) -> argparse.ArgumentParser:
+        """The parser of the command ``name``, built by its module's ``register`` (once)."""
+        if name in self._pending:
+            from .examples import attach
+
+            self._pending.discard(name)
+            del self._name_parser_map[name]
+            self._choices_actions = [a for a in self._choices_actions if a.dest != name]
+            importlib.import_module(f"{__name__}.{name}").register(self)
+            # the listing and the choices in the order of COMMANDS, as the eager build has them
+            rank = {c: i for i, c in enumerate(COMMANDS)}
+            self._choices_actions.sort(key=lambda a: rank.get(a.dest, len(rank)))
+            ordered = sorted(self._name_parser_map.items(), key=lambda kv: rank.get(kv[0], len(rank)))
+            self._name_parser_map.clear()
+            self._name_parser_map.update(ordered)
+            attach(self._name_parser_map[name], name)
+        return self._name_parser_map[name]
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values and values[0] in self._pending:
+            self.load(values[0])
+        super().__call__(parser, namespace, values, option_string)
+
+
+def build_parser(lazy: bool = False) -> argparse.ArgumentParser:
+    """The ``gearspec`` parser.  ``lazy``: a command's parser (and module) only when the command is
+    named (:func:`main`: start-up without the analysis libraries); default every parser built."""
     p = _Parser(prog="gearspec", description="Spectral analysis and modelling of friction in robot gear drives.")
     p.add_argument("--version", action="version", version=f"gearspec {__version__}")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", action=_Commands)
     for name in COMMANDS:
-        importlib.import_module(f"{__name__}.{name}").register(sub)
+        if lazy:
+            sub.add_pending(name)
+        else:
+            importlib.import_module(f"{__name__}.{name}").register(sub)
     from .examples import attach
 
     attach(p)
@@ -303,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
+    parser = build_parser(lazy=True)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a refused option value (one line printed)

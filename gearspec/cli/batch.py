@@ -11,7 +11,7 @@ import re
 import time
 from pathlib import Path
 
-from . import analysis_parser, command_line, number, print_html
+from . import COMMAND_HELP, analysis_parser, command_line, number, print_html
 from .fit import law_choices
 
 EXAMPLES = """examples:
@@ -36,7 +36,7 @@ def __getattr__(name):
 
 
 def register(sub) -> None:
-    p = analysis_parser(sub, "batch", run, help="fit many recordings and joints (on Dask) and report the fleet",
+    p = analysis_parser(sub, "batch", run, help=COMMAND_HELP["batch"],
                         description="Analyse every recording (and, in ROS bags, every joint) as `gearspec fit` "
                                     "does on it alone, in parallel on Dask, into DIR/fleet.parquet (one row per "
                                     "source, joint and direction); then test each joint's parameters over the "

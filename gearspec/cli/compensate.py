@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from . import command_line, number, print_html
+from . import COMMAND_HELP, command_line, number, print_html
 
 _EXAMPLES = """examples:
   gearspec fit twin/silo4_twin.csv --gear twin/silo4_twin_gear.toml --law silo4 --json model.json --quiet
@@ -33,8 +33,7 @@ def _speeds(text: str) -> list[float]:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("compensate", help="a fitted model as friction feed-forward in a twin's speed loop: ripple "
-                                          "and tracking error without / Coulomb+viscous / the model",
+    p = sub.add_parser("compensate", help=COMMAND_HELP["compensate"],
                        description="Run the speed plateaus of a twin (the SILO4 joint 3 or a direct drive with "
                                    "cogging) three times: no compensation, a Coulomb + viscous feed-forward from "
                                    "the model's own tau_c and viscous, and the model itself as feed-forward through "

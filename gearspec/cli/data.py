@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from . import COMMAND_HELP
+
 
 def register(sub) -> None:
-    dp = sub.add_parser("data", help="the registry of real data sets")
+    dp = sub.add_parser("data", help=COMMAND_HELP["data"])
     dp.add_argument("action", choices=("list", "describe", "fetch"))
     dp.add_argument("name", nargs="?")
     dp.set_defaults(func=run, check=_check)

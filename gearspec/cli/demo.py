@@ -3,12 +3,12 @@ reproduction in a small configuration (:mod:`paper_repro.demo`)."""
 
 from __future__ import annotations
 
-from . import print_html
+from . import COMMAND_HELP, print_html
 from .repro import reproductions
 
 
 def register(sub) -> None:
-    dm = sub.add_parser("demo", help="run the main analysis on built-in data and write a report")
+    dm = sub.add_parser("demo", help=COMMAND_HELP["demo"])
     dm.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
     dm.set_defaults(func=run)
 

@@ -7,6 +7,7 @@ import time
 
 from ..jsonsafe import dumps
 from . import (
+    COMMAND_HELP,
     POSITIVE,
     PROBABILITY,
     add_motion_option,
@@ -28,7 +29,7 @@ KINDS = ("periodic", "speed_law", "load", "temperature", "drift", "asymmetry", "
 
 def register(sub) -> None:
     p = analysis_parser(sub, "diagnose", run,
-                        help="find what the model misses: residual -> effect -> new term -> held-out error",
+                        help=COMMAND_HELP["diagnose"],
                         description="Fit the model you believe in, look for structure in its residual (over position, "
                                     "against speed, load, temperature, time, acceleration and near reversals), add a "
                                     "term for an effect only when it lowers the error on held-out data (whole segments "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 from . import (
+    COMMAND_HELP,
     PROBABILITY,
     add_motion_option,
     add_output_options,
@@ -21,7 +22,7 @@ from .fit import law_choices
 
 def register(sub) -> None:
     sp = analysis_parser(
-        sub, "discover", run, help="search a library of friction terms for the laws the data support",
+        sub, "discover", run, help=COMMAND_HELP["discover"],
         description="Search a library of physically meaningful friction terms (Coulomb, viscous, power laws, "
                     "Stribeck of three shapes on a grid of velocities, load- and temperature-coupled terms, "
                     "position ripple at the declared and found lines with constant or decaying amplitude, each "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InputError
-from . import number
+from . import COMMAND_HELP, number
 
 _EXAMPLES = """examples:
   gearspec export model.json --format c --out ctrl/ --smooth-velocity 0.02
@@ -31,7 +31,7 @@ def _triple(text: str):
 
 
 def register(sub) -> None:
-    p = sub.add_parser("export", help="export a fitted model for a controller: C99, YAML, lookup tables, JSON",
+    p = sub.add_parser("export", help=COMMAND_HELP["export"],
                        description="Export a friction model (gearspec fit --json or diagnose --json) for a "
                                    "controller. Refuses (exit 2) files of another gearspec version, keys it does "
                                    "not know and terms that need state (hysteresis, backlash, drift).",

@@ -6,6 +6,7 @@ import json
 import time
 
 from . import (
+    COMMAND_HELP,
     POSITIVE,
     add_motion_option,
     add_output_options,
@@ -32,7 +33,7 @@ def law_choices(*first: str) -> tuple[str, ...]:
 
 
 def register(sub) -> None:
-    p = analysis_parser(sub, "fit", run, help="identify a friction law (SILO4 eq. 11, eq. 3, Lola laws 8 and 11)",
+    p = analysis_parser(sub, "fit", run, help=COMMAND_HELP["fit"],
                         description="Identify a friction law per direction from the constant-speed segments and "
                                     "the free motion (ramps, moves, chirps) of a recording: the joint weighted least-squares fit beside the published procedure "
                                     "and simpler laws, with standard errors and held-out errors.")

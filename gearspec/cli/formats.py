@@ -7,13 +7,14 @@ from __future__ import annotations
 from importlib import resources
 
 from ..errors import InputError
+from . import COMMAND_HELP
 
 #: topic name -> the number of its section in CONTRACTS.md
 SECTIONS = {"recording": 1, "gear": 2, "frequencies": 3, "outputs": 4}
 
 
 def register(sub) -> None:
-    p = sub.add_parser("formats", help="the input and output formats (recording columns, gear spec, JSON)",
+    p = sub.add_parser("formats", help=COMMAND_HELP["formats"],
                        description="Print the formats gearspec reads and writes: the recording columns and "
                                    "units, the gear spec, frequencies, the command line and the JSON outputs.")
     p.add_argument("topic", nargs="?", metavar="TOPIC", help=" | ".join(SECTIONS) + " (default: all)")

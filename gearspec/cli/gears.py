@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from . import COMMAND_HELP
+
 
 def register(sub) -> None:
-    gp = sub.add_parser("gears", help="list gear presets or describe a gear spec")
+    gp = sub.add_parser("gears", help=COMMAND_HELP["gears"])
     gp.add_argument("name", nargs="?", help="preset name or TOML file")
     gp.set_defaults(func=run)
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 import time
 
 from ..errors import InputError
-from . import print_html
+from . import COMMAND_HELP, print_html
 
 
 def register(sub) -> None:
-    p = sub.add_parser("repro", help="reproduce a paper's figures and tables (silo4, lola, emps)",
+    p = sub.add_parser("repro", help=COMMAND_HELP["repro"],
                        description="Reproduce the figures and tables of a paper or benchmark with the public API: "
                                    "writes DIR/report.md, the figures as PNG and each table as CSV with the columns "
                                    "quantity, paper, gearspec, rel_diff.")

@@ -11,13 +11,13 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..simulate.profiles import PROFILES, SHAPES
-from . import number
+from . import COMMAND_HELP, number
 
 _FORMATS = ("csv", "parquet", "npz")
 
 
 def register(sub) -> None:
-    sp = sub.add_parser("simulate", help="twin recordings with known friction (SILO4 joint 3, Lola/CROPS testbed)",
+    sp = sub.add_parser("simulate", help=COMMAND_HELP["simulate"],
                         description="Simulate a test bench whose friction is known and write its recording in the "
                                     "recording format, with the gear spec to read it and the truth as JSON.")
     tw = sp.add_subparsers(dest="twin", metavar="TWIN")

@@ -8,6 +8,7 @@ from ..errors import InputError
 from ..spectrum.results import REPRESENTATIVES as AUTO_PAGES
 from ..jsonsafe import dumps
 from . import (
+    COMMAND_HELP,
     POSITIVE,
     PROBABILITY,
     add_output_options,
@@ -31,7 +32,7 @@ MAX_CONSOLE_SEGMENTS = 24
 
 
 def register(sub) -> None:
-    sp = analysis_parser(sub, "spectrum", run, help="constant-speed segments and their order spectra",
+    sp = analysis_parser(sub, "spectrum", run, help=COMMAND_HELP["spectrum"],
                          description="Find constant-speed segments per direction and analyse the torque ripple over "
                                      "position in each: amplitude, phase and standard error at every declared gear "
                                      "line, and peaks no declared line explains.")

@@ -92,15 +92,18 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
         raise InputError(f"the speed band of a free-motion block must be between 0 and 1, got {band}")
     if motion == "plateaus" or any(s.kind == "free" for s in seg.segments):
         return seg
-    keep = [s for s in seg.segments if motion == "auto" or s.kind == "quasi_static"]
+    kept = [motion == "auto" or s.kind == "quasi_static" for s in seg.segments]
+    keep = [s for s, k in zip(seg.segments, kept) if k]
     excluded = Counter(seg.excluded)
-    excluded["transient"] += sum(s.n for s in seg.segments if s not in keep)
+    excluded["transient"] += sum(s.n for s, k in zip(seg.segments, kept) if not k)
     taken = np.zeros(len(rec), bool)
     for s in keep:
         taken[s.start:s.stop] = True
     vel = derivatives(rec)[0] if velocity is None else np.asarray(velocity, dtype=float)
-    blocks, moving_plateau = _blocks(rec, vel, taken, band, min_speed, unit0=len(keep))
-    n_free = sum(s.n for s in blocks)
+    pieces, moving_plateau = _free_rows(rec, vel, taken, min_speed)
+    # every free row is in exactly one block: the count needs no blocks (a plateau recording's
+    # ramps would give thousands, built for nothing when the share decides against free motion)
+    n_free = sum(int(np.count_nonzero(p[3])) for p in pieces)
     settings = {**seg.settings, "motion": motion, "free_band": band, "free_rows": n_free}
     if motion == "auto":
         # plateaus chained along a slow ramp count as free motion in the share (they stay plateaus)
@@ -108,6 +111,7 @@ def free_motion(rec: Recording, seg: Segmentation, *, motion: str = "auto", band
         settings["free_share"] = share
         if share < FREE_SHARE:
             return Segmentation(list(seg.segments), Counter(seg.excluded), seg.n_rows, settings)
+    blocks = _blocks(pieces, band, unit0=len(keep))
     left = n_free
     for reason in _REASONS:
         take = min(left, excluded.get(reason, 0))
@@ -131,12 +135,12 @@ def _chained_rows(segments) -> int:
     return sum(pl[i].n for i in chained)
 
 
-def _blocks(rec: Recording, vel: np.ndarray, taken: np.ndarray, band: float, min_speed, unit0: int):
-    """The free blocks of ``rec`` outside ``taken`` rows, and the number of moving rows inside them."""
+def _free_rows(rec: Recording, vel: np.ndarray, taken: np.ndarray, min_speed):
+    """Per piece ``(run, a, v, free, floor, noise)`` (``v`` its velocities, ``free`` its moving rows
+    outside ``taken``; pieces without free rows left out), and the number of moving rows in ``taken``."""
     t, theta = rec.t, rec.theta
-    blocks: list[Segment] = []
+    out = []
     moving_taken = 0
-    unit = unit0
     for run, a, b in rec.pieces():
         v = vel[a:b]
         sp = np.abs(v)
@@ -147,8 +151,17 @@ def _blocks(rec: Recording, vel: np.ndarray, taken: np.ndarray, band: float, min
         moving = np.isfinite(v) & (sp > floor)
         moving_taken += int(np.count_nonzero(moving & taken[a:b]))
         free = moving & ~taken[a:b]
-        if not free.any():
-            continue
+        if free.any():
+            out.append((run, a, v, free, floor, noise))
+    return out, moving_taken
+
+
+def _blocks(pieces, band: float, unit0: int) -> list[Segment]:
+    """The free blocks of the pieces of :func:`_free_rows`."""
+    blocks: list[Segment] = []
+    unit = unit0
+    for run, a, v, free, floor, noise in pieces:
+        sp = np.abs(v)
         # stretches: runs of free rows of one sign; blocks: runs of one speed bin within a stretch
         sign = np.where(v > 0, 1, -1)
         key = np.where(free, sign, 0)
@@ -156,7 +169,7 @@ def _blocks(rec: Recording, vel: np.ndarray, taken: np.ndarray, band: float, min
         bins = _speed_bins(np.where(free, sp, 0.0), band, max(100 * noise, floor))
         new_block = new_stretch | np.r_[True, bins[1:] != bins[:-1]]
         starts = np.flatnonzero(new_block)
-        stops = np.r_[starts[1:], b - a]
+        stops = np.r_[starts[1:], len(v)]
         stretch_id = np.cumsum(new_stretch) - 1
         last_stretch = -1
         for s, e in zip(starts.tolist(), stops.tolist()):
@@ -167,4 +180,4 @@ def _blocks(rec: Recording, vel: np.ndarray, taken: np.ndarray, band: float, min
                 last_stretch = stretch_id[s]
             blocks.append(Segment(int(run), int(a + s), int(a + e), int(sign[s]), float(np.mean(sp[s:e])),
                                   kind="free", unit=unit - 1))
-    return blocks, moving_taken
+    return blocks

@@ -9,8 +9,6 @@ import math
 from functools import cached_property
 
 import numpy as np
-from scipy.signal import savgol_filter
-
 from ..recording import Recording
 
 __all__ = ["derivatives", "fit_derivatives", "friction_torque", "FrictionTorque"]
@@ -24,15 +22,44 @@ def derivatives(rec: Recording, deriv_window: int | None = None) -> tuple[np.nda
     t, theta = rec.t, rec.theta
     vel = np.full(len(t), np.nan)
     acc = np.full(len(t), np.nan)
+    alike = {}  # uniform pieces of one length, step and window: filtered together (_savgol_rows)
     for _, a, b in rec.pieces():
         tt, th = t[a:b], theta[a:b]
         params = _filter_params(tt, deriv_window)
         if params is None:
             continue
         dt, w, uniform = params
+        if uniform:
+            alike.setdefault((b - a, dt, w), []).append(a)
+            continue
         vel[a:b] = _savgol(tt, th, dt, w, uniform, 1)
         acc[a:b] = _savgol(tt, th, dt, w, uniform, 2)
+    for (n, dt, w), starts in alike.items():
+        _savgol_rows(theta, n, dt, w, starts, vel, acc)
     return vel, acc
+
+
+#: most samples filtered in one call of :func:`_savgol_rows` (bounds its temporary arrays: 8 MB each)
+_ROWS_SAMPLES = 1_000_000
+
+
+def _savgol_rows(theta, n, dt, w, starts, vel, acc) -> None:
+    """Velocity and acceleration of the uniform pieces ``theta[a:a + n]`` (``a`` in ``starts``), all of
+    one step ``dt`` and window ``w``, written into ``vel`` and ``acc``: one ``savgol_filter`` call
+    per derivative on the pieces stacked as rows (of at most :data:`_ROWS_SAMPLES` samples) instead of
+    one per piece.  The same numbers as :func:`_savgol` piece by piece: the filter works row by row
+    (the convolution per row, the edge fits as one least-squares problem with a right-hand side per
+    row; ``tests/test_segment_speed.py`` checks equality bit for bit)."""
+    from scipy.signal import savgol_filter
+
+    per = max(1, _ROWS_SAMPLES // n)
+    for k in range(0, len(starts), per):
+        group = starts[k:k + per]
+        rows = np.stack([theta[a:a + n] for a in group])
+        for deriv, out in ((1, vel), (2, acc)):
+            filtered = savgol_filter(rows, w, 2, deriv=deriv, delta=dt, axis=-1)
+            for a, row in zip(group, filtered):
+                out[a:a + n] = row
 
 
 def fit_derivatives(rec: Recording, segments, lines=None, deriv_window: int | None = None):
@@ -60,6 +87,8 @@ def fit_derivatives(rec: Recording, segments, lines=None, deriv_window: int | No
 
 def _savgol(tt, th, dt, w, uniform, deriv):
     """The Savitzky-Golay derivative of one piece; a jittered one on a uniform grid of ``dt``."""
+    from scipy.signal import savgol_filter
+
     if uniform:
         return savgol_filter(th, w, 2, deriv=deriv, delta=dt)
     grid = np.arange(tt[0], tt[-1] + dt / 2, dt)
@@ -138,6 +167,8 @@ class FrictionTorque:
                 self._whole[a] = _savgol(self.rec.t[a:b], self.rec.theta[a:b], dt, w, False, 2)
             acc = self._whole[a][start - a:stop - a]
         else:
+            from scipy.signal import savgol_filter
+
             lo, hi = max(a, start - w), min(b, stop + w)
             acc = savgol_filter(self.rec.theta[lo:hi], w, 2, deriv=2, delta=dt)[start - lo:stop - lo]
         return tau - self.J * np.nan_to_num(acc)
