@@ -272,3 +272,60 @@ def masked_range(x, use):
     if n == 0:
         return 0, np.nan, np.nan
     return n, lo, hi
+
+
+@njit(cache=True, nogil=True)
+def direction_runs(v, min_speed, d, acc, check_acc, starts, stops, min_piece):
+    """The runs of samples moving in direction ``d`` (``d v > min_speed``; NaN never moves; with
+    ``check_acc`` the acceleration finite too) within each stretch ``[starts[k], stops[k])``:
+    ``(run starts, run stops, moving samples)``, runs shorter than ``min_piece`` left out (their
+    samples counted as moving)."""
+    n_max = len(v) // max(min_piece, 1) + len(starts) + 1
+    rs = np.empty(n_max, np.int64)
+    re = np.empty(n_max, np.int64)
+    n_runs = 0
+    n_moving = 0
+    for k in range(len(starts)):
+        a = -1
+        for i in range(starts[k], stops[k] + 1):
+            mv = False
+            if i < stops[k]:
+                x = v[i]
+                mv = x > min_speed if d > 0 else x < -min_speed
+                if mv and check_acc:
+                    mv = np.isfinite(acc[i])
+            if mv:
+                n_moving += 1
+                if a < 0:
+                    a = i
+            elif a >= 0:
+                if i - a >= min_piece:
+                    rs[n_runs] = a
+                    re[n_runs] = i
+                    n_runs += 1
+                a = -1
+    return rs[:n_runs].copy(), re[:n_runs].copy(), n_moving
+
+
+@njit(cache=True, nogil=True)
+def gather_runs(rs, re, t, theta, v, tau, acc, inertia, d, need_acc):
+    """The samples of the runs ``[rs[k], re[k])`` one after the other: ``(t, theta, |v|, y, acc)``
+    with the friction magnitude ``y = d (tau - inertia acc)`` (``inertia`` 0: ``d tau``) and ``acc``
+    (empty unless ``need_acc``)."""
+    n = 0
+    for k in range(len(rs)):
+        n += re[k] - rs[k]
+    t_o, th_o, sp_o, y_o = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    a_o = np.empty(n if need_acc else 0)
+    o = 0
+    for k in range(len(rs)):
+        for i in range(rs[k], re[k]):
+            t_o[o] = t[i]
+            th_o[o] = theta[i]
+            sp_o[o] = abs(v[i])
+            y = tau[i] - inertia * acc[i] if inertia != 0 else tau[i]
+            y_o[o] = -y if d < 0 else y
+            if need_acc:
+                a_o[o] = acc[i]
+            o += 1
+    return t_o, th_o, sp_o, y_o, a_o

@@ -158,37 +158,26 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
         min_speed = _default_min_speed(v)
     if not (math.isfinite(min_speed) and min_speed >= 0):
         raise InputError(f"min_speed must be a speed >= 0 in {rec.unit}/s, got {min_speed!r}")
-    moving = v > min_speed if d > 0 else v < -min_speed  # d v > min_speed; NaN compares False
-    if inertia and acc is not None:
-        ok_acc = np.isfinite(acc)
-        moving &= ok_acc
-    # the pieces: runs of moving samples within each stretch of the recording, at least MIN_PIECE
-    # long; the samples kept selected by a mask (a compress is cheaper than an index of every sample)
-    bounds, n = [], 0
-    n_moving = int(np.count_nonzero(moving))
-    for _, a, b in rec.pieces():
-        m = moving[a:b]
-        edges = np.flatnonzero(np.diff(m.view(np.int8), prepend=0, append=0))
-        for s, e in zip(edges[0::2], edges[1::2]):
-            if e - s >= MIN_PIECE:
-                bounds.append((n, n + e - s))
-                n += e - s
-            else:
-                moving[a + s:a + e] = False  # moving is this function's own array
-    keep = moving  # the stretches of rec.pieces() tile the recording: their pieces in order
+    from ._kernels import direction_runs, gather_runs
+
+    # the pieces: runs of moving samples (d v > min_speed; with J removed, a finite acceleration)
+    # within each stretch of the recording, at least MIN_PIECE long, gathered in one pass
+    sub_j = bool(inertia) and acc is not None
+    stretches = np.array([(a, b) for _, a, b in rec.pieces()], dtype=np.int64).reshape(-1, 2)
+    no_acc = np.zeros(0)
+    rs, re, n_moving = direction_runs(v, float(min_speed), d, acc if sub_j else no_acc, sub_j,
+                                      stretches[:, 0], stretches[:, 1], MIN_PIECE)
+    lengths = re - rs
+    ends = np.cumsum(lengths)
+    bounds = [(int(e - k), int(e)) for e, k in zip(ends, lengths)]
+    n = int(ends[-1]) if len(ends) else 0
     excluded = {"other direction or slower than min_speed": len(rec) - n_moving,
                 f"pieces shorter than {MIN_PIECE} samples": n_moving - n}
-    tau = rec.tau[keep]
-    if inertia and acc is not None:
-        tau -= inertia * acc[keep]
-    if d < 0:
-        np.negative(tau, out=tau)
-    speed = v[keep]
-    np.abs(speed, out=speed)
-    theta = rec.theta[keep]
+    keep_acc = bool(need_acc and acc is not None)
+    t, theta, speed, y, acc_m = gather_runs(rs, re, rec.t, rec.theta, v, rec.tau, acc if acc is not None else no_acc,
+                                            float(inertia) if sub_j else 0.0, d, keep_acc)
     nyq = _block_nyquist(theta, bounds)
-    return Motion(d, rec.unit, rec.t[keep], theta, speed, tau,
-                  None if (acc is None or not need_acc) else acc[keep], nyq, bounds, float(min_speed),
+    return Motion(d, rec.unit, t, theta, speed, y, acc_m if keep_acc else None, nyq, bounds, float(min_speed),
                   inertia if inertia else None, source, excluded)
 
 
