@@ -329,3 +329,145 @@ def gather_runs(rs, re, t, theta, v, tau, acc, inertia, d, need_acc):
                 a_o[o] = acc[i]
             o += 1
     return t_o, th_o, sp_o, y_o, a_o
+
+
+@njit(cache=True, nogil=True)
+def _search_with_guess(key, arr, a, n, guess):
+    """numpy's ``binary_search_with_guess`` (the search of ``np.interp``) on ``arr[a:a + n]``: the
+    index ``j`` with ``arr[j] <= key < arr[j + 1]`` (-1 below, n above), trying ``guess`` first."""
+    if key > arr[a + n - 1]:
+        return n
+    if key < arr[a]:
+        return -1
+    if n <= 4:
+        i = 1
+        while i < n and key >= arr[a + i]:
+            i += 1
+        return i - 1
+    imin, imax = 0, n
+    guess = max(min(guess, n - 3), 1)
+    if key < arr[a + guess]:
+        if key < arr[a + guess - 1]:
+            imax = guess - 1
+            if guess > 8 and key >= arr[a + guess - 8]:
+                imin = guess - 8
+        else:
+            return guess - 1
+    else:
+        if key < arr[a + guess + 1]:
+            return guess
+        if key < arr[a + guess + 2]:
+            return guess + 1
+        imin = guess + 2
+        if guess < n - 9 and key < arr[a + guess + 8]:
+            imax = guess + 8
+    while imin < imax:
+        imid = imin + ((imax - imin) >> 1)
+        if key >= arr[a + imid]:
+            imin = imid + 1
+        else:
+            imax = imid
+    return imin - 1
+
+
+@njit(cache=True, nogil=True)
+def _interp(x, xp, fp, a, n, j):
+    """``np.interp(x, xp[a:a + n], fp[a:a + n])`` of one value, its search starting from ``j``:
+    ``(value, j)`` (the same arithmetic as numpy's, bit for bit)."""
+    if np.isnan(x):
+        return x, j
+    j = _search_with_guess(x, xp, a, n, j)
+    if j == -1:
+        return fp[a], 0
+    if j == n:
+        return fp[a + n - 1], j
+    if j == n - 1 or xp[a + j] == x:
+        return fp[a + j], j
+    k = a + j
+    slope = (fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k])
+    out = slope * (x - xp[k]) + fp[k]
+    if np.isnan(out):
+        out = slope * (x - xp[k + 1]) + fp[k + 1]
+        if np.isnan(out) and fp[k] == fp[k + 1]:
+            out = fp[k]
+    return out, j
+
+
+@njit(cache=True, nogil=True)
+def _search(arr, a, n, key, right):
+    """``np.searchsorted(arr[a:a + n], key, side)`` (``right``: side="right") by bisection."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if arr[a + mid] < key or (right and arr[a + mid] == key):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
+def window_layout(th, y, t, starts, stops, spacing, window):
+    """The order map's windows over the pieces ``[starts[k], stops[k])`` of the position ``th``
+    (increasing along the motion): each piece with a grid of at least ``window`` points at
+    ``spacing`` gets ``y`` interpolated linearly on ``ceil(th0 / spacing) .. floor(th1 / spacing)``
+    (times spacing, ``np.interp``'s arithmetic) and windows of ``window`` points with 50 % overlap.
+
+    Returns ``(grid, first, a_edge, b_edge, duration, half_idx, b_idx, n_win, p_start, p_stop)``:
+    the grids concatenated; per window its first grid point there, its first and last grid position,
+    its duration (s, ``t`` interpolated at them) and ``searchsorted(piece, last, "left")``; per
+    piece with windows its number of windows and bounds, and its half-window edges (window starts,
+    then the end of the last window's first half) ``searchsorted(piece, edge, "right")``; indices
+    within the piece."""
+    step = window // 2
+    n_p = len(starts)
+    g0s, n_grids, n_wins = np.empty(n_p, np.int64), np.zeros(n_p, np.int64), np.zeros(n_p, np.int64)
+    tot_g = tot_w = n_with = 0
+    for k in range(n_p):
+        s, e = starts[k], stops[k]
+        g0 = np.int64(np.ceil(th[s] / spacing))
+        g1 = np.int64(np.floor(th[e - 1] / spacing))
+        g0s[k] = g0
+        if g1 - g0 + 1 >= window:
+            n_grids[k] = g1 - g0 + 1
+            n_wins[k] = (n_grids[k] - window) // step + 1
+            tot_g += n_grids[k]
+            tot_w += n_wins[k]
+            n_with += 1
+    grid = np.empty(tot_g)
+    first, dur, b_idx = np.empty(tot_w, np.int64), np.empty(tot_w), np.empty(tot_w, np.int64)
+    a_edge, b_edge = np.empty(tot_w), np.empty(tot_w)
+    half_idx = np.empty(tot_w + n_with, np.int64)
+    n_win, p_start, p_stop = np.empty(n_with, np.int64), np.empty(n_with, np.int64), np.empty(n_with, np.int64)
+    og = ow = oh = op = 0
+    for k in range(n_p):
+        nw = n_wins[k]
+        if nw == 0:
+            continue
+        s, e = starts[k], stops[k]
+        n = e - s
+        g0 = g0s[k]
+        j = 0
+        for i in range(n_grids[k]):
+            grid[og + i], j = _interp((g0 + i) * spacing, th, y, s, n, j)
+        j = 0
+        tb = np.empty(nw)
+        for w in range(nw):  # the windows' last points, then their first (np.interp's order)
+            x_b = (g0 + window - 1 + w * step) * spacing
+            tb[w], j = _interp(x_b, th, t, s, n, j)
+            b_edge[ow + w] = x_b
+            b_idx[ow + w] = _search(th, s, n, x_b, False)
+        for w in range(nw):
+            x_a = (g0 + w * step) * spacing
+            ta, j = _interp(x_a, th, t, s, n, j)
+            dur[ow + w] = tb[w] - ta
+            a_edge[ow + w] = x_a
+            first[ow + w] = og + w * step
+        for w in range(nw + 1):
+            half_idx[oh + w] = _search(th, s, n, (g0 + w * step) * spacing, True)
+        n_win[op], p_start[op], p_stop[op] = nw, s, e
+        og += n_grids[k]
+        ow += nw
+        oh += nw + 1
+        op += 1
+    return grid, first, a_edge, b_edge, dur, half_idx, b_idx, n_win, p_start, p_stop

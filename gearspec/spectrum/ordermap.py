@@ -364,46 +364,21 @@ def _window_layout(m: Motion, spacing: float, window: int):
     its speed (unit/s: travel / duration), the lowest position Nyquist frequency of its samples
     (cycles/unit), its samples, and its mean sample spacing (unit).  One pass over the pieces for
     what needs a piece's own samples (interpolation, searches); the rest over all windows at once."""
-    step = window // 2
+    from ._kernels import window_layout
+
     # position along the direction of motion (increasing in both directions); time order kept
     th_all = m.theta if m.direction > 0 else -m.theta
-    grids, first, halfs, i_bs, th_as, th_bs, durs, starts, ends = [], [], [], [], [], [], [], [], []
-    n_grid_all = 0
-    for s, e in m.bounds:
-        th = th_all[s:e]
-        g0 = math.ceil(th[0] / spacing)
-        g1 = math.floor(th[-1] / spacing)
-        n_grid = g1 - g0 + 1
-        if n_grid < window:
-            continue
-        n_win = (n_grid - window) // step + 1
-        x = np.arange(g0, g1 + 1) * spacing
-        grids.append(np.interp(x, th, m.y[s:e]))
-        first.append(n_grid_all + np.arange(n_win) * step)
-        n_grid_all += n_grid
-        # each window's edges in samples (for its Nyquist) and in time (for its speed); with 50 %
-        # overlap a window is two consecutive half windows: the lowest Nyquist of its samples is
-        # the lower of theirs.  edges: the window starts, then the end of the last one's first half
-        edges = x[0:(n_win + 1) * step:step]
-        th_b = x[window - 1:window - 1 + n_win * step:step]
-        halfs.append(np.searchsorted(th, edges, side="right"))  # clipped to the piece below
-        i_bs.append(np.searchsorted(th, th_b, side="left"))
-        tt = np.interp(np.concatenate([th_b, edges[:-1]]), th, m.t[s:e])
-        durs.append(tt[:n_win] - tt[n_win:])
-        th_as.append(edges[:-1])
-        th_bs.append(th_b)
-        starts.append(s)
-        ends.append(e)
-    if not grids:
+    bounds = np.array(m.bounds, dtype=np.int64).reshape(-1, 2)
+    grid, first, th_a, th_b, durs, halfs, i_b, n_win, start, ends = window_layout(
+        th_all, m.y, m.t, bounds[:, 0], bounds[:, 1], float(spacing), int(window))
+    if not len(grid):
         z = np.zeros(0)
         return z, np.zeros(0, int), z, z, np.zeros(0, int), z
-    n_win = np.array([len(a) for a in th_as])
-    start, ends = np.array(starts), np.array(ends)  # of the pieces with windows
     # sample indices in the motion: each half-window edge's last sample at or before it, and each
     # window's first sample after its end (both within the window's piece)
     s_h, e_h = np.repeat(start, n_win + 1), np.repeat(ends, n_win + 1)
-    halfs = np.minimum(np.maximum(np.concatenate(halfs) - 1, 0) + s_h, e_h - 1)
-    i_b = np.minimum(np.concatenate(i_bs) + 1 + np.repeat(start, n_win), np.repeat(ends, n_win))
+    halfs = np.minimum(np.maximum(halfs - 1, 0) + s_h, e_h - 1)
+    i_b = np.minimum(i_b + 1 + np.repeat(start, n_win), np.repeat(ends, n_win))
     # the lowest Nyquist of each half window (a reduceat over every piece's half-window edges and
     # its end: the segment from a piece's end to the next piece's first edge is not used)
     last = np.cumsum(n_win + 1) - 1  # the end of the last window's first half, per piece
@@ -414,12 +389,12 @@ def _window_layout(m: Motion, spacing: float, window: int):
     pos = np.repeat(np.cumsum(n_win + 2) - (n_win + 2), n_win) + _local_index(n_win)
     nyqs = np.minimum(h_min[pos], h_min[pos + 1])
     counts = i_b - np.delete(halfs, last)
-    travel = np.concatenate(th_bs) - np.concatenate(th_as)
-    speeds = travel / np.abs(np.concatenate(durs))
+    travel = th_b - th_a
+    speeds = travel / np.abs(durs)
     # linear interpolation between samples spaced ds reads a line at f low by sinc^2(f ds)
     # (the triangle kernel's response): divided out per window at its mean sample spacing
     ds = travel / np.maximum(counts - 1, 1)
-    return np.concatenate(grids), np.concatenate(first), speeds, nyqs, counts, ds
+    return grid, first, speeds, nyqs, counts, ds
 
 
 def _local_index(n: np.ndarray) -> np.ndarray:
