@@ -394,6 +394,54 @@ def _interp(x, xp, fp, a, n, j):
 
 
 @njit(cache=True, nogil=True)
+def _interp_walk(x, xp, fp, a, n, j):
+    """:func:`_interp` where ``xp[a:a + n]`` does not decrease and ``x`` does not fall below the
+    previous value: the index walks forward from ``j`` (numpy's search finds the same one: the last
+    ``j`` with ``xp[j] <= x``)."""
+    if np.isnan(x):
+        return x, j
+    if x < xp[a]:
+        return fp[a], 0
+    if x >= xp[a + n - 1]:
+        return fp[a + n - 1], j
+    while xp[a + j + 1] <= x:
+        j += 1
+    k = a + j
+    if xp[k] == x:
+        return fp[k], j
+    slope = (fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k])
+    out = slope * (x - xp[k]) + fp[k]
+    if np.isnan(out):
+        out = slope * (x - xp[k + 1]) + fp[k + 1]
+        if np.isnan(out) and fp[k] == fp[k + 1]:
+            out = fp[k]
+    return out, j
+
+
+@njit(cache=True, nogil=True)
+def _grid_walk(xp, fp, a, n, g0, spacing, out):
+    """``out[i] = np.interp((g0 + i) * spacing, xp[a:a + n], fp[a:a + n])`` where ``xp`` does not
+    decrease (:func:`_interp_walk`, its common case written out: a loop the compiler keeps tight)."""
+    j = 0
+    first, last = xp[a], xp[a + n - 1]
+    for i in range(len(out)):
+        x = (g0 + i) * spacing
+        if not (first <= x < last):  # outside, at the last point, or NaN
+            out[i], j = _interp_walk(x, xp, fp, a, n, j)
+            continue
+        while xp[a + j + 1] <= x:
+            j += 1
+        k = a + j
+        if xp[k] == x:
+            out[i] = fp[k]
+            continue
+        v = (fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k]) * (x - xp[k]) + fp[k]
+        if np.isnan(v):
+            v = _interp_walk(x, xp, fp, a, n, j)[0]
+        out[i] = v
+
+
+@njit(cache=True, nogil=True)
 def _search(arr, a, n, key, right):
     """``np.searchsorted(arr[a:a + n], key, side)`` (``right``: side="right") by bisection."""
     lo, hi = 0, n
@@ -447,19 +495,28 @@ def window_layout(th, y, t, starts, stops, spacing, window):
         s, e = starts[k], stops[k]
         n = e - s
         g0 = g0s[k]
-        j = 0
-        for i in range(n_grids[k]):
-            grid[og + i], j = _interp((g0 + i) * spacing, th, y, s, n, j)
+        mono = True  # positions that never decrease: the interpolation's index walks forward
+        for i in range(s, e - 1):
+            if th[i + 1] < th[i]:
+                mono = False
+                break
+        if mono:
+            _grid_walk(th, y, s, n, g0, spacing, grid[og:og + n_grids[k]])
+        else:
+            j = 0
+            for i in range(n_grids[k]):
+                grid[og + i], j = _interp((g0 + i) * spacing, th, y, s, n, j)
         j = 0
         tb = np.empty(nw)
         for w in range(nw):  # the windows' last points, then their first (np.interp's order)
             x_b = (g0 + window - 1 + w * step) * spacing
-            tb[w], j = _interp(x_b, th, t, s, n, j)
+            tb[w], j = _interp_walk(x_b, th, t, s, n, j) if mono else _interp(x_b, th, t, s, n, j)
             b_edge[ow + w] = x_b
             b_idx[ow + w] = _search(th, s, n, x_b, False)
+        j = 0 if mono else j  # (np.interp carries its search on from the last points)
         for w in range(nw):
             x_a = (g0 + w * step) * spacing
-            ta, j = _interp(x_a, th, t, s, n, j)
+            ta, j = _interp_walk(x_a, th, t, s, n, j) if mono else _interp(x_a, th, t, s, n, j)
             dur[ow + w] = tb[w] - ta
             a_edge[ow + w] = x_a
             first[ow + w] = og + w * step
