@@ -275,14 +275,11 @@ def masked_range(x, use):
 
 
 @njit(cache=True, nogil=True)
-def direction_runs(v, min_speed, d, acc, check_acc, starts, stops, min_piece):
+def direction_runs(v, min_speed, d, acc, check_acc, starts, stops, min_piece, rs, re):
     """The runs of samples moving in direction ``d`` (``d v > min_speed``; NaN never moves; with
-    ``check_acc`` the acceleration finite too) within each stretch ``[starts[k], stops[k])``:
-    ``(run starts, run stops, moving samples)``, runs shorter than ``min_piece`` left out (their
-    samples counted as moving)."""
-    n_max = len(v) // max(min_piece, 1) + len(starts) + 1
-    rs = np.empty(n_max, np.int64)
-    re = np.empty(n_max, np.int64)
+    ``check_acc`` the acceleration finite too) within each stretch ``[starts[k], stops[k])``, into
+    ``rs`` and ``re`` (room for ``len(v) // min_piece + len(starts)`` runs): ``(runs, moving
+    samples)``, runs shorter than ``min_piece`` left out (their samples counted as moving)."""
     n_runs = 0
     n_moving = 0
     for k in range(len(starts)):
@@ -304,19 +301,14 @@ def direction_runs(v, min_speed, d, acc, check_acc, starts, stops, min_piece):
                     re[n_runs] = i
                     n_runs += 1
                 a = -1
-    return rs[:n_runs].copy(), re[:n_runs].copy(), n_moving
+    return n_runs, n_moving
 
 
 @njit(cache=True, nogil=True)
-def gather_runs(rs, re, t, theta, v, tau, acc, inertia, d, need_acc):
-    """The samples of the runs ``[rs[k], re[k])`` one after the other: ``(t, theta, |v|, y, acc)``
-    with the friction magnitude ``y = d (tau - inertia acc)`` (``inertia`` 0: ``d tau``) and ``acc``
-    (empty unless ``need_acc``)."""
-    n = 0
-    for k in range(len(rs)):
-        n += re[k] - rs[k]
-    t_o, th_o, sp_o, y_o = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    a_o = np.empty(n if need_acc else 0)
+def gather_runs(rs, re, t, theta, v, tau, acc, inertia, d, need_acc, t_o, th_o, sp_o, y_o, a_o):
+    """The samples of the runs ``[rs[k], re[k])`` one after the other into ``t_o, th_o, sp_o, y_o``
+    and ``a_o``: time, position, ``|v|``, the friction magnitude ``y = d (tau - inertia acc)``
+    (``inertia`` 0: ``d tau``) and, when ``need_acc``, the acceleration."""
     o = 0
     for k in range(len(rs)):
         for i in range(rs[k], re[k]):
@@ -328,7 +320,6 @@ def gather_runs(rs, re, t, theta, v, tau, acc, inertia, d, need_acc):
             if need_acc:
                 a_o[o] = acc[i]
             o += 1
-    return t_o, th_o, sp_o, y_o, a_o
 
 
 @njit(cache=True, nogil=True)
@@ -455,22 +446,11 @@ def _search(arr, a, n, key, right):
 
 
 @njit(cache=True, nogil=True)
-def window_layout(th, y, t, starts, stops, spacing, window):
-    """The order map's windows over the pieces ``[starts[k], stops[k])`` of the position ``th``
-    (increasing along the motion): each piece with a grid of at least ``window`` points at
-    ``spacing`` gets ``y`` interpolated linearly on ``ceil(th0 / spacing) .. floor(th1 / spacing)``
-    (times spacing, ``np.interp``'s arithmetic) and windows of ``window`` points with 50 % overlap.
-
-    Returns ``(grid, first, a_edge, b_edge, duration, half_idx, b_idx, n_win, p_start, p_stop)``:
-    the grids concatenated; per window its first grid point there, its first and last grid position,
-    its duration (s, ``t`` interpolated at them) and ``searchsorted(piece, last, "left")``; per
-    piece with windows its number of windows and bounds, and its half-window edges (window starts,
-    then the end of the last window's first half) ``searchsorted(piece, edge, "right")``; indices
-    within the piece."""
-    step = window // 2
+def layout_sizes(th, starts, stops, spacing, window):
+    """Per piece ``[starts[k], stops[k])`` of ``th``: its first grid point ``ceil(th0 / spacing)``, its
+    grid points (0 when fewer than ``window``) and windows (50 % overlap), for :func:`window_layout`."""
     n_p = len(starts)
     g0s, n_grids, n_wins = np.empty(n_p, np.int64), np.zeros(n_p, np.int64), np.zeros(n_p, np.int64)
-    tot_g = tot_w = n_with = 0
     for k in range(n_p):
         s, e = starts[k], stops[k]
         g0 = np.int64(np.ceil(th[s] / spacing))
@@ -478,17 +458,29 @@ def window_layout(th, y, t, starts, stops, spacing, window):
         g0s[k] = g0
         if g1 - g0 + 1 >= window:
             n_grids[k] = g1 - g0 + 1
-            n_wins[k] = (n_grids[k] - window) // step + 1
-            tot_g += n_grids[k]
-            tot_w += n_wins[k]
-            n_with += 1
-    grid = np.empty(tot_g)
-    first, dur, b_idx = np.empty(tot_w, np.int64), np.empty(tot_w), np.empty(tot_w, np.int64)
-    a_edge, b_edge = np.empty(tot_w), np.empty(tot_w)
-    half_idx = np.empty(tot_w + n_with, np.int64)
-    n_win, p_start, p_stop = np.empty(n_with, np.int64), np.empty(n_with, np.int64), np.empty(n_with, np.int64)
+            n_wins[k] = (n_grids[k] - window) // (window // 2) + 1
+    return g0s, n_grids, n_wins
+
+
+@njit(cache=True, nogil=True)
+def window_layout(th, y, t, starts, stops, spacing, window, g0s, sizes, outs):
+    """The order map's windows over the pieces ``[starts[k], stops[k])`` of the position ``th``
+    (increasing along the motion): each piece with a grid of at least ``window`` points at
+    ``spacing`` gets ``y`` interpolated linearly on ``ceil(th0 / spacing) .. floor(th1 / spacing)``
+    (times spacing, ``np.interp``'s arithmetic) and windows of ``window`` points with 50 % overlap.
+
+    Fills ``outs = (grid, first, a_edge, b_edge, duration, half_idx, b_idx, n_win, p_start, p_stop)``
+    (sizes from :func:`layout_sizes`: ``g0s`` and ``sizes = (grid points, windows)`` per piece):
+    the grids concatenated; per window its first grid point there, its first and last grid position,
+    its duration (s, ``t`` interpolated at them) and ``searchsorted(piece, last, "left")``; per
+    piece with windows its number of windows and bounds, and its half-window edges (window starts,
+    then the end of the last window's first half) ``searchsorted(piece, edge, "right")``; indices
+    within the piece."""
+    step = window // 2
+    n_grids, n_wins = sizes
+    grid, first, a_edge, b_edge, dur, half_idx, b_idx, n_win, p_start, p_stop = outs
     og = ow = oh = op = 0
-    for k in range(n_p):
+    for k in range(len(starts)):
         nw = n_wins[k]
         if nw == 0:
             continue
@@ -527,4 +519,18 @@ def window_layout(th, y, t, starts, stops, spacing, window):
         ow += nw
         oh += nw + 1
         op += 1
-    return grid, first, a_edge, b_edge, dur, half_idx, b_idx, n_win, p_start, p_stop
+
+
+
+@njit(cache=True, nogil=True)
+def mask_chunk(use, start, out):
+    """The indices of the ``True`` values of ``use`` from ``start`` on, at most ``len(out)`` of them,
+    into ``out``: ``(how many, where the next search starts)``."""
+    n = 0
+    i = start
+    while i < len(use) and n < len(out):
+        if use[i]:
+            out[n] = i
+            n += 1
+        i += 1
+    return n, i

@@ -165,8 +165,11 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
     sub_j = bool(inertia) and acc is not None
     stretches = np.array([(a, b) for _, a, b in rec.pieces()], dtype=np.int64).reshape(-1, 2)
     no_acc = np.zeros(0)
-    rs, re, n_moving = direction_runs(v, float(min_speed), d, acc if sub_j else no_acc, sub_j,
-                                      stretches[:, 0], stretches[:, 1], MIN_PIECE)
+    rs = np.empty(len(v) // MIN_PIECE + len(stretches) + 1, np.int64)
+    re = np.empty_like(rs)
+    n_runs, n_moving = direction_runs(v, float(min_speed), d, acc if sub_j else no_acc, sub_j,
+                                      stretches[:, 0], stretches[:, 1], MIN_PIECE, rs, re)
+    rs, re = rs[:n_runs], re[:n_runs]
     lengths = re - rs
     ends = np.cumsum(lengths)
     bounds = [(int(e - k), int(e)) for e, k in zip(ends, lengths)]
@@ -174,8 +177,10 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
     excluded = {"other direction or slower than min_speed": len(rec) - n_moving,
                 f"pieces shorter than {MIN_PIECE} samples": n_moving - n}
     keep_acc = bool(need_acc and acc is not None)
-    t, theta, speed, y, acc_m = gather_runs(rs, re, rec.t, rec.theta, v, rec.tau, acc if acc is not None else no_acc,
-                                            float(inertia) if sub_j else 0.0, d, keep_acc)
+    t, theta, speed, y = (np.empty(n) for _ in range(4))
+    acc_m = np.empty(n if keep_acc else 0)
+    gather_runs(rs, re, rec.t, rec.theta, v, rec.tau, acc if acc is not None else no_acc,
+                float(inertia) if sub_j else 0.0, d, keep_acc, t, theta, speed, y, acc_m)
     nyq = _block_nyquist(theta, bounds)
     return Motion(d, rec.unit, t, theta, speed, y, acc_m if keep_acc else None, nyq, bounds, float(min_speed),
                   inertia if inertia else None, source, excluded)
@@ -364,13 +369,19 @@ def _window_layout(m: Motion, spacing: float, window: int):
     its speed (unit/s: travel / duration), the lowest position Nyquist frequency of its samples
     (cycles/unit), its samples, and its mean sample spacing (unit).  One pass over the pieces for
     what needs a piece's own samples (interpolation, searches); the rest over all windows at once."""
-    from ._kernels import window_layout
+    from ._kernels import layout_sizes, window_layout
 
     # position along the direction of motion (increasing in both directions); time order kept
     th_all = m.theta if m.direction > 0 else -m.theta
     bounds = np.array(m.bounds, dtype=np.int64).reshape(-1, 2)
-    grid, first, th_a, th_b, durs, halfs, i_b, n_win, start, ends = window_layout(
-        th_all, m.y, m.t, bounds[:, 0], bounds[:, 1], float(spacing), int(window))
+    g0s, n_grids, n_wins = layout_sizes(th_all, bounds[:, 0], bounds[:, 1], float(spacing), int(window))
+    n_g, n_w, n_p = int(n_grids.sum()), int(n_wins.sum()), int(np.count_nonzero(n_wins))
+    outs = (np.empty(n_g), np.empty(n_w, np.int64), np.empty(n_w), np.empty(n_w), np.empty(n_w),
+            np.empty(n_w + n_p, np.int64), np.empty(n_w, np.int64), np.empty(n_p, np.int64),
+            np.empty(n_p, np.int64), np.empty(n_p, np.int64))
+    window_layout(th_all, m.y, m.t, bounds[:, 0], bounds[:, 1], float(spacing), int(window), g0s,
+                  (n_grids, n_wins), outs)
+    grid, first, th_a, th_b, durs, halfs, i_b, n_win, start, ends = outs
     if not len(grid):
         z = np.zeros(0)
         return z, np.zeros(0, int), z, z, np.zeros(0, int), z

@@ -379,16 +379,14 @@ def _per_line(mom: tuple, n_f: int, tk: np.ndarray, fit_j: bool) -> list:
 def _chunks(use: np.ndarray):
     """The indices of the ``True`` samples of ``use``, at most ``_CHUNK`` at a time, in order, without
     an index of them all (memory: one chunk)."""
-    block = _CHUNK // 4
-    counts = np.add.reduceat(use.view(np.int8), np.arange(0, len(use), block), dtype=np.int64) if len(use) else []
-    a = held = 0
-    for k, c in enumerate(counts):
-        if held + c > _CHUNK:
-            yield np.flatnonzero(use[a:k * block]) + a
-            a, held = k * block, 0
-        held += int(c)
-    if held:
-        yield np.flatnonzero(use[a:]) + a
+    from ._kernels import mask_chunk
+
+    start = 0
+    while start < len(use):
+        out = np.empty(_CHUNK, np.int64)
+        n, start = mask_chunk(use, start, out)
+        if n:
+            yield out[:n]
 
 
 #: the moment column of g_k g_l (g = 1, sin, cos)
