@@ -534,3 +534,18 @@ def mask_chunk(use, start, out):
             n += 1
         i += 1
     return n, i
+
+
+@njit(cache=True, nogil=True)
+def bin_sums(order, bins, power, limit, freq, p_sum, n_win):
+    """The order map's cells: for each window ``w`` of ``order`` (in that order), ``p_sum[bins[w],
+    k] += power[w, k]`` and ``n_win[bins[w], k] += 1`` where ``freq[k] < limit[w]`` (the frequencies
+    the window measures)."""
+    for i in range(len(order)):
+        w = order[i]
+        b = bins[w]
+        lim = limit[w]
+        for k in range(len(freq)):
+            if freq[k] < lim:
+                p_sum[b, k] += power[w, k]
+                n_win[b, k] += 1

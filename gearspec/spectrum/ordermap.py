@@ -471,18 +471,15 @@ def _bin_windows(m: Motion, wins, edges, freq, gear, window, length, method) -> 
     nb, k = len(edges) - 1, len(freq)
     b = np.searchsorted(edges, speeds, side="right") - 1
     ok = (b >= 0) & (b < nb)
-    # a cell counts a window only where its frequency is measurable there (the Nyquist mask)
-    meas = freq[None, :] < MEASURABLE_FRACTION * nyqs[:, None]
+    # a cell counts a window only where its frequency is measurable there (the Nyquist mask); the
+    # windows of each bin summed in their order
+    from ._kernels import bin_sums
+
     p_sum = np.zeros((nb, k))
     n_win = np.zeros((nb, k), int)
-    # the windows of each bin summed in their order (as np.add.at would, several times faster)
     order = np.flatnonzero(ok)
     order = order[np.argsort(b[order], kind="stable")]
-    if len(order):
-        bb = b[order]
-        first = np.flatnonzero(np.concatenate(([True], bb[1:] != bb[:-1])))
-        p_sum[bb[first]] = np.add.reduceat(np.where(meas[order], power[order], 0.0), first, axis=0)
-        n_win[bb[first]] = np.add.reduceat(meas[order].astype(int), first, axis=0)
+    bin_sums(order, b, power, MEASURABLE_FRACTION * nyqs, np.asarray(freq, float), p_sum, n_win)
     with np.errstate(invalid="ignore", divide="ignore"):
         amp = np.where(n_win > 0, np.sqrt(p_sum / np.maximum(n_win, 1)), np.nan)
     speed = np.full(nb, np.nan)
