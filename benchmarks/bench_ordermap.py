@@ -108,7 +108,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--samples", type=int, default=10_000_000)
     p.add_argument("--quick", action="store_true", help="10^6 samples")
-    p.add_argument("--repeat", type=int, default=3, help="runs of the analysis after the warm-up, best kept (default 3)")
+    p.add_argument("--repeat", type=int, default=3,
+                   help="runs of the analysis after the warm-up, best kept (default 3)")
     p.add_argument("--json", help="write the numbers here")
     a = p.parse_args(argv)
     n = 1_000_000 if a.quick else a.samples
@@ -139,7 +140,8 @@ def main(argv=None) -> int:
     t_all, res = best_of(lambda: order_analysis(rec, lines, inertia=0), a.repeat)
     cpu_all = (time.process_time() - c0) / a.repeat
     ratio = t_all / t_fft
-    print(f"3. order_analysis: 2 order maps + {len(res.tracks)} tracks (best of {a.repeat} after the warm-up, directions in "
+    print(f"3. order_analysis: 2 order maps + {len(res.tracks)} tracks (best of {a.repeat} after the warm-up, "
+          f"directions in "
           f"{2 if len(rec) >= PARALLEL_MIN_SAMPLES and (os.cpu_count() or 1) >= 2 else 1} threads): {t_all:.3f} s = "
           f"{ratio:.2f} x the FFT  (target <= {TARGET:g} x: {'MET' if ratio <= TARGET else 'NOT MET'})")
     t_one, _ = best_of(lambda: order_analysis(rec, lines, inertia=0, workers=1), 1)
@@ -164,7 +166,8 @@ def main(argv=None) -> int:
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     copies = peak / (8.0 * n)
-    print(f"4. peak memory of order_analysis (tracemalloc): {peak / 2**20:.0f} MiB = {copies:.1f} copies of the data")
+    print(f"4. peak memory of order_analysis (tracemalloc; the compiled kernels write into arrays numpy "
+          f"allocates): {peak / 2**20:.0f} MiB = {copies:.1f} copies of the data")
     checks = []
     for tr in res.tracks:
         i = np.flatnonzero(np.isfinite(tr.amplitude))
