@@ -158,37 +158,31 @@ def _motion(rec: Recording, d: int, kin: tuple, min_speed, inertia, need_acc: bo
         min_speed = _default_min_speed(v)
     if not (math.isfinite(min_speed) and min_speed >= 0):
         raise InputError(f"min_speed must be a speed >= 0 in {rec.unit}/s, got {min_speed!r}")
-    moving = v > min_speed if d > 0 else v < -min_speed  # d v > min_speed; NaN compares False
-    if inertia and acc is not None:
-        ok_acc = np.isfinite(acc)
-        moving &= ok_acc
-    # the pieces: runs of moving samples within each stretch of the recording, at least MIN_PIECE
-    # long; the samples kept selected by a mask (a compress is cheaper than an index of every sample)
-    bounds, n = [], 0
-    n_moving = int(np.count_nonzero(moving))
-    for _, a, b in rec.pieces():
-        m = moving[a:b]
-        edges = np.flatnonzero(np.diff(m.view(np.int8), prepend=0, append=0))
-        for s, e in zip(edges[0::2], edges[1::2]):
-            if e - s >= MIN_PIECE:
-                bounds.append((n, n + e - s))
-                n += e - s
-            else:
-                moving[a + s:a + e] = False  # moving is this function's own array
-    keep = moving  # the stretches of rec.pieces() tile the recording: their pieces in order
+    from ._kernels import direction_runs, gather_runs
+
+    # the pieces: runs of moving samples (d v > min_speed; with J removed, a finite acceleration)
+    # within each stretch of the recording, at least MIN_PIECE long, gathered in one pass
+    sub_j = bool(inertia) and acc is not None
+    stretches = np.array([(a, b) for _, a, b in rec.pieces()], dtype=np.int64).reshape(-1, 2)
+    no_acc = np.zeros(0)
+    rs = np.empty(len(v) // MIN_PIECE + len(stretches) + 1, np.int64)
+    re = np.empty_like(rs)
+    n_runs, n_moving = direction_runs(v, float(min_speed), d, acc if sub_j else no_acc, sub_j,
+                                      stretches[:, 0], stretches[:, 1], MIN_PIECE, rs, re)
+    rs, re = rs[:n_runs], re[:n_runs]
+    lengths = re - rs
+    ends = np.cumsum(lengths)
+    bounds = [(int(e - k), int(e)) for e, k in zip(ends, lengths)]
+    n = int(ends[-1]) if len(ends) else 0
     excluded = {"other direction or slower than min_speed": len(rec) - n_moving,
                 f"pieces shorter than {MIN_PIECE} samples": n_moving - n}
-    tau = rec.tau[keep]
-    if inertia and acc is not None:
-        tau -= inertia * acc[keep]
-    if d < 0:
-        np.negative(tau, out=tau)
-    speed = v[keep]
-    np.abs(speed, out=speed)
-    theta = rec.theta[keep]
+    keep_acc = bool(need_acc and acc is not None)
+    t, theta, speed, y = (np.empty(n) for _ in range(4))
+    acc_m = np.empty(n if keep_acc else 0)
+    gather_runs(rs, re, rec.t, rec.theta, v, rec.tau, acc if acc is not None else no_acc,
+                float(inertia) if sub_j else 0.0, d, keep_acc, t, theta, speed, y, acc_m)
     nyq = _block_nyquist(theta, bounds)
-    return Motion(d, rec.unit, rec.t[keep], theta, speed, tau,
-                  None if (acc is None or not need_acc) else acc[keep], nyq, bounds, float(min_speed),
+    return Motion(d, rec.unit, t, theta, speed, y, acc_m if keep_acc else None, nyq, bounds, float(min_speed),
                   inertia if inertia else None, source, excluded)
 
 
@@ -375,46 +369,27 @@ def _window_layout(m: Motion, spacing: float, window: int):
     its speed (unit/s: travel / duration), the lowest position Nyquist frequency of its samples
     (cycles/unit), its samples, and its mean sample spacing (unit).  One pass over the pieces for
     what needs a piece's own samples (interpolation, searches); the rest over all windows at once."""
-    step = window // 2
+    from ._kernels import layout_sizes, window_layout
+
     # position along the direction of motion (increasing in both directions); time order kept
     th_all = m.theta if m.direction > 0 else -m.theta
-    grids, first, halfs, i_bs, th_as, th_bs, durs, starts, ends = [], [], [], [], [], [], [], [], []
-    n_grid_all = 0
-    for s, e in m.bounds:
-        th = th_all[s:e]
-        g0 = math.ceil(th[0] / spacing)
-        g1 = math.floor(th[-1] / spacing)
-        n_grid = g1 - g0 + 1
-        if n_grid < window:
-            continue
-        n_win = (n_grid - window) // step + 1
-        x = np.arange(g0, g1 + 1) * spacing
-        grids.append(np.interp(x, th, m.y[s:e]))
-        first.append(n_grid_all + np.arange(n_win) * step)
-        n_grid_all += n_grid
-        # each window's edges in samples (for its Nyquist) and in time (for its speed); with 50 %
-        # overlap a window is two consecutive half windows: the lowest Nyquist of its samples is
-        # the lower of theirs.  edges: the window starts, then the end of the last one's first half
-        edges = x[0:(n_win + 1) * step:step]
-        th_b = x[window - 1:window - 1 + n_win * step:step]
-        halfs.append(np.searchsorted(th, edges, side="right"))  # clipped to the piece below
-        i_bs.append(np.searchsorted(th, th_b, side="left"))
-        tt = np.interp(np.concatenate([th_b, edges[:-1]]), th, m.t[s:e])
-        durs.append(tt[:n_win] - tt[n_win:])
-        th_as.append(edges[:-1])
-        th_bs.append(th_b)
-        starts.append(s)
-        ends.append(e)
-    if not grids:
+    bounds = np.array(m.bounds, dtype=np.int64).reshape(-1, 2)
+    g0s, n_grids, n_wins = layout_sizes(th_all, bounds[:, 0], bounds[:, 1], float(spacing), int(window))
+    n_g, n_w, n_p = int(n_grids.sum()), int(n_wins.sum()), int(np.count_nonzero(n_wins))
+    outs = (np.empty(n_g), np.empty(n_w, np.int64), np.empty(n_w), np.empty(n_w), np.empty(n_w),
+            np.empty(n_w + n_p, np.int64), np.empty(n_w, np.int64), np.empty(n_p, np.int64),
+            np.empty(n_p, np.int64), np.empty(n_p, np.int64))
+    window_layout(th_all, m.y, m.t, bounds[:, 0], bounds[:, 1], float(spacing), int(window), g0s,
+                  (n_grids, n_wins), outs)
+    grid, first, th_a, th_b, durs, halfs, i_b, n_win, start, ends = outs
+    if not len(grid):
         z = np.zeros(0)
         return z, np.zeros(0, int), z, z, np.zeros(0, int), z
-    n_win = np.array([len(a) for a in th_as])
-    start, ends = np.array(starts), np.array(ends)  # of the pieces with windows
     # sample indices in the motion: each half-window edge's last sample at or before it, and each
     # window's first sample after its end (both within the window's piece)
     s_h, e_h = np.repeat(start, n_win + 1), np.repeat(ends, n_win + 1)
-    halfs = np.minimum(np.maximum(np.concatenate(halfs) - 1, 0) + s_h, e_h - 1)
-    i_b = np.minimum(np.concatenate(i_bs) + 1 + np.repeat(start, n_win), np.repeat(ends, n_win))
+    halfs = np.minimum(np.maximum(halfs - 1, 0) + s_h, e_h - 1)
+    i_b = np.minimum(i_b + 1 + np.repeat(start, n_win), np.repeat(ends, n_win))
     # the lowest Nyquist of each half window (a reduceat over every piece's half-window edges and
     # its end: the segment from a piece's end to the next piece's first edge is not used)
     last = np.cumsum(n_win + 1) - 1  # the end of the last window's first half, per piece
@@ -425,12 +400,12 @@ def _window_layout(m: Motion, spacing: float, window: int):
     pos = np.repeat(np.cumsum(n_win + 2) - (n_win + 2), n_win) + _local_index(n_win)
     nyqs = np.minimum(h_min[pos], h_min[pos + 1])
     counts = i_b - np.delete(halfs, last)
-    travel = np.concatenate(th_bs) - np.concatenate(th_as)
-    speeds = travel / np.abs(np.concatenate(durs))
+    travel = th_b - th_a
+    speeds = travel / np.abs(durs)
     # linear interpolation between samples spaced ds reads a line at f low by sinc^2(f ds)
     # (the triangle kernel's response): divided out per window at its mean sample spacing
     ds = travel / np.maximum(counts - 1, 1)
-    return np.concatenate(grids), np.concatenate(first), speeds, nyqs, counts, ds
+    return grid, first, speeds, nyqs, counts, ds
 
 
 def _local_index(n: np.ndarray) -> np.ndarray:
@@ -496,18 +471,15 @@ def _bin_windows(m: Motion, wins, edges, freq, gear, window, length, method) -> 
     nb, k = len(edges) - 1, len(freq)
     b = np.searchsorted(edges, speeds, side="right") - 1
     ok = (b >= 0) & (b < nb)
-    # a cell counts a window only where its frequency is measurable there (the Nyquist mask)
-    meas = freq[None, :] < MEASURABLE_FRACTION * nyqs[:, None]
+    # a cell counts a window only where its frequency is measurable there (the Nyquist mask); the
+    # windows of each bin summed in their order
+    from ._kernels import bin_sums
+
     p_sum = np.zeros((nb, k))
     n_win = np.zeros((nb, k), int)
-    # the windows of each bin summed in their order (as np.add.at would, several times faster)
     order = np.flatnonzero(ok)
     order = order[np.argsort(b[order], kind="stable")]
-    if len(order):
-        bb = b[order]
-        first = np.flatnonzero(np.concatenate(([True], bb[1:] != bb[:-1])))
-        p_sum[bb[first]] = np.add.reduceat(np.where(meas[order], power[order], 0.0), first, axis=0)
-        n_win[bb[first]] = np.add.reduceat(meas[order].astype(int), first, axis=0)
+    bin_sums(order, b, power, MEASURABLE_FRACTION * nyqs, np.asarray(freq, float), p_sum, n_win)
     with np.errstate(invalid="ignore", divide="ignore"):
         amp = np.where(n_win > 0, np.sqrt(p_sum / np.maximum(n_win, 1)), np.nan)
     speed = np.full(nb, np.nan)

@@ -184,7 +184,7 @@ class _Measured:
     def __init__(self, use: np.ndarray):
         self.use = use
         self.n = int(np.count_nonzero(use))
-        self.speed = None
+        self.lo = self.hi = None
 
     def check(self, m: Motion, f: float, knots: int, how: str) -> None:
         """Refuse (one sentence) a line with too few samples, or samples of one speed only."""
@@ -194,9 +194,10 @@ class _Measured:
             raise InputError(f"line at {f:.6g} cycles/{m.unit}: {self.n} samples of the {dname} direction lie "
                              f"below {MEASURABLE_FRACTION:g} x their position Nyquist frequency; tracking needs at "
                              f"least {4 * q}")
-        if self.speed is None:
-            self.speed = m.speed[self.use]
-            self.lo, self.hi = float(self.speed.min()), float(self.speed.max())
+        if self.lo is None:  # the speeds of the samples measuring the line span the track's knots
+            from ._kernels import masked_range
+
+            _, self.lo, self.hi = masked_range(m.speed, self.use)
         if not self.hi > self.lo:
             raise InputError(f"line at {f:.6g} cycles/{m.unit}: the {dname} samples that measure it share one speed")
 
@@ -207,19 +208,14 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
     lo, hi, n_use = group.lo, group.hi, group.n
     n_basis = knots + _DEGREE + 1
     tk = np.concatenate([[lo] * (_DEGREE + 1), np.linspace(lo, hi, knots + 2)[1:-1], [hi] * (_DEGREE + 1)])
-    normals = _normal_equations_many(m, group.use, [f for f, _ in lines], tk, how == "fitted")
     grid = np.linspace(lo, hi, SPEED_GRID)
     cell = (hi - lo) / (SPEED_GRID - 1)
     edges = np.concatenate([grid - cell / 2, [hi + cell / 2]])
-    # samples per grid cell, and travel of the samples near each grid speed (within half a knot
-    # span): speed x the median step; a million samples at a time (memory)
-    counts, travel = np.zeros(SPEED_GRID, np.int64), np.zeros(SPEED_GRID)
-    for i in range(0, group.n, 1 << 20):
-        sp = group.speed[i:i + (1 << 20)]
-        cells = _grid_cells(sp, edges)
-        counts += np.bincount(cells, minlength=SPEED_GRID)
-        travel += np.bincount(cells, weights=sp, minlength=SPEED_GRID)
-    travel *= m.median_step
+    # with the moments: samples per grid cell, and travel of the samples near each grid speed
+    # (within half a knot span): speed x the median step
+    mom = _moments(m, group.use, [f for f, _ in lines], tk, how == "fitted", edges)
+    normals = _per_line(mom, len(lines), tk, how == "fitted")
+    counts, travel = mom[4], mom[5] * m.median_step
     half = max(int(round(0.5 * (SPEED_GRID - 1) / (knots + 1))), 0)
     near = np.convolve(travel, np.ones(2 * half + 1), mode="same")
     tracks = []
@@ -245,18 +241,11 @@ def _fit_tracks(m: Motion, lines: list, group: _Measured, knots: int, level: flo
 
 def _grid_cells(x: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """The cell ``i`` with ``edges[i] <= x < edges[i + 1]`` of every ``x`` within ``[edges[0],
-    edges[-1])`` (equal cells; as ``np.histogram(x, edges)`` counts them): the arithmetic guess,
-    and a search among the edges for the few values whose guess lies within 1e-9 of a cell's
-    border, where rounding may have put it on the wrong side (no sort of all values)."""
-    n_cells = len(edges) - 1
-    pos = np.subtract(x, edges[0])
-    pos *= n_cells / (edges[-1] - edges[0])
-    cells = pos.astype(np.intp)
-    pos -= cells  # the fraction of the cell
-    near = np.flatnonzero((pos < 1e-9) | (pos > 1 - 1e-9))
-    cells[near] = np.searchsorted(edges, x[near], side="right") - 1
-    np.clip(cells, 0, n_cells - 1, out=cells)
-    return cells
+    edges[-1])`` (equal cells; as ``np.histogram(x, edges)`` counts them): the rule the track's
+    one pass over the samples applies (:func:`~gearspec.spectrum._kernels.grid_cell`)."""
+    from ._kernels import grid_cells
+
+    return grid_cells(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(edges, dtype=float))
 
 
 def _inertia_choice(inertia, gear) -> tuple[float | None, str]:
@@ -322,115 +311,82 @@ def _normal_equations(m: Motion, use: np.ndarray, f: float, tk: np.ndarray, fit_
 def _normal_equations_many(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fit_j: bool) -> list:
     """``(X'X, X'y, y'y)`` of the track design of every line of ``freqs`` (the columns: B-splines of
     the level, of a (sine), of c (cosine), then the acceleration when J is fitted) on the samples
-    ``use``, exactly, without forming it (``tk``: knots from the lowest to the highest speed of them).
+    ``use``, exactly, without forming it (``tk``: knots from the lowest to the highest speed of them):
+    :func:`_moments`, then :func:`_per_line`."""
+    edges = np.array([tk[0], tk[-1]])  # one speed cell: not used here
+    return _per_line(_moments(m, use, freqs, tk, fit_j, edges), len(freqs), tk, fit_j)
+
+
+def _moments(m: Motion, use: np.ndarray, freqs, tk: np.ndarray, fit_j: bool, edges: np.ndarray) -> tuple:
+    """The moments of every knot span of the samples ``use`` for the lines ``freqs``, in one pass
+    over the samples: ``(P, Q, AJ, yy, counts, travel)`` (see
+    :func:`~gearspec.spectrum._kernels.track_sums`; counts and summed speeds per cell of the
+    speed grid with ``edges``).
 
     On a knot span the four B-splines a sample touches are cubics in the span coordinate u, so every
     entry of ``X'X`` is a combination of the moments ``sum u^s g_k g_l`` (s = 0..6; g = 1, sin, cos)
     and ``X'y`` of ``sum u^s g_k y`` (s = 0..3), accumulated in double precision, then combined with
-    the spans' polynomials.  The samples are taken in chunks, each sorted by knot span (time order
-    kept within a span); per span two matrix products, ``u^s [1; g_k; g_k g_l]'`` and ``[u^s y; u^s
-    acc] [1; g_k]'`` over all lines at once, give the moments (the powers of u and the gathers shared
-    by the lines; ``cos^2 = 1 - sin^2``, so its moments are those of 1 less those of sin^2)."""
+    the spans' polynomials (:func:`_per_line`; ``cos^2 = 1 - sin^2``).  The samples are taken in
+    chunks in time order; per chunk the phases are reduced to one cycle in double precision, their
+    sines and cosines taken by numpy in single precision, and the compiled kernel sums the moments."""
+    from ._kernels import track_gather, track_sums
+
+    nspan = len(tk) - 2 * _DEGREE - 1
+    n_f = len(freqs)
+    f_arr = np.asarray(freqs, dtype=float)
+    P = np.zeros((nspan, 7, 1 + 4 * n_f))
+    Q = np.zeros((nspan, 8, 1 + 2 * n_f))
+    AJ = np.zeros((nspan, 2))
+    counts = np.zeros(len(edges) - 1, np.int64)
+    travel = np.zeros(len(edges) - 1)
+    acc = m.acc if fit_j else np.zeros(0)
+    X, Y, A = np.empty(_CHUNK), np.empty(_CHUNK), np.empty(_CHUNK)
+    span = np.empty(_CHUNK, np.intp)
+    ph = np.empty((n_f, _CHUNK), np.float32)
+    S, C = np.empty_like(ph), np.empty_like(ph)
+    yy = 0.0
+    for chunk in _chunks(use):
+        n = len(chunk)
+        track_gather(chunk, m.theta, m.speed, m.y, acc, f_arr, tk, edges, X, Y, A, ph, span, counts, travel)
+        np.sin(ph[:, :n], out=S[:, :n])
+        np.cos(ph[:, :n], out=C[:, :n])
+        yy += track_sums(X[:n], Y[:n], A[:n], span[:n], S[:, :n], C[:, :n], tk, P, Q, AJ)
+    return P, Q, AJ, yy, counts, travel
+
+
+def _per_line(mom: tuple, n_f: int, tk: np.ndarray, fit_j: bool) -> list:
+    """``(X'X, X'y, y'y)`` of every line from the moments of :func:`_moments`."""
+    P_all, Q_all, AJ, yy = mom[:4]
     nb = len(tk) - _DEGREE - 1
     q = 3 * nb + fit_j
     polys = _span_polynomials(tk)
-    n_f = len(freqs)
-    n_trig = 1 + 2 * n_f  # G rows: 1, the sines and cosines of every line, then per line s^2, s c
-    n_w = 4 + 4 * fit_j
-    acc_p = {jj: np.zeros((7, 1 + 4 * n_f)) for jj in polys}
-    acc_q = {jj: np.zeros((n_w, n_trig)) for jj in polys}
-    acc_j = {jj: np.zeros(2) for jj in polys}  # sum acc^2, sum acc y
-    yy = 0.0
-    # the span of a speed x within [tk[0], tk[-1]] (searchsorted(tk, x, "right") - 1, the top speed
-    # in the last span): _DEGREE + the number of interior knots at or below x
-    interior = tk[_DEGREE + 1:len(tk) - _DEGREE - 1]
-    U = np.empty((7, _CHUNK))
-    W = np.empty((n_w, _CHUNK))
-    for chunk in _chunks(use):
-        # the chunk's samples span by span (time order kept within a span: a stable radix sort)
-        x = m.speed[chunk]
-        span = np.full(len(x), _DEGREE, np.uint8)
-        for t in interior:
-            span += x >= t
-        perm = np.argsort(span, kind="stable")
-        r, span = chunk[perm], span[perm]
-        n = len(r)
-        cuts = np.searchsorted(span, np.arange(len(tk) + 1))
-        # the speeds lie within [tk[0], tk[-1]]: the knots span the speeds of these samples
-        u = U[:, :n]
-        u[0] = 1.0
-        np.take(x, perm, out=u[1])
-        for jj in polys:  # u, the coordinate in the sample's span
-            a, e = cuts[jj], cuts[jj + 1]
-            u[1, a:e] -= tk[jj]
-            u[1, a:e] /= tk[jj + 1] - tk[jj]
-        for k in range(2, 7):
-            np.multiply(u[k - 1], u[1], out=u[k])
-        y = m.y[r]
-        yy += float(y @ y)
-        w = W[:, :n]  # u^s y, u^s acc (s = 0..3)
-        np.multiply(u[:4], y, out=w[:4])
-        if fit_j:
-            acc = m.acc[r]
-            np.multiply(u[:4], acc, out=w[4:])
-        G = _trig_rows(m.theta[r], freqs)
-        for jj in polys:
-            a, e = cuts[jj], cuts[jj + 1]
-            if e == a:
-                continue
-            acc_p[jj] += u[:, a:e] @ G[:, a:e].T
-            acc_q[jj] += w[:, a:e] @ G[:n_trig, a:e].T
-            if fit_j:
-                acc_j[jj] += (float(acc[a:e] @ acc[a:e]), float(acc[a:e] @ y[a:e]))
+    n_trig = 1 + 2 * n_f
     out = []
     for li in range(n_f):
         cols = [0, 1 + 2 * li, 2 + 2 * li]
-        mom = {}
+        mom_l = {}
         for jj in polys:
-            P, Q = acc_p[jj], acc_q[jj]
+            P, Q = P_all[jj - _DEGREE], Q_all[jj - _DEGREE]
             M = np.empty((7, 6))
             M[:, :3] = P[:, cols]
             M[:, 3:5] = P[:, n_trig + 2 * li:n_trig + 2 * li + 2]
             M[:, 5] = M[:, 0] - M[:, 3]  # cos^2 = 1 - sin^2
-            mom[jj] = [M, Q[:4, cols], Q[4:, cols] if fit_j else None, acc_j[jj][0], acc_j[jj][1]]
-        out.append(_assemble(mom, polys, nb, q, fit_j) + (yy,))
+            mom_l[jj] = [M, Q[:4, cols], Q[4:, cols] if fit_j else None, AJ[jj - _DEGREE, 0], AJ[jj - _DEGREE, 1]]
+        out.append(_assemble(mom_l, polys, nb, q, fit_j) + (yy,))
     return out
 
 
 def _chunks(use: np.ndarray):
     """The indices of the ``True`` samples of ``use``, at most ``_CHUNK`` at a time, in order, without
     an index of them all (memory: one chunk)."""
-    block = _CHUNK // 4
-    counts = np.add.reduceat(use.view(np.int8), np.arange(0, len(use), block), dtype=np.int64) if len(use) else []
-    a = held = 0
-    for k, c in enumerate(counts):
-        if held + c > _CHUNK:
-            yield np.flatnonzero(use[a:k * block]) + a
-            a, held = k * block, 0
-        held += int(c)
-    if held:
-        yield np.flatnonzero(use[a:]) + a
+    from ._kernels import mask_chunk
 
-
-def _trig_rows(theta: np.ndarray, freqs) -> np.ndarray:
-    """Rows 1, then ``sin, cos`` of ``2 pi f theta`` of every line, then ``s^2, s c`` of every line
-    (the phase reduced to one cycle in double precision, then sine and cosine in single)."""
-    n_f, n = len(freqs), len(theta)
-    sq = 1 + 2 * n_f
-    G = np.empty((1 + 4 * n_f, n))
-    G[0] = 1.0
-    ph64 = np.empty(n)
-    ph = np.empty(n, np.float32)
-    for li, f in enumerate(freqs):
-        np.multiply(theta, f, out=ph64)
-        ph64 -= np.floor(ph64)  # the phase in cycles (exactly np.mod(., 1.0))
-        np.multiply(ph64, 2 * np.pi, out=ph, casting="same_kind")
-        s, c = G[1 + 2 * li], G[2 + 2 * li]
-        s[:] = np.sin(ph)
-        c[:] = np.cos(ph)
-        np.multiply(s, s, out=G[sq + 2 * li])  # products of singles: exact in double
-        np.multiply(s, c, out=G[sq + 2 * li + 1])
-    return G
+    start = 0
+    while start < len(use):
+        out = np.empty(_CHUNK, np.int64)
+        n, start = mask_chunk(use, start, out)
+        if n:
+            yield out[:n]
 
 
 #: the moment column of g_k g_l (g = 1, sin, cos)
