@@ -218,7 +218,7 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
     fig.suptitle(f"Ripple amplitude against speed per declared line, {len(result.segments)} segments "
                  "(error bars: 95 %)", fontsize=11)
     fig.tight_layout(rect=(0, 0.35 / (3.4 * nrow) + 0.03 * math.ceil(len(handles) / 4), 1, 1))
-    return _save(fig, path)
+    return _save(fig, path, tight=False)  # laid out by tight_layout: one draw, not two
 
 
 def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, strongest: int = 3) -> Path | None:
@@ -270,7 +270,7 @@ def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, s
     fig.suptitle("Every segment: declared lines (median per speed, dots: segments) and peaks no declared line fits",
                  fontsize=10)
     fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4), 1, 1))
-    return _save(fig, path)
+    return _save(fig, path, tight=False)  # laid out by tight_layout: one draw, not two
 
 
 def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Path | None:
@@ -330,4 +330,4 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
                  "dashed: declared lines", fontsize=9)
     ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
-    return _save(fig, path)
+    return _save(fig, path, tight=False)  # laid out by tight_layout: one draw, not two
