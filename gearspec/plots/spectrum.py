@@ -113,11 +113,17 @@ def _spectrum_panel(ax, i: int, s, unit: str, points: int) -> None:
             ax.loglog(f, np.maximum(a, 1e-12), color=color, lw=lw, alpha=alpha, label=label)
         f, a = _envelope(s.ls_frequency, s.noise_amplitude, points)
         ax.loglog(f, a, color="k", lw=0.8, ls=":", label="local noise level")
+    # one errorbar call per colour and fill (each call builds its artists and styles: most of a
+    # panel's time when made once per peak)
+    groups: dict[tuple[str, bool], list] = {}
     for p in s.peaks:
         color = ("#9467bd" if p.declared else "#17becf" if p.aliased_from else
                  _ENCODER if p.quantisation_harmonic is not None else "#ff7f0e" if p.label else "#d62728")
-        ax.errorbar([p.frequency], [max(p.amplitude, 1e-12)], yerr=[[0], [p.amplitude_se]], fmt="o",
-                    ms=4, color=color, mfc=color if p.fap < 0.01 else "none", zorder=5)
+        groups.setdefault((color, p.fap < 0.01), []).append((p.frequency, max(p.amplitude, 1e-12), p.amplitude_se))
+    for (color, filled), pts in groups.items():
+        f_, a_, se_ = (list(c) for c in zip(*pts))
+        ax.errorbar(f_, a_, yerr=[[0.0] * len(pts), se_], fmt="o", ms=4, color=color,
+                    mfc=color if filled else "none", zorder=5)
     # the three strongest peaks named, one a frequency band (a factor 3: labels of close peaks overlap),
     # those near the right edge written leftwards (inside the axes)
     named: list[float] = []
