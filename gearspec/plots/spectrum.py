@@ -12,7 +12,7 @@ import pandas as pd
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import DIRS, NEG as _NEG, POS as _POS, plain_log_axis, plt, save as _save
+from . import DIRS, NEG as _NEG, POS as _POS, plain_log_axis, plt, save as _plots_save
 from .ordermap import _scale
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_spectrum_summary",
@@ -20,6 +20,21 @@ __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "pl
 
 #: colour of the encoder's own lines (count rate folded by the sampling) and of the quantisation limit
 _ENCODER = "#8c564b"
+
+
+def _tight_layout(fig, **kw) -> None:
+    """``fig.tight_layout(**kw)``, and the figure marked laid out: :func:`_save` then draws it once
+    (no second draw to crop it; a few pixels of margin more, the same content)."""
+    fig.tight_layout(**kw)
+    fig.gearspec_laid_out = True
+
+
+def _save(fig, path, tight: bool | None = None) -> Path:
+    """:func:`gearspec.plots.save`; ``tight`` None: crop to the content unless :func:`_tight_layout`
+    laid the figure out already."""
+    if tight is None:
+        tight = not getattr(fig, "gearspec_laid_out", False)
+    return _plots_save(fig, path, tight=tight)
 
 
 def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 20_000, max_rows: int = 12) -> Path:
@@ -113,11 +128,17 @@ def _spectrum_panel(ax, i: int, s, unit: str, points: int) -> None:
             ax.loglog(f, np.maximum(a, 1e-12), color=color, lw=lw, alpha=alpha, label=label)
         f, a = _envelope(s.ls_frequency, s.noise_amplitude, points)
         ax.loglog(f, a, color="k", lw=0.8, ls=":", label="local noise level")
+    # one errorbar call per colour and fill (each call builds its artists and styles: most of a
+    # panel's time when made once per peak)
+    groups: dict[tuple[str, bool], list] = {}
     for p in s.peaks:
         color = ("#9467bd" if p.declared else "#17becf" if p.aliased_from else
                  _ENCODER if p.quantisation_harmonic is not None else "#ff7f0e" if p.label else "#d62728")
-        ax.errorbar([p.frequency], [max(p.amplitude, 1e-12)], yerr=[[0], [p.amplitude_se]], fmt="o",
-                    ms=4, color=color, mfc=color if p.fap < 0.01 else "none", zorder=5)
+        groups.setdefault((color, p.fap < 0.01), []).append((p.frequency, max(p.amplitude, 1e-12), p.amplitude_se))
+    for (color, filled), pts in groups.items():
+        f_, a_, se_ = (list(c) for c in zip(*pts))
+        ax.errorbar(f_, a_, yerr=[[0.0] * len(pts), se_], fmt="o", ms=4, color=color,
+                    mfc=color if filled else "none", zorder=5)
     # the three strongest peaks named, one a frequency band (a factor 3: labels of close peaks overlap),
     # those near the right edge written leftwards (inside the axes)
     named: list[float] = []
@@ -217,7 +238,7 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
     fig.legend(handles=list(handles.values()), loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.suptitle(f"Ripple amplitude against speed per declared line, {len(result.segments)} segments "
                  "(error bars: 95 %)", fontsize=11)
-    fig.tight_layout(rect=(0, 0.35 / (3.4 * nrow) + 0.03 * math.ceil(len(handles) / 4), 1, 1))
+    _tight_layout(fig, rect=(0, 0.35 / (3.4 * nrow) + 0.03 * math.ceil(len(handles) / 4), 1, 1))
     return _save(fig, path)
 
 
@@ -269,7 +290,7 @@ def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, s
                frameon=False)
     fig.suptitle("Every segment: declared lines (median per speed, dots: segments) and peaks no declared line fits",
                  fontsize=10)
-    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4), 1, 1))
+    _tight_layout(fig, rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4), 1, 1))
     return _save(fig, path)
 
 
@@ -329,5 +350,5 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
     ax.set_title(f"Peaks no declared line explains (fap <= {max_fap:g}); marker area ~ amplitude; "
                  "dashed: declared lines", fontsize=9)
     ax.legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
+    _tight_layout(fig)
     return _save(fig, path)

@@ -151,13 +151,8 @@ def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = 
     counts = np.empty(len(edges) - 1)
 
     def block_levels(blocks, masked=True):  # rows of equal width, NaN for masked bins
-        if masked:
-            ref = np.nanmedian(blocks, axis=1, keepdims=True) / math.log(2)
-        else:  # no NaN: the same median, from a (vectorised) sort rather than nanmedian's masked one
-            s = np.sort(blocks, axis=1)
-            w = s.shape[1]
-            med = s[:, w // 2] if w % 2 else (s[:, w // 2 - 1] + s[:, w // 2]) / 2
-            ref = med[:, None] / math.log(2)
+        # the rows' medians (nanmedian's numbers) from one vectorised sort: NaN sorts last
+        ref = _row_medians(blocks, masked)[:, None] / math.log(2)
         below = blocks < 10 * ref
         cnt = np.sum(below, axis=1)
         with np.errstate(invalid="ignore"):
@@ -196,6 +191,22 @@ def noise_blocks(power: np.ndarray, width: int = 200, mask: np.ndarray | None = 
             levels[n_grow:n_grow + n_full], counts[n_grow:n_grow + n_full] = lev, cnt
     good = np.isfinite(levels)
     return centres[good], levels[good], counts[good]
+
+
+def _row_medians(rows: np.ndarray, masked: bool = True) -> np.ndarray:
+    """The median of every row of ``rows`` leaving NaN out (``np.nanmedian(rows, axis=1)``, the same
+    numbers in the rows' precision; NaN for a row of NaN only) from one sort, without the masked
+    arrays ``nanmedian`` uses on short rows (most of its time); ``masked``: False when no NaN."""
+    s = np.sort(rows, axis=1)
+    w = s.shape[1]
+    if not masked:
+        return s[:, w // 2] if w % 2 else (s[:, w // 2 - 1] + s[:, w // 2]) / 2
+    m = w - np.count_nonzero(np.isnan(s), axis=1)
+    r = np.arange(len(s))
+    lo = s[r, np.maximum(m - 1, 0) // 2]
+    hi = s[r, np.minimum(m // 2, w - 1)]
+    med = np.where(m % 2 == 1, lo, (lo + hi) / 2)
+    return np.where(m > 0, med, np.nan)
 
 
 #: the smallest positive normal double: a false-alarm probability below it is not 0 but unknown
