@@ -121,9 +121,10 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
     else:
         raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
     Lt = np.zeros(stats.G.shape)
-    for i in range(S):
-        lam, U = np.linalg.eigh(stats.G[i])
-        Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam, 0.0, None))[:, None] * U.T)
+    if S:   # one batched eigen-decomposition (the same LAPACK call on each segment's matrix)
+        lam, U = np.linalg.eigh(stats.G)
+        for i in range(S):
+            Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam[i], 0.0, None))[:, None] * U[i].T)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
     decay_free = np.array([a != "const" for a in amp_law], bool)
     method = "independent" if se == "independent" else "covariance"
@@ -473,6 +474,10 @@ class JointFit:
         model = FrictionModel(law, directions["positive"], directions["negative"], unit=data.unit, terms=terms,
                               not_identified=not_identified, notes=notes, name=self.name or law,
                               meta={"fit": settings})
+        if getattr(self, "_predict_only", False):
+            # a held-out fold's model (:func:`_fold_fit`): only its predictions are read
+            self.harmonics_, self.model_ = specs, model
+            return self
         model.rmse = _safe_rmse(model, data)
         flags = inverted_sign(model, data) + negative_viscous(model, data)
         if self.check:
@@ -480,7 +485,7 @@ class JointFit:
                 _warn(msg)
         if self.holdout:
             model.rmse_holdout, model.rmse_holdout_reason = holdout(
-                lambda tr: refit(model, tr, holdout=None), data, by=self.holdout, folds=self.folds)
+                lambda tr: _fold_fit(model, tr), data, by=self.holdout, folds=self.folds)
         self.harmonics_, self.model_ = specs, model
         return self
 
@@ -533,6 +538,15 @@ _SETTINGS = tuple(inspect.signature(JointFit.__init__).parameters)[1:]
 def clone(estimator: JointFit) -> JointFit:
     """A new, unfitted estimator with copies of the settings of ``estimator``."""
     return type(estimator)(**copy.deepcopy(estimator.get_params()))
+
+
+def _fold_fit(model: FrictionModel, data: FitData) -> FrictionModel:
+    """``refit(model, data, holdout=None)`` for a held-out fold, whose model is only asked for its
+    predictions: the same parameters, without the in-sample rmse and the checks' flags (which
+    :meth:`JointFit.fit` would compute on the fold's training data and nobody reads)."""
+    est = JointFit.from_model(model).set_params(se="covariance", check=False, holdout=None)
+    est._predict_only = True
+    return est.fit(data).model_
 
 
 def _warn(message: str) -> None:
