@@ -112,3 +112,19 @@ def test_fold_fit_predicts_as_refit(small):
     assert quick.rmse is None and full.rmse is not None     # the unread in-sample rmse is skipped
     ref, _ = holdout(lambda tr: joint.refit(m, tr, holdout=None), small, by="segment", folds=3)
     assert m.rmse_holdout == ref
+
+
+def test_weighted_design_is_the_full_contraction(small):
+    """``_Problem.weighted_design`` against ``Lt @ design`` contracted over all local columns (the
+    formula it replaces): every entry is one product plus exact zeros, so equal bit for bit; with
+    the inertia column too."""
+    from gearspec.identify.stats import segment_stats
+
+    pos = small.direction_subset(1)
+    for acc in (False, True):
+        stats = segment_stats(pos, [0.8], acc=acc)
+        prob = joint._make_problem(stats, "silo4", [{"frequency": 0.8}], "segment")
+        for vs, decay in ((1.5, 0.0), (3.0, 0.02)):
+            M = prob.design([vs], np.array([decay]))
+            full = np.einsum("spq,sql->spl", prob.Lt, M).reshape(-1, M.shape[2])
+            assert np.array_equal(prob.weighted_design([vs], np.array([decay])), full)

@@ -88,10 +88,31 @@ class _Problem:
         M[:, 2 + 2 * k, nb + 2 * k + 1] = fac
         return M
 
+    def weighted_design(self, nonlin_base, decays):
+        """``Lt @ design`` per segment, ``(S * P, L)``, from the few local columns each linear
+        parameter enters (the level, the line's two, the inertia's): the same products as the full
+        contraction over ``design``'s zeros, each entry one product, bit for bit."""
+        st, Lt = self.stats, self.Lt
+        S, P = st.g.shape
+        nb, K = len(self.basis.lin), self.K
+        L = nb + 2 * K + int(st.acc)
+        A = np.zeros((S, P, L))
+        if st.acc:
+            A[:, :, L - 1] = Lt[:, :, P - 1]
+        if nb:
+            cols = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
+            A[:, :, :nb] = Lt[:, :, :1] * cols[:, None, :]
+        if K:
+            fac = (self.factors(decays) * st.sampled)[:, None, :]
+            A[:, :, nb:nb + 2 * K:2] = Lt[:, :, 1:1 + 2 * K:2] * fac
+            A[:, :, nb + 1:nb + 2 * K:2] = Lt[:, :, 2:2 + 2 * K:2] * fac
+        return A.reshape(-1, L)
+
     def solve_linear(self, nonlin_base, decays):
-        M = self.design(nonlin_base, decays)
-        A = np.einsum("spq,sql->spl", self.Lt, M).reshape(-1, M.shape[2])
-        rhs = np.einsum("spq,sq->sp", self.Lt, self.stats.beta_hat).ravel()
+        A = self.weighted_design(nonlin_base, decays)
+        rhs = self.__dict__.get("_rhs")
+        if rhs is None:      # the weighted local coefficients: the same for every nonlinear value
+            rhs = self._rhs = np.einsum("spq,sq->sp", self.Lt, self.stats.beta_hat).ravel()
         nonneg = [j for j, nm in enumerate(self.basis.lin) if nm in self.basis.nonneg]
         if nonneg:
             lo = np.full(A.shape[1], -np.inf)
