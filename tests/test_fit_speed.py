@@ -128,3 +128,24 @@ def test_weighted_design_is_the_full_contraction(small):
             M = prob.design([vs], np.array([decay]))
             full = np.einsum("spq,sql->spl", prob.Lt, M).reshape(-1, M.shape[2])
             assert np.array_equal(prob.weighted_design([vs], np.array([decay])), full)
+
+
+def test_grid_costs_are_reused_only_for_the_same_columns(small):
+    """The grid's costs of :func:`~gearspec.identify.jointlines.grid_starts` are kept per statistics
+    and columns: a second problem with the same statistics and columns (a held shape at decay 0 is
+    the same column) starts where a fresh computation starts; other weights are not reused."""
+    from gearspec.identify.jointlines import grid_starts, held
+    from gearspec.identify.stats import segment_stats
+
+    pos = small.direction_subset(1)
+    stats = segment_stats(pos, [0.8])
+    prob = joint._make_problem(stats, "silo4", [{"frequency": 0.8}], "segment")
+    first = grid_starts(held(prob, [0]))
+    assert len(stats._grid_costs) > 0
+    fresh = joint._make_problem(segment_stats(pos.subset(np.arange(len(pos))), [0.8]), "silo4",
+                                [{"frequency": 0.8}], "segment")
+    assert grid_starts(prob)[0] == grid_starts(fresh)[0] == first[0]
+    n = len(stats._grid_costs)
+    uniform = joint._make_problem(stats, "silo4", [{"frequency": 0.8}], "uniform")
+    grid_starts(uniform)
+    assert len(stats._grid_costs) == 2 * n          # other weights: other costs, computed
