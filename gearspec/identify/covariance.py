@@ -100,6 +100,19 @@ def _bread(J: np.ndarray) -> np.ndarray:
     return np.linalg.pinv(Js.T @ Js, rcond=1e-12, hermitian=True) / np.outer(cn, cn)
 
 
+def _residual_maker(Jc: np.ndarray, bread: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``A_c = (I - H_cc)^-1/2`` of a cluster with rows ``Jc`` (``H_cc = Jc B Jc^T``, ``B`` = ``bread``)
+    without forming the rows x rows matrices: ``A_c = I + W diag(s) W^T``.  ``H_cc`` has rank at most
+    p: with ``Jc = Q R`` (reduced QR) it is ``Q (R B R^T) Q^T``, so ``I - H_cc`` has the eigenvalues
+    ``1 - mu`` (``mu``: those of ``R B R^T``, eigenvectors ``W = Q V``) and 1 on the rest; each
+    eigenvalue held at least :data:`_MIN_RESIDUAL_FRACTION`, as in the dense form
+    ``U clip(lambda)^-1/2 U^T`` it replaces (the same matrix; cost rows x p^2, not rows^3)."""
+    Qc, Rc = np.linalg.qr(Jc)
+    M = Rc @ bread @ Rc.T
+    mu, V = np.linalg.eigh(0.5 * (M + M.T))
+    return Qc @ V, 1.0 / np.sqrt(np.clip(1.0 - mu, _MIN_RESIDUAL_FRACTION, None)) - 1.0
+
+
 def _cr2(J: np.ndarray, r: np.ndarray, row_cluster: np.ndarray, bread: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The CR2 covariance ``B (sum_c u_c u_c^T) B`` with ``u_c = J_c^T A_c r_c``, and the Bell-McCaffrey
     degrees of freedom of each parameter (see :func:`fit_covariance`)."""
@@ -111,21 +124,19 @@ def _cr2(J: np.ndarray, r: np.ndarray, row_cluster: np.ndarray, bread: np.ndarra
     JA = []  # A_c J_c per cluster
     for rows in groups:
         Jc, rc = J[rows], r[rows]
-        H = Jc @ bread @ Jc.T
-        lam, U = np.linalg.eigh(np.eye(len(rows)) - 0.5 * (H + H.T))
-        A = (U / np.sqrt(np.clip(lam, _MIN_RESIDUAL_FRACTION, None))) @ U.T
-        u = Jc.T @ (A @ rc)
+        W, s = _residual_maker(Jc, bread)
+        u = Jc.T @ (rc + W @ (s * (W.T @ rc)))
         meat += np.outer(u, u)
-        JA.append((Jc, A @ Jc))
+        JA.append((Jc, Jc + W @ (s[:, None] * (W.T @ Jc))))
     # Bell-McCaffrey: for parameter j, g_c = A_c J_c B e_j on the rows of cluster c; with
-    # G = (I - H) [g_1 .. g_C], G^T G = diag(|g_c|^2) - Q^T B Q, Q_c = J_c^T g_c; df = tr^2 / |.|_F^2
+    # G = (I - H) [g_1 .. g_C], G^T G = diag(|g_c|^2) - Q^T B Q, Q_c = J_c^T g_c; df = tr^2 / |.|_F^2.
+    # All parameters at once: column j of A_c J_c B is g_c of parameter j
+    gs = [AJ @ bread for _, AJ in JA]                                   # (n_c, p) per cluster
+    D = np.array([np.einsum("ij,ij->j", g, g) for g in gs])            # (C, p): |g_c|^2
+    Q = np.stack([Jc.T @ g for (Jc, _), g in zip(JA, gs)], axis=-1)    # (p, p, C): [:, j, c] = Q_c of j
     df = np.empty(p)
-    for j in range(p):
-        w = bread[:, j]
-        g = [AJ @ w for _, AJ in JA]
-        D = np.array([gc @ gc for gc in g])
-        Q = np.column_stack([Jc.T @ gc for (Jc, _), gc in zip(JA, g)])
-        GG = np.diag(D) - Q.T @ bread @ Q
+    for j in range(p):          # one C x C matrix at a time (not p of them: C can be thousands of blocks)
+        GG = np.diag(D[:, j]) - Q[:, j, :].T @ bread @ Q[:, j, :]
         den = float(np.sum(GG * GG))
         df[j] = float(np.trace(GG)) ** 2 / den if den > 0 else np.inf
     return bread @ meat @ bread, df

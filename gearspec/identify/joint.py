@@ -88,10 +88,31 @@ class _Problem:
         M[:, 2 + 2 * k, nb + 2 * k + 1] = fac
         return M
 
+    def weighted_design(self, nonlin_base, decays):
+        """``Lt @ design`` per segment, ``(S * P, L)``, from the few local columns each linear
+        parameter enters (the level, the line's two, the inertia's): the same products as the full
+        contraction over ``design``'s zeros, each entry one product, bit for bit."""
+        st, Lt = self.stats, self.Lt
+        S, P = st.g.shape
+        nb, K = len(self.basis.lin), self.K
+        L = nb + 2 * K + int(st.acc)
+        A = np.zeros((S, P, L))
+        if st.acc:
+            A[:, :, L - 1] = Lt[:, :, P - 1]
+        if nb:
+            cols = self.basis.columns(st.speed, st.load if st.load is not None else np.zeros(S), *nonlin_base)
+            A[:, :, :nb] = Lt[:, :, :1] * cols[:, None, :]
+        if K:
+            fac = (self.factors(decays) * st.sampled)[:, None, :]
+            A[:, :, nb:nb + 2 * K:2] = Lt[:, :, 1:1 + 2 * K:2] * fac
+            A[:, :, nb + 1:nb + 2 * K:2] = Lt[:, :, 2:2 + 2 * K:2] * fac
+        return A.reshape(-1, L)
+
     def solve_linear(self, nonlin_base, decays):
-        M = self.design(nonlin_base, decays)
-        A = np.einsum("spq,sql->spl", self.Lt, M).reshape(-1, M.shape[2])
-        rhs = np.einsum("spq,sq->sp", self.Lt, self.stats.beta_hat).ravel()
+        A = self.weighted_design(nonlin_base, decays)
+        rhs = self.__dict__.get("_rhs")
+        if rhs is None:      # the weighted local coefficients: the same for every nonlinear value
+            rhs = self._rhs = np.einsum("spq,sq->sp", self.Lt, self.stats.beta_hat).ravel()
         nonneg = [j for j, nm in enumerate(self.basis.lin) if nm in self.basis.nonneg]
         if nonneg:
             lo = np.full(A.shape[1], -np.inf)
@@ -121,9 +142,10 @@ def _make_problem(stats: SegmentStats, law: str, harmonics: list[dict], weights:
     else:
         raise InputError(f"weights must be 'segment' or 'uniform', got '{weights}'")
     Lt = np.zeros(stats.G.shape)
-    for i in range(S):
-        lam, U = np.linalg.eigh(stats.G[i])
-        Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam, 0.0, None))[:, None] * U.T)
+    if S:   # one batched eigen-decomposition (the same LAPACK call on each segment's matrix)
+        lam, U = np.linalg.eigh(stats.G)
+        for i in range(S):
+            Lt[i] = math.sqrt(w[i]) * (np.sqrt(np.clip(lam[i], 0.0, None))[:, None] * U[i].T)
     amp_law = [("const" if h.get("decay", True) is False else h.get("law", "exp")) for h in harmonics]
     decay_free = np.array([a != "const" for a in amp_law], bool)
     method = "independent" if se == "independent" else "covariance"
@@ -473,6 +495,10 @@ class JointFit:
         model = FrictionModel(law, directions["positive"], directions["negative"], unit=data.unit, terms=terms,
                               not_identified=not_identified, notes=notes, name=self.name or law,
                               meta={"fit": settings})
+        if getattr(self, "_predict_only", False):
+            # a held-out fold's model (:func:`_fold_fit`): only its predictions are read
+            self.harmonics_, self.model_ = specs, model
+            return self
         model.rmse = _safe_rmse(model, data)
         flags = inverted_sign(model, data) + negative_viscous(model, data)
         if self.check:
@@ -480,7 +506,7 @@ class JointFit:
                 _warn(msg)
         if self.holdout:
             model.rmse_holdout, model.rmse_holdout_reason = holdout(
-                lambda tr: refit(model, tr, holdout=None), data, by=self.holdout, folds=self.folds)
+                lambda tr: _fold_fit(model, tr), data, by=self.holdout, folds=self.folds)
         self.harmonics_, self.model_ = specs, model
         return self
 
@@ -533,6 +559,15 @@ _SETTINGS = tuple(inspect.signature(JointFit.__init__).parameters)[1:]
 def clone(estimator: JointFit) -> JointFit:
     """A new, unfitted estimator with copies of the settings of ``estimator``."""
     return type(estimator)(**copy.deepcopy(estimator.get_params()))
+
+
+def _fold_fit(model: FrictionModel, data: FitData) -> FrictionModel:
+    """``refit(model, data, holdout=None)`` for a held-out fold, whose model is only asked for its
+    predictions: the same parameters, without the in-sample rmse and the checks' flags (which
+    :meth:`JointFit.fit` would compute on the fold's training data and nobody reads)."""
+    est = JointFit.from_model(model).set_params(se="covariance", check=False, holdout=None)
+    est._predict_only = True
+    return est.fit(data).model_
 
 
 def _warn(message: str) -> None:

@@ -161,9 +161,18 @@ def grid_starts(prob, init=None, at=None) -> tuple[list[list[float]], np.ndarray
     if at is not None:
         return [list(at)], dec0, (math.log(nl_lo), math.log(nl_hi))
     costs = []
+    # the grid's costs are kept on the statistics: the fit with every shape held (:func:`faint_lines`)
+    # and the fit that follows it start from the same grid with the same columns (a decay of 0 is a
+    # constant amplitude), so they are computed once; the key holds everything a cost depends on
+    memo = prob.stats.__dict__.setdefault("_grid_costs", {})
+    key0 = (prob.basis.lin, prob.basis.nonlin, prob.basis.columns, prob.basis.nonneg, prob.weights.tobytes(),
+            (prob.factors(dec0) * prob.stats.sampled).tobytes())
     for vs in grid_vs:
-        _, r = prob.solve_linear([] if vs is None else [vs], dec0)
-        costs.append(float(r @ r))
+        key = key0 + (None if vs is None else float(vs),)
+        if key not in memo:
+            _, r = prob.solve_linear([] if vs is None else [vs], dec0)
+            memo[key] = float(r @ r)
+        costs.append(memo[key])
     # starts: every local minimum of the grid cost (the best three), not only the lowest grid
     # point -- a sharp minimum (noiseless or precise points) can fall between two grid points and
     # cost more there than a broad local minimum elsewhere does

@@ -23,7 +23,7 @@ from ..segment import find_segments, free_motion
 from .joint import fit, refit
 from .published import line_amplitudes, silo4_published
 from .stats import harmonic_specs
-from .validate import _safe_rmse, holdout, segment_errors
+from .validate import _safe_rmse, holdout, segment_errors, segment_row
 
 __all__ = ["compare", "FitResult", "identify_recording"]
 
@@ -165,17 +165,32 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
 def _segment_errors(models: dict, data: FitData) -> dict:
     """:func:`segment_errors` of every model, the data cut into one piece per segment once (a
     segment's rows are found by one sort, not by a mask over all rows per segment and model: the
-    cost grows with rows, not rows x segments); the same rows as on the whole data.  Data that
-    hold free motion (blocks grouped by stretch) go through :func:`segment_errors` as they are."""
+    cost grows with rows, not rows x segments); the same rows, in the same order, as on the whole
+    data.  Each model is evaluated once per direction on that direction's rows (not once per
+    segment): the predictions are the same sample by sample.  Data that hold free motion (blocks
+    grouped by stretch) go through :func:`segment_errors` as they are."""
     if data.free_motion or len(data) == 0:
         return {name: segment_errors(m, data) for name, m in models.items()}
     group = data.groups("segment")
     order = np.argsort(group, kind="stable")
     _, starts = np.unique(group[order], return_index=True)
     bounds = np.append(starts, len(order))
-    pieces = [data.subset(order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+    pieces = [order[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    first_dir = data.direction[order[starts]]
+    inputs = data.inputs()
     out = {}
     for name, m in models.items():
-        rows = [df for df in (segment_errors(m, piece) for piece in pieces) if not df.empty]
-        out[name] = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame([])
+        preds = {}
+        for d in np.unique(first_dir):
+            rows = np.concatenate([p for p, fd in zip(pieces, first_dir) if fd == d])
+            try:
+                pred = m.evaluate(**{k: (None if x is None else x[rows]) for k, x in inputs.items()})
+            except InputError:      # a direction the model cannot predict: its segments left out
+                continue
+            at = 0
+            for j in np.flatnonzero(first_dir == d):
+                preds[j] = pred[at:at + len(pieces[j])]
+                at += len(pieces[j])
+        recs = [segment_row(data, pieces[j], preds[j], group[pieces[j][0]]) for j in range(len(pieces)) if j in preds]
+        out[name] = pd.DataFrame(recs) if recs else pd.DataFrame([])
     return out

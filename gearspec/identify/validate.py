@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
 
-__all__ = ["holdout", "holdout_rmse", "segment_errors", "inverted_sign", "negative_viscous"]
+__all__ = ["holdout", "holdout_rmse", "segment_errors", "segment_row", "inverted_sign", "negative_viscous"]
 
 
 def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
@@ -80,21 +80,28 @@ def segment_errors(model: FrictionModel, data: FitData) -> pd.DataFrame:
     rows = []
     group = data.groups("segment")
     for sid in np.unique(group):
-        sub = data.subset(group == sid)
-        d = int(sub.direction[0])
+        ii = np.flatnonzero(group == sid)
         try:
-            pred = model.evaluate(**sub.inputs())
+            pred = model.evaluate(**data.subset(ii).inputs())
         except InputError:
             continue
-        err = d * (pred - sub.y)
-        level = float(np.mean(d * sub.y))
-        rows.append({"segment": int(sid), "run": int(sub.run[0]), "direction": d,
-                     "speed": float(np.mean(np.abs(sub.v))), "n": len(sub), "level": level,
-                     "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
-                     "rmse": float(np.sqrt(np.mean(err ** 2))),
-                     # in percent of the mean friction; undefined (NaN) where that mean is 0
-                     "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")})
+        rows.append(segment_row(data, ii, pred, sid))
     return pd.DataFrame(rows)
+
+
+def segment_row(data: FitData, ii: np.ndarray, pred: np.ndarray, sid) -> dict:
+    """One row of :func:`segment_errors`: segment (or stretch) ``sid`` of ``data``, its rows ``ii`` in
+    time order, and the model's prediction ``pred`` there (torque, Nm or N)."""
+    d = int(data.direction[ii[0]])
+    y = data.y[ii]
+    err = d * (pred - y)
+    level = float(np.mean(d * y))
+    return {"segment": int(sid), "run": int(data.run[ii[0]]), "direction": d,
+            "speed": float(np.mean(np.abs(data.v[ii]))), "n": len(ii), "level": level,
+            "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
+            "rmse": float(np.sqrt(np.mean(err ** 2))),
+            # in percent of the mean friction; undefined (NaN) where that mean is 0
+            "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")}
 
 
 # ---------------------------------------------------------------------- checks of a fitted model
