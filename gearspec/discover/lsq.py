@@ -72,17 +72,21 @@ class NormalSolver:
         settle at rounding level."""
         Xn, Li = self.X, self.factor
         c = Li.T @ (Li @ (Xn.T @ y))
-        prev = np.inf
+        prev, ok = np.inf, False
         for k in range(MAX_STEPS):
             dc = Li.T @ (Li @ (Xn.T @ (y - Xn @ c)))
             c = c + dc
             size, step = max(float(np.max(np.abs(c))), 1e-300), float(np.max(np.abs(dc)))
             # the first correction is the normal equations' error (about eps x cond^2); once it
             # is below FIRST, the refined c is at the rounding floor
-            if step <= TOL * size or (k == 0 and step <= FIRST * size) or step > 0.5 * prev:
+            if step <= TOL * size or (k == 0 and step <= FIRST * size):
+                ok = True
+                break
+            ok = step <= ACCEPT * size
+            if step > 0.5 * prev:         # stagnating: at the rounding floor
                 break
             prev = step
-        return c if step <= ACCEPT * size else None
+        return c if ok else None
 
     def solve(self, y: np.ndarray) -> np.ndarray | None:
         """Coefficients of ``X`` (None: refused, see :meth:`coef_scaled`)."""
