@@ -29,6 +29,7 @@ MIN_RATIO = 1e-5
 MAX_STEPS = 5
 TOL = 1e-15
 ACCEPT = 1e-9
+#: a first correction below FIRST x the size leaves the refined coefficients at the rounding floor
 FIRST = 1e-7
 #: smaller designs (rows x columns) are left to QR, which is as fast there (measured: 0.85x at
 #: 240 x 12, 1.4x at 720 x 12, 1.0x at 530 x 20, 2.3x at 2400 x 12 on captured discover fits)
