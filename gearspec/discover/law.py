@@ -20,6 +20,7 @@ from scipy import optimize
 from ..core.crossval import deal_folds, group_summary, held_out
 from ..model import FrictionModel
 from .library import FAMILIES, _g
+from .lsq import NormalSolver
 from .moments import Moments
 
 __all__ = ["Part", "LawFit", "fit_law", "fold_ids", "canonical", "complexity"]
@@ -173,6 +174,28 @@ def _solve(X, y):
     return w, U
 
 
+def _solve_fast(X, y, basis: bool = True):
+    """:func:`_solve`'s coefficients through the normal equations (:class:`.lsq.NormalSolver`)
+    where the design allows, else by :func:`_solve`.  Returns the coefficients and what
+    :func:`_project_out` needs: the solver, or (with ``basis``) the QR path's orthonormal basis."""
+    ns = NormalSolver.of(X)
+    w = ns.solve(y) if ns is not None else None
+    if w is not None:
+        return w, ns
+    w, U = _solve(X, y)
+    return w, (U if basis else None)
+
+
+def _project_out(ns, X, v):
+    """``v`` minus its projection on the column space of ``X``; ``ns`` from :func:`_solve_fast`."""
+    if isinstance(ns, NormalSolver):
+        r = ns.residual(v)
+        if r is not None:
+            return r
+        ns = _solve(X, v)[1]
+    return v - ns @ (ns.T @ v)
+
+
 # ---------------------------------------------------------------------- fit
 @dataclass
 class LawFit:
@@ -261,30 +284,29 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
             cache.clear()
             A, dA = _multipliers(parts, lay, m, zz, deriv=True, slots=slots)
             X = (A[:, None, :] * Pk).reshape(-1, ncol)
-            w, U = _solve(X, q)
-            cache[key] = (X, w, U, dA)
+            w, ns = _solve_fast(X, q)
+            cache[key] = (X, w, ns, dA)
         return cache[key]
 
     def resid(zz):
-        X, w, U, _ = state(zz)
+        X, w, _, _ = state(zz)
         return q - X @ w
 
     def sse_at(zz):
         A = _multipliers(parts, lay, m, zz, slots=slots)
         X = (A[:, None, :] * Pk).reshape(-1, ncol)
-        r = q - X @ _solve(X, q)[0]
+        r = q - X @ _solve_fast(X, q, basis=False)[0]
         return float(r @ r)
 
     def jac(zz):
         # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w
-        X, w, U, dA = state(zz)
+        X, w, ns, dA = state(zz)
         J = np.empty((len(q), len(zz)))
         for k, cols in enumerate(dA):
             v = np.zeros((m.S, m.K))
             for j, d in cols:
                 v += (d * w[j])[:, None] * Pk[:, :, j]
-            v = v.reshape(-1)
-            J[:, k] = -(v - U @ (U.T @ v))
+            J[:, k] = -_project_out(ns, X, v.reshape(-1))
         return J
 
     if refine and len(z) and scan:

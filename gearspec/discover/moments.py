@@ -57,6 +57,11 @@ class Moments(GroupNormals):
         Reference temperature (mean over the samples) of the temperature basis.
     unit : str
     notes : list of str
+    group : ndarray, (S,) or None
+        The held-out unit of each segment where it is not the segment itself: a block of free
+        motion's whole stretch of motion (:attr:`gearspec.fitdata.FitData.group`); None when every
+        segment is its own unit (plateaus, sweeps).  Folds, paired comparisons and the held-out
+        Z's clusters follow it (:meth:`groups`).
     Gb, bb, yyb : ndarray, (S, B, K, K), (S, B, K), (S, B), or None
         The same normal equations in ``B`` consecutive blocks of every segment's samples
         (``np.array_split`` of them, as :func:`gearspec.core.crossval.z_statistic` splits a
@@ -82,13 +87,14 @@ class Moments(GroupNormals):
     vabs: np.ndarray | None = None
     unit: str = "rad"
     notes: list = field(default_factory=list)
+    group: np.ndarray | None = None
     Gb: np.ndarray | None = None
     bb: np.ndarray | None = None
     yyb: np.ndarray | None = None
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     per_group = GroupNormals.per_group + ("segment", "run", "direction", "speed", "P", "q", "rest", "load",
-                                          "temperature", "cycles", "noise", "vabs", "Gb", "bb", "yyb")
+                                          "temperature", "cycles", "noise", "vabs", "group", "Gb", "bb", "yyb")
 
     def __post_init__(self):
         if self.P is None:
@@ -243,6 +249,18 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     gn = GroupNormals(*(np.concatenate([c[0][k] for c in parts]) for k in range(4)))
     blocks = {} if change is not None else {k: np.concatenate([c[1][k] for c in parts]) for k in ("Gb", "bb", "yyb")}
     noise = np.concatenate([c[2] for c in parts])
+    group = None
+    if data.group is not None and change is not None:
+        group = np.asarray(data.group)[order][starts].astype(np.int64)
+        block = group != sids
+        if block.any():
+            # a block of free motion (a few samples over which the speed changes) cannot tell its
+            # noise from the friction's change within it (its own estimate was about 100 times the
+            # noise variance on bell moves): blocks take the other segments' median, or -- with
+            # none -- held-out comparisons use the spread over stretches of motion (pool._excess)
+            noise = np.where(block, np.nan, noise)
+        else:
+            group = None
     vm = np.array([np.mean(v[sl]) for sl in segs])
     varying = sum(np.ptp(v[sl]) > 1e-9 * max(abs(m), 1e-300) for sl, m in zip(segs, vm))
     if varying:
@@ -259,7 +277,7 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
                    run=data.run[order][starts].astype(np.int64), speed=np.abs(vm), vabs=seg_mean(np.abs(data.v)),
                    direction=np.array([int(np.sign(np.sum(dirs[sl]))) or int(dirs[sl][0]) for sl in segs], np.int64),
                    load=seg_mean(load), temperature=seg_mean(temp), cycles=cycles, noise=_fill_noise(noise),
-                   t_ref=t_ref, unit=data.unit, notes=notes, **blocks)
+                   t_ref=t_ref, unit=data.unit, notes=notes, group=group, **blocks)
 
 
 #: samples x sample bases held at once while reducing (a chunk of whole segments; at least one)
