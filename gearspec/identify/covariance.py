@@ -51,6 +51,10 @@ CLUSTER_MARGIN = 2
 #: its residual is inflated by at most 1 / sqrt of it, 10x)
 _MIN_RESIDUAL_FRACTION = 1e-2
 
+#: the degrees of freedom's |GG|_F^2 from p x p products is trusted when it keeps at least this share of
+#: the terms it is the difference of; below, it is summed from GG's rows (see :func:`_cr2`)
+_DF_CANCEL = 1e-4
+
 _Z975 = float(stats.norm.ppf(0.975))
 
 
@@ -101,45 +105,71 @@ def _bread(J: np.ndarray) -> np.ndarray:
 
 
 def _residual_maker(Jc: np.ndarray, bread: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``A_c = (I - H_cc)^-1/2`` of a cluster with rows ``Jc`` (``H_cc = Jc B Jc^T``, ``B`` = ``bread``)
+    """``A_c = (I - H_cc)^-1/2`` of clusters with rows ``Jc`` (``H_cc = Jc B Jc^T``, ``B`` = ``bread``)
     without forming the rows x rows matrices: ``A_c = I + W diag(s) W^T``.  ``H_cc`` has rank at most
     p: with ``Jc = Q R`` (reduced QR) it is ``Q (R B R^T) Q^T``, so ``I - H_cc`` has the eigenvalues
     ``1 - mu`` (``mu``: those of ``R B R^T``, eigenvectors ``W = Q V``) and 1 on the rest; each
     eigenvalue held at least :data:`_MIN_RESIDUAL_FRACTION`, as in the dense form
-    ``U clip(lambda)^-1/2 U^T`` it replaces (the same matrix; cost rows x p^2, not rows^3)."""
+    ``U clip(lambda)^-1/2 U^T`` it replaces (the same matrix; cost rows x p^2, not rows^3).
+    ``Jc`` may be a stack ``(clusters, rows, p)`` of clusters of one size: one batched QR and
+    eigen-decomposition for all of them."""
     Qc, Rc = np.linalg.qr(Jc)
-    M = Rc @ bread @ Rc.T
-    mu, V = np.linalg.eigh(0.5 * (M + M.T))
+    M = Rc @ bread @ np.swapaxes(Rc, -1, -2)
+    mu, V = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
     return Qc @ V, 1.0 / np.sqrt(np.clip(1.0 - mu, _MIN_RESIDUAL_FRACTION, None)) - 1.0
 
 
 def _cr2(J: np.ndarray, r: np.ndarray, row_cluster: np.ndarray, bread: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The CR2 covariance ``B (sum_c u_c u_c^T) B`` with ``u_c = J_c^T A_c r_c``, and the Bell-McCaffrey
-    degrees of freedom of each parameter (see :func:`fit_covariance`)."""
+    degrees of freedom of each parameter (see :func:`fit_covariance`).  Clusters of the same number
+    of rows are handled as one stack (free motion has thousands of small blocks)."""
     p = J.shape[1]
-    meat = np.zeros((p, p))
     order = np.argsort(row_cluster, kind="stable")
-    _, starts = np.unique(row_cluster[order], return_index=True)
-    groups = np.split(order, starts[1:])
-    JA = []  # A_c J_c per cluster
-    for rows in groups:
-        Jc, rc = J[rows], r[rows]
+    _, starts, sizes = np.unique(row_cluster[order], return_index=True, return_counts=True)
+    U, D, Q = [], [], []   # per cluster: u_c (p), |g_c|^2 per parameter (p), Q_c = J_c^T g_c (p, p)
+    for n_c in np.unique(sizes):
+        pick = starts[sizes == n_c]
+        rows = order[pick[:, None] + np.arange(n_c)]                    # (k, n_c): row indices
+        Jc, rc = J[rows], r[rows]                                        # (k, n_c, p), (k, n_c)
         W, s = _residual_maker(Jc, bread)
-        u = Jc.T @ (rc + W @ (s * (W.T @ rc)))
-        meat += np.outer(u, u)
-        JA.append((Jc, Jc + W @ (s[:, None] * (W.T @ Jc))))
-    # Bell-McCaffrey: for parameter j, g_c = A_c J_c B e_j on the rows of cluster c; with
-    # G = (I - H) [g_1 .. g_C], G^T G = diag(|g_c|^2) - Q^T B Q, Q_c = J_c^T g_c; df = tr^2 / |.|_F^2.
-    # All parameters at once: column j of A_c J_c B is g_c of parameter j
-    gs = [AJ @ bread for _, AJ in JA]                                   # (n_c, p) per cluster
-    D = np.array([np.einsum("ij,ij->j", g, g) for g in gs])            # (C, p): |g_c|^2
-    Q = np.stack([Jc.T @ g for (Jc, _), g in zip(JA, gs)], axis=-1)    # (p, p, C): [:, j, c] = Q_c of j
+        Wt = np.swapaxes(W, -1, -2)
+        Arc = rc + np.einsum("kim,km->ki", W, s * np.einsum("kim,ki->km", W, rc))   # A_c r_c
+        U.append(np.einsum("kip,ki->kp", Jc, Arc))
+        AJ = Jc + W @ (s[:, :, None] * (Wt @ Jc))
+        g = AJ @ bread                                                   # column j: g_c of parameter j
+        D.append(np.einsum("kij,kij->kj", g, g))
+        Q.append(np.swapaxes(Jc, -1, -2) @ g)                            # (k, p, p): [:, :, j] = Q_c of j
+    U, D, Q = np.concatenate(U), np.concatenate(D), np.concatenate(Q)
+    meat = U.T @ U
+    # Bell-McCaffrey: for parameter j, with G = (I - H) [g_1 .. g_C], G^T G = GG = diag(D_j) - Q_j^T B Q_j
+    # (Q_j: p x C, column c = Q_c of j); df = tr(GG)^2 / |GG|_F^2.  With many clusters (free motion's
+    # blocks) from p x p products: tr(GG) = sum D_j - tr(B M_j), |GG|_F^2 = sum D_j^2
+    # - 2 sum_c D_cj q_c^T B q_c + tr((B M_j)^2), M_j = Q_j Q_j^T (cost C p^2, not C^2 p).  That sum
+    # cancels where GG is nearly 0 (a parameter one cluster pins): when it keeps less than
+    # _DF_CANCEL of its terms, |GG|_F^2 is summed from GG's rows instead, a block of rows at a time.
     df = np.empty(p)
-    for j in range(p):          # one C x C matrix at a time (not p of them: C can be thousands of blocks)
-        GG = np.diag(D[:, j]) - Q[:, j, :].T @ bread @ Q[:, j, :]
-        den = float(np.sum(GG * GG))
-        df[j] = float(np.trace(GG)) ** 2 / den if den > 0 else np.inf
+    for j in range(p):
+        Qj, Dj = Q[:, :, j], D[:, j]                                     # (C, p): rows q_c
+        BM = bread @ (Qj.T @ Qj)
+        diag = np.einsum("cp,pq,cq->c", Qj, bread, Qj)
+        big = float(Dj @ Dj + np.sum(BM * BM.T))
+        den = big - 2.0 * float(Dj @ diag)
+        if not den > _DF_CANCEL * big:
+            den = _frobenius2(Dj, Qj, bread)
+        tr = float(Dj.sum() - np.trace(BM))
+        df[j] = tr ** 2 / den if den > 0 else np.inf
     return bread @ meat @ bread, df
+
+
+def _frobenius2(Dj: np.ndarray, Qj: np.ndarray, bread: np.ndarray, block: int = 512) -> float:
+    """``|diag(Dj) - Qj B Qj^T|_F^2`` summed a block of rows at a time (memory block x C)."""
+    QB = Qj @ bread
+    total = 0.0
+    for a in range(0, len(Dj), block):
+        rows = QB[a:a + block] @ Qj.T                                   # (block, C) of Q B Q^T
+        rows[np.arange(len(rows)), np.arange(a, a + len(rows))] -= Dj[a:a + block]
+        total += float(np.sum(rows * rows))
+    return total
 
 
 def small_sample_factor(df) -> np.ndarray:
