@@ -136,6 +136,10 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         full[keep] = beta1[:int(keep.sum())]
         _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
+    if ext is not rnd and cand._cache.get("round") is ext:
+        # the candidate's memo of the extended round holds that round's design (rows x terms): not
+        # kept past this candidate (nothing asks for that round again), memory bounded in candidates
+        cand._cache = {}
     return _Folds(dd.y - p0, p1, props, contribution, n_par)
 
 
