@@ -31,6 +31,7 @@ from .context import Round
 from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal
 from .frommodel import state_from_model
+from . import gram
 from .nonlinear import polish, refine
 from .nuisance import admit_partial_lines
 from .detectors import analyse, propose
@@ -240,11 +241,15 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         keep = np.ones(rnd.X.shape[1], bool)
         for k, _ in items:
             keep &= k
-        X = np.column_stack([rnd.X[:, keep]] + [prop.columns(dd) for _, prop in items])
-        Xt = X[tr_rows]
-        G = Xt.T @ Xt
-        beta = solve_normal(G, Xt.T @ dd.y[tr_rows], reference=np.einsum("ij,ij->j", X, X))
-        out[rows] = dd.y[rows] - X[rows] @ beta
+        # the design of this fold's model as column blocks, reduced a bounded number of rows at a
+        # time (never stacked: rows x terms); the reference diagonal from the per-group sums
+        cols = [(rnd.X, keep)] + [prop.columns(dd) for _, prop in items]
+        G, b = gram.normals(cols, dd.y, gram.spans(dd.starts, dd.stops, train))
+        ref = np.concatenate([rnd.ref_diag[keep]] + [np.einsum("ij,ij->j", c, c) for c in cols[1:]])
+        beta = solve_normal(G, b, reference=ref)
+        test = gram.spans(dd.starts, dd.stops, ~train)
+        gram.predict(cols, beta, test, out=out)
+        out[rows] = dd.y[rows] - out[rows]
     return out
 
 
