@@ -138,9 +138,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
     if ext is not rnd and cand._cache.get("round") is ext:
-        # the candidate's memo of the extended round holds that round's design (rows x terms): not
-        # kept past this candidate (nothing asks for that round again), memory bounded in candidates
-        cand._cache = {}
+        cand._cache = {}    # its memo holds the extended round's design (rows x terms), never asked again
     return _Folds(dd.y - p0, p1, props, contribution, n_par)
 
 
@@ -241,14 +239,12 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         keep = np.ones(rnd.X.shape[1], bool)
         for k, _ in items:
             keep &= k
-        # the design of this fold's model as column blocks, reduced a bounded number of rows at a
-        # time (never stacked: rows x terms); the reference diagonal from the per-group sums
+        # this fold's design as column blocks, reduced a chunk of rows at a time (never stacked)
         cols = [(rnd.X, keep)] + [prop.columns(dd) for _, prop in items]
         G, b = gram.normals(cols, dd.y, gram.spans(dd.starts, dd.stops, train))
         ref = np.concatenate([rnd.ref_diag[keep]] + [np.einsum("ij,ij->j", c, c) for c in cols[1:]])
         beta = solve_normal(G, b, reference=ref)
-        test = gram.spans(dd.starts, dd.stops, ~train)
-        gram.predict(cols, beta, test, out=out)
+        gram.predict(cols, beta, gram.spans(dd.starts, dd.stops, ~train), out=out)
         out[rows] = dd.y[rows] - out[rows]
     return out
 
