@@ -12,6 +12,7 @@ offset).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import math
 from collections import OrderedDict
@@ -61,9 +62,11 @@ class Block:
         one first-order column per nonlinear parameter (:meth:`taylor_columns`).  The last few
         computed are cached on the data."""
         cache = dd.cache.setdefault("columns", OrderedDict())
-        ck = (id(self), bool(taylor))
+        # keyed by what the columns depend on: the block's fields (its coefficients only for the
+        # Taylor columns), so that a copy carrying new coefficients reuses its plain columns
+        ck = self._cache_key(taylor)
         hit = cache.get(ck)
-        if hit is not None and hit[0] is self:
+        if hit is not None and (hit[0] is self or ck[0] == "fields"):
             cache.move_to_end(ck)
             return hit[1]
         if taylor:
@@ -79,6 +82,15 @@ class Block:
         while len(cache) > 1 and (len(cache) > _CACHE_SIZE or held > _CACHE_COLUMNS):
             held -= cache.popitem(last=False)[1][1].shape[1]
         return cols
+
+    def _cache_key(self, taylor: bool) -> tuple:
+        """The key of the block's columns in the data's cache: its type and the exact repr of every
+        field (floats repr round-trip); by identity when a field holds an array (repr abbreviates)."""
+        vals = tuple((f.name, getattr(self, f.name)) for f in dataclasses.fields(self)
+                     if taylor or f.name != "coef")
+        if any(isinstance(v, np.ndarray) for _, v in vals):
+            return ("id", id(self), bool(taylor))
+        return ("fields", type(self), repr(vals), bool(taylor))
 
     def taylor_columns(self, dd: DiagnoseData) -> np.ndarray:
         """First-order columns of the nonlinear parameters: the derivative of the block's present

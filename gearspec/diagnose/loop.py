@@ -31,6 +31,7 @@ from .context import Round
 from .data import DiagnoseData
 from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal
 from .frommodel import state_from_model
+from . import gram
 from .nonlinear import polish, refine
 from .nuisance import admit_partial_lines
 from .detectors import analyse, propose
@@ -136,6 +137,8 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         full[keep] = beta1[:int(keep.sum())]
         _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
+    if ext is not rnd and cand._cache.get("round") is ext:
+        cand._cache = {}    # its memo holds the extended round's design (rows x terms), never asked again
     return _Folds(dd.y - p0, p1, props, contribution, n_par)
 
 
@@ -236,11 +239,13 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         keep = np.ones(rnd.X.shape[1], bool)
         for k, _ in items:
             keep &= k
-        X = np.column_stack([rnd.X[:, keep]] + [prop.columns(dd) for _, prop in items])
-        Xt = X[tr_rows]
-        G = Xt.T @ Xt
-        beta = solve_normal(G, Xt.T @ dd.y[tr_rows], reference=np.einsum("ij,ij->j", X, X))
-        out[rows] = dd.y[rows] - X[rows] @ beta
+        # this fold's design as column blocks, reduced a chunk of rows at a time (never stacked)
+        cols = [(rnd.X, keep)] + [prop.columns(dd) for _, prop in items]
+        G, b = gram.normals(cols, dd.y, gram.spans(dd.starts, dd.stops, train))
+        ref = np.concatenate([rnd.ref_diag[keep]] + [np.einsum("ij,ij->j", c, c) for c in cols[1:]])
+        beta = solve_normal(G, b, reference=ref)
+        gram.predict(cols, beta, gram.spans(dd.starts, dd.stops, ~train), out=out)
+        out[rows] = dd.y[rows] - out[rows]
     return out
 
 

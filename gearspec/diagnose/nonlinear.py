@@ -89,9 +89,21 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
     scale parameters and to the bounds; halved while the error does not fall).  A cheap
     :func:`polish` for the held-out test, where every candidate needs one."""
     y = dd.y
+    buf = [np.empty(0)]
+
+    def stacked(cols):
+        """The design of ``cols`` stacked into one buffer reused by every step of the refinement
+        (the same array as ``np.column_stack``, without a new rows x terms allocation per trial)."""
+        p = sum(c.shape[1] for c in cols)
+        if buf[0].size < len(y) * p:
+            buf[0] = np.empty(len(y) * p)
+        X = buf[0][:len(y) * p].reshape(len(y), p)
+        if cols:
+            np.concatenate(cols, axis=1, out=X)
+        return X
 
     def sse(st):
-        X = st.design(dd)
+        X = stacked([b.columns(dd) for b in st.blocks])
         beta = solve_normal(X.T @ X, X.T @ y)
         r = y - X @ beta
         return float(r @ r), beta
@@ -111,7 +123,7 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
                     moves.append((i, par))
         if not moves:
             return cur
-        X = np.column_stack(cols)
+        X = stacked(cols)
         taylor = solve_normal(X.T @ X, X.T @ y)[at]
         improved = False
         for scale in (1.0, 0.5, 0.25):
