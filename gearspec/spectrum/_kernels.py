@@ -165,7 +165,8 @@ def _run_level(x, y, a, lo, h, P, Q, AJ):
 def _run_line(x, y, a, S, C, lo, h, P, Q, cs, cq):
     """One line's moments of samples of one span (see :func:`track_sums`): ``P[s, cs]``, ``P[s, cs
     + 1]`` (sine, cosine), ``P[s, cq]``, ``P[s, cq + 1]`` (sin^2, sin cos), ``Q[s, cs]``, ``Q[s, cs +
-    1]`` (times y, s < 4) and ``Q[4 + s, .]`` (times acc)."""
+    1]`` (times y, s < 4) and ``Q[4 + s, .]`` (times acc).  Written out sum by sum on purpose: numba
+    keeps these scalars in registers, where an array of accumulators would go through memory."""
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = c0 = c1 = c2 = c3 = c4 = c5 = c6 = 0.0
     t0 = t1 = t2 = t3 = t4 = t5 = t6 = m0 = m1 = m2 = m3 = m4 = m5 = m6 = 0.0
     ys0 = ys1 = ys2 = ys3 = yc0 = yc1 = yc2 = yc3 = 0.0
