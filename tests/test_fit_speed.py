@@ -143,11 +143,11 @@ def test_grid_costs_are_reused_only_for_the_same_columns(small):
     stats = segment_stats(pos, [0.8])
     prob = joint._make_problem(stats, "silo4", [{"frequency": 0.8}], "segment")
     first = grid_starts(held(prob, [0]))
-    assert len(stats._grid_costs) > 0
+    assert len(stats.grid_costs) > 0
     fresh = joint._make_problem(segment_stats(pos.subset(np.arange(len(pos))), [0.8]), "silo4",
                                 [{"frequency": 0.8}], "segment")
     assert grid_starts(prob)[0] == grid_starts(fresh)[0] == first[0]
-    n = len(stats._grid_costs)
+    n = len(stats.grid_costs)
     uniform = joint._make_problem(stats, "silo4", [{"frequency": 0.8}], "uniform")
     grid_starts(uniform)
-    assert len(stats._grid_costs) == 2 * n          # other weights: other costs, computed
+    assert len(stats.grid_costs) == 2 * n          # other weights: other costs, computed

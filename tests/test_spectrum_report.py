@@ -157,7 +157,7 @@ def test_single_speed_panel_has_no_axis_offset_text(tmp_path, monkeypatch):
                                fs=2000, noise=1e-4, seed=2, gear=load_gear("silo4-joint3"), one_run_per_plateau=True)
     res = analyze(rec, progress=False)
     figs = []
-    monkeypatch.setattr(splots, "_save", lambda fig, path: figs.append(fig) or path)
+    monkeypatch.setattr(splots, "_save", lambda fig, path, **kw: figs.append(fig) or path)
     splots.plot_amplitude_vs_speed(res, tmp_path / "a.png")
     (fig,) = figs
     fig.canvas.draw()

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CHUNK_ROWS", "spans", "all_rows", "width", "normals", "predict", "residual"]
+__all__ = ["CHUNK_ROWS", "spans", "width", "normals", "predict"]
 
 #: rows per chunk: 16384 rows x 40 columns are 5 MB, a few cache-sized BLAS products each
 CHUNK_ROWS = 16384
@@ -31,11 +31,6 @@ def spans(starts, stops, mask=None, chunk: int = CHUNK_ROWS) -> list[tuple[int, 
         if z > a:
             out.append((a, z))
     return out
-
-
-def all_rows(n: int, chunk: int = CHUNK_ROWS) -> list[tuple[int, int]]:
-    """``[0, n)`` in ranges of at most ``chunk`` rows."""
-    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
 
 
 def _rows(cols, a: int, z: int) -> np.ndarray:
@@ -77,8 +72,3 @@ def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: in
     for a, z in ranges:
         out[a:z] = _rows(cols, a, z) @ beta
     return out
-
-
-def residual(cols, y: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    """``y - X beta`` at every row."""
-    return y - predict(cols, beta, all_rows(len(y)), n=len(y))

@@ -161,10 +161,11 @@ def grid_starts(prob, init=None, at=None) -> tuple[list[list[float]], np.ndarray
     if at is not None:
         return [list(at)], dec0, (math.log(nl_lo), math.log(nl_hi))
     costs = []
-    # the grid's costs are kept on the statistics: the fit with every shape held (:func:`faint_lines`)
-    # and the fit that follows it start from the same grid with the same columns (a decay of 0 is a
-    # constant amplitude), so they are computed once; the key holds everything a cost depends on
-    memo = prob.stats.__dict__.setdefault("_grid_costs", {})
+    # the grid's costs are kept on the statistics (``grid_costs``): the fit with every shape held
+    # (:func:`faint_lines`) and the fit that follows it start from the same grid with the same columns
+    # (a decay of 0 is a constant amplitude), so they are computed once; the key holds everything a
+    # cost depends on
+    memo = prob.stats.grid_costs
     key0 = (prob.basis.lin, prob.basis.nonlin, prob.basis.columns, prob.basis.nonneg, prob.weights.tobytes(),
             (prob.factors(dec0) * prob.stats.sampled).tobytes())
     for vs in grid_vs:

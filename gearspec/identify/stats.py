@@ -8,7 +8,7 @@ position, friction Nm (N).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -98,6 +98,9 @@ class SegmentStats(GroupNormals):
     frequencies: np.ndarray = None
     acc: bool = False             # the last local column is direction x acceleration (inertia identified)
     free: np.ndarray | None = None  # (S,) bool: a block of free motion
+    # the Stribeck grid's costs of fits on these statistics (:func:`~.jointlines.grid_starts`); not
+    # an init field, so a subset (``dataclasses.replace``) starts with its own, empty
+    grid_costs: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     per_group = GroupNormals.per_group + ("segment", "speed", "load", "active", "sampled", "cycles", "sigma2",
                                           "beta_hat", "rss_hat", "free")

@@ -12,7 +12,7 @@ import pandas as pd
 from ..recording import Recording
 from ..segment import Segmentation
 from ..spectrum.analysis import SpectrumResult
-from . import DIRS, NEG as _NEG, POS as _POS, plain_log_axis, plt, save as _plots_save
+from . import DIRS, NEG as _NEG, POS as _POS, plain_log_axis, plt, save as _save
 from .ordermap import _scale
 
 __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_spectrum_summary",
@@ -20,21 +20,6 @@ __all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "pl
 
 #: colour of the encoder's own lines (count rate folded by the sampling) and of the quantisation limit
 _ENCODER = "#8c564b"
-
-
-def _tight_layout(fig, **kw) -> None:
-    """``fig.tight_layout(**kw)``, and the figure marked laid out: :func:`_save` then draws it once
-    (no second draw to crop it; a few pixels of margin more, the same content)."""
-    fig.tight_layout(**kw)
-    fig.gearspec_laid_out = True
-
-
-def _save(fig, path, tight: bool | None = None) -> Path:
-    """:func:`gearspec.plots.save`; ``tight`` None: crop to the content unless :func:`_tight_layout`
-    laid the figure out already."""
-    if tight is None:
-        tight = not getattr(fig, "gearspec_laid_out", False)
-    return _plots_save(fig, path, tight=tight)
 
 
 def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 20_000, max_rows: int = 12) -> Path:
@@ -238,8 +223,8 @@ def plot_amplitude_vs_speed(result: SpectrumResult, path, relative: bool = False
     fig.legend(handles=list(handles.values()), loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.suptitle(f"Ripple amplitude against speed per declared line, {len(result.segments)} segments "
                  "(error bars: 95 %)", fontsize=11)
-    _tight_layout(fig, rect=(0, 0.35 / (3.4 * nrow) + 0.03 * math.ceil(len(handles) / 4), 1, 1))
-    return _save(fig, path)
+    fig.tight_layout(rect=(0, 0.35 / (3.4 * nrow) + 0.03 * math.ceil(len(handles) / 4), 1, 1))
+    return _save(fig, path, tight=False)   # laid out: one draw, no crop
 
 
 def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, strongest: int = 3) -> Path | None:
@@ -290,8 +275,8 @@ def plot_spectrum_summary(result: SpectrumResult, path, max_fap: float = 0.01, s
                frameon=False)
     fig.suptitle("Every segment: declared lines (median per speed, dots: segments) and peaks no declared line fits",
                  fontsize=10)
-    _tight_layout(fig, rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4), 1, 1))
-    return _save(fig, path)
+    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4), 1, 1))
+    return _save(fig, path, tight=False)   # laid out: one draw, no crop
 
 
 def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Path | None:
@@ -350,5 +335,5 @@ def plot_unexplained(result: SpectrumResult, path, max_fap: float = 0.01) -> Pat
     ax.set_title(f"Peaks no declared line explains (fap <= {max_fap:g}); marker area ~ amplitude; "
                  "dashed: declared lines", fontsize=9)
     ax.legend(fontsize=8, loc="lower right")
-    _tight_layout(fig)
-    return _save(fig, path)
+    fig.tight_layout()
+    return _save(fig, path, tight=False)   # laid out: one draw, no crop
