@@ -18,7 +18,9 @@ Targets (issue 13, on 2 cores) printed beside each number: spectrum <= 5x the re
 diagnose and discover <= 30x, peak memory <= 3 copies of the data, the four commands together on
 the default twin < 120 s.  A Python process that has imported gearspec holds ~0.2 GB before it reads
 a row, more than 3 copies of the default twin (~38 MB): the memory column also shows the copies
-above that floor (the floor measured in the same run).  A child is stopped when its memory passes
+above that floor (the floor measured in the same run).  Time has a floor too: a process that only
+imports numpy, pandas and pyplot (what any command that reads a table and draws a figure needs)
+takes about 1 s, several times the default twin's read; each file's line prints that ratio.  A child is stopped when its memory passes
 ``--max-memory`` GB or its time ``--timeout`` s, and the row says so.  Timed under whatever load the
 machine has: the load average is printed.  Exits 0 when it ran: it informs, it does not gate CI.
 """
@@ -133,13 +135,24 @@ def floor_rss(max_rss: float) -> int:
     return run_child([sys.executable, "-c", code], max_rss, 300)["max_rss"]
 
 
-def bench_file(name: str, csv: Path, gear, commands, args, floor: int) -> dict:
+def floor_seconds(max_rss: float, repeat: int = 3) -> float:
+    """Wall time (s, the least of ``repeat``) of a child that only imports numpy, pandas and
+    matplotlib's pyplot and exits: what any command that reads a table and draws a figure pays
+    before its first row."""
+    code = "import numpy, pandas, matplotlib; matplotlib.use('Agg'); import matplotlib.pyplot"
+    return min(run_child([sys.executable, "-c", code], max_rss, 300)["seconds"] for _ in range(repeat))
+
+
+def bench_file(name: str, csv: Path, gear, commands, args, floor: int, floor_s: float) -> dict:
     read_s, data_bytes, rows = read_baseline(csv)
     print(f"\n{name}: {csv} ({rows:,} rows; DataFrame {data_bytes / 1e6:.0f} MB; pandas.read_csv {read_s:.2f} s; "
           f"load average {os.getloadavg()[0]:.1f})")
     print(f"{'command':9s} {'s':>8s} {'x read':>7s} {'target':>7s} {'peak GB':>8s} {'copies':>7s} {'above floor':>11s}"
           f" {'target':>7s}  status")
-    out = {"file": str(csv), "rows": rows, "data_bytes": data_bytes, "read_s": read_s, "commands": {}}
+    out = {"file": str(csv), "rows": rows, "data_bytes": data_bytes, "read_s": read_s, "commands": {},
+           "floor_s": floor_s, "floor_ratio": floor_s / read_s}
+    print(f"(a process that only imports numpy, pandas and pyplot takes {floor_s:.2f} s = {floor_s / read_s:.1f}x "
+          "this read: no command that draws a figure can be faster)")
     with tempfile.TemporaryDirectory() as tmp:
         for cmd in commands:
             argv = [sys.executable, "-m", "gearspec", cmd, str(csv), "--gear", str(gear), "--out",
@@ -173,21 +186,22 @@ def main(argv=None) -> int:
     commands = args.only or list(COMMANDS)
     report = {"load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
     with tempfile.TemporaryDirectory() as tmp:
-        floor = floor_rss(args.max_memory * 1e9)
-        report["floor_rss"] = floor
+        floor, floor_s = floor_rss(args.max_memory * 1e9), floor_seconds(args.max_memory * 1e9)
+        report["floor_rss"], report["floor_s"] = floor, floor_s
         print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; a process importing gearspec: "
-              f"{floor / 1e9:.2f} GB (the floor)")
+              f"{floor / 1e9:.2f} GB (the memory floor); one importing numpy, pandas and pyplot: {floor_s:.2f} s "
+              "(the time floor)")
         if args.twin:
             csv, gear = Path(args.twin) / "silo4_twin.csv", Path(args.twin) / "silo4_twin_gear.toml"
         else:
             csv, gear = default_twin(Path(tmp))
-        report["default_twin"] = bench_file("default twin", csv, gear, commands, args, floor)
+        report["default_twin"] = bench_file("default twin", csv, gear, commands, args, floor, floor_s)
         if not args.quick:
             big = Path(args.big) if args.big else Path(tmp) / "big"
             t0 = time.perf_counter()
             csv, gear = big_recording(big, args.rows)
             print(f"\n(the big recording: {time.perf_counter() - t0:.0f} s to write or find)")
-            report["big"] = bench_file(f"{args.rows:.0e}-row recording", csv, gear, commands, args, floor)
+            report["big"] = bench_file(f"{args.rows:.0e}-row recording", csv, gear, commands, args, floor, floor_s)
     report["load_average_end"] = os.getloadavg()
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=1))
