@@ -98,3 +98,28 @@ def test_fit_with_keyed_columns_recovers_the_truth():
             got, se = m.directions[d].values[k], m.directions[d].se[k]
             assert abs(got - truth.directions[d].values[k]) < 5 * se
     assert fitted.rmse == pytest.approx(1e-3, rel=0.05)
+
+
+def test_a_decay_difference_from_its_direction_alone_equals_the_full_difference():
+    """A line's decay moves the columns of its own direction only: the difference built from
+    that direction (the others left at exactly 0) is the generic one, exactly (the same matrix
+    and the same product), for every decay of the model."""
+    from gearspec.diagnose.nonlinear import nonlinear_parameters, with_parameter
+    dd = _data()
+    st = state_from_model(_model(), dd)
+    st = st.refreshed(np.linspace(0.5, 1.5, len(st.names)))
+    checked = 0
+    for blk in st.blocks:
+        if not isinstance(blk, design.HarmonicBlock):
+            continue
+        c = np.asarray(blk.coef, float)
+        for key, val, *_ in nonlinear_parameters(blk, dd):
+            if key[0] != "decay":
+                continue
+            h = 1e-4 * (abs(val) or 1.0)
+            up, dn = with_parameter(blk, key, val + h), with_parameter(blk, key, val - h)
+            fast = blk._difference(dd, up, dn, c, h)
+            full = design.Block._difference(blk, dd, up, dn, c, h)
+            assert np.any(fast != 0) and np.array_equal(fast, full)
+            checked += 1
+    assert checked == 4      # two lines, two directions
