@@ -123,3 +123,19 @@ def test_a_decay_difference_from_its_direction_alone_equals_the_full_difference(
             assert np.any(fast != 0) and np.array_equal(fast, full)
             checked += 1
     assert checked == 4      # two lines, two directions
+
+
+def test_the_normal_solve_reads_the_lower_triangle_only():
+    """:func:`polish` computes the cross block of its normal equations once (C^T X) and mirrors
+    it into the upper triangle: the same coefficients only while the solve reads the lower
+    triangle alone.  Known answer: the least-squares coefficients of a random design (lstsq),
+    unchanged when the upper triangle holds garbage."""
+    from gearspec.diagnose.solve import solve_normal
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(200, 6)) * np.array([1, 10, 0.1, 1e3, 1, 1e-2])
+    y = X @ np.arange(1.0, 7.0) + rng.normal(size=200)
+    G, b = X.T @ X, X.T @ y
+    beta = solve_normal(G, b)
+    assert np.allclose(beta, np.linalg.lstsq(X, y, rcond=None)[0], rtol=1e-9)
+    garbage = G + np.triu(rng.normal(size=G.shape) * 1e6, k=1)
+    assert np.array_equal(solve_normal(garbage, b), beta)

@@ -174,13 +174,13 @@ class BaseBlock(Block):
         keys = speed_keys(dd) if dd.fit.load is None else None
         if keys is None:
             return super()._difference(dd, up, dn, c, h)
-        return ((up._at_keys(dd, keys) - dn._at_keys(dd, keys)) @ c / (2 * h))[keys[4]]
+        return np.take((up._at_keys(dd, keys) - dn._at_keys(dd, keys)) @ c / (2 * h), keys[4])
 
     def _raw(self, dd):
         f = dd.fit
         keys = speed_keys(dd) if f.load is None else None
         if keys is not None:
-            return self._at_keys(dd, keys)[keys[4]]
+            return np.take(self._at_keys(dd, keys), keys[4], axis=0)
         speed = np.abs(f.v)
         sgn = np.sign(f.v)
         law = LAWS[self.law]
@@ -296,7 +296,7 @@ class HarmonicBlock(Block):
             if only is not None and d != only:
                 continue
             sel = np.ones(len(kidx), bool) if self.symmetric else kdir == d
-            out.append((d, np.where(sel, ksg * np.asarray(self._g(d, u, rng.get(d)))[kidx], 0.0)[kinv]))
+            out.append((d, np.take(np.where(sel, ksg * np.asarray(self._g(d, u, rng.get(d)))[kidx], 0.0), kinv)))
         return out
 
     def _groups(self, f):

@@ -13,6 +13,9 @@ import numpy as np
 from .data import DiagnoseData
 from .design import BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
 
+#: rows of the designs copied at a time into the refinement's buffer
+_COPY_ROWS = 4096
+
 __all__ = ["nonlinear_standard_errors", "polish", "refine", "nonlinear_parameters", "with_parameter", "travel_range"]
 
 
@@ -67,7 +70,10 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
                 def rss(x, cur=cur, key=key, log=log):
                     b = with_parameter(cur, key, math.exp(x) if log else x)
                     C = b.columns(dd)
-                    G = np.block([[Goo, Xo.T @ C], [C.T @ Xo, C.T @ C]])
+                    # one product of the cross block: the solve (an eigendecomposition) reads the lower
+                    # triangle of G only, so its upper block is the mirror of the lower one
+                    CtX = C.T @ Xo
+                    G = np.block([[Goo, CtX.T], [CtX, C.T @ C]])
                     rhs = np.concatenate([bo, C.T @ y])
                     beta = solve_normal(G, rhs)
                     return yy - float(beta @ rhs)
@@ -100,8 +106,8 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
         if buf[0].size < len(y) * p:
             buf[0] = np.empty(len(y) * p)
         X = buf[0][:len(y) * p].reshape(len(y), p)
-        if cols:
-            np.concatenate(cols, axis=1, out=X)
+        for a in range(0, len(y), _COPY_ROWS) if cols else ():   # copied by row chunks that stay in cache
+            np.concatenate([c[a:a + _COPY_ROWS] for c in cols], axis=1, out=X[a:a + _COPY_ROWS])
         return X
 
     def sse(st):
@@ -221,7 +227,8 @@ def travel_range(dd: DiagnoseData) -> tuple[float, float]:
     if not len(fin):
         return 0.0, 0.0
     th = dd.at("theta")
-    steps = np.concatenate([np.abs(np.diff(th[a:z])) for a, z in zip(dd.starts, dd.stops) if z - a > 2] or [np.zeros(0)])
+    steps = np.concatenate([np.abs(np.diff(th[a:z])) for a, z in zip(dd.starts, dd.stops) if z - a > 2]
+                           or [np.zeros(0)])
     steps = steps[steps > 0]
     lo = float(np.median(steps)) if len(steps) else float(np.min(fin))
     return lo, float(np.max(fin))
