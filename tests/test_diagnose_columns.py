@@ -139,3 +139,15 @@ def test_the_normal_solve_reads_the_lower_triangle_only():
     assert np.allclose(beta, np.linalg.lstsq(X, y, rcond=None)[0], rtol=1e-9)
     garbage = G + np.triu(rng.normal(size=G.shape) * 1e6, k=1)
     assert np.array_equal(solve_normal(garbage, b), beta)
+
+
+def test_hstack_by_row_chunks_is_column_stack():
+    """The designs are copied a chunk of rows at a time: the same array as ``np.column_stack``,
+    for row counts below, at and across the chunk size."""
+    from gearspec.diagnose.gram import COPY_ROWS, hstack
+    rng = np.random.default_rng(2)
+    for n in (1, COPY_ROWS, 2 * COPY_ROWS + 17):
+        cols = [rng.normal(size=(n, k)) for k in (3, 1, 2, 5)]
+        assert np.array_equal(hstack(cols), np.column_stack(cols))
+        out = np.full((n, 11), np.nan)
+        assert hstack(cols, out=out) is out and np.array_equal(out, np.column_stack(cols))

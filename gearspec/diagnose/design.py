@@ -25,6 +25,7 @@ from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
 from .data import DiagnoseData, per_speed, speed_keys
+from .gram import hstack
 from .solve import _cov, solve_normal
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "FittedState", "fit_state",
@@ -72,7 +73,7 @@ class Block:
         if taylor:
             plain = self.columns(dd)
             T = self.taylor_columns(dd)
-            cols = np.column_stack([plain, T]) if T.shape[1] else plain
+            cols = hstack([plain, T]) if T.shape[1] else plain
         else:
             raw = np.asarray(self._raw(dd), dtype=float).reshape(len(dd.fit), -1)
             cols = raw if dd.reduce is None else (np.column_stack([dd.R(raw[:, j]) for j in range(raw.shape[1])])
@@ -249,19 +250,13 @@ class HarmonicBlock(Block):
         """Speed range of the amplitude law of every direction (key 0 when symmetric): the one
         the block carries, else the speeds at which ``dd`` measures the line."""
         fixed = dict(self.speed_range)
-        memo = dd.cache.setdefault("line_ranges", OrderedDict())
-        out = {}
+        memo = dd.cache.setdefault("line_ranges", OrderedDict())    # the data's, by frequency and direction
         for d in ((0,) if self.symmetric else self.dirs):
-            if fixed.get(d):
-                out[d] = fixed[d]
-                continue
-            k = (self.frequency, d)
-            if k not in memo:
-                memo[k] = line_speed_range(dd, self.frequency, d)
+            if not fixed.get(d) and (self.frequency, d) not in memo:
+                memo[(self.frequency, d)] = line_speed_range(dd, self.frequency, d)
                 while len(memo) > 64:
                     memo.popitem(last=False)
-            out[d] = memo[k]
-        return out
+        return {d: fixed.get(d) or memo[(self.frequency, d)] for d in ((0,) if self.symmetric else self.dirs)}
 
     def _trig(self, dd):
         """``sin`` and ``cos`` of ``2 pi f theta`` at the samples, 0 in the segments whose position
@@ -493,7 +488,7 @@ class State:
 
     def design(self, dd: DiagnoseData, taylor: bool = False) -> np.ndarray:
         cols = [b.columns(dd, taylor) for b in self.blocks]
-        return np.column_stack(cols) if cols else np.zeros((len(dd), 0))
+        return hstack(cols) if cols else np.zeros((len(dd), 0))
 
     def spans(self, dd: DiagnoseData | None = None, taylor: bool = False) -> list[tuple[int, int]]:
         out, i = [], 0

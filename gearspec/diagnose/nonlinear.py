@@ -12,9 +12,7 @@ import numpy as np
 
 from .data import DiagnoseData
 from .design import BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
-
-#: rows of the designs copied at a time into the refinement's buffer
-_COPY_ROWS = 4096
+from .gram import hstack
 
 __all__ = ["nonlinear_standard_errors", "polish", "refine", "nonlinear_parameters", "with_parameter", "travel_range"]
 
@@ -106,9 +104,7 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
         if buf[0].size < len(y) * p:
             buf[0] = np.empty(len(y) * p)
         X = buf[0][:len(y) * p].reshape(len(y), p)
-        for a in range(0, len(y), _COPY_ROWS) if cols else ():   # copied by row chunks that stay in cache
-            np.concatenate([c[a:a + _COPY_ROWS] for c in cols], axis=1, out=X[a:a + _COPY_ROWS])
-        return X
+        return hstack(cols, out=X) if cols else X
 
     def sse(st):
         X = stacked([b.columns(dd) for b in st.blocks])
