@@ -279,7 +279,7 @@ def per_speed(dd: DiagnoseData, fn) -> np.ndarray:
         u, inv = np.unique(sp, return_inverse=True)
         hit = dd.cache["speeds"] = (v, u, inv) if 4 * len(u) <= len(sp) else (v, None, None)
     _, u, inv = hit
-    return fn(np.abs(v)) if u is None else np.asarray(fn(u))[inv]
+    return fn(np.abs(v)) if u is None else np.take(np.asarray(fn(u)), inv, axis=0)
 
 
 def speed_keys(dd: DiagnoseData):

@@ -59,7 +59,7 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
             if not params:
                 continue
             others = [b.columns(dd) for j, b in enumerate(blocks) if j != i]
-            Xo = np.column_stack(others) if others else np.zeros((len(dd), 0))
+            Xo = hstack(others) if others else np.zeros((len(dd), 0))
             Goo = Xo.T @ Xo
             bo = Xo.T @ y
             for key, val, lo, hi, log in params:
