@@ -151,3 +151,36 @@ def test_hstack_by_row_chunks_is_column_stack():
         assert np.array_equal(hstack(cols), np.column_stack(cols))
         out = np.full((n, 11), np.nan)
         assert hstack(cols, out=out) is out and np.array_equal(out, np.column_stack(cols))
+
+
+def test_no_keys_when_they_would_not_be_fewer_than_a_quarter_of_the_samples():
+    """Few distinct speeds, but every sample its own (speed, sign, direction): 8 keys for 16
+    samples are no saving, and the columns are built on the samples (the rule of
+    :func:`per_speed`: keys only when at most a quarter of the samples)."""
+    from dataclasses import replace
+    dd = _data()
+    f = dd.fit.subset(np.arange(16))
+    v = np.tile([1.0, -1.0, 2.0, -2.0], 4)
+    direction = np.repeat([1, -1], 8)
+    small = dg.DiagnoseData(replace(f, v=v, direction=direction, cache={}), by="segment")
+    assert len(np.unique(np.abs(v))) * 4 <= len(v)       # few speeds: per_speed gathers
+    assert speed_keys(small) is None
+    tiny = dg.DiagnoseData(replace(f, v=np.abs(v), direction=np.ones(16, int), cache={}), by="segment")
+    assert len(speed_keys(tiny)[1]) == 2                  # two speeds, one sign and direction: two keys
+
+
+def test_a_lines_speed_ranges_from_the_cache_are_its_directions_own():
+    """The speeds at which the data measure a line, per direction, cached on the data by frequency
+    and direction: the same as computed afresh, and different in the two directions here (the
+    negative plateaus run 10 % faster: 0.55-17.6 rad/s against 0.5-16)."""
+    from gearspec.diagnose.coverage import line_speed_range
+    dd = _data()
+    st = state_from_model(_model(), dd)
+    lines = [b for b in st.blocks if isinstance(b, design.HarmonicBlock)]
+    for blk in lines:
+        for _ in range(2):                                  # computed, then from the cache
+            got = blk.ranges(dd)
+            for d in (1, -1):
+                assert got[d] == line_speed_range(dd, blk.frequency, d)
+        assert blk.ranges(dd)[1] != blk.ranges(dd)[-1]
+    assert lines[0].ranges(dd)[-1][1] == pytest.approx(1.1 * 16, rel=1e-6)
