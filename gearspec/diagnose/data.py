@@ -19,7 +19,8 @@ from ..segment import Segmentation, find_segments, free_motion
 from ..segment.trim import edge_rows
 from ..signals import butter_filtfilt, central_difference, decimate, decimation_index
 
-__all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves", "per_speed"]
+__all__ = ["DiagnoseData", "trajectory_data", "travel_since_reversal", "reversal_travel", "moves", "per_speed",
+           "speed_keys"]
 
 
 # ---------------------------------------------------------------------- reversals
@@ -278,7 +279,35 @@ def per_speed(dd: DiagnoseData, fn) -> np.ndarray:
         u, inv = np.unique(sp, return_inverse=True)
         hit = dd.cache["speeds"] = (v, u, inv) if 4 * len(u) <= len(sp) else (v, None, None)
     _, u, inv = hit
-    return fn(np.abs(v)) if u is None else np.asarray(fn(u))[inv]
+    return fn(np.abs(v)) if u is None else np.take(np.asarray(fn(u)), inv, axis=0)
+
+
+def speed_keys(dd: DiagnoseData):
+    """The distinct (speed, sign of the velocity, direction) of the samples of ``dd.fit`` when they
+    are few (plateaus: one per segment), cached on the data: ``(u, kidx, ksign, kdir, kinv)`` with
+    ``u`` the distinct speeds of :func:`per_speed`, ``u[kidx]`` the speed of every key, ``ksign`` and
+    ``kdir`` its sign of ``v`` and direction, and ``kinv`` the key of every sample; None when the
+    samples share few speeds no more (then :func:`per_speed` evaluates on the samples).
+
+    A column that depends on the sample only through these three (a base law's column with the
+    sign of the motion in one direction, a line's amplitude factor) is built at the keys and
+    gathered once: the same numbers, elementwise, as built on the samples."""
+    f = dd.fit
+    hit = dd.cache.get("speed_keys")
+    if hit is not None and hit[0] is f.v and hit[1] is f.direction:
+        return hit[2]
+    per_speed(dd, np.abs)     # fills the distinct speeds
+    _, u, inv = dd.cache["speeds"]
+    keys = None
+    if u is not None:
+        sg = np.sign(f.v)
+        di = np.asarray(f.direction)
+        code = (inv.astype(np.int64) * 3 + (sg.astype(np.int64) + 1)) * 3 + (di.astype(np.int64) + 1)
+        uc, first, kinv = np.unique(code, return_index=True, return_inverse=True)
+        if 4 * len(uc) <= len(code):
+            keys = (u, inv[first], sg[first], di[first], kinv.reshape(-1))
+    dd.cache["speed_keys"] = (f.v, f.direction, keys)
+    return keys
 
 
 # ---------------------------------------------------------------------- whole trajectories

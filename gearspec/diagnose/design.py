@@ -24,7 +24,8 @@ from ..errors import InputError
 from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
-from .data import DiagnoseData, per_speed
+from .data import DiagnoseData, per_speed, speed_keys
+from .gram import hstack
 from .solve import _cov, solve_normal
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "FittedState", "fit_state",
@@ -72,7 +73,7 @@ class Block:
         if taylor:
             plain = self.columns(dd)
             T = self.taylor_columns(dd)
-            cols = np.column_stack([plain, T]) if T.shape[1] else plain
+            cols = hstack([plain, T]) if T.shape[1] else plain
         else:
             raw = np.asarray(self._raw(dd), dtype=float).reshape(len(dd.fit), -1)
             cols = raw if dd.reduce is None else (np.column_stack([dd.R(raw[:, j]) for j in range(raw.shape[1])])
@@ -96,6 +97,7 @@ class Block:
         """First-order columns of the nonlinear parameters: the derivative of the block's present
         contribution (``columns @ coef``) with respect to each (a linear refit with them is one
         Gauss-Newton step: every fit of the held-out test refits them on its own data)."""
+        from .nonlinear import nonlinear_parameters, with_parameter
         if not self.coef:
             return np.zeros((len(dd), 0))
         c = np.asarray(self.coef, dtype=float)
@@ -104,14 +106,18 @@ class Block:
             h = 1e-4 * (abs(val) if log or val != 0 else 1.0) if key[0] != "frequency" else 1e-7 * abs(val)
             if key[0] == "decay" and val == 0:
                 h = 1e-4 / max(float(np.max(np.abs(dd.fit.v))), 1e-12)
-            up = with_parameter(self, key, val + h)._raw(dd)
-            dn = with_parameter(self, key, val - h)._raw(dd)
-            d = (np.asarray(up, float).reshape(len(dd.fit), -1) - np.asarray(dn, float).reshape(len(dd.fit), -1)) \
-                @ c / (2 * h)
-            out.append(dd.R(d))
+            out.append(dd.R(self._difference(dd, with_parameter(self, key, val + h),
+                                             with_parameter(self, key, val - h), c, h)))
         return np.column_stack(out) if out else np.zeros((len(dd), 0))
 
+    def _difference(self, dd: DiagnoseData, up: "Block", dn: "Block", c: np.ndarray, h: float) -> np.ndarray:
+        """The central difference ``(up - dn) @ c / 2h`` of two copies of the block at the samples."""
+        n = len(dd.fit)
+        return (np.asarray(up._raw(dd), float).reshape(n, -1) - np.asarray(dn._raw(dd), float).reshape(n, -1)) \
+            @ c / (2 * h)
+
     def n_taylor(self, dd: DiagnoseData) -> int:
+        from .nonlinear import nonlinear_parameters
         return len(nonlinear_parameters(self, dd)) if self.coef else 0
 
     @property
@@ -153,8 +159,29 @@ class BaseBlock(Block):
     def _nonlin(self, d):
         return dict(self.nonlin).get(d if not self.symmetric else 0, {})
 
+    def _at_keys(self, dd, keys) -> np.ndarray:
+        """The columns at the distinct (speed, sign, direction) of the samples (:func:`speed_keys`)."""
+        u, kidx, ksg, kdir, _ = keys
+        law = LAWS[self.law]
+        groups = [(0, np.ones(len(kidx), bool))] if self.symmetric else [(d, kdir == d) for d in self.dirs]
+        cols = []
+        for d, sel in groups:
+            # the law at the distinct speeds, as :func:`per_speed` evaluates it
+            X = np.asarray(law.design(self._lin(d), self._nonlin(d), u, np.zeros(len(u))))[kidx]
+            cols.append(np.where(sel[:, None], ksg[:, None] * X, 0.0))
+        return np.concatenate(cols, axis=1) if cols else np.zeros((len(kidx), 0))
+
+    def _difference(self, dd, up, dn, c, h):
+        keys = speed_keys(dd) if dd.fit.load is None else None
+        if keys is None:
+            return super()._difference(dd, up, dn, c, h)
+        return np.take((up._at_keys(dd, keys) - dn._at_keys(dd, keys)) @ c / (2 * h), keys[4])
+
     def _raw(self, dd):
         f = dd.fit
+        keys = speed_keys(dd) if f.load is None else None
+        if keys is not None:
+            return np.take(self._at_keys(dd, keys), keys[4], axis=0)
         speed = np.abs(f.v)
         sgn = np.sign(f.v)
         law = LAWS[self.law]
@@ -223,8 +250,49 @@ class HarmonicBlock(Block):
         """Speed range of the amplitude law of every direction (key 0 when symmetric): the one
         the block carries, else the speeds at which ``dd`` measures the line."""
         fixed = dict(self.speed_range)
-        return {d: fixed.get(d) or line_speed_range(dd, self.frequency, d)
-                for d in ((0,) if self.symmetric else self.dirs)}
+        memo = dd.cache.setdefault("line_ranges", OrderedDict())    # the data's, by frequency and direction
+        for d in ((0,) if self.symmetric else self.dirs):
+            if not fixed.get(d) and (self.frequency, d) not in memo:
+                memo[(self.frequency, d)] = line_speed_range(dd, self.frequency, d)
+                while len(memo) > 64:
+                    memo.popitem(last=False)
+        return {d: fixed.get(d) or memo[(self.frequency, d)] for d in ((0,) if self.symmetric else self.dirs)}
+
+    def _trig(self, dd):
+        """``sin`` and ``cos`` of ``2 pi f theta`` at the samples, 0 in the segments whose position
+        sampling cannot carry the line (above 0.8 of their position Nyquist frequency: an aliased
+        sinusoid would fit noise there), cached on the data."""
+        trig = dd.cache.setdefault("trig", OrderedDict())
+        hit = trig.get(self.frequency)
+        if hit is None:
+            x = _TWO_PI * self.frequency * dd.fit.theta
+            sn, cs = np.sin(x), np.cos(x)
+            if dd.reduce is None:
+                ok = resolved(dd, self.frequency)
+                if not ok.all():
+                    sn, cs = np.where(ok, sn, 0.0), np.where(ok, cs, 0.0)
+            hit = trig[self.frequency] = (sn, cs)
+            while len(trig) > 16:
+                trig.popitem(last=False)
+        return hit
+
+    def _factors(self, dd, rng: dict, keys, only=None):
+        """``(d, factor)`` per direction: the amplitude factor with the sign of the motion at the
+        samples of direction d, 0 elsewhere (built at the distinct speeds when :func:`speed_keys`
+        has them: the same numbers); ``only``: that direction alone."""
+        f = dd.fit
+        if keys is None:
+            sgn = np.sign(f.v)
+            return [(d, np.where(sel, sgn * per_speed(dd, lambda sp, d=d: self._g(d, sp, rng.get(d))), 0.0))
+                    for d, sel in self._groups(f) if only is None or d == only]
+        u, kidx, ksg, kdir, kinv = keys
+        out = []
+        for d in ((0,) if self.symmetric else self.dirs):
+            if only is not None and d != only:
+                continue
+            sel = np.ones(len(kidx), bool) if self.symmetric else kdir == d
+            out.append((d, np.take(np.where(sel, ksg * np.asarray(self._g(d, u, rng.get(d)))[kidx], 0.0), kinv)))
+        return out
 
     def _groups(self, f):
         if self.symmetric:
@@ -246,32 +314,47 @@ class HarmonicBlock(Block):
         f = dd.fit
         if f.theta is None:
             raise InputError("a position-locked line needs positions (theta)")
-        sgn = np.sign(f.v)
-        trig = dd.cache.setdefault("trig", OrderedDict())
-        hit = trig.get(self.frequency)
-        if hit is None:
-            x = _TWO_PI * self.frequency * f.theta
-            hit = trig[self.frequency] = (np.sin(x), np.cos(x))
-            while len(trig) > 16:
-                trig.popitem(last=False)
-        sn, cs = hit
-        cols = []
+        sn, cs = self._trig(dd)
         lp = dict(self.load_phase)
-        # segments whose position sampling cannot carry the line (above 0.8 of their position
-        # Nyquist frequency) do not get it: an aliased sinusoid would fit noise there
-        if dd.reduce is None:
-            ok = resolved(dd, self.frequency)
-            if not ok.all():
-                sn, cs = np.where(ok, sn, 0.0), np.where(ok, cs, 0.0)
-        rng = self.ranges(dd)
-        for d, sel in self._groups(f):
-            g = np.where(sel, sgn * per_speed(dd, lambda sp, d=d: self._g(d, sp, rng.get(d))), 0.0)
-            cols += [g * sn, g * cs]
+        if lp and f.load is None:
+            raise InputError("a load-dependent line (SILO4 eq. 14) needs the 'load' channel")
+        facs = self._factors(dd, self.ranges(dd), speed_keys(dd))
+        out = np.empty((len(f), sum(2 + (d in lp) for d, _ in facs)))
+        j = 0
+        for d, g in facs:     # written into the columns: no list of columns stacked afterwards
+            np.multiply(g, sn, out=out[:, j])
+            np.multiply(g, cs, out=out[:, j + 1])
+            j += 2
             if d in lp:
-                if f.load is None:
-                    raise InputError("a load-dependent line (SILO4 eq. 14) needs the 'load' channel")
-                cols.append(g * f.load ** 2 * (sn * math.cos(lp[d]) + cs * math.sin(lp[d])))
-        return np.column_stack(cols)
+                out[:, j] = g * f.load ** 2 * (sn * math.cos(lp[d]) + cs * math.sin(lp[d]))
+                j += 1
+        return out
+
+    def _difference(self, dd, up, dn, c, h):
+        """A decay's central difference with the columns of the other directions left at exactly 0
+        (as their differences are): the same matrix, and product, as :meth:`Block._difference`
+        without building them twice."""
+        moved = [d for d, b in dict(up.decay).items() if dict(dn.decay).get(d) != b]
+        if (type(self)._raw is not HarmonicBlock._raw or len(moved) != 1 or up.frequency != dn.frequency
+                or up.law != dn.law or dd.fit.theta is None):
+            return super()._difference(dd, up, dn, c, h)
+        f = dd.fit
+        sn, cs = self._trig(dd)
+        lp = dict(self.load_phase)
+        rng, keys = self.ranges(dd), speed_keys(dd)
+        D = np.zeros((len(f), len(c)))
+        i = 0
+        for d in ((0,) if self.symmetric else self.dirs):
+            if d == moved[0]:
+                (_, gu), = up._factors(dd, rng, keys, only=d)
+                (_, gd), = dn._factors(dd, rng, keys, only=d)
+                D[:, i] = gu * sn - gd * sn
+                D[:, i + 1] = gu * cs - gd * cs
+                if d in lp:
+                    trig = sn * math.cos(lp[d]) + cs * math.sin(lp[d])
+                    D[:, i + 2] = gu * f.load ** 2 * trig - gd * f.load ** 2 * trig
+            i += 2 + (d in lp)
+        return D @ c / (2 * h)
 
     def write(self, model, coef, se, ranges: dict | None = None):
         """The fitted line into ``model``'s harmonics; ``ranges`` (:meth:`ranges`): the speed range
@@ -405,7 +488,7 @@ class State:
 
     def design(self, dd: DiagnoseData, taylor: bool = False) -> np.ndarray:
         cols = [b.columns(dd, taylor) for b in self.blocks]
-        return np.column_stack(cols) if cols else np.zeros((len(dd), 0))
+        return hstack(cols) if cols else np.zeros((len(dd), 0))
 
     def spans(self, dd: DiagnoseData | None = None, taylor: bool = False) -> list[tuple[int, int]]:
         out, i = [], 0
@@ -504,87 +587,14 @@ def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) ->
     return FittedState(state, beta, se, r, float(np.sqrt(np.mean(r * r))), pred, speed_ranges=ranges)
 
 
-# ---------------------------------------------------------------------- nonlinear parameters
-def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
-    """The nonlinear parameters of a block the polish refines: ``(key, value, lo, hi, log)``.
-
-    Base law: every Stribeck velocity (within a factor 4); lines: decay constants (their own law,
-    in units of the top speed) and, for lines the loop found, the frequency (within half a
-    resolution step); terms: exponent, Stribeck velocity and presliding length.
-    """
-    out = []
-    sp = np.abs(dd.fit.v)
-    top = float(np.max(sp)) if len(sp) else 1.0
-    top = top if top > 0 else 1.0
-    low = float(np.min(sp[sp > 0])) if np.any(sp > 0) else top / 100
-    # speed-like parameters stay within a decade below the slowest and three times the fastest speed
-    s_lo, s_hi = low / 10, 3 * top
-    if isinstance(blk, BaseBlock):
-        for d, nl in blk.nonlin:
-            for k, v in nl.items():
-                if v is not None and v > 0:
-                    out.append((("base", d, k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
-    elif isinstance(blk, HarmonicBlock):
-        for d, law in blk.law:
-            dec = float(dict(blk.decay).get(d, 0.0))
-            bounds = {"exp": (min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top),
-                      "rational": (0.0, max(dec, 0.0) + 10.0 / top), "power": (0.0, max(dec, 0.0) + 6.0)}
-            if law in bounds:
-                out.append((("decay", d), dec, *bounds[law], False))
-        if blk.found and dd.fit.theta is not None:
-            th = dd.at("theta")
-            span = max((float(np.ptp(th[a:z])) for a, z in zip(dd.starts, dd.stops)), default=0.0) or 1.0
-            f = blk.frequency
-            out.append((("frequency",), f, f - 0.5 / span, f + 0.5 / span, False))
-    elif isinstance(blk, TermBlock):
-        for k, v in blk.fixed:
-            if k == "exponent":
-                out.append((("fixed", k), float(v), 0.05, 4.0, False))
-            elif k == "v_s" and v > 0:
-                out.append((("fixed", k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
-            elif k == "length" and v > 0 and dd.travel is not None:
-                t_lo, t_hi = travel_range(dd)
-                if t_hi > t_lo:
-                    out.append((("fixed", k), float(v), max(v / 4, t_lo), min(v * 4, t_hi), True))
-    return out
-
-
-def travel_range(dd: DiagnoseData) -> tuple[float, float]:
-    """Presliding lengths the data can resolve: from the median step between consecutive
-    observations of a moving segment (shorter is a spike at one sample) to the longest travel
-    after a reversal."""
-    tr = dd.at("travel")
-    fin = tr[np.isfinite(tr) & (tr > 0)] if tr is not None else np.zeros(0)
-    if not len(fin):
-        return 0.0, 0.0
-    th = dd.at("theta")
-    steps = np.concatenate([np.abs(np.diff(th[a:z])) for a, z in zip(dd.starts, dd.stops) if z - a > 2] or [np.zeros(0)])
-    steps = steps[steps > 0]
-    lo = float(np.median(steps)) if len(steps) else float(np.min(fin))
-    return lo, float(np.max(fin))
-
-
-def with_parameter(blk: Block, key: tuple, value: float) -> Block:
-    """A copy of ``blk`` (same uid) with one nonlinear parameter changed."""
-    if key[0] == "base":
-        _, d, k = key
-        nl = tuple((dd_, {**x, k: value} if dd_ == d else x) for dd_, x in blk.nonlin)
-        return replace(blk, nonlin=nl)
-    if key[0] == "decay":
-        d = key[1]
-        return replace(blk, decay=tuple((k, value if k == d else v) for k, v in blk.decay))
-    if key[0] == "frequency":
-        return replace(blk, frequency=float(value))
-    if key[0] == "fixed":
-        k = key[1]
-        return replace(blk, fixed=tuple((kk, value if kk == k else v) for kk, v in blk.fixed))
-    raise KeyError(key)
-
-
 def __getattr__(name: str):
-    """``state_from_model`` and ``predict_model`` live in :mod:`.frommodel` (which builds on the
-    blocks here); still importable from this module."""
+    """``state_from_model`` and ``predict_model`` live in :mod:`.frommodel`, the nonlinear parameters
+    (``nonlinear_parameters``, ``with_parameter``, ``travel_range``) in :mod:`.nonlinear` (both build
+    on the blocks here); still importable from this module."""
     if name in ("state_from_model", "predict_model"):
         from . import frommodel
         return getattr(frommodel, name)
+    if name in ("nonlinear_parameters", "with_parameter", "travel_range"):
+        from . import nonlinear
+        return getattr(nonlinear, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

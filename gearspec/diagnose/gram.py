@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CHUNK_ROWS", "spans", "width", "normals", "predict"]
+__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "width", "normals", "predict", "hstack"]
 
 #: rows per chunk: 16384 rows x 40 columns are 5 MB, a few cache-sized BLAS products each
 CHUNK_ROWS = 16384
@@ -71,4 +71,20 @@ def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: in
     out = np.zeros(n) if out is None else out
     for a, z in ranges:
         out[a:z] = _rows(cols, a, z) @ beta
+    return out
+
+
+#: rows copied at a time by :func:`hstack`: a chunk of every block stays in cache while it is copied
+COPY_ROWS = 4096
+
+
+def hstack(cols, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.column_stack`` of 2-d blocks with the same rows (the same array), copied a chunk of
+    :data:`COPY_ROWS` rows at a time (into ``out`` when given): about half the time of one copy
+    of narrow blocks into a wide array."""
+    n = cols[0].shape[0]
+    p = sum(c.shape[1] for c in cols)
+    out = np.empty((n, p)) if out is None else out
+    for a in range(0, n, COPY_ROWS):
+        np.concatenate([c[a:a + COPY_ROWS] for c in cols], axis=1, out=out[a:a + COPY_ROWS])
     return out

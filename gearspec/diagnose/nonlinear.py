@@ -1,17 +1,20 @@
 """The nonlinear parameters of a state (Stribeck velocities, decays, frequencies, exponents,
-lengths): their standard errors in the joint fit, and their refinement on all data -- bounded
-one-dimensional searches (:func:`polish`) and Gauss-Newton steps (:func:`refine`)."""
+lengths): which a block has (:func:`nonlinear_parameters`), their standard errors in the joint fit,
+and their refinement on all data -- bounded one-dimensional searches (:func:`polish`) and
+Gauss-Newton steps (:func:`refine`)."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from .data import DiagnoseData
-from .design import State, _cov, nonlinear_parameters, solve_normal, with_parameter
+from .design import BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
+from .gram import hstack
 
-__all__ = ["nonlinear_standard_errors", "polish", "refine"]
+__all__ = ["nonlinear_standard_errors", "polish", "refine", "nonlinear_parameters", "with_parameter", "travel_range"]
 
 
 def nonlinear_standard_errors(state: State, dd: DiagnoseData, X: np.ndarray | None = None,
@@ -56,7 +59,7 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
             if not params:
                 continue
             others = [b.columns(dd) for j, b in enumerate(blocks) if j != i]
-            Xo = np.column_stack(others) if others else np.zeros((len(dd), 0))
+            Xo = hstack(others) if others else np.zeros((len(dd), 0))
             Goo = Xo.T @ Xo
             bo = Xo.T @ y
             for key, val, lo, hi, log in params:
@@ -65,7 +68,10 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
                 def rss(x, cur=cur, key=key, log=log):
                     b = with_parameter(cur, key, math.exp(x) if log else x)
                     C = b.columns(dd)
-                    G = np.block([[Goo, Xo.T @ C], [C.T @ Xo, C.T @ C]])
+                    # one product of the cross block: the solve (an eigendecomposition) reads the lower
+                    # triangle of G only, so its upper block is the mirror of the lower one
+                    CtX = C.T @ Xo
+                    G = np.block([[Goo, CtX.T], [CtX, C.T @ C]])
                     rhs = np.concatenate([bo, C.T @ y])
                     beta = solve_normal(G, rhs)
                     return yy - float(beta @ rhs)
@@ -98,9 +104,7 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
         if buf[0].size < len(y) * p:
             buf[0] = np.empty(len(y) * p)
         X = buf[0][:len(y) * p].reshape(len(y), p)
-        if cols:
-            np.concatenate(cols, axis=1, out=X)
-        return X
+        return hstack(cols, out=X) if cols else X
 
     def sse(st):
         X = stacked([b.columns(dd) for b in st.blocks])
@@ -142,3 +146,102 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
         if not improved:
             break
     return cur.refreshed(beta)
+
+
+# ---------------------------------------------------------------------- nonlinear parameters
+def nonlinear_parameters(blk: Block, dd: DiagnoseData) -> list[tuple]:
+    """The nonlinear parameters of a block the polish refines: ``(key, value, lo, hi, log)``.
+
+    Base law: every Stribeck velocity (within a factor 4); lines: decay constants (their own law,
+    in units of the top speed) and, for lines the loop found, the frequency (within half a
+    resolution step); terms: exponent, Stribeck velocity and presliding length.
+    """
+    out = []
+    top, low = _speed_bounds(dd)
+    # speed-like parameters stay within a decade below the slowest and three times the fastest speed
+    s_lo, s_hi = low / 10, 3 * top
+    if isinstance(blk, BaseBlock):
+        for d, nl in blk.nonlin:
+            for k, v in nl.items():
+                if v is not None and v > 0:
+                    out.append((("base", d, k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
+    elif isinstance(blk, HarmonicBlock):
+        for d, law in blk.law:
+            dec = float(dict(blk.decay).get(d, 0.0))
+            bounds = {"exp": (min(dec, 0.0) - 2.0 / top, max(dec, 0.0) + 10.0 / top),
+                      "rational": (0.0, max(dec, 0.0) + 10.0 / top), "power": (0.0, max(dec, 0.0) + 6.0)}
+            if law in bounds:
+                out.append((("decay", d), dec, *bounds[law], False))
+        if blk.found and dd.fit.theta is not None:
+            span = _longest_span(dd)
+            f = blk.frequency
+            out.append((("frequency",), f, f - 0.5 / span, f + 0.5 / span, False))
+    elif isinstance(blk, TermBlock):
+        for k, v in blk.fixed:
+            if k == "exponent":
+                out.append((("fixed", k), float(v), 0.05, 4.0, False))
+            elif k == "v_s" and v > 0:
+                out.append((("fixed", k), float(v), max(v / 4, s_lo), min(v * 4, s_hi), True))
+            elif k == "length" and v > 0 and dd.travel is not None:
+                t_lo, t_hi = travel_range(dd)
+                if t_hi > t_lo:
+                    out.append((("fixed", k), float(v), max(v / 4, t_lo), min(v * 4, t_hi), True))
+    return out
+
+
+def _speed_bounds(dd: DiagnoseData) -> tuple[float, float]:
+    """The largest speed of the samples (1 when none moves) and the smallest nonzero one (1 % of
+    the largest when none), cached on the data."""
+    hit = dd.cache.get("speed_bounds")
+    if hit is not None and hit[0] is dd.fit.v:
+        return hit[1]
+    sp = np.abs(dd.fit.v)
+    top = float(np.max(sp)) if len(sp) else 1.0
+    top = top if top > 0 else 1.0
+    low = float(np.min(sp[sp > 0])) if np.any(sp > 0) else top / 100
+    dd.cache["speed_bounds"] = (dd.fit.v, (top, low))
+    return top, low
+
+
+def _longest_span(dd: DiagnoseData) -> float:
+    """The longest travel of one held-out group (1 when there is none), cached on the data."""
+    hit = dd.cache.get("longest_span")
+    if hit is not None and hit[0] is dd.fit.theta:
+        return hit[1]
+    th = dd.at("theta")
+    span = max((float(np.ptp(th[a:z])) for a, z in zip(dd.starts, dd.stops)), default=0.0) or 1.0
+    dd.cache["longest_span"] = (dd.fit.theta, span)
+    return span
+
+
+def travel_range(dd: DiagnoseData) -> tuple[float, float]:
+    """Presliding lengths the data can resolve: from the median step between consecutive
+    observations of a moving segment (shorter is a spike at one sample) to the longest travel
+    after a reversal."""
+    tr = dd.at("travel")
+    fin = tr[np.isfinite(tr) & (tr > 0)] if tr is not None else np.zeros(0)
+    if not len(fin):
+        return 0.0, 0.0
+    th = dd.at("theta")
+    steps = np.concatenate([np.abs(np.diff(th[a:z])) for a, z in zip(dd.starts, dd.stops) if z - a > 2]
+                           or [np.zeros(0)])
+    steps = steps[steps > 0]
+    lo = float(np.median(steps)) if len(steps) else float(np.min(fin))
+    return lo, float(np.max(fin))
+
+
+def with_parameter(blk: Block, key: tuple, value: float) -> Block:
+    """A copy of ``blk`` (same uid) with one nonlinear parameter changed."""
+    if key[0] == "base":
+        _, d, k = key
+        nl = tuple((dd_, {**x, k: value} if dd_ == d else x) for dd_, x in blk.nonlin)
+        return replace(blk, nonlin=nl)
+    if key[0] == "decay":
+        d = key[1]
+        return replace(blk, decay=tuple((k, value if k == d else v) for k, v in blk.decay))
+    if key[0] == "frequency":
+        return replace(blk, frequency=float(value))
+    if key[0] == "fixed":
+        k = key[1]
+        return replace(blk, fixed=tuple((kk, value if kk == k else v) for kk, v in blk.fixed))
+    raise KeyError(key)
