@@ -229,8 +229,6 @@ def _map_and_scale(path: Path, frame: pd.DataFrame, meta: dict, mapping: dict, s
 
 def _numeric_column(path, frame: pd.DataFrame, col: str) -> pd.Series:
     s = frame[col]
-    if s.dtype == np.float64:
-        return s  # already what astype(float) gives: no copy of a long column
     if s.dtype.kind in "biuf":
         return s.astype(float)
     coerced = pd.to_numeric(s, errors="coerce")
