@@ -107,3 +107,49 @@ def test_freed_memory_is_handed_back_on_linux():
     # the trim runs (True) where glibc has it; the memory it returns is measured by the benchmark
     # (bench_cli's peak and resident memory), not here
     assert _release_freed_memory() is True
+
+
+# ---------------------------------------------------------------------- segments in two threads
+def _plateaus():
+    from gearspec.gears import load_gear
+    from gearspec.simulate import Ripple, plateau_recording
+
+    gear = load_gear("silo4-joint3")
+    f_motor = 1 / (2 * np.pi)  # the motor shaft's line, cycles per rad of the motor
+    # short plateaus (3000 samples each, far below LS_MAX_SAMPLES): the Lomb-Scargle path
+    rec, _ = plateau_recording([40, -40, 80, -80, 120], ripples=[Ripple(f_motor, 1e-3, 0.5), Ripple(1.234, 5e-4, 0.1)],
+                               level=0.01, duration=3, fs=1000, noise=1e-4, gear=gear, seed=5)
+    return rec
+
+
+def test_short_segments_get_two_threads_when_two_cpus_may_be_used(monkeypatch):
+    import os
+
+    from gearspec.segment import find_segments
+    from gearspec.spectrum.analysis import LS_MAX_SAMPLES
+    from gearspec.spectrum.pipeline import _n_workers
+
+    seg = find_segments(_plateaus())
+    assert len(seg) == 5 and max(s.n for s in seg) < LS_MAX_SAMPLES
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    assert _n_workers("auto", seg) == 2
+    from dataclasses import replace
+
+    assert _n_workers("auto", replace(seg, segments=seg.segments[:1])) == 1  # one segment: nothing to share
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert _n_workers("auto", seg) == 1        # a process bound to one CPU
+
+
+def test_two_threads_give_the_numbers_of_one():
+    """Each segment's periodogram with one finufft thread inside the pool, with finufft's default
+    threads outside it: the JSON must be the same to the last digit (no tolerance: the segments
+    are independent and each one's arithmetic is the same)."""
+    import json
+
+    from gearspec.spectrum import analyze
+
+    rec = _plateaus()
+    one = analyze(rec, workers=1).to_dict()
+    two = analyze(rec, workers=2).to_dict()
+    assert len(one["segments"]) == 5 and any(p["declared"] for p in one["segments"][0]["peaks"])
+    assert json.dumps(one, default=float) == json.dumps(two, default=float)
