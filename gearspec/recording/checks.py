@@ -182,7 +182,9 @@ def _check_torque_unit(rec: Recording, src: str) -> None:
                             f"constant {gear.torque_constant:g} Nm/A of gear spec '{gear.name}'); {fix}")
             return
     ratio = gear.total_ratio if (gear is not None and gear.reference == "output" and gear.stages) else 1.0
-    level = float(np.median(tau[np.isfinite(tau)])) / ratio
+    fin = np.isfinite(tau)
+    # tau is this function's own array (np.abs made it): the median may reorder it in place
+    level = float(np.median(tau if fin.all() else tau[fin], overwrite_input=True)) / ratio
     if level > MAX_MOTOR_TORQUE:
         at = "at the motor" + (f" (the output's divided by the ratio {ratio:g})" if ratio != 1 else "")
         _doubt(rec, f"{src}: the median torque is {level:.3g} Nm {at}, more than any robot servo motor gives "

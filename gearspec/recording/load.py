@@ -351,10 +351,8 @@ def _number_runs(path, frame: pd.DataFrame, run_offset: int, several: bool, note
         ok = np.isfinite(r)
         if not ok.all():
             raise InputError(f"{path}: column 'run', data row {int(np.flatnonzero(~ok)[0]) + 1}: run ids must be integers, not NaN")
-        if np.any(r != np.round(r)):
-            raise InputError(f"{path}: column 'run' holds non-integer values; run ids must be integers")
-        uniq, inv = np.unique(r.astype(np.int64), return_inverse=True)
-        frame["run"] = inv + run_offset
+        uniq, inv = _run_ids(path, r)
+        frame["run"] = inv + run_offset if run_offset else inv
         if several:
             notes.append(f"{path}: runs {list(uniq)} renumbered {run_offset}..{run_offset + len(uniq) - 1}")
         run_offset += len(uniq)
@@ -363,6 +361,37 @@ def _number_runs(path, frame: pd.DataFrame, run_offset: int, several: bool, note
         run_offset += 1
     frame["run"] = frame["run"].astype(np.int64)
     return frame, run_offset
+
+
+#: run ids spanning at most this many times the rows (plus a constant) are numbered by counting
+#: (linear in the rows); others by sorting, as :func:`numpy.unique` does
+_COUNTED_RUN_SPAN = 4
+
+
+def _run_ids(path, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct run ids of the finite column ``r`` (ascending, int64) and each row's index into
+    them: :func:`numpy.unique` of ``r`` as integers with ``return_inverse``, the same arrays.
+
+    Ids within +-2**53 (every integer there is exact in a float) whose range is at most
+    :data:`_COUNTED_RUN_SPAN` times the rows are counted with :func:`numpy.bincount` instead of
+    sorted: a 10^7-row recording's 400 runs in 0.1 s instead of 1.5 s.  Non-integer ids are refused.
+    """
+    if len(r) and -2.0 ** 53 < float(r.min()) and float(r.max()) < 2.0 ** 53:
+        ri = r.astype(np.int64)
+        if not np.array_equal(ri, r):
+            raise InputError(f"{path}: column 'run' holds non-integer values; run ids must be integers")
+        lo = int(ri.min())
+        span = int(ri.max()) - lo + 1
+        if span > _COUNTED_RUN_SPAN * len(ri) + 1024:
+            return np.unique(ri, return_inverse=True)
+        if lo:
+            ri -= lo  # ri is this function's own copy
+        present = np.bincount(ri, minlength=span) > 0
+        rank = np.cumsum(present) - 1
+        return np.flatnonzero(present) + lo, rank[ri]
+    if np.any(r != np.round(r)):
+        raise InputError(f"{path}: column 'run' holds non-integer values; run ids must be integers")
+    return np.unique(r.astype(np.int64), return_inverse=True)
 
 
 def _gap_note(rec: Recording, n_gaps: int) -> str:
