@@ -101,6 +101,12 @@ def read_baseline(csv: Path, repeat: int = 2) -> tuple[float, int, int]:
     return best, int(frame.memory_usage(deep=True).sum()), len(frame)
 
 
+def read_peak(csv: Path, max_rss: float) -> int:
+    """Peak RSS (bytes) of a child that imports pandas and reads ``csv`` (what the read alone holds
+    at its peak: the parser's buffers beside the frame)."""
+    return run_child([sys.executable, "-c", f"import pandas; pandas.read_csv({str(csv)!r})"], max_rss, 600)["max_rss"]
+
+
 def default_twin(tmp: Path) -> tuple[Path, Path]:
     out = tmp / "twin"
     subprocess.run([sys.executable, "-m", "gearspec", "simulate", "silo4", "--out", str(out), "--quiet"], check=True)
@@ -151,6 +157,10 @@ def bench_file(name: str, csv: Path, gear, commands, args, floor: int, floor_s: 
           f" {'target':>7s}  status")
     out = {"file": str(csv), "rows": rows, "data_bytes": data_bytes, "read_s": read_s, "commands": {},
            "floor_s": floor_s, "floor_ratio": floor_s / read_s}
+    peak = read_peak(csv, args.max_memory * 1e9)
+    out["read_peak_rss"], out["read_peak_copies_above_floor"] = peak, (peak - floor) / data_bytes
+    print(f"(a process that only reads it with pandas peaks at {peak / 1e9:.2f} GB = "
+          f"{(peak - floor) / data_bytes:.1f} copies above the floor)")
     print(f"(a process that only imports numpy, pandas and pyplot takes {floor_s:.2f} s = {floor_s / read_s:.1f}x "
           "this read: no command that draws a figure can be faster)")
     with tempfile.TemporaryDirectory() as tmp:
