@@ -13,7 +13,7 @@ from typing import ClassVar
 import numpy as np
 
 __all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations", "group_cross",
-           "partial_out_last", "unique_ids"]
+           "partial_out_last", "unique_ids", "group_rows"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -48,6 +48,27 @@ def unique_ids(a, *, return_index: bool = False, return_inverse: bool = False):
     if return_inverse:
         out.append(np.cumsum(new, dtype=np.intp) - 1)
     return out[0] if len(out) == 1 else tuple(out)
+
+
+def group_rows(ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of every group, each group's in their order: ``(order, groups, bounds)`` with
+    ``order = argsort(ids, kind="stable")``, ``groups`` the distinct ids ascending and group ``j``'s
+    rows ``order[bounds[j]:bounds[j + 1]]``.  Ids already in ascending order (a recording's
+    segments) need no sort: ``order`` is then ``arange``.
+
+    Parameters
+    ----------
+    ids : array_like, (n,)
+        Group id of every row.
+    """
+    ids = np.asarray(ids)
+    if len(ids) > 1 and not bool(np.all(ids[1:] >= ids[:-1])):
+        order = np.argsort(ids, kind="stable")
+        ordered = ids[order]
+    else:
+        order, ordered = np.arange(len(ids)), ids
+    groups, starts = unique_ids(ordered, return_index=True)
+    return order, groups, np.append(starts, len(ids))
 
 
 def normal_equations(X, y) -> tuple[np.ndarray, np.ndarray, float]:

@@ -15,6 +15,7 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from ..core.crossval import n_params as _n_params
+from ..core.reduction import group_rows
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import load_gear
@@ -183,9 +184,8 @@ def _segment_errors(models: dict, data: FitData) -> dict:
     if data.free_motion or len(data) == 0:
         return {name: segment_errors(m, data) for name, m in models.items()}
     group = data.groups("segment")
-    order = np.argsort(group, kind="stable")
-    _, starts = np.unique(group[order], return_index=True)
-    bounds = np.append(starts, len(order))
+    order, _, bounds = group_rows(group)
+    starts = bounds[:-1]
     pieces = [order[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     first_dir = data.direction[order[starts]]
     inputs = data.inputs()
