@@ -132,10 +132,12 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
             for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
     missing = [j for j, tag in enumerate(tags) if tag not in cache]
     if missing:
-        new = _segments_stats(data, [order[bounds[j]:bounds[j + 1]] for j in missing], freqs, nyquist_fraction,
-                              acc, data.speed_change())
-        for j, r in zip(missing, new):
-            cache[tags[j]] = r
+        change = data.speed_change()
+        for part in _chunks([bounds[j + 1] - bounds[j] for j in missing]):
+            new = _segments_stats(data, [order[bounds[missing[i]]:bounds[missing[i] + 1]] for i in part], freqs,
+                                  nyquist_fraction, acc, change)
+            for i, r in zip(part, new):
+                cache[tags[missing[i]]] = r
     rows = [cache[tag] for tag in tags]
     K, P = len(freqs), 1 + 2 * len(freqs) + int(acc)
     shape = {"G": (0, P, P), "g": (0, P), "beta_hat": (0, P), "sampled": (0, K), "cycles": (0, K)}
@@ -149,6 +151,25 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
                         sampled=sampled, cycles=cycles, sigma2=stack("sigma2"),
                         beta_hat=stack("beta_hat"), rss_hat=stack("rss_hat"), frequencies=freqs, acc=bool(acc),
                         free=_free_flags(data, sids))
+
+
+#: the segments' statistics are computed a bounded number of rows at a time (their columns, sines
+#: and cosines: about 0.1 GB per 2^20 rows), whole segments each; a segment's numbers do not
+#: depend on the segments computed with it
+CHUNK_ROWS = 2 ** 20
+
+
+def _chunks(sizes) -> list[list[int]]:
+    """Consecutive runs of the indices of ``sizes`` (rows per segment) of at most :data:`CHUNK_ROWS`
+    rows each (at least one segment per run)."""
+    out, cur, rows = [], [], 0
+    for i, n in enumerate(sizes):
+        if cur and rows + n > CHUNK_ROWS:
+            out.append(cur)
+            cur, rows = [], 0
+        cur.append(i)
+        rows += int(n)
+    return out + [cur] if cur else out
 
 
 def _free_flags(data: FitData, sids: np.ndarray) -> np.ndarray | None:
