@@ -256,32 +256,49 @@ class FitData:
     def plateaus(self, blocks: int = 8) -> pd.DataFrame:
         """One row per segment: mean speed, mean friction magnitude ``level`` and its standard
         error (from ``blocks`` consecutive block means, so that ripple and coloured noise count),
-        mean load and temperature.  Sorted by direction and speed."""
-        rows = []
-        mag = self.direction * self.y
+        mean load and temperature.  Sorted by direction and speed.
+
+        A segment's row is computed once and kept in :attr:`cache` (shared with the subsets, whose
+        segments keep their ids), as :func:`gearspec.identify.stats.segment_stats` keeps its numbers:
+        the held-out folds of the published procedure and the checks of every model read them again."""
         order, sids, bounds = group_rows(self.segment)
+        ends = self.values_at("y", order[np.concatenate((bounds[:-1], bounds[1:] - 1))]) if len(sids) else []
+        tags = [(int(sid), int(b - a), float(y0), float(y1))
+                for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
+        channels = tuple(c for c in ("load", "temperature", "t") if self.has(c))
+        cache = self.cache.setdefault(("plateaus", int(blocks), channels), {})
         info = self.segments.set_index("segment") if len(self.segments) else None
-        for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
-            ii = order[a:b]
-            m = mag[ii]
-            nb = min(blocks, len(m))
-            if nb >= 2:
-                bm = np.array([x.mean() for x in np.array_split(m, nb)])
-                se = float(bm.std(ddof=1) / np.sqrt(nb))
-            else:
-                se = float("nan")
-            row = {"segment": int(sid), "run": int(self.run[ii[0]]), "direction": int(self.direction[ii[0]]),
-                   "speed": float(np.mean(np.abs(self.v[ii]))), "n": len(ii), "level": float(m.mean()),
-                   "level_se": se}
-            if info is not None and sid in info.index:
-                row["speed"] = float(info.loc[sid, "speed"])
-            for c in ("load", "temperature", "t"):
-                arr = getattr(self, c)
-                if arr is not None:
-                    row[c] = float(np.mean(arr[ii]))
-            rows.append(row)
-        df = pd.DataFrame(rows)
+        for j, tag in enumerate(tags):
+            if tag not in cache:
+                cache[tag] = self._plateau_row(order[bounds[j]:bounds[j + 1]], tag[0], blocks, channels, info)
+        df = pd.DataFrame([cache[tag] for tag in tags])
         return df.sort_values(["direction", "speed"], ascending=[False, True]).reset_index(drop=True)
+
+    def _plateau_row(self, ii, sid, blocks, channels, info) -> dict:
+        """:meth:`plateaus`' row of segment ``sid``, its rows ``ii`` in time order."""
+        m = self.values_at("direction", ii) * self.values_at("y", ii)
+        nb = min(blocks, len(m))
+        if nb >= 2:
+            bm = np.array([x.mean() for x in np.array_split(m, nb)])
+            se = float(bm.std(ddof=1) / np.sqrt(nb))
+        else:
+            se = float("nan")
+        row = {"segment": int(sid), "run": int(self.values_at("run", ii[:1])[0]),
+               "direction": int(self.values_at("direction", ii[:1])[0]),
+               "speed": float(np.mean(np.abs(self.values_at("v", ii)))), "n": len(ii), "level": float(m.mean()),
+               "level_se": se}
+        if info is not None and sid in info.index:
+            row["speed"] = float(info.loc[sid, "speed"])
+        for c in channels:
+            row[c] = float(np.mean(self.values_at(c, ii)))
+        return row
+
+    def has(self, name: str) -> bool:
+        """Whether the sample array ``name`` is given (not None), without gathering it in a subset."""
+        if name in self.__dict__:
+            return self.__dict__[name] is not None
+        lazy = self.__dict__.get("_lazy")
+        return lazy is not None and name in lazy[1]
 
     def channels(self) -> list[str]:
         return [f.name for f in fields(self) if f.name in _ARRAYS and getattr(self, f.name) is not None]

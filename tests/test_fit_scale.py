@@ -140,3 +140,46 @@ def test_fit_is_the_same_with_eager_subsets_and_tiny_chunks(twin, monkeypatch):
         assert abs(got["tau_c"] - want["tau_c"]) < 0.03 * want["tau_c"]
         assert abs(fast.model.harmonics(d)[0]["amplitude"] - want["harmonics"][0]["amplitude"]) < 0.05 * 2e-3
     assert fast.model.rmse_holdout < 1.2 * 2e-4                # held-out error at the noise
+
+
+def _plateaus_08(self, blocks=8):
+    """gearspec 0.8's FitData.plateaus: every segment computed at each call."""
+    import pandas as pd
+
+    rows = []
+    mag = self.direction * self.y
+    order = np.argsort(self.segment, kind="stable")
+    sids, starts = np.unique(self.segment[order], return_index=True)
+    bounds = np.append(starts, len(order))
+    info = self.segments.set_index("segment") if len(self.segments) else None
+    for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
+        ii = order[a:b]
+        m = mag[ii]
+        nb = min(blocks, len(m))
+        se = float(np.array([x.mean() for x in np.array_split(m, nb)]).std(ddof=1) / np.sqrt(nb)) if nb >= 2 \
+            else float("nan")
+        row = {"segment": int(sid), "run": int(self.run[ii[0]]), "direction": int(self.direction[ii[0]]),
+               "speed": float(np.mean(np.abs(self.v[ii]))), "n": len(ii), "level": float(m.mean()), "level_se": se}
+        if info is not None and sid in info.index:
+            row["speed"] = float(info.loc[sid, "speed"])
+        for c in ("load", "temperature", "t"):
+            if getattr(self, c) is not None:
+                row[c] = float(np.mean(getattr(self, c)[ii]))
+        rows.append(row)
+    return pd.DataFrame(rows).sort_values(["direction", "speed"], ascending=[False, True]).reset_index(drop=True)
+
+
+def test_plateaus_are_kept_per_segment(twin):
+    _, rec = twin
+    data = FitData.from_recording(rec, find_segments(rec))
+    ref = _plateaus_08(data)
+    assert data.plateaus().equals(ref) and data.plateaus().equals(ref)      # computed, then read back
+    train = data.subset(data.segment % 3 != 0)                             # a fold: its rows read from the cache
+    assert "y" not in train.__dict__
+    assert train.plateaus().equals(_plateaus_08(_eager_subset(data, data.segment % 3 != 0)))
+    assert data.plateaus(blocks=4).equals(_plateaus_08(data, blocks=4))
+    # other friction values (the same segments): their own rows, never the cached ones
+    other = FitData.from_recording(rec, find_segments(rec))
+    other.cache = data.cache
+    other.y = other.y * 2.0
+    assert np.allclose(other.plateaus()["level"], 2 * ref["level"], rtol=1e-15, atol=0)
