@@ -12,7 +12,6 @@ from typing import Mapping
 
 import numpy as np
 import pandas as pd
-from threadpoolctl import threadpool_limits
 
 from ..core.crossval import n_params as _n_params
 from ..core.reduction import group_rows
@@ -121,11 +120,8 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     and then identifies the inertia with the friction unless the gear spec gives it); ``inertia``:
     False leaves the torque as measured (no ``J thetadd`` subtracted even when the spec gives J).
     """
-    # the products here are small (segments' normal equations, p of 3-30): BLAS threads only
-    # contend (a 25000 x 21 product took 0.29 s of CPU with two threads on the busy machine, 2 ms on one)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds, se, load_ratio,
-                         compare_with, motion, inertia)
+    return _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds, se, load_ratio,
+                     compare_with, motion, inertia)
 
 
 def _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds, se, load_ratio, compare_with,

@@ -86,6 +86,8 @@ def _time_fit(t, theta, frequencies, residual: bool = True):
     """``(acc, v, r)``: the locked acceleration and velocity at each sample and the residual time
     ``t - t(theta)`` (s) of the fit of :func:`locked_acceleration` (``residual`` False: None, not
     computed)."""
+    from ..core.reduction import gram
+
     t = np.asarray(t, dtype=float)
     th = np.asarray(theta, dtype=float)
     lo, hi = float(th.min()), float(th.max())
@@ -100,7 +102,7 @@ def _time_fit(t, theta, frequencies, residual: bool = True):
     tc = t - t.mean()
     slope = float(np.dot(u - u.mean(), tc) / np.dot(u - u.mean(), u - u.mean()))
     rest = tc - slope * u
-    coef = np.linalg.lstsq(X.T @ X, X.T @ rest, rcond=None)[0]
+    coef = np.linalg.lstsq(gram(X), X.T @ rest, rcond=None)[0]
     coef[1] += slope
     m = len(w)
     a, b = coef[3:3 + m], coef[3 + m:]
