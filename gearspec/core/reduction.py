@@ -83,14 +83,20 @@ def gram(X) -> np.ndarray:
     threads split the p x p result, not the sums over the rows, so every entry is the same to the
     last bit (checked at 5000-10^6 rows, 3-41 columns).  Products with a vector (``X^T y``,
     ``y^T y``) keep the threads: theirs do split the sums, and the last bits would change."""
+    X = np.asarray(X, dtype=float)
+    with one_blas_thread():
+        return X.T @ X
+
+
+def one_blas_thread():
+    """A context in which BLAS runs on one thread (``threadpoolctl``; its controller made once, so
+    that entering costs microseconds)."""
     global _CONTROLLER
     if _CONTROLLER is None:
         from threadpoolctl import ThreadpoolController
 
         _CONTROLLER = ThreadpoolController()
-    X = np.asarray(X, dtype=float)
-    with _CONTROLLER.limit(limits=1, user_api="blas"):
-        return X.T @ X
+    return _CONTROLLER.limit(limits=1, user_api="blas")
 
 
 def normal_equations(X, y) -> tuple[np.ndarray, np.ndarray, float]:
