@@ -226,7 +226,8 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, nyquist_frac
     rss = np.maximum(yy - np.einsum("sp,sp->s", beta, g), 0.0)
     dof = n - (1 + 2 * sampled.sum(axis=1) + int(acc) + (G_change > 0 if T else 0))
     sigma2 = np.where(dof >= 3, rss / np.maximum(dof, 1), np.nan)
-    return [{"n": int(n[s]), "speed": float(speed[s]), "load": float(load[s]), "sampled": sampled[s], "cycles": cycles[s], "G": G[s], "g": g[s], "yy": float(yy[s]),
+    return [{"n": int(n[s]), "speed": float(speed[s]), "load": float(load[s]), "sampled": sampled[s],
+             "cycles": cycles[s], "G": G[s], "g": g[s], "yy": float(yy[s]),
              "beta_hat": beta[s], "rss_hat": float(rss[s]), "sigma2": float(sigma2[s])} for s in range(len(n))]
 
 
