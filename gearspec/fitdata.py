@@ -4,11 +4,12 @@ samples), and their plateau averages (the Stribeck curve of SILO4 Fig. 4)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import pandas as pd
 
+from .core.reduction import group_rows, unique_ids
 from .errors import InputError
 from .recording import Recording
 from .segment import Segmentation, find_segments, free_motion
@@ -161,11 +162,21 @@ class FitData:
 
     # ------------------------------------------------------------------ views
     def __len__(self) -> int:
-        return len(self.v)
+        lazy = self.__dict__.get("_lazy")
+        return lazy[0] if lazy is not None else len(self.v)
+
+    def values_at(self, name: str, idx) -> np.ndarray:
+        """``getattr(self, name)[idx]`` (a sample array at the rows ``idx``) without gathering the
+        whole array of a :meth:`subset` that has not read it yet."""
+        lazy = self.__dict__.get("_lazy")
+        if lazy is not None and name not in self.__dict__ and name in lazy[1]:
+            source, rows = lazy[1][name]
+            return source[rows[idx]]
+        return getattr(self, name)[idx]
 
     @property
     def n_segments(self) -> int:
-        return int(len(np.unique(self.segment)))
+        return int(len(unique_ids(self.segment)))
 
     @property
     def free_motion(self) -> bool:
@@ -180,7 +191,7 @@ class FitData:
         line would take it up (viscous x the change of speed within a block is as large as the noise)."""
         if not self.free_motion or self.speed is None:
             return None
-        ids, inv = np.unique(self.segment, return_inverse=True)
+        ids, inv = unique_ids(self.segment, return_inverse=True)
         dev = self.speed - (np.bincount(inv, weights=self.speed) / np.bincount(inv))[inv]
         qs = self.segments.loc[self.segments["kind"] == "quasi_static", "segment"].to_numpy()
         if len(qs):
@@ -196,13 +207,38 @@ class FitData:
                 "t": self.t, "acc": self.acc, "run": self.run}
 
     def subset(self, mask) -> "FitData":
-        """The samples where ``mask`` is true (a boolean array, or an index array)."""
+        """The samples where ``mask`` is true (a boolean array, or an index array).
+
+        The subset's sample arrays are gathered when they are first read (its ``segment`` at
+        once): a held-out fold's fit reads the per-segment statistics cached on the data
+        (:func:`gearspec.identify.stats.segment_stats`), not the samples, so it copies none of the
+        ten or more arrays of a long recording (10^7 rows: 0.7 GB per copy).  The values are those
+        of ``getattr(self, name)[mask]``."""
         mask = np.asarray(mask)
-        kw = {name: (None if getattr(self, name) is None else getattr(self, name)[mask]) for name in _ARRAYS}
-        keep = np.unique(kw["segment"])
-        segs = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) if len(self.segments) else \
-            self.segments
-        return replace(self, **kw, segments=segs, notes=list(self.notes), cache=self.cache)
+        rows = np.flatnonzero(mask) if mask.dtype == bool else mask
+        lazy = self.__dict__.get("_lazy")
+        new = object.__new__(_Subset)
+        pending, composed = {}, {}
+        for f in fields(self):
+            name = f.name
+            if name not in _ARRAYS:
+                new.__dict__[name] = getattr(self, name)
+            elif lazy is not None and name not in self.__dict__:     # not read here yet: from its source
+                source, at = lazy[1][name]
+                if id(at) not in composed:
+                    composed[id(at)] = at[rows]
+                pending[name] = (source, composed[id(at)])
+            elif self.__dict__[name] is None:
+                new.__dict__[name] = None
+            else:
+                pending[name] = (self.__dict__[name], rows)
+        new.__dict__["_lazy"] = (len(rows), pending)
+        keep = unique_ids(new.segment)
+        new.segments = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) \
+            if len(self.segments) else self.segments
+        new.notes = list(self.notes)
+        new.cache = self.cache
+        return new
 
     def direction_subset(self, direction: int) -> "FitData":
         return self.subset(self.direction == direction)
@@ -220,34 +256,78 @@ class FitData:
     def plateaus(self, blocks: int = 8) -> pd.DataFrame:
         """One row per segment: mean speed, mean friction magnitude ``level`` and its standard
         error (from ``blocks`` consecutive block means, so that ripple and coloured noise count),
-        mean load and temperature.  Sorted by direction and speed."""
-        rows = []
-        mag = self.direction * self.y
-        order = np.argsort(self.segment, kind="stable")
-        sids, starts = np.unique(self.segment[order], return_index=True)
-        bounds = np.append(starts, len(order))
+        mean load and temperature.  Sorted by direction and speed.
+
+        A segment's row is computed once and kept in :attr:`cache` (shared with the subsets, whose
+        segments keep their ids), as :func:`gearspec.identify.stats.segment_stats` keeps its numbers:
+        the held-out folds of the published procedure and the checks of every model read them again."""
+        order, sids, bounds = group_rows(self.segment)
+        ends = self.values_at("y", order[np.concatenate((bounds[:-1], bounds[1:] - 1))]) if len(sids) else []
+        tags = [(int(sid), int(b - a), float(y0), float(y1))
+                for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
+        channels = tuple(c for c in ("load", "temperature", "t") if self.has(c))
+        cache = self.cache.setdefault(("plateaus", int(blocks), channels), {})
         info = self.segments.set_index("segment") if len(self.segments) else None
-        for sid, a, b in zip(sids, bounds[:-1], bounds[1:]):
-            ii = order[a:b]
-            m = mag[ii]
-            nb = min(blocks, len(m))
-            if nb >= 2:
-                bm = np.array([x.mean() for x in np.array_split(m, nb)])
-                se = float(bm.std(ddof=1) / np.sqrt(nb))
-            else:
-                se = float("nan")
-            row = {"segment": int(sid), "run": int(self.run[ii[0]]), "direction": int(self.direction[ii[0]]),
-                   "speed": float(np.mean(np.abs(self.v[ii]))), "n": len(ii), "level": float(m.mean()),
-                   "level_se": se}
-            if info is not None and sid in info.index:
-                row["speed"] = float(info.loc[sid, "speed"])
-            for c in ("load", "temperature", "t"):
-                arr = getattr(self, c)
-                if arr is not None:
-                    row[c] = float(np.mean(arr[ii]))
-            rows.append(row)
-        df = pd.DataFrame(rows)
+        for j, tag in enumerate(tags):
+            if tag not in cache:
+                cache[tag] = self._plateau_row(order[bounds[j]:bounds[j + 1]], tag[0], blocks, channels, info)
+        df = pd.DataFrame([cache[tag] for tag in tags])
         return df.sort_values(["direction", "speed"], ascending=[False, True]).reset_index(drop=True)
+
+    def _plateau_row(self, ii, sid, blocks, channels, info) -> dict:
+        """:meth:`plateaus`' row of segment ``sid``, its rows ``ii`` in time order."""
+        m = self.values_at("direction", ii) * self.values_at("y", ii)
+        nb = min(blocks, len(m))
+        if nb >= 2:
+            bm = np.array([x.mean() for x in np.array_split(m, nb)])
+            se = float(bm.std(ddof=1) / np.sqrt(nb))
+        else:
+            se = float("nan")
+        row = {"segment": int(sid), "run": int(self.values_at("run", ii[:1])[0]),
+               "direction": int(self.values_at("direction", ii[:1])[0]),
+               "speed": float(np.mean(np.abs(self.values_at("v", ii)))), "n": len(ii), "level": float(m.mean()),
+               "level_se": se}
+        if info is not None and sid in info.index:
+            row["speed"] = float(info.loc[sid, "speed"])
+        for c in channels:
+            row[c] = float(np.mean(self.values_at(c, ii)))
+        return row
+
+    def has(self, name: str) -> bool:
+        """Whether the sample array ``name`` is given (not None), without gathering it in a subset."""
+        if name in self.__dict__:
+            return self.__dict__[name] is not None
+        lazy = self.__dict__.get("_lazy")
+        return lazy is not None and name in lazy[1]
 
     def channels(self) -> list[str]:
         return [f.name for f in fields(self) if f.name in _ARRAYS and getattr(self, f.name) is not None]
+
+
+class _Gathered:
+    """A sample array of a :class:`_Subset`: gathered from its source array when first read, then kept."""
+
+    def __set_name__(self, owner, name):
+        self.name = name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return None          # the class attribute (a dataclass field's default)
+        d = obj.__dict__
+        if self.name not in d:
+            source, rows = d["_lazy"][1][self.name]
+            d[self.name] = source[rows]
+        return d[self.name]
+
+    def __set__(self, obj, value):
+        obj.__dict__[self.name] = value
+
+
+class _Subset(FitData):
+    """What :meth:`FitData.subset` returns: a FitData whose sample arrays are gathered when read."""
+
+
+for _name in _ARRAYS:
+    _g = _Gathered()
+    _g.__set_name__(_Subset, _name)
+    setattr(_Subset, _name, _g)

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import InputError
+from .reduction import unique_ids
 
 __all__ = ["SPEED_RTOL", "group_summary", "deal_folds", "row_folds", "splits", "held_out", "HeldOut", "z_statistic",
            "critical_z", "n_params"]
@@ -48,7 +49,7 @@ def group_summary(groups, direction, speed, weight=None) -> tuple[np.ndarray, np
     w = np.ones(len(g)) if weight is None else np.asarray(weight, dtype=float)
     if not (len(g) == len(d) == len(s) == len(w)):
         raise InputError("group summaries need one direction, speed and weight per row")
-    ids, first, inv = np.unique(g, return_index=True, return_inverse=True)
+    ids, first, inv = unique_ids(g, return_index=True, return_inverse=True)
     sign = np.sign(np.bincount(inv, weights=d * w, minlength=len(ids))).astype(int)
     sign = np.where(sign == 0, np.sign(d[first]), sign).astype(int)
     mean_speed = np.bincount(inv, weights=s * w, minlength=len(ids)) / np.bincount(inv, weights=w, minlength=len(ids))
@@ -99,7 +100,8 @@ def splits(fold) -> Iterator[tuple[int, np.ndarray]]:
     """``(f, test)`` for every fold ``f`` that leaves something to train on and something to
     test: ``test`` is the boolean mask of the fold's units (rows, segments or groups)."""
     fold = np.asarray(fold)
-    for f in np.unique(fold):
+    small = fold.dtype.kind in "iu" and len(fold) and 0 <= fold.min() and fold.max() < 2 ** 20
+    for f in (np.flatnonzero(np.bincount(fold)) if small else np.unique(fold)):   # the same folds, no sort
         test = fold == f
         if test.any() and not test.all():
             yield int(f), test

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from ..core.crossval import n_params as _n_params
+from ..core.reduction import group_rows
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import load_gear
@@ -119,6 +120,13 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
     and then identifies the inertia with the friction unless the gear spec gives it); ``inertia``:
     False leaves the torque as measured (no ``J thetadd`` subtracted even when the spec gives J).
     """
+    return _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds, se, load_ratio,
+                     compare_with, motion, inertia)
+
+
+def _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds, se, load_ratio, compare_with,
+              motion, inertia) -> FitResult:
+    """:func:`identify_recording`'s work (its arguments, in its order)."""
     gear = load_gear(gear) if gear is not None else rec.gear
     seg = free_motion(rec, segmentation if segmentation is not None else find_segments(rec), motion=motion)
     notes = [_motion_note(seg)] if any(s.kind == "free" for s in seg.segments) else []
@@ -172,9 +180,8 @@ def _segment_errors(models: dict, data: FitData) -> dict:
     if data.free_motion or len(data) == 0:
         return {name: segment_errors(m, data) for name, m in models.items()}
     group = data.groups("segment")
-    order = np.argsort(group, kind="stable")
-    _, starts = np.unique(group[order], return_index=True)
-    bounds = np.append(starts, len(order))
+    order, _, bounds = group_rows(group)
+    starts = bounds[:-1]
     pieces = [order[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     first_dir = data.direction[order[starts]]
     inputs = data.inputs()

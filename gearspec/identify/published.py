@@ -20,6 +20,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
+from ..core.reduction import unique_ids
 from ..fitdata import FitData
 from ..model import LAWS, RPM, Direction, FrictionModel, Harmonic
 from . import validate
@@ -103,14 +104,17 @@ def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None
     model = _published(data, amplitudes, specs, high_speed, set(constant))
     if holdout:
         def fit_fold(train):  # the plateaus and line amplitudes of the training segments only
-            amp = amplitudes[amplitudes["segment"].isin(np.unique(train.segment))]
-            return _published(train, amp, specs, high_speed, set(constant))
+            amp = amplitudes[amplitudes["segment"].isin(unique_ids(train.segment))]
+            return _published(train, amp, specs, high_speed, set(constant), rmse=False)
 
         model.rmse_holdout, model.rmse_holdout_reason = validate.holdout(fit_fold, data, by=holdout, folds=folds)
     return model
 
 
-def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, constant) -> FrictionModel:
+def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, constant,
+               rmse: bool = True) -> FrictionModel:
+    """The published procedure on ``data``; ``rmse``: compute its in-sample rmse (a held-out
+    fold's model is only asked for predictions)."""
     plate = data.plateaus()
     directions, ni, notes = {}, {}, []
     for d, dname in ((1, "positive"), (-1, "negative")):
@@ -181,7 +185,8 @@ def _published(data: FitData, amplitudes: pd.DataFrame, specs, high_speed, const
     model = FrictionModel("silo4", directions["positive"], directions["negative"], unit=data.unit,
                           not_identified=ni, notes=notes, name="SILO4 published procedure",
                           meta={"procedure": "published", "high_speed": high_speed})
-    model.rmse = _safe_rmse(model, data)
+    if rmse:
+        model.rmse = _safe_rmse(model, data)
     return model
 
 

@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns, partial_out_last
+from ..core.reduction import GroupNormals, group_normal_equations, group_rows, harmonic_columns, partial_out_last
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
@@ -123,31 +123,53 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
     freqs = np.asarray(list(frequencies), dtype=float)
     if acc and data.acc is None:
         raise InputError("the inertia cannot be identified: the fit data have no acceleration")
-    key = (tuple(freqs.tolist()), float(min_cycles), float(nyquist_fraction), bool(acc))
+    # one entry per segment whatever min_cycles (it only decides ``active``, from the cached cycles)
+    key = (tuple(freqs.tolist()), float(nyquist_fraction), bool(acc))
     cache = data.cache.setdefault(("segment_stats",) + key, {})
-    order = np.argsort(data.segment, kind="stable")
-    sids, starts = np.unique(data.segment[order], return_index=True)
-    bounds = np.append(starts, len(order))
-    tags = [(int(sid), int(b - a), float(data.y[order[a]]), float(data.y[order[b - 1]]))
-            for sid, a, b in zip(sids, bounds[:-1], bounds[1:])]
+    order, sids, bounds = group_rows(data.segment)
+    ends = data.values_at("y", order[np.concatenate((bounds[:-1], bounds[1:] - 1))]) if len(sids) else np.zeros(0)
+    tags = [(int(sid), int(b - a), float(y0), float(y1))
+            for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
     missing = [j for j, tag in enumerate(tags) if tag not in cache]
     if missing:
-        new = _segments_stats(data, [order[bounds[j]:bounds[j + 1]] for j in missing], freqs, min_cycles,
-                              nyquist_fraction, acc, data.speed_change())
-        for j, r in zip(missing, new):
-            cache[tags[j]] = r
+        change = data.speed_change()
+        for part in _chunks([bounds[j + 1] - bounds[j] for j in missing]):
+            new = _segments_stats(data, [order[bounds[missing[i]]:bounds[missing[i] + 1]] for i in part], freqs,
+                                  nyquist_fraction, acc, change)
+            for i, r in zip(part, new):
+                cache[tags[missing[i]]] = r
     rows = [cache[tag] for tag in tags]
     K, P = len(freqs), 1 + 2 * len(freqs) + int(acc)
-    shape = {"G": (0, P, P), "g": (0, P), "beta_hat": (0, P), "active": (0, K), "sampled": (0, K), "cycles": (0, K)}
+    shape = {"G": (0, P, P), "g": (0, P), "beta_hat": (0, P), "sampled": (0, K), "cycles": (0, K)}
 
     def stack(name):
         return np.array([r[name] for r in rows]) if rows else np.zeros(shape.get(name, (0,)))
 
+    sampled, cycles = stack("sampled").astype(bool), stack("cycles")
     return SegmentStats(stack("G"), stack("g"), stack("yy"), stack("n").astype(int), segment=sids, speed=stack("speed"),
-                        load=stack("load") if data.load is not None else None, active=stack("active").astype(bool),
-                        sampled=stack("sampled").astype(bool), cycles=stack("cycles"), sigma2=stack("sigma2"),
+                        load=stack("load") if data.load is not None else None, active=(cycles >= min_cycles) & sampled,
+                        sampled=sampled, cycles=cycles, sigma2=stack("sigma2"),
                         beta_hat=stack("beta_hat"), rss_hat=stack("rss_hat"), frequencies=freqs, acc=bool(acc),
                         free=_free_flags(data, sids))
+
+
+#: the segments' statistics are computed a bounded number of rows at a time (their columns, sines
+#: and cosines: about 0.1 GB per 2^20 rows), whole segments each; a segment's numbers do not
+#: depend on the segments computed with it
+CHUNK_ROWS = 2 ** 20
+
+
+def _chunks(sizes) -> list[list[int]]:
+    """Consecutive runs of the indices of ``sizes`` (rows per segment) of at most :data:`CHUNK_ROWS`
+    rows each (at least one segment per run)."""
+    out, cur, rows = [], [], 0
+    for i, n in enumerate(sizes):
+        if cur and rows + n > CHUNK_ROWS:
+            out.append(cur)
+            cur, rows = [], 0
+        cur.append(i)
+        rows += int(n)
+    return out + [cur] if cur else out
 
 
 def _free_flags(data: FitData, sids: np.ndarray) -> np.ndarray | None:
@@ -158,8 +180,8 @@ def _free_flags(data: FitData, sids: np.ndarray) -> np.ndarray | None:
     return np.array([int(s) in free for s in sids], bool)
 
 
-def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, min_cycles: float, nyquist_fraction: float,
-                    acc: bool, change: np.ndarray | None = None) -> list[dict]:
+def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, nyquist_fraction: float, acc: bool,
+                    change: np.ndarray | None = None) -> list[dict]:
     """The statistics of the segments whose rows (in time order) are ``groups``, all at once: one
     dict per segment (the cached unit).  ``change`` (per sample, :meth:`FitData.speed_change`): a
     column with a coefficient of its own in every segment, taken out of its normal equations
@@ -204,9 +226,8 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, min_cycles: 
     rss = np.maximum(yy - np.einsum("sp,sp->s", beta, g), 0.0)
     dof = n - (1 + 2 * sampled.sum(axis=1) + int(acc) + (G_change > 0 if T else 0))
     sigma2 = np.where(dof >= 3, rss / np.maximum(dof, 1), np.nan)
-    active = (cycles >= min_cycles) & sampled
-    return [{"n": int(n[s]), "speed": float(speed[s]), "load": float(load[s]), "active": active[s],
-             "sampled": sampled[s], "cycles": cycles[s], "G": G[s], "g": g[s], "yy": float(yy[s]),
+    return [{"n": int(n[s]), "speed": float(speed[s]), "load": float(load[s]), "sampled": sampled[s],
+             "cycles": cycles[s], "G": G[s], "g": g[s], "yy": float(yy[s]),
              "beta_hat": beta[s], "rss_hat": float(rss[s]), "sigma2": float(sigma2[s])} for s in range(len(n))]
 
 

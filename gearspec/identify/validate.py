@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from ..core.crossval import held_out, row_folds
+from ..core.reduction import unique_ids
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
@@ -40,7 +41,7 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
     groups, and enough speeds left for the law) -- and ``reason`` says which, in one sentence;
     never the in-sample error in its place.  When some folds fail, ``rmse`` comes from the others
     and ``reason`` says how many held-out samples it covers."""
-    ng = len(np.unique(data.groups(by)))
+    ng = len(unique_ids(data.groups(by)))
     if ng < 2:
         return None, (f"cross-validation needs two held-out {by}s or more; the data have {ng}")
 
@@ -68,6 +69,8 @@ def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
         p = model.params(dname)
         if all(p.get(k) is not None for k in model.law_spec.params if k not in model.law_spec.optional):
             ok |= data.direction == d
+    if ok.all():        # every sample: the data as they are (the same rows, no copy)
+        return model.rmse_on(data)
     return model.rmse_on(data.subset(ok)) if ok.any() else None
 
 

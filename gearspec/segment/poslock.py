@@ -79,12 +79,15 @@ def locked_acceleration(t: np.ndarray, theta: np.ndarray, frequencies) -> np.nda
         ``-v^3 t''(theta)`` per sample, ``v = 1 / t'(theta)``, of the least-squares fit of
         ``t(theta)`` (module docstring).
     """
-    return _time_fit(t, theta, frequencies)[0]
+    return _time_fit(t, theta, frequencies, residual=False)[0]
 
 
-def _time_fit(t, theta, frequencies):
+def _time_fit(t, theta, frequencies, residual: bool = True):
     """``(acc, v, r)``: the locked acceleration and velocity at each sample and the residual time
-    ``t - t(theta)`` (s) of the fit of :func:`locked_acceleration`."""
+    ``t - t(theta)`` (s) of the fit of :func:`locked_acceleration` (``residual`` False: None, not
+    computed)."""
+    from ..core.reduction import gram
+
     t = np.asarray(t, dtype=float)
     th = np.asarray(theta, dtype=float)
     lo, hi = float(th.min()), float(th.max())
@@ -99,14 +102,14 @@ def _time_fit(t, theta, frequencies):
     tc = t - t.mean()
     slope = float(np.dot(u - u.mean(), tc) / np.dot(u - u.mean(), u - u.mean()))
     rest = tc - slope * u
-    coef = np.linalg.lstsq(X.T @ X, X.T @ rest, rcond=None)[0]
+    coef = np.linalg.lstsq(gram(X), X.T @ rest, rcond=None)[0]
     coef[1] += slope
     m = len(w)
     a, b = coef[3:3 + m], coef[3 + m:]
     d1 = (coef[1] + 2 * coef[2] * u) / half + c @ (w * a) - s @ (w * b)
     d2 = 2 * coef[2] / half ** 2 - s @ (w * w * a) - c @ (w * w * b)
     v = 1.0 / d1
-    return -v ** 3 * d2, v, tc - X @ coef
+    return -v ** 3 * d2, v, (tc - X @ coef) if residual else None
 
 
 def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray) -> tuple[np.ndarray, int, int]:
