@@ -134,6 +134,7 @@ class _Pool:
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
         self.refine_top = 4
+        self.say = lambda text: None   # progress: called with one line of text as a step of the search ends
 
     def consider(self, parts, origin, thr, refine: bool = True):
         parts = canonical(parts)
@@ -192,8 +193,10 @@ def climb(pool: _Pool, rounds: int = 12):
     pool.screen()
     cur = pool.best()
     compound = False
-    for _ in range(rounds):
+    for rnd in range(rounds):
         nxt = _climb_step(pool, cur, compound)
+        pool.say(f"hill climb round {rnd + 1}{' (pairs of moves)' if compound else ''}: {len(pool.cands)} laws "
+                 f"screened, the best of complexity {pool.cands[nxt].complexity}")
         if nxt == cur and not compound:
             compound = True          # a local optimum of single moves: try pairs once
             continue
@@ -226,13 +229,22 @@ def finalize(pool: _Pool, local_search: bool = True):
     best; the selection rule on those; the selected law's simplifications checked too, until the
     selection stands (four rounds at most).  Returns the selected signature."""
     pool.screen()
-    for _ in range(4):
-        pool.refit_holdout(_reachable(pool))
+    for rnd in range(4):
+        reach = _reachable(pool)
+        n_new = len(reach - pool.full)
+        pool.refit_holdout(reach)
         sel = pool.select()
+        pool.say(f"selection round {rnd + 1}: {n_new} laws on or near the front refitted on held-out folds, "
+                 f"selected complexity {pool.cands[sel].complexity}")
         if not local_search:
             return sel
-        pool.refit_holdout(_simplifications(pool, sel))
+        simple = _simplifications(pool, sel)
+        n_new = len(simple - pool.full)
+        pool.say(f"selection round {rnd + 1}: {len(simple)} simplifications of the selected law fitted")
+        pool.refit_holdout(simple)
         nsel = pool.select()
+        pool.say(f"selection round {rnd + 1}: {n_new} simplifications refitted on held-out folds, "
+                 + ("the selection stands" if nsel == sel else f"selected complexity {pool.cands[nsel].complexity}"))
         if nsel == sel:
             return sel
     return nsel
