@@ -203,10 +203,15 @@ def validate_law(M: Moments, Mv: Moments, parts, *, alpha: float, min_gain: floa
     groups = Mv.segment
     made = []
 
+    fitted: dict = {}      # the law kept after a round is one of that round's alternatives: fitted once
+
     def pred(ps):
         if not ps:
             return np.zeros((Mv.S, Mv.K))
-        return fit_law(M, canonical(ps)).basis_coefficients(Mv)
+        key = canonical(ps)
+        if key not in fitted:
+            fitted[key] = fit_law(M, key).basis_coefficients(Mv)
+        return fitted[key]
 
     while True:
         p1 = pred(parts)
