@@ -135,6 +135,10 @@ def test_every_long_stage_prints_progress(run_with_progress):
                  "acceptance round 1: ", "inclusion probabilities of the level terms",
                  "reference law SILO4 eq. 3 (per direction) fitted on the same folds"):
         assert any(t.startswith(head) or head in t for t in lines), head
+    # the screen's rounds: the two true lines enter (the motor-shaft line first: alone its Z is the
+    # larger), the decoy at twice the motor shaft does not
+    entered = [t.split(": ")[1].split(" ")[0] for t in lines if t.startswith("line screen round")]
+    assert entered == [f"{F3:.6g}", f"{F2:.6g}"]
     # the last acceptance round says every term passes, with the selected law's number of terms
     last = [t for t in lines if t.startswith("acceptance round")][-1]
     assert last.endswith(f"all {len(res.best.parts)} terms pass")

@@ -174,7 +174,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     its columns over a short segment).  Bonferroni over the lines still in play.  ``inside``: the
     line entered in a round.  ``max_lines``: the rounds stop once that many lines are in (a law holds
     no more; the lines still out keep the verdict of the last round, beside the lines in).
-    ``progress``: called with a line of text after the lines alone are tested.
+    ``progress``: called with a line of text after the lines alone are tested and after every round.
     ``fold_of_segment``, ``group_of_segment``: fold and held-out group of every segment, in the
     order of the sorted segment ids."""
     freqs = np.asarray(freqs, dtype=float)
@@ -216,6 +216,9 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
         inside.append(best)
         rest.remove(best)
         out[alive[best]]["inside"] = True
+        if progress is not None:
+            progress(f"line screen round {rnd}: {freqs[alive[best]]:.6g} cycles/{data.unit} enters "
+                     f"(held-out Z {zs[best]:.1f} beside the lines in)")
     return out
 
 
