@@ -505,7 +505,10 @@ def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple, say=None
             if not np.any(cg >= 0):
                 continue
             prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
-                                       alpha=run.alpha, seed=run.seed, free=_free(X.shape[1], nf), column_groups=cg)
+                                       alpha=run.alpha, seed=run.seed, free=_free(X.shape[1], nf), column_groups=cg,
+                                       progress=None if say is None else
+                                       (lambda text, st=stage: say(f"inclusion probabilities of the {st} terms: "
+                                                                   + text)))
             for k, p in enumerate(mine):
                 rows.append({"term": p.label(run.M.frequencies), "family": p.family,
                              "variant": "direction-dependent" if p.split else "both directions",
