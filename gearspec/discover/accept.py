@@ -154,9 +154,11 @@ def _alternatives(parts, families):
 
 
 def backward(M: Moments, fold, groups, parts, *, alpha: float, min_gain: float, n_candidates: int,
-             families=(), label=None) -> tuple[tuple, list[Verdict]]:
+             families=(), label=None, progress=None) -> tuple[tuple, list[Verdict]]:
     """Backward elimination of the module docstring: the law with every term passing, and the
-    verdicts of the last round (every term) plus those of the simplifications made."""
+    verdicts of the last round (every term) plus those of the simplifications made.  ``progress``:
+    called with one line of text after every round (each refits every term's alternative on the
+    held-out folds: on a long recording a round takes seconds)."""
     parts = canonical(_start_values(M, parts))
     z_crit = critical_z(alpha, n_candidates, len(np.unique(groups)))
     label = label or (lambda p: p.label(M.frequencies))
@@ -167,9 +169,13 @@ def backward(M: Moments, fold, groups, parts, *, alpha: float, min_gain: float, 
                            move=move, cache=cache), alt) for i, alt, move in _alternatives(parts, families)]
         failing = [(v, alt) for v, alt in verdicts if not v.passed and alt]
         if not failing:
+            if progress is not None:
+                progress(f"acceptance round {len(made) + 1}: all {len(parts)} terms pass")
             return parts, made + [v for v, _ in verdicts]
         v, alt = min(failing, key=lambda x: x[0].z)
         made.append(v)
+        if progress is not None:
+            progress(f"acceptance round {len(made)}: {v.reason()}; simplified")
         parts = canonical(_start_values(M, alt))
 
 
@@ -197,10 +203,15 @@ def validate_law(M: Moments, Mv: Moments, parts, *, alpha: float, min_gain: floa
     groups = Mv.segment
     made = []
 
+    fitted: dict = {}      # the law kept after a round is one of that round's alternatives: fitted once
+
     def pred(ps):
         if not ps:
             return np.zeros((Mv.S, Mv.K))
-        return fit_law(M, canonical(ps)).basis_coefficients(Mv)
+        key = canonical(ps)
+        if key not in fitted:
+            fitted[key] = fit_law(M, key).basis_coefficients(Mv)
+        return fitted[key]
 
     while True:
         p1 = pred(parts)

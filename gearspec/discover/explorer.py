@@ -167,13 +167,13 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
                        local_search=local_search, inertia=inertia, seed=seed, test_alpha=test_alpha, say=say)
         run.min_gain = min_gain
         pool, _, sel, stages = _search(run, say)
-        sel = _accept(run, pool, sel, validation, inertia)
+        sel = _accept(run, pool, sel, validation, inertia, say)
         say("acceptance: every term of the selected law tested on held-out data")
         cand_list, front, selected = _finish(run, pool, sel)
-        inclusion = _inclusion(run, cand_list[selected].parts, *stages)
+        inclusion = _inclusion(run, cand_list[selected].parts, *stages, say=say)
         if run.n_models:
             say(f"inclusion probabilities: {run.n_models} bootstrap replicates")
-        refs, levels = _compare(data, run, cand_list[selected], references, published)
+        refs, levels = _compare(data, run, cand_list[selected], references, published, say)
         if references or published:
             say(f"{len(refs)} reference laws scored on the same folds")
         run.timings["total"] = time.perf_counter() - t_start
@@ -196,6 +196,7 @@ def _search(run: "_Run", say) -> tuple:
     say(f"level law searched: {len(pool1.cands)} laws")
     t0 = time.perf_counter()
     pool, path2, X2, nf = _ripple_stage(run, pool1, level, z_level, lib1, lib2)
+    pool.say = say
     if not pool.fits:
         raise InputError("the sparse regression selected no term at any threshold: the friction signal is "
                          "zero or the library does not fit the data")
@@ -301,6 +302,8 @@ def _prepare(data, t_start, *, frequencies, gear, spectrum, library, library_opt
     t_screen = time.perf_counter() - t0
     M = moments(data, [s["frequency"] for s in kept], [s.get("label") for s in kept], inertia=inertia,
                 min_cycles=min_cycles)
+    if kept:
+        say(f"{M.S} segments reduced with their {len(kept)} ripple lines")
     timings = {"moments": time.perf_counter() - t_start - t_screen, "line screen": t_screen}
     notes = list(M.notes) + notes
     lib = library if library is not None else default_library(M, **lib_opts)
@@ -386,7 +389,7 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
     return pool, path2, X2, nf
 
 
-def _accept(run: _Run, pool: _Pool, sel, validation, inertia):
+def _accept(run: _Run, pool: _Pool, sel, validation, inertia, say=None):
     """The closed loop's acceptance rule on the law the search selected (:mod:`.accept`): backward
     elimination by the held-out test, then the independent recording's check; the signature of
     the law that stands (added to the pool with its full held-out refit when it is new)."""
@@ -397,7 +400,7 @@ def _accept(run: _Run, pool: _Pool, sel, validation, inertia):
     splittable = sum(1 for p in cand.parts if not p.split and p.fam.basis != "acc") if len(M.directions) == 2 else 0
     n_cand = max(len(_addable(run.lib)) + splittable, 1)
     final, verdicts = backward(M, run.fold, M.groups(run.by), cand.parts, alpha=run.test_alpha,
-                               min_gain=run.min_gain, n_candidates=n_cand, families=fams)
+                               min_gain=run.min_gain, n_candidates=n_cand, families=fams, progress=say)
     if validation is not None:
         Mv = _validation_moments(validation, M, inertia)
         final, more = validate_law(M, Mv, final, alpha=run.test_alpha, min_gain=run.min_gain, families=fams)
@@ -473,7 +476,7 @@ def _finish(run: _Run, pool: _Pool, sel) -> tuple[list, list, int]:
     return cand_list, front, selected
 
 
-def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.DataFrame:
+def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple, say=None) -> pd.DataFrame:
     """Inclusion probabilities of the terms of the selected law ``final``: the fraction of
     bootstrap replicates over segments (or runs) in which each stage's sparse regression
     (``(moments, library, path, design or None, held columns)``), at the largest threshold of its
@@ -502,7 +505,10 @@ def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.Da
             if not np.any(cg >= 0):
                 continue
             prob = bootstrap_inclusion(X, Ms, t, by=run.by, n_models=run.n_models, method=run.optimizer,
-                                       alpha=run.alpha, seed=run.seed, free=_free(X.shape[1], nf), column_groups=cg)
+                                       alpha=run.alpha, seed=run.seed, free=_free(X.shape[1], nf), column_groups=cg,
+                                       progress=None if say is None else
+                                       (lambda text, st=stage: say(f"inclusion probabilities of the {st} terms: "
+                                                                   + text)))
             for k, p in enumerate(mine):
                 rows.append({"term": p.label(run.M.frequencies), "family": p.family,
                              "variant": "direction-dependent" if p.split else "both directions",
@@ -510,18 +516,24 @@ def _inclusion(run: _Run, final, level_path: tuple, ripple_path: tuple) -> pd.Da
                              "probability": float(prob[k]) if k < len(prob) else 0.0, "stage": stage,
                              "threshold": t})
             run.settings[f"bootstrap_threshold_{stage}"] = t
+            if say is not None:
+                say(f"inclusion probabilities of the {stage} terms: {run.n_models} bootstrap replicates")
         if rows:
             inclusion = pd.DataFrame(rows).sort_values("probability", ascending=False).reset_index(drop=True)
     run.timings["bootstrap"] = time.perf_counter() - t0
     return inclusion
 
 
-def _compare(data: FitData, run: _Run, selected: Candidate, references, published) -> tuple[list, dict]:
+def _compare(data: FitData, run: _Run, selected: Candidate, references, published, say=None) -> tuple[list, dict]:
     """The papers' laws refitted on the same folds and the published models scored as they are;
     the mean friction of every segment (data, the selected law, each reference) for the plots."""
     t0 = time.perf_counter()
     M = run.M
-    refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold) for law in references or ()]
+    refs: list[Reference] = []
+    for law in references or ():
+        refs.append(_paper_law(data, M, law, run.specs, run.fold))
+        if say is not None and refs[-1].model is not None:
+            say(f"reference law {refs[-1].name} fitted on the same folds")
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
     levels = {"data": M.b[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}

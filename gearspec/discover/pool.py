@@ -118,6 +118,11 @@ def _neighbours(parts, M: Moments, addable=(), adds: bool = True) -> list[tuple]
     return out
 
 
+#: laws per progress line within a step of the selection (on the default twin: 10 full held-out
+#: refits of a 40-parameter law take about 7 s)
+TICK = 10
+
+
 class _Pool:
     """Structures refined and scored on one set of moments: one per signature (the best in-sample
     fit among those that share it).  Held-out errors: a fast screen while searching (nonlinear
@@ -134,6 +139,7 @@ class _Pool:
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
         self.refine_top = 4
+        self.say = lambda text: None   # progress: called with one line of text as a step of the search ends
 
     def consider(self, parts, origin, thr, refine: bool = True):
         parts = canonical(parts)
@@ -164,16 +170,23 @@ class _Pool:
                 self.cands.pop(sig, None)
         self.screen()
 
-    def refit_holdout(self, sigs):
-        for sig in sigs:
-            if sig in self.full:
-                continue
+    def refit_holdout(self, sigs, what: str = ""):
+        """Full held-out refits of the laws ``sigs`` (those without one yet); with ``what``, a
+        progress line every :data:`TICK` laws (``what``: the laws, as the line names them)."""
+        todo = [s for s in sigs if s not in self.full]
+        for k, sig in enumerate(todo):
             c = self.cands[sig]
             if any(p.free for p in c.parts):
                 c.fit = fit_law(self.M, c.parts, z0=c.fit.z)
                 c.cv_sse, c.cv_pred = cross_validate(self.M, c.parts, self.fold, z0=c.fit.z)
                 c.rmse_holdout = math.sqrt(float(np.sum(c.cv_sse)) / self.M.N)
             self.full.add(sig)
+            self.tick(k, len(todo), what)
+
+    def tick(self, k: int, n: int, what: str) -> None:
+        """Progress within a long step: a line after every :data:`TICK` of its ``n`` laws but the last."""
+        if what and (k + 1) % TICK == 0 and k + 1 < n:
+            self.say(f"{what}: {k + 1} of {n}")
 
     def best(self):
         """The structure with the lowest held-out error so far."""
@@ -192,8 +205,10 @@ def climb(pool: _Pool, rounds: int = 12):
     pool.screen()
     cur = pool.best()
     compound = False
-    for _ in range(rounds):
+    for rnd in range(rounds):
         nxt = _climb_step(pool, cur, compound)
+        pool.say(f"hill climb round {rnd + 1}{' (pairs of moves)' if compound else ''}: {len(pool.cands)} laws "
+                 f"screened, the best of complexity {pool.cands[nxt].complexity}")
         if nxt == cur and not compound:
             compound = True          # a local optimum of single moves: try pairs once
             continue
@@ -226,13 +241,22 @@ def finalize(pool: _Pool, local_search: bool = True):
     best; the selection rule on those; the selected law's simplifications checked too, until the
     selection stands (four rounds at most).  Returns the selected signature."""
     pool.screen()
-    for _ in range(4):
-        pool.refit_holdout(_reachable(pool))
+    for rnd in range(4):
+        reach = _reachable(pool)
+        n_new = len(reach - pool.full)
+        pool.refit_holdout(reach, f"selection round {rnd + 1}: laws on or near the front refitted on held-out folds")
         sel = pool.select()
+        pool.say(f"selection round {rnd + 1}: {n_new} laws on or near the front refitted on held-out folds, "
+                 f"selected complexity {pool.cands[sel].complexity}")
         if not local_search:
             return sel
-        pool.refit_holdout(_simplifications(pool, sel))
+        simple = _simplifications(pool, sel, f"selection round {rnd + 1}: simplifications of the selected law fitted")
+        n_new = len(simple - pool.full)
+        pool.say(f"selection round {rnd + 1}: {len(simple)} simplifications of the selected law fitted")
+        pool.refit_holdout(simple, f"selection round {rnd + 1}: simplifications refitted on held-out folds")
         nsel = pool.select()
+        pool.say(f"selection round {rnd + 1}: {n_new} simplifications refitted on held-out folds, "
+                 + ("the selection stands" if nsel == sel else f"selected complexity {pool.cands[nsel].complexity}"))
         if nsel == sel:
             return sel
     return nsel
@@ -249,13 +273,16 @@ def _reachable(pool: _Pool) -> set:
     return set(_front(pool.cands)) | set(near)
 
 
-def _simplifications(pool: _Pool, sel) -> set:
+def _simplifications(pool: _Pool, sel, what: str = "") -> set:
     """The selected law's neighbours that add nothing (a term dropped, made symmetric or
-    direction-dependent, reshaped), fitted and screened."""
+    direction-dependent, reshaped), fitted and screened (``what``: progress, as in
+    :meth:`_Pool.refit_holdout`)."""
     base = pool.cands[sel]
     nb = set()
-    for parts in _neighbours(_inherit(base.fit), pool.M, pool.addable, adds=False):
+    moves = _neighbours(_inherit(base.fit), pool.M, pool.addable, adds=False)
+    for k, parts in enumerate(moves):
         pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold)
+        pool.tick(k, len(moves), what)
         sig = _signature(parts)
         if sig in pool.fits:
             nb.add(sig)

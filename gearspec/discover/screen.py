@@ -108,25 +108,44 @@ def _segments(data: FitData, inertia):
     return order, starts, stops, chans
 
 
-def _held_out_z(G, g, cols0, cols1, fold, direction, group) -> float:
+def _training_sums(G, g, fold, direction) -> dict:
+    """``{(fold, direction): (sum of G, sum of g)}`` over every fold's training segments of that
+    direction (the held-out segments of the fold and direction exist): what :func:`_held_out_z`
+    fits on, summed once for all the lines and rounds of the screen.  numpy sums over the segments
+    (axis 0) entry by entry in segment order when two columns or more are kept (a line is two), so
+    the kept columns of these sums equal the sums of those columns bit for bit (one column alone
+    would be summed pairwise)."""
+    out = {}
+    for f in np.unique(fold):
+        test = fold == f
+        for d in (1, -1):
+            tr, te = ~test & (direction == d), test & (direction == d)
+            if te.any() and tr.any():
+                out[(f, d)] = (G[tr].sum(0), g[tr].sum(0))
+    return out
+
+
+def _held_out_z(G, g, cols0, cols1, fold, direction, group, sums=None) -> float:
     """Held-out Z (one cluster per held-out group, :func:`~gearspec.core.crossval.z_statistic` with
     one block) of the lines' columns ``cols1`` against ``cols0`` (a subset), one coefficient set per
     direction fitted on the training folds; from the segments' normal equations ``G`` (S, K, K),
     ``g`` (S, K) of those columns alone: with ``d`` the change of a segment's coefficients, its
     ``<r0, delta> = g.d - b0' G d`` and ``|delta|^2 = d' G d`` (cost segments x columns used^2).
-    ``group``: the held-out group (0..n-1) of every segment."""
+    ``group``: the held-out group (0..n-1) of every segment; ``sums``: :func:`_training_sums` of
+    ``G`` and ``g`` (computed here when not given)."""
     cols = list(cols1)
     pos0 = [cols.index(c) for c in cols0]
     Gc, gc = G[:, cols][:, :, cols], g[:, cols]
     S, k = gc.shape
     beta0, beta1 = np.zeros((S, k)), np.zeros((S, k))
+    sums = _training_sums(G, g, fold, direction) if sums is None else sums
     for f in np.unique(fold):
         test = fold == f
         for d in (1, -1):
-            tr, te = ~test & (direction == d), test & (direction == d)
-            if not te.any() or not tr.any():
+            te = test & (direction == d)
+            if (f, d) not in sums:
                 continue
-            Gt, gt = Gc[tr].sum(0), gc[tr].sum(0)
+            Gt, gt = sums[(f, d)][0][np.ix_(cols, cols)], sums[(f, d)][1][cols]
             beta1[te] = np.linalg.lstsq(Gt, gt, rcond=1e-10)[0]
             if pos0:
                 beta0[np.ix_(te, pos0)] = np.linalg.lstsq(Gt[np.ix_(pos0, pos0)], gt[pos0], rcond=1e-10)[0]
@@ -155,7 +174,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     its columns over a short segment).  Bonferroni over the lines still in play.  ``inside``: the
     line entered in a round.  ``max_lines``: the rounds stop once that many lines are in (a law holds
     no more; the lines still out keep the verdict of the last round, beside the lines in).
-    ``progress``: called with a line of text after the lines alone are tested.
+    ``progress``: called with a line of text after the lines alone are tested and after every round.
     ``fold_of_segment``, ``group_of_segment``: fold and held-out group of every segment, in the
     order of the sorted segment ids."""
     freqs = np.asarray(freqs, dtype=float)
@@ -179,6 +198,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
     if len(alive) < 2:
         return out
     G, g = joint_statistics(data, freqs[alive], inertia=inertia, min_cycles=min_cycles)
+    sums = _training_sums(G, g, fold_of_segment, direction)      # once for every line and round
     inside: list[int] = []
     rest = list(range(len(alive)))
     rnd = 0
@@ -186,7 +206,7 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
         rnd += 1
         zc = critical_z(alpha, F - len(inside), n_groups)
         cols0 = [c for j in inside for c in (2 * j, 2 * j + 1)]
-        zs = {j: _held_out_z(G, g, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, group)
+        zs = {j: _held_out_z(G, g, cols0, cols0 + [2 * j, 2 * j + 1], fold_of_segment, direction, group, sums)
               for j in rest}
         for j, z in zs.items():
             out[alive[j]].update(z=float(z), z_crit=zc, passed=bool(z >= zc), round=rnd)
@@ -196,6 +216,9 @@ def screen_lines(data: FitData, freqs, fold_of_segment: np.ndarray, group_of_seg
         inside.append(best)
         rest.remove(best)
         out[alive[best]]["inside"] = True
+        if progress is not None:
+            progress(f"line screen round {rnd}: {freqs[alive[best]]:.6g} cycles/{data.unit} enters "
+                     f"(held-out Z {zs[best]:.1f} beside the lines in)")
     return out
 
 

@@ -97,7 +97,7 @@ def path(sc: Scaled, thresholds, method: str = "stlsq", alpha: float = 1e-4, fre
 
 def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models: int = 50,
                         method: str = "stlsq", alpha: float = 1e-4, seed: int = 0, free=None,
-                        column_groups=None) -> np.ndarray:
+                        column_groups=None, progress=None) -> np.ndarray:
     """Fraction of segment-bootstrap replicates in which each column is selected.
 
     ``X``: the library design on the pseudo rows of ``m``, a
@@ -105,6 +105,7 @@ def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models
     Groups (segments or runs) are drawn with replacement; each replicate is scaled afresh and
     fitted at ``threshold``.  ``column_groups`` (p,): a group index per column (-1: none); then the
     fraction of replicates in which any column of each group is selected, (max group + 1,).
+    ``progress``: called with one line of text after every 10 replicates but the last.
     """
     from .blocks import SegmentDesign
 
@@ -115,7 +116,7 @@ def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models
     design = X if isinstance(X, SegmentDesign) else SegmentDesign(m, np.ones((m.S, 0)), np.zeros(0, int), X)
     cg = None if column_groups is None else np.asarray(column_groups, dtype=int)
     hits = np.zeros(design.shape[1] if cg is None else int(cg.max()) + 1)
-    for _ in range(n_models):
+    for i in range(n_models):
         pick = np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))])
         sc = Scaled(*design.reduce(pick))
         sel = _fit(method, threshold, alpha, sc, free) != 0
@@ -123,4 +124,6 @@ def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models
             hits += sel
         else:
             hits[np.unique(cg[sel & (cg >= 0)])] += 1
+        if progress is not None and (i + 1) % 10 == 0 and i + 1 < n_models:
+            progress(f"{i + 1} of {n_models} bootstrap replicates")
     return hits / max(n_models, 1)
