@@ -19,6 +19,7 @@ from scipy import optimize
 
 from ..core.crossval import deal_folds, group_summary, held_out
 from ..model import FrictionModel
+from . import lsq
 from .library import FAMILIES, _g
 from .lsq import NormalSolver
 from .moments import Moments
@@ -187,12 +188,13 @@ def _solve_fast(X, y, basis: bool = True):
 
 
 def _project_out(ns, X, v):
-    """``v`` minus its projection on the column space of ``X``; ``ns`` from :func:`_solve_fast`."""
+    """``v`` (n,) or the columns of ``v`` (n, m) minus their projections on the column space of
+    ``X``; ``ns`` from :func:`_solve_fast`."""
     if isinstance(ns, NormalSolver):
         r = ns.residual(v)
         if r is not None:
             return r
-        ns = _solve(X, v)[1]
+        ns = _solve(X, v if v.ndim == 1 else v[:, 0])[1]      # the basis does not depend on the target
     return v - ns @ (ns.T @ v)
 
 
@@ -276,15 +278,21 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     Pk = m.P[:, :, kidx]                     # (S, K, p)
     ncol = len(lay.cols)
     slots = _slots(parts, lay, m)
+    # the normal equations serve designs of MIN_SIZE entries or more (NormalSolver.of); smaller
+    # ones go to QR, with the arithmetic they always had
+    large = m.S * m.K * ncol >= lsq.MIN_SIZE and m.S * m.K >= ncol
     cache = {}
+
+    def solve(A):
+        X = (A[:, None, :] * Pk).reshape(-1, ncol)
+        return X, _solve_fast(X, q)
 
     def state(zz):
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
             A, dA = _multipliers(parts, lay, m, zz, deriv=True, slots=slots)
-            X = (A[:, None, :] * Pk).reshape(-1, ncol)
-            w, ns = _solve_fast(X, q)
+            X, (w, ns) = solve(A)
             cache[key] = (X, w, ns, dA)
         return cache[key]
 
@@ -293,21 +301,22 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         return q - X @ w
 
     def sse_at(zz):
-        A = _multipliers(parts, lay, m, zz, slots=slots)
-        X = (A[:, None, :] * Pk).reshape(-1, ncol)
-        r = q - X @ _solve_fast(X, q, basis=False)[0]
+        X, (w, _) = solve(_multipliers(parts, lay, m, zz, slots=slots))
+        r = q - X @ w
         return float(r @ r)
 
     def jac(zz):
-        # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w
+        # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w, all k at once
         X, w, ns, dA = state(zz)
-        J = np.empty((len(q), len(zz)))
+        V = np.zeros((m.S, m.K, len(zz)))
         for k, cols in enumerate(dA):
-            v = np.zeros((m.S, m.K))
             for j, d in cols:
-                v += (d * w[j])[:, None] * Pk[:, :, j]
-            J[:, k] = -_project_out(ns, X, v.reshape(-1))
-        return J
+                V[:, :, k] += (d * w[j])[:, None] * Pk[:, :, j]
+        V = V.reshape(-1, len(zz))
+        if large:
+            return -_project_out(ns, X, V)
+        # small designs (QR): one column at a time, the arithmetic of short recordings unchanged
+        return np.column_stack([-_project_out(ns, X, V[:, k].copy()) for k in range(len(zz))])
 
     if refine and len(z) and scan:
         # variable projection has local optima (a Stribeck velocity beyond the plateaus trading
