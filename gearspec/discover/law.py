@@ -133,18 +133,27 @@ def _slots(parts, lay: _Layout, m: Moments) -> list:
 
 def _multipliers(parts, lay: _Layout, m: Moments, z: np.ndarray, deriv: bool = False, slots=None):
     """(S, p) per-segment multipliers of the law's columns for nonlinear parameters exp(z); with
-    ``deriv`` also their derivatives with respect to each z (a list of (columns, (S, n)) pairs).
+    ``deriv`` also their derivatives with respect to each z (:func:`_derivatives`).
     ``slots``: :func:`_slots` of these parts, layout and moments (computed when not given)."""
+    slots = slots if slots is not None else _slots(parts, lay, m)
     A = np.empty((m.S, len(lay.cols)))
-    dA = [[] for _ in lay.nl]
-    for cols, mag, sgn, k, p0 in (slots if slots is not None else _slots(parts, lay, m)):
+    for cols, mag, sgn, k, p0 in slots:
         pv = p0 if k is None else math.exp(z[k])
         A[:, cols] = (sgn * mag(m.speed, pv))[:, None]
-        if deriv and k is not None:
-            h = 1e-6
-            dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
-            dA[k] = [(j, dcol) for j in cols]
-    return (A, dA) if deriv else A
+    return (A, _derivatives(m, z, slots)) if deriv else A
+
+
+def _derivatives(m: Moments, z: np.ndarray, slots) -> list:
+    """Derivatives of the multipliers with respect to each z (central differences in z): a list,
+    per nonlinear parameter, of (column, (S,) derivative) pairs."""
+    dA = [[] for _ in z]
+    for cols, mag, sgn, k, p0 in slots:
+        if k is None:
+            continue
+        pv, h = math.exp(z[k]), 1e-6
+        dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
+        dA[k] = [(j, dcol) for j in cols]
+    return dA
 
 
 def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
@@ -291,13 +300,12 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
-            A, dA = _multipliers(parts, lay, m, zz, deriv=True, slots=slots)
-            X, (w, ns) = solve(A)
-            cache[key] = (X, w, ns, dA)
+            X, (w, ns) = solve(_multipliers(parts, lay, m, zz, slots=slots))
+            cache[key] = (X, w, ns)
         return cache[key]
 
     def resid(zz):
-        X, w, _, _ = state(zz)
+        X, w, _ = state(zz)
         return q - X @ w
 
     def sse_at(zz):
@@ -307,9 +315,9 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
 
     def jac(zz):
         # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w, all k at once
-        X, w, ns, dA = state(zz)
+        X, w, ns = state(zz)
         V = np.zeros((m.S, m.K, len(zz)))
-        for k, cols in enumerate(dA):
+        for k, cols in enumerate(_derivatives(m, zz, slots)):     # only where the optimiser asks
             for j, d in cols:
                 V[:, :, k] += (d * w[j])[:, None] * Pk[:, :, j]
         V = V.reshape(-1, len(zz))
