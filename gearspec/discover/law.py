@@ -162,7 +162,9 @@ def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
 
 def _design(parts, lay, m: Moments, z) -> np.ndarray:
     A = _multipliers(parts, lay, m, z)
-    return (A[:, None, :] * m.P[:, :, _basis_index(lay, m)]).reshape(m.S * m.K, len(lay.cols))
+    # (P[:, :, kidx] is laid out basis-major: made C-ordered, the product reshapes without a copy)
+    Pk = np.ascontiguousarray(m.P[:, :, _basis_index(lay, m)])
+    return (A[:, None, :] * Pk).reshape(m.S * m.K, len(lay.cols))
 
 
 def _solve(X, y):
@@ -284,38 +286,51 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     q = m.q.reshape(-1)
     converged = True
     kidx = _basis_index(lay, m)
-    Pk = m.P[:, :, kidx]                     # (S, K, p)
+    Pk = np.ascontiguousarray(m.P[:, :, kidx])       # (S, K, p), C-ordered: designs reshape without a copy
     ncol = len(lay.cols)
     slots = _slots(parts, lay, m)
     # the normal equations serve designs of MIN_SIZE entries or more (NormalSolver.of); smaller
     # ones go to QR, with the arithmetic they always had
     large = m.S * m.K * ncol >= lsq.MIN_SIZE and m.S * m.K >= ncol
+    # a large design is built column-scaled in one pass: its column norms from the pseudo rows'
+    # squared column sums (|X_j|^2 = sum_s a_sj^2 D_sj)
+    D = np.einsum("skj,skj->sj", Pk, Pk) if large else None
     cache = {}
 
     def solve(A):
+        """(design, coefficients, solver or QR basis, residual) at the multipliers ``A``."""
+        if large:
+            amax = np.max(np.abs(A), axis=0)
+            amax[amax == 0] = 1.0
+            As = A / amax                   # tiny multipliers are not squared to zero
+            nrm = np.sqrt(np.sum(As * As * D, axis=0)) * amax
+            if np.all(nrm > 0):
+                Xn = ((A / nrm)[:, None, :] * Pk).reshape(-1, ncol)
+                ns = NormalSolver.of_scaled(Xn, nrm)
+                c = ns.coef_scaled(q) if ns is not None else None
+                if c is not None:
+                    return Xn, c / nrm, ns, q - Xn @ c
         X = (A[:, None, :] * Pk).reshape(-1, ncol)
-        return X, _solve_fast(X, q)
+        w, ns = _solve_fast(X, q)
+        return X, w, ns, q - X @ w
 
     def state(zz):
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
-            X, (w, ns) = solve(_multipliers(parts, lay, m, zz, slots=slots))
-            cache[key] = (X, w, ns)
+            cache[key] = solve(_multipliers(parts, lay, m, zz, slots=slots))
         return cache[key]
 
     def resid(zz):
-        X, w, _ = state(zz)
-        return q - X @ w
+        return state(zz)[3].copy()
 
-    def sse_at(zz):
-        X, (w, _) = solve(_multipliers(parts, lay, m, zz, slots=slots))
-        r = q - X @ w
+    def sse_at(A):
+        r = solve(A)[3]
         return float(r @ r)
 
     def jac(zz):
         # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w, all k at once
-        X, w, ns = state(zz)
+        X, w, ns, _ = state(zz)
         V = np.zeros((m.S, m.K, len(zz)))
         for k, cols in enumerate(_derivatives(m, zz, slots)):     # only where the optimiser asks
             for j, d in cols:
@@ -330,14 +345,20 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         # variable projection has local optima (a Stribeck velocity beyond the plateaus trading
         # against Coulomb and viscous friction): scan each nonlinear parameter over its range, the
         # others held, and start from the best point
-        best = sse_at(z)
+        # (only the columns of parameter k are recomputed at its grid points)
+        A0 = _multipliers(parts, lay, m, z, slots=slots)
+        best = sse_at(A0)
         for k in range(len(z)):
+            own = [(cols, mag, sgn) for cols, mag, sgn, kk, _ in slots if kk == k]
             for g in np.linspace(lay.lo[k], lay.hi[k], 7)[1:-1]:
-                zz = z.copy()
-                zz[k] = g
-                r2 = sse_at(zz)
+                A = A0.copy()
+                for cols, mag, sgn in own:
+                    A[:, cols] = (sgn * mag(m.speed, math.exp(g)))[:, None]
+                r2 = sse_at(A)
                 if r2 < best:
-                    best, z = r2, zz
+                    best, A0 = r2, A
+                    z = z.copy()
+                    z[k] = g
     if refine and len(z):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)

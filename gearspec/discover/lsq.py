@@ -54,7 +54,14 @@ class NormalSolver:
         nrm = np.sqrt(np.sum(X * X, axis=0))
         if np.any(nrm == 0):
             return None
-        Xn = X / nrm
+        return cls.of_scaled(X / nrm, nrm)
+
+    @classmethod
+    def of_scaled(cls, Xn: np.ndarray, nrm: np.ndarray) -> "NormalSolver | None":
+        """:meth:`of` for a design given with its columns already divided by their norms ``nrm``
+        (all > 0): ``Xn = X / nrm``, built in one pass where the norms are known beforehand."""
+        if Xn.shape[0] < Xn.shape[1] or Xn.shape[1] == 0 or Xn.size < MIN_SIZE:
+            return None
         N = Xn.T @ Xn
         try:
             L = np.linalg.cholesky(N)
