@@ -306,7 +306,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
             nrm = np.sqrt(np.sum(As * As * D, axis=0)) * amax
             if np.all(nrm > 0):
                 Xn = ((A / nrm)[:, None, :] * Pk).reshape(-1, ncol)
-                ns = NormalSolver.of_scaled(Xn, nrm)
+                ns = NormalSolver.of((Xn, nrm))
                 c = ns.coef_scaled(q) if ns is not None else None
                 if c is not None:
                     return Xn, c / nrm, ns, q - Xn @ c

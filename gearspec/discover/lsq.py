@@ -48,20 +48,22 @@ class NormalSolver:
         self.X, self.nrm, self.factor = X, nrm, factor
 
     @classmethod
-    def of(cls, X: np.ndarray) -> "NormalSolver | None":
-        if X.shape[0] < X.shape[1] or X.shape[1] == 0 or X.size < MIN_SIZE:
-            return None
-        nrm = np.sqrt(np.sum(X * X, axis=0))
-        if np.any(nrm == 0):
-            return None
-        return cls.of_scaled(X / nrm, nrm)
-
-    @classmethod
-    def of_scaled(cls, Xn: np.ndarray, nrm: np.ndarray) -> "NormalSolver | None":
-        """:meth:`of` for a design given with its columns already divided by their norms ``nrm``
-        (all > 0): ``Xn = X / nrm``, built in one pass where the norms are known beforehand."""
+    def of(cls, X) -> "NormalSolver | None":
+        """The solver of the design ``X`` (n, p), or None (too small or too ill-conditioned for the
+        normal equations).  ``X`` may also be given as ``(Xn, nrm)``: the design with its columns
+        already divided by their norms ``nrm`` (all > 0), built so in one pass where the norms are
+        known beforehand (:func:`.law.fit_law`)."""
+        if isinstance(X, tuple):
+            Xn, nrm = X
+        else:
+            Xn, nrm = X, None
         if Xn.shape[0] < Xn.shape[1] or Xn.shape[1] == 0 or Xn.size < MIN_SIZE:
             return None
+        if nrm is None:
+            nrm = np.sqrt(np.sum(X * X, axis=0))
+            if np.any(nrm == 0):
+                return None
+            Xn = X / nrm
         N = Xn.T @ Xn
         try:
             L = np.linalg.cholesky(N)
