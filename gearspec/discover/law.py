@@ -366,11 +366,17 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
                                          max_nfev=max_nfev, x_scale=1.0)
         z = sol.x
         converged = sol.status > 0
-    X = _design(parts, lay, m, z)
-    w = _solve(X, q)[0]
-    fit = LawFit(parts, z, w, m.sse(X, w), m.N, converged, layout=lay)
+    if large:
+        # the refined normal equations (QR where they refuse), the residual kept from the solve
+        X, w, _, r = cache.get(z.tobytes()) or solve(_multipliers(parts, lay, m, z, slots=slots))
+        sse = np.sum(r.reshape(m.S, m.K) ** 2, axis=1) + m.rest
+    else:
+        X = _design(parts, lay, m, z)
+        w = _solve(X, q)[0]
+        sse = m.sse(X, w)
+    fit = LawFit(parts, z, w, sse, m.N, converged, layout=lay)
     if se:
-        _covariance(fit, m, X)
+        _covariance(fit, m, _design(parts, lay, m, z))
     return fit
 
 
