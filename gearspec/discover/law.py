@@ -331,13 +331,21 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     def jac(zz):
         # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w, all k at once
         X, w, ns, _ = state(zz)
+        dA = _derivatives(m, zz, slots)                 # only where the optimiser asks
+        if large:
+            # dX/dz_k w for all k as one product: (S*K, p) design of the derivatives times the
+            # columns' assignment to the parameters (p, nz)
+            C, own = np.zeros((m.S, ncol)), np.zeros((ncol, len(zz)))
+            for k, cols in enumerate(dA):
+                for j, d in cols:
+                    C[:, j] = d * w[j]
+                    own[j, k] = 1.0
+            return -_project_out(ns, X, (Pk * C[:, None, :]).reshape(-1, ncol) @ own)
         V = np.zeros((m.S, m.K, len(zz)))
-        for k, cols in enumerate(_derivatives(m, zz, slots)):     # only where the optimiser asks
+        for k, cols in enumerate(dA):
             for j, d in cols:
                 V[:, :, k] += (d * w[j])[:, None] * Pk[:, :, j]
         V = V.reshape(-1, len(zz))
-        if large:
-            return -_project_out(ns, X, V)
         # small designs (QR): one column at a time, the arithmetic of short recordings unchanged
         return np.column_stack([-_project_out(ns, X, V[:, k].copy()) for k in range(len(zz))])
 
