@@ -93,12 +93,13 @@ def test_a_large_law_fit_finds_the_truth_and_agrees_with_qr(known_law, monkeypat
     vals = {(v["part"], v["name"], v["slot"]): v["value"] for v in fast.values()}
     # known answer: per direction 8 plateaus x 500 samples at 0.1 mNm noise; the level's standard
     # error is about 0.1 mNm / sqrt(4000) x 3 (its correlation with the viscous column) = 5e-6 Nm:
-    # Coulomb within 3e-5 Nm (6 of them), viscous within 1 % (its lever arm, 600 rad/s, makes its
-    # error about 1e-8 Nm s/rad, 1e-4 relative), the decays within 10 % (the line's amplitude at 0.1
-    # mNm noise over 8 speeds: the decay's error is a few %)
+    # Coulomb within 3e-5 Nm (6 of them; measured 2e-6), viscous within 0.1 % (its lever arm, 600
+    # rad/s, makes its error about 1e-8 Nm s/rad, 1e-4 relative; measured 6e-5), the decays within
+    # 10 % (the line's amplitude at 0.1 mNm noise over 8 speeds: the decay's error is a few %;
+    # measured 2 and 4.5 %)
     for d, t in TRUTH.items():
         assert vals[(0, "1", d)] == pytest.approx(t["tau_c"], abs=3e-5)
-        assert vals[(1, "1", d)] == pytest.approx(t["viscous"], rel=0.01)
+        assert vals[(1, "1", d)] == pytest.approx(t["viscous"], rel=1e-3)
         assert vals[(2, "decay", d)] == pytest.approx(t["decay"], rel=0.1)
     # the in-sample rms is the noise's (0.1 mNm within 5 %: the law is the truth's structure)
     assert fast.rmse == pytest.approx(0.1e-3, rel=0.05)
