@@ -209,6 +209,49 @@ def _project_out(ns, X, v):
     return v - ns @ (ns.T @ v)
 
 
+def _solve_law(A, Pk, q, D=None):
+    """A law's least squares at the multipliers ``A`` (S, p) on its pseudo rows ``Pk`` (S, K, p)
+    and targets ``q`` (S*K,): ``(design, coefficients, solver or QR basis, residual)``.  With ``D``
+    (S, p), the pseudo rows' squared column sums (a large design: :data:`.lsq.MIN_SIZE`), the design
+    is built column-scaled in one pass (``|X_j|^2 = sum_s a_sj^2 D_sj``) for the normal equations,
+    and the design returned is that scaled one; else (or where they refuse) :func:`_solve_fast`."""
+    S, K, ncol = Pk.shape
+    if D is not None:
+        amax = np.max(np.abs(A), axis=0)
+        amax[amax == 0] = 1.0
+        As = A / amax                   # tiny multipliers are not squared to zero
+        nrm = np.sqrt(np.sum(As * As * D, axis=0)) * amax
+        if np.all(nrm > 0):
+            Xn = ((A / nrm)[:, None, :] * Pk).reshape(-1, ncol)
+            ns = NormalSolver.of((Xn, nrm))
+            c = ns.coef_scaled(q) if ns is not None else None
+            if c is not None:
+                return Xn, c / nrm, ns, q - Xn @ c
+    X = (A[:, None, :] * Pk).reshape(-1, ncol)
+    w, ns = _solve_fast(X, q)
+    return X, w, ns, q - X @ w
+
+
+def _scan(z, lay: _Layout, m: Moments, slots, sse_at):
+    """The start of a refinement: each nonlinear parameter scanned over 5 inner points of its
+    range (7-point grid), the others held at the best so far (``sse_at``: residual sum of squares
+    at the multipliers); only the scanned parameter's columns are recomputed at its grid points."""
+    A0 = _multipliers(None, lay, m, z, slots=slots)
+    best = sse_at(A0)
+    for k in range(len(z)):
+        own = [(cols, mag, sgn) for cols, mag, sgn, kk, _ in slots if kk == k]
+        for g in np.linspace(lay.lo[k], lay.hi[k], 7)[1:-1]:
+            A = A0.copy()
+            for cols, mag, sgn in own:
+                A[:, cols] = (sgn * mag(m.speed, math.exp(g)))[:, None]
+            r2 = sse_at(A)
+            if r2 < best:
+                best, A0 = r2, A
+                z = z.copy()
+                z[k] = g
+    return z
+
+
 # ---------------------------------------------------------------------- fit
 @dataclass
 class LawFit:
@@ -292,27 +335,12 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     # the normal equations serve designs of MIN_SIZE entries or more (NormalSolver.of); smaller
     # ones go to QR, with the arithmetic they always had
     large = m.S * m.K * ncol >= lsq.MIN_SIZE and m.S * m.K >= ncol
-    # a large design is built column-scaled in one pass: its column norms from the pseudo rows'
-    # squared column sums (|X_j|^2 = sum_s a_sj^2 D_sj)
+    # a large design is built column-scaled in one pass (_solve_law)
     D = np.einsum("skj,skj->sj", Pk, Pk) if large else None
     cache = {}
 
     def solve(A):
-        """(design, coefficients, solver or QR basis, residual) at the multipliers ``A``."""
-        if large:
-            amax = np.max(np.abs(A), axis=0)
-            amax[amax == 0] = 1.0
-            As = A / amax                   # tiny multipliers are not squared to zero
-            nrm = np.sqrt(np.sum(As * As * D, axis=0)) * amax
-            if np.all(nrm > 0):
-                Xn = ((A / nrm)[:, None, :] * Pk).reshape(-1, ncol)
-                ns = NormalSolver.of((Xn, nrm))
-                c = ns.coef_scaled(q) if ns is not None else None
-                if c is not None:
-                    return Xn, c / nrm, ns, q - Xn @ c
-        X = (A[:, None, :] * Pk).reshape(-1, ncol)
-        w, ns = _solve_fast(X, q)
-        return X, w, ns, q - X @ w
+        return _solve_law(A, Pk, q, D)
 
     def state(zz):
         key = zz.tobytes()
@@ -350,23 +378,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         return np.column_stack([-_project_out(ns, X, V[:, k].copy()) for k in range(len(zz))])
 
     if refine and len(z) and scan:
-        # variable projection has local optima (a Stribeck velocity beyond the plateaus trading
-        # against Coulomb and viscous friction): scan each nonlinear parameter over its range, the
-        # others held, and start from the best point
-        # (only the columns of parameter k are recomputed at its grid points)
-        A0 = _multipliers(parts, lay, m, z, slots=slots)
-        best = sse_at(A0)
-        for k in range(len(z)):
-            own = [(cols, mag, sgn) for cols, mag, sgn, kk, _ in slots if kk == k]
-            for g in np.linspace(lay.lo[k], lay.hi[k], 7)[1:-1]:
-                A = A0.copy()
-                for cols, mag, sgn in own:
-                    A[:, cols] = (sgn * mag(m.speed, math.exp(g)))[:, None]
-                r2 = sse_at(A)
-                if r2 < best:
-                    best, A0 = r2, A
-                    z = z.copy()
-                    z[k] = g
+        z = _scan(z, lay, m, slots, sse_at)
     if refine and len(z):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -384,7 +396,7 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         sse = m.sse(X, w)
     fit = LawFit(parts, z, w, sse, m.N, converged, layout=lay)
     if se:
-        _covariance(fit, m, _design(parts, lay, m, z))
+        _covariance(fit, m, _design(parts, lay, m, z) if large else X)
     return fit
 
 
