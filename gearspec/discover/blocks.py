@@ -74,7 +74,8 @@ class SegmentDesign:
         """The design's pseudo rows of the segments ``idx`` (len(idx)*K, nf + p)."""
         idx = np.asarray(idx, dtype=int)
         M = self.M
-        X = (self.A[idx][:, None, :] * M.P[idx][:, :, self.kidx]).reshape(len(idx) * M.K, self.A.shape[1])
+        Pk = np.ascontiguousarray(M.P[idx][:, :, self.kidx])    # C-ordered: the product reshapes without a copy
+        X = (self.A[idx][:, None, :] * Pk).reshape(len(idx) * M.K, self.A.shape[1])
         if self.nf:
             F = self.fixed.reshape(M.S, M.K, self.nf)[idx].reshape(len(idx) * M.K, self.nf)
             X = np.hstack([F, X])

@@ -19,6 +19,7 @@ from scipy import optimize
 
 from ..core.crossval import deal_folds, group_summary, held_out
 from ..model import FrictionModel
+from . import lsq
 from .library import FAMILIES, _g
 from .lsq import NormalSolver
 from .moments import Moments
@@ -132,18 +133,27 @@ def _slots(parts, lay: _Layout, m: Moments) -> list:
 
 def _multipliers(parts, lay: _Layout, m: Moments, z: np.ndarray, deriv: bool = False, slots=None):
     """(S, p) per-segment multipliers of the law's columns for nonlinear parameters exp(z); with
-    ``deriv`` also their derivatives with respect to each z (a list of (columns, (S, n)) pairs).
+    ``deriv`` also their derivatives with respect to each z (:func:`_derivatives`).
     ``slots``: :func:`_slots` of these parts, layout and moments (computed when not given)."""
+    slots = slots if slots is not None else _slots(parts, lay, m)
     A = np.empty((m.S, len(lay.cols)))
-    dA = [[] for _ in lay.nl]
-    for cols, mag, sgn, k, p0 in (slots if slots is not None else _slots(parts, lay, m)):
+    for cols, mag, sgn, k, p0 in slots:
         pv = p0 if k is None else math.exp(z[k])
         A[:, cols] = (sgn * mag(m.speed, pv))[:, None]
-        if deriv and k is not None:
-            h = 1e-6
-            dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
-            dA[k] = [(j, dcol) for j in cols]
-    return (A, dA) if deriv else A
+    return (A, _derivatives(m, z, slots)) if deriv else A
+
+
+def _derivatives(m: Moments, z: np.ndarray, slots) -> list:
+    """Derivatives of the multipliers with respect to each z (central differences in z): a list,
+    per nonlinear parameter, of (column, (S,) derivative) pairs."""
+    dA = [[] for _ in z]
+    for cols, mag, sgn, k, p0 in slots:
+        if k is None:
+            continue
+        pv, h = math.exp(z[k]), 1e-6
+        dcol = sgn * (mag(m.speed, pv * math.exp(h)) - mag(m.speed, pv * math.exp(-h))) / (2 * h)
+        dA[k] = [(j, dcol) for j in cols]
+    return dA
 
 
 def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
@@ -152,7 +162,9 @@ def _basis_index(lay: _Layout, m: Moments) -> np.ndarray:
 
 def _design(parts, lay, m: Moments, z) -> np.ndarray:
     A = _multipliers(parts, lay, m, z)
-    return (A[:, None, :] * m.P[:, :, _basis_index(lay, m)]).reshape(m.S * m.K, len(lay.cols))
+    # (P[:, :, kidx] is laid out basis-major: made C-ordered, the product reshapes without a copy)
+    Pk = np.ascontiguousarray(m.P[:, :, _basis_index(lay, m)])
+    return (A[:, None, :] * Pk).reshape(m.S * m.K, len(lay.cols))
 
 
 def _solve(X, y):
@@ -187,13 +199,57 @@ def _solve_fast(X, y, basis: bool = True):
 
 
 def _project_out(ns, X, v):
-    """``v`` minus its projection on the column space of ``X``; ``ns`` from :func:`_solve_fast`."""
+    """``v`` (n,) or the columns of ``v`` (n, m) minus their projections on the column space of
+    ``X``; ``ns`` from :func:`_solve_fast`."""
     if isinstance(ns, NormalSolver):
         r = ns.residual(v)
         if r is not None:
             return r
-        ns = _solve(X, v)[1]
+        ns = _solve(X, v if v.ndim == 1 else v[:, 0])[1]      # the basis does not depend on the target
     return v - ns @ (ns.T @ v)
+
+
+def _solve_law(A, Pk, q, D=None):
+    """A law's least squares at the multipliers ``A`` (S, p) on its pseudo rows ``Pk`` (S, K, p)
+    and targets ``q`` (S*K,): ``(design, coefficients, solver or QR basis, residual)``.  With ``D``
+    (S, p), the pseudo rows' squared column sums (a large design: :data:`.lsq.MIN_SIZE`), the design
+    is built column-scaled in one pass (``|X_j|^2 = sum_s a_sj^2 D_sj``) for the normal equations,
+    and the design returned is that scaled one; else (or where they refuse) :func:`_solve_fast`."""
+    S, K, ncol = Pk.shape
+    if D is not None:
+        amax = np.max(np.abs(A), axis=0)
+        amax[amax == 0] = 1.0
+        As = A / amax                   # tiny multipliers are not squared to zero
+        nrm = np.sqrt(np.sum(As * As * D, axis=0)) * amax
+        if np.all(nrm > 0):
+            Xn = ((A / nrm)[:, None, :] * Pk).reshape(-1, ncol)
+            ns = NormalSolver.of((Xn, nrm))
+            c = ns.coef_scaled(q) if ns is not None else None
+            if c is not None:
+                return Xn, c / nrm, ns, q - Xn @ c
+    X = (A[:, None, :] * Pk).reshape(-1, ncol)
+    w, ns = _solve_fast(X, q)
+    return X, w, ns, q - X @ w
+
+
+def _scan(z, lay: _Layout, m: Moments, slots, sse_at):
+    """The start of a refinement: each nonlinear parameter scanned over 5 inner points of its
+    range (7-point grid), the others held at the best so far (``sse_at``: residual sum of squares
+    at the multipliers); only the scanned parameter's columns are recomputed at its grid points."""
+    A0 = _multipliers(None, lay, m, z, slots=slots)
+    best = sse_at(A0)
+    for k in range(len(z)):
+        own = [(cols, mag, sgn) for cols, mag, sgn, kk, _ in slots if kk == k]
+        for g in np.linspace(lay.lo[k], lay.hi[k], 7)[1:-1]:
+            A = A0.copy()
+            for cols, mag, sgn in own:
+                A[:, cols] = (sgn * mag(m.speed, math.exp(g)))[:, None]
+            r2 = sse_at(A)
+            if r2 < best:
+                best, A0 = r2, A
+                z = z.copy()
+                z[k] = g
+    return z
 
 
 # ---------------------------------------------------------------------- fit
@@ -273,54 +329,56 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
     q = m.q.reshape(-1)
     converged = True
     kidx = _basis_index(lay, m)
-    Pk = m.P[:, :, kidx]                     # (S, K, p)
+    Pk = np.ascontiguousarray(m.P[:, :, kidx])       # (S, K, p), C-ordered: designs reshape without a copy
     ncol = len(lay.cols)
     slots = _slots(parts, lay, m)
+    # the normal equations serve designs of MIN_SIZE entries or more (NormalSolver.of); smaller
+    # ones go to QR, with the arithmetic they always had
+    large = m.S * m.K * ncol >= lsq.MIN_SIZE and m.S * m.K >= ncol
+    # a large design is built column-scaled in one pass (_solve_law)
+    D = np.einsum("skj,skj->sj", Pk, Pk) if large else None
     cache = {}
+
+    def solve(A):
+        return _solve_law(A, Pk, q, D)
 
     def state(zz):
         key = zz.tobytes()
         if key not in cache:
             cache.clear()
-            A, dA = _multipliers(parts, lay, m, zz, deriv=True, slots=slots)
-            X = (A[:, None, :] * Pk).reshape(-1, ncol)
-            w, ns = _solve_fast(X, q)
-            cache[key] = (X, w, ns, dA)
+            cache[key] = solve(_multipliers(parts, lay, m, zz, slots=slots))
         return cache[key]
 
     def resid(zz):
-        X, w, _, _ = state(zz)
-        return q - X @ w
+        return state(zz)[3].copy()
 
-    def sse_at(zz):
-        A = _multipliers(parts, lay, m, zz, slots=slots)
-        X = (A[:, None, :] * Pk).reshape(-1, ncol)
-        r = q - X @ _solve_fast(X, q, basis=False)[0]
+    def sse_at(A):
+        r = solve(A)[3]
         return float(r @ r)
 
     def jac(zz):
-        # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w
-        X, w, ns, dA = state(zz)
-        J = np.empty((len(q), len(zz)))
+        # variable projection, Kaufman's approximation: J_k = -(I - U U^T) dX/dz_k w, all k at once
+        X, w, ns, _ = state(zz)
+        dA = _derivatives(m, zz, slots)                 # only where the optimiser asks
+        if large:
+            # dX/dz_k w for all k as one product: (S*K, p) design of the derivatives times the
+            # columns' assignment to the parameters (p, nz)
+            C, own = np.zeros((m.S, ncol)), np.zeros((ncol, len(zz)))
+            for k, cols in enumerate(dA):
+                for j, d in cols:
+                    C[:, j] = d * w[j]
+                    own[j, k] = 1.0
+            return -_project_out(ns, X, (Pk * C[:, None, :]).reshape(-1, ncol) @ own)
+        V = np.zeros((m.S, m.K, len(zz)))
         for k, cols in enumerate(dA):
-            v = np.zeros((m.S, m.K))
             for j, d in cols:
-                v += (d * w[j])[:, None] * Pk[:, :, j]
-            J[:, k] = -_project_out(ns, X, v.reshape(-1))
-        return J
+                V[:, :, k] += (d * w[j])[:, None] * Pk[:, :, j]
+        V = V.reshape(-1, len(zz))
+        # small designs (QR): one column at a time, the arithmetic of short recordings unchanged
+        return np.column_stack([-_project_out(ns, X, V[:, k].copy()) for k in range(len(zz))])
 
     if refine and len(z) and scan:
-        # variable projection has local optima (a Stribeck velocity beyond the plateaus trading
-        # against Coulomb and viscous friction): scan each nonlinear parameter over its range, the
-        # others held, and start from the best point
-        best = sse_at(z)
-        for k in range(len(z)):
-            for g in np.linspace(lay.lo[k], lay.hi[k], 7)[1:-1]:
-                zz = z.copy()
-                zz[k] = g
-                r2 = sse_at(zz)
-                if r2 < best:
-                    best, z = r2, zz
+        z = _scan(z, lay, m, slots, sse_at)
     if refine and len(z):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -328,11 +386,17 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
                                          max_nfev=max_nfev, x_scale=1.0)
         z = sol.x
         converged = sol.status > 0
-    X = _design(parts, lay, m, z)
-    w = _solve(X, q)[0]
-    fit = LawFit(parts, z, w, m.sse(X, w), m.N, converged, layout=lay)
+    if large:
+        # the refined normal equations (QR where they refuse), the residual kept from the solve
+        X, w, _, r = cache.get(z.tobytes()) or solve(_multipliers(parts, lay, m, z, slots=slots))
+        sse = np.sum(r.reshape(m.S, m.K) ** 2, axis=1) + m.rest
+    else:
+        X = _design(parts, lay, m, z)
+        w = _solve(X, q)[0]
+        sse = m.sse(X, w)
+    fit = LawFit(parts, z, w, sse, m.N, converged, layout=lay)
     if se:
-        _covariance(fit, m, X)
+        _covariance(fit, m, _design(parts, lay, m, z) if large else X)
     return fit
 
 

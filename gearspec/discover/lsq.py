@@ -48,13 +48,22 @@ class NormalSolver:
         self.X, self.nrm, self.factor = X, nrm, factor
 
     @classmethod
-    def of(cls, X: np.ndarray) -> "NormalSolver | None":
-        if X.shape[0] < X.shape[1] or X.shape[1] == 0 or X.size < MIN_SIZE:
+    def of(cls, X) -> "NormalSolver | None":
+        """The solver of the design ``X`` (n, p), or None (too small or too ill-conditioned for the
+        normal equations).  ``X`` may also be given as ``(Xn, nrm)``: the design with its columns
+        already divided by their norms ``nrm`` (all > 0), built so in one pass where the norms are
+        known beforehand (:func:`.law.fit_law`)."""
+        if isinstance(X, tuple):
+            Xn, nrm = X
+        else:
+            Xn, nrm = X, None
+        if Xn.shape[0] < Xn.shape[1] or Xn.shape[1] == 0 or Xn.size < MIN_SIZE:
             return None
-        nrm = np.sqrt(np.sum(X * X, axis=0))
-        if np.any(nrm == 0):
-            return None
-        Xn = X / nrm
+        if nrm is None:
+            nrm = np.sqrt(np.sum(X * X, axis=0))
+            if np.any(nrm == 0):
+                return None
+            Xn = X / nrm
         N = Xn.T @ Xn
         try:
             L = np.linalg.cholesky(N)
@@ -69,24 +78,26 @@ class NormalSolver:
         return cls(Xn, nrm, Li)
 
     def coef_scaled(self, y: np.ndarray) -> np.ndarray | None:
-        """Coefficients of the column-scaled design (refined); None when the refinement does not
-        settle at rounding level."""
+        """Coefficients of the column-scaled design (refined) for the target ``y`` (n,) or the
+        targets ``y`` (n, m), every column refined until it settles; None when the refinement of
+        one does not settle at rounding level."""
         Xn, Li = self.X, self.factor
         c = Li.T @ (Li @ (Xn.T @ y))
         prev, ok = np.inf, False
         for k in range(MAX_STEPS):
             dc = Li.T @ (Li @ (Xn.T @ (y - Xn @ c)))
             c = c + dc
-            size, step = max(float(np.max(np.abs(c))), 1e-300), float(np.max(np.abs(dc)))
+            size, step = np.maximum(np.max(np.abs(c), axis=0), 1e-300), np.max(np.abs(dc), axis=0)
             # the first correction is the normal equations' error (about eps x cond^2); once it
             # is below FIRST, the refined c is at the rounding floor
-            if step <= TOL * size or (k == 0 and step <= FIRST * size):
+            done = (step <= TOL * size) | ((k == 0) & (step <= FIRST * size))
+            if np.all(done):
                 ok = True
                 break
-            ok = step <= ACCEPT * size
-            if step > 0.5 * prev:         # stagnating: at the rounding floor
+            ok = bool(np.all(done | (step <= ACCEPT * size)))
+            if np.all(done | (step > 0.5 * prev)):         # stagnating: at the rounding floor
                 break
-            prev = step
+            prev = np.where(done, 0.0, step)
         return c if ok else None
 
     def solve(self, y: np.ndarray) -> np.ndarray | None:
@@ -95,6 +106,8 @@ class NormalSolver:
         return None if c is None else c / self.nrm
 
     def residual(self, v: np.ndarray) -> np.ndarray | None:
-        """``v`` minus its projection on the column space of ``X`` (None: refused)."""
+        """``v`` (n,) or the columns of ``v`` (n, m) minus their projections on the column space of
+        ``X`` (None: refused)."""
         c = self.coef_scaled(v)
         return None if c is None else v - self.X @ c
+
