@@ -257,14 +257,24 @@ class PeriodicCandidate(Candidate):
                 self.hint = integer_hint(self.gear, f, 3 * se)
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
+        # the all-data proposal is asked for again when the loop accepts the candidate: the same
+        # search on the same residual, kept for the round
+        if train.all():
+            cache = self._round_cache(rnd)
+            if "all" not in cache:
+                cache["all"] = self._propose(rnd, train)
+            return cache["all"]
+        return self._propose(rnd, train)
+
+    def _propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         dd = rnd.dd
         rows = rnd.rows(train)
-        r0 = dd.y[rows] - rnd.X[rows] @ rnd.beta(train)
-        theta = dd.at("theta")[rows]
-        d = dd.at("direction")[rows]
-        speed = np.abs(dd.at("v")[rows])
-        seg = dd.at("segment")[rows]
-        top = float(np.max(np.abs(dd.at("v")))) if len(dd) else 0.0
+        r0 = rnd.train_residual(train)
+        theta = rnd.channel("theta")[rows]
+        d = rnd.channel("direction")[rows]
+        speed = rnd.channel("speed")[rows]
+        seg = rnd.channel("segment")[rows]
+        top = float(np.max(rnd.channel("speed"))) if len(dd) else 0.0
         moving = speed > (0.05 * top if dd.kind == "trajectory" else 0.0)
         dirs = [x for x in (1, -1) if np.sum((d == x) & moving) >= 16]
         if not dirs:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.crossval import held_out
+from ..core.crossval import held_out, splits
 from .data import DiagnoseData
 from ..core.reduction import GroupNormals, normal_equations
 from .design import FittedState, HarmonicBlock, State, fit_state, solve_normal
@@ -52,6 +52,9 @@ class Round:
     dd: DiagnoseData = field(repr=False)
     state: State = field(repr=False)
     fold: np.ndarray = field(repr=False)
+    #: the standard errors of the nonlinear parameters (``fitted.nonlinear_se``); False for a round
+    #: only a candidate's held-out folds read (the extended model of :func:`~.loop._run_folds`)
+    standard_errors: bool = field(default=True, repr=False)
     fitted: FittedState = field(init=False, repr=False)
     X: np.ndarray = field(init=False, repr=False)
     grams: GroupNormals = field(init=False, repr=False)
@@ -60,6 +63,9 @@ class Round:
     keys: frozenset = field(init=False, repr=False)
     _sums: dict = field(init=False, repr=False, default_factory=dict)
     _beta: dict = field(init=False, repr=False, default_factory=dict)
+    #: what every candidate of the round reads alike: channels at the observations, the held-out
+    #: prediction of the model as it stands, the training residual of a fold (:meth:`train_residual`)
+    _memo: dict = field(init=False, repr=False, default_factory=dict)
 
     def __post_init__(self):
         dd = self.dd
@@ -69,7 +75,8 @@ class Round:
         X = state.design(dd, taylor=True)
         grams = group_normals(X, dd.y, dd.starts, dd.stops)
         G_all = grams.sum()[0]
-        fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
+        if self.standard_errors:
+            fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
         for name, value in (("state", state), ("fitted", fitted), ("X", X), ("grams", grams),
                             ("ref_diag", np.diag(G_all).copy()), ("K", int(self.fold.max()) + 1),
                             ("keys", frozenset(b.key for b in state.blocks))):
@@ -93,6 +100,49 @@ class Round:
             G, b, _ = self.train_sums(train)
             self._beta[k] = solve_normal(G, b, reference=self.ref_diag)
         return self._beta[k]
+
+    def channel(self, name: str) -> np.ndarray | None:
+        """A channel at the observations (:meth:`DiagnoseData.at`), read once per round (every
+        candidate reads the same); ``"speed"``: ``|v|``.  Read-only: do not write into it."""
+        key = ("channel", name)
+        if key not in self._memo:
+            a = np.abs(self.dd.at("v")) if name == "speed" else self.dd.at(name)
+            if a is not None:
+                a.flags.writeable = False
+            self._memo[key] = a
+        return self._memo[key]
+
+    def held_out_prediction(self) -> np.ndarray:
+        """The prediction of the model as it stands at every observation, fitted on the folds
+        without it (Nm): ``X beta(train)`` group by group on views of ``X``.  The same for every
+        candidate of the round (read-only)."""
+        if "p0" not in self._memo:
+            p0 = np.zeros(len(self.dd))
+            for _, test in splits(self.fold):
+                beta = self.beta(~test)
+                for g in np.flatnonzero(test):
+                    a, z = self.dd.starts[g], self.dd.stops[g]
+                    p0[a:z] = self.X[a:z] @ beta
+            p0.flags.writeable = False
+            self._memo["p0"] = p0
+        return self._memo["p0"]
+
+    def train_residual(self, train: np.ndarray) -> np.ndarray:
+        """``y - X beta(train)`` at the observations of the groups ``train`` (Nm, in their order),
+        group by group on views of ``X`` (no copy of its rows); the last few kept (read-only)."""
+        key = ("r0", self.key(train))
+        hit = self._memo.get(key)
+        if hit is None:
+            beta = self.beta(train)
+            dd = self.dd
+            parts = [dd.y[a:z] - self.X[a:z] @ beta for a, z in zip(dd.starts[train], dd.stops[train])]
+            hit = np.concatenate(parts) if parts else np.zeros(0)
+            hit.flags.writeable = False
+            old = [k for k in self._memo if k[0] == "r0"]
+            if len(old) >= self.K + 1:          # the folds' and all data's: a round asks for no others
+                del self._memo[old[0]]
+            self._memo[key] = hit
+        return hit
 
     def rows(self, train_groups: np.ndarray) -> np.ndarray:
         """Observations (boolean) of the groups where ``train_groups`` is true."""

@@ -108,7 +108,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
             movable = [b.uid for b in rnd.state.blocks if b.n_taylor(dd)] + [b.uid for b in prop_all.add]
             st = refine(rnd.state.replaced(prop_all.drop, prop_all.add), dd, only=set(movable))
             st_base = st.replaced([b.uid for b in prop_all.add], prop_all.drop)
-            ext = Round(dd, st_base, rnd.fold)
+            ext = Round(dd, st_base, rnd.fold, standard_errors=False)
         # what the candidate adds when fitted on all data (for the report's figure)
         p_ext = prop_all if ext is rnd else cand.propose(ext, ext.all_groups())
         if p_ext is not None:
@@ -118,16 +118,16 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
             full = np.zeros(ext.X.shape[1])
             full[keep] = beta[:nk]      # no copy of the kept columns (rows x terms) of a long recording
             contribution = ext.X @ full + p_ext.columns(dd) @ beta[nk:] - rnd.fitted.prediction
-    p0 = np.zeros(len(dd))
+    p0 = rnd.held_out_prediction()      # the same for every candidate of the round
     p1 = np.zeros(len(dd))
     props = []
     n_par = 0
     for _, test in splits(rnd.fold):
         train = ~test
-        _predict(p0, test, dd, rnd.X, rnd.beta(train))
         prop = cand.propose(ext, train) if (train.any() and not train.all()) else None
         if prop is None:
-            _predict(p1, test, dd, rnd.X, rnd.beta(train))
+            rows = rnd.rows(test)
+            p1[rows] = p0[rows]
             props.append(None)
             continue
         keep = ext.keep_mask(prop.drop)
