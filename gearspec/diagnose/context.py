@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.crossval import held_out, splits
+from ..core.crossval import held_out
 from .data import DiagnoseData
 from ..core.reduction import GroupNormals, normal_equations
 from .design import FittedState, HarmonicBlock, State, fit_state, solve_normal
@@ -114,18 +114,9 @@ class Round:
 
     def held_out_prediction(self) -> np.ndarray:
         """The prediction of the model as it stands at every observation, fitted on the folds
-        without it (Nm): ``X beta(train)`` group by group on views of ``X``.  The same for every
-        candidate of the round (read-only)."""
-        if "p0" not in self._memo:
-            p0 = np.zeros(len(self.dd))
-            for _, test in splits(self.fold):
-                beta = self.beta(~test)
-                for g in np.flatnonzero(test):
-                    a, z = self.dd.starts[g], self.dd.stops[g]
-                    p0[a:z] = self.X[a:z] @ beta
-            p0.flags.writeable = False
-            self._memo["p0"] = p0
-        return self._memo["p0"]
+        without it (Nm): :meth:`baseline_holdout`'s, the same for every candidate of the round
+        (do not write into it)."""
+        return self.baseline_holdout()["prediction"]
 
     def train_residual(self, train: np.ndarray) -> np.ndarray:
         """``y - X beta(train)`` at the observations of the groups ``train`` (Nm, in their order),
@@ -180,14 +171,22 @@ class Round:
         """Held-out sums of squares of the model as it stands, per group (Nm^2), its held-out
         prediction at every observation (Nm) and its held-out rmse (Nm), folds as
         :func:`gearspec.core.crossval.held_out` runs them: ``{"sse", "prediction", "rmse"}``."""
-        dd = self.dd
-        pred = np.zeros(len(dd))
+        hit = self._memo.get("holdout")
+        if hit is None:
+            dd = self.dd
+            pred = np.zeros(len(dd))
 
-        def score(beta, test):
-            rows = self.rows(test)
-            pred[rows] = self.X[rows] @ beta
-            r = dd.y - pred
-            return [float(r[a:z] @ r[a:z]) for a, z in zip(dd.starts[test], dd.stops[test])]
+            def score(beta, test):
+                # group by group on views of X (no copy of its rows)
+                out = []
+                for a, z in zip(dd.starts[test], dd.stops[test]):
+                    pred[a:z] = self.X[a:z] @ beta
+                    r = dd.y[a:z] - pred[a:z]
+                    out.append(float(r @ r))
+                return out
 
-        ho = held_out(self.fold, self.beta, score, weight=dd.stops - dd.starts, catch=())
-        return {"sse": ho.sse, "prediction": pred, "rmse": ho.rmse}
+            ho = held_out(self.fold, self.beta, score, weight=dd.stops - dd.starts, catch=())
+            hit = self._memo["holdout"] = {"sse": ho.sse, "prediction": pred, "rmse": ho.rmse}
+        # the round's model does not change: the same numbers every time it is asked (a step's
+        # guard, the next round's "before", the final model)
+        return dict(hit)
