@@ -201,19 +201,41 @@ def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01
 
     rr = dm(r)
     yy = float(rr @ rr)
+    # a speed per segment (plateaus): g(|v|) is constant within each, dm(g sn) = g dm(sn), and the
+    # normal equations of every law are weighted sums of five per-segment sums (equal to the
+    # stacked ones up to the order of the additions): one pass over the samples, not one per law
+    seg_speed = np.zeros(len(sids))
+    seg_speed[inv] = speed
+    if np.array_equal(seg_speed[inv], speed):
+        S, C = dm(sn), dm(cs)
+        sums = [np.bincount(inv, weights=a * b, minlength=len(sids)) for a, b in ((S, S), (S, C), (C, C), (S, rr),
+                                                                                  (C, rr))]
 
-    def rss(g):
-        A = np.column_stack([dm(g * sn), dm(g * cs)])
-        b = A.T @ rr
-        return yy - float(solve_normal(A.T @ A, b) @ b)
+        def rss_of(g_seg):
+            g2 = g_seg * g_seg
+            G = np.array([[g2 @ sums[0], g2 @ sums[1]], [g2 @ sums[1], g2 @ sums[2]]])
+            b = np.array([g_seg @ sums[3], g_seg @ sums[4]])
+            return yy - float(solve_normal(G, b) @ b)
+
+        speed_of = seg_speed
+    else:
+        def rss_of(g):
+            A = np.column_stack([dm(g * sn), dm(g * cs)])
+            b = A.T @ rr
+            return yy - float(solve_normal(A.T @ A, b) @ b)
+
+        speed_of = speed
+
+    def rss(law, b):
+        return rss_of(amplitude_law(law, speed_of, b))
 
     top = float(np.max(speed)) if len(speed) else 1.0
-    out = {"const": (rss(np.ones_like(speed)), 0.0)}
+    out = {"const": (rss_of(np.ones_like(speed_of)), 0.0)}
     speeds = np.unique(np.round(speed, 9))
     if len(speeds) >= 2 and top > 0:
         for law, grid in (("exp", EXP_GRID), ("rational", RAT_GRID), ("power", POW_GRID)):
             consts = [g if law == "power" else g / top for g in grid]
-            out[law] = min(((rss(amplitude_law(law, speed, b)), b) for b in consts), key=lambda vb: vb[0])
+            out[law] = min(((rss(law, b), b) for b in consts), key=lambda vb: vb[0])
     law, (val, dec) = min(out.items(), key=lambda kv: kv[1][0])
     s2 = val / max(len(r) - 3 - len(sids), 1)
     if law != "const" and (out["const"][0] - val) < stats.chi2.isf(alpha, 1) * s2:
