@@ -180,3 +180,22 @@ def test_amplitude_law_with_speed_varying_within_a_segment_uses_the_samples():
     law, _, rss = choose_amplitude_law(theta, speed, seg, r, 0.9)
     assert law == "exp"
     assert rss["const"] == pytest.approx(_stacked_rss(theta, speed, seg, r, 0.9, "const", 0.0), rel=1e-9)
+
+
+def test_a_dense_spectrum_is_drawn_with_every_peak_and_trough():
+    """10^5 frequencies, a line of 1e-3 Nm at 7.3 cycles/rad and a null of 1e-9 at 0.41 over a 1e-6
+    noise floor: the drawn curve keeps both extremes at their frequencies in at most 2 x 3000 points."""
+    from gearspec.plots.diagnose import SPECTRUM_POINTS, _drawn
+
+    rng = np.random.default_rng(1)
+    f = np.linspace(0.0, 100.0, 100_001)
+    a = 1e-6 * (1 + rng.random(len(f)))
+    i_peak, i_null = np.searchsorted(f, 7.3), np.searchsorted(f, 0.41)
+    a[i_peak], a[i_null] = 1e-3, 1e-9
+    fd, ad = _drawn(f, a)
+    assert len(fd) <= 2 * SPECTRUM_POINTS and np.all(np.diff(fd) >= 0) and np.all(fd > 0)
+    assert ad.max() == 1e-3 and fd[np.argmax(ad)] == f[i_peak]
+    assert ad.min() == 1e-9 and fd[np.argmin(ad)] == f[i_null]
+    assert np.all(np.isin(fd, f))                                # points of the spectrum, not bin centres
+    short_f, short_a = _drawn(f[:500], a[:500])                  # short: as it is (but f = 0)
+    assert np.array_equal(short_f, f[1:500]) and np.array_equal(short_a, a[1:500])
