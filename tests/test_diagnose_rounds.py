@@ -199,3 +199,28 @@ def test_a_dense_spectrum_is_drawn_with_every_peak_and_trough():
     assert np.all(np.isin(fd, f))                                # points of the spectrum, not bin centres
     short_f, short_a = _drawn(f[:500], a[:500])                  # short: as it is (but f = 0)
     assert np.array_equal(short_f, f[1:500]) and np.array_equal(short_a, a[1:500])
+
+
+def test_a_proposals_remembered_fit_is_the_fit_and_keeps_no_round_alive(dd):
+    import gc
+    import weakref
+
+    from gearspec.diagnose.candidates import FixedCandidate, Proposal, per_direction, train_fit
+
+    rnd = Round(dd, state_from_model(MODEL, dd), loop.folds_of(dd, 4))
+    cand = FixedCandidate("other", "offset", per_direction(rnd, "offset", key="offset"))
+    prop = Proposal.of(rnd, cand.blocks)
+    keep = rnd.keep_mask(())
+    train = rnd.fold != 2
+    beta, rss = train_fit(rnd, keep, prop, train)
+    again, rss2 = train_fit(rnd, keep, prop, train)
+    assert again is beta and rss2 == rss                      # asked again: remembered
+    prop.fits.clear()
+    fresh, rss3 = train_fit(rnd, keep, prop, train)
+    assert np.array_equal(fresh, beta) and rss3 == rss         # and what a fresh fit gives
+    other, _ = train_fit(rnd, keep, prop, rnd.fold != 1)
+    assert not np.array_equal(other, beta)                     # other training groups: another fit
+    ref = weakref.ref(rnd)
+    del rnd
+    gc.collect()
+    assert ref() is None                                       # the memo does not hold the round (its X)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import types
+import weakref
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -42,6 +43,9 @@ class Proposal:
     ctc: np.ndarray | None = None
     cty: np.ndarray | None = None
     describe: str = ""
+    #: :func:`train_fit`'s answers, by round, training groups and kept columns (a grid candidate's
+    #: fold asks for its best value's fit again)
+    fits: dict = field(default_factory=dict, repr=False)
 
     def columns(self, dd) -> np.ndarray:
         return np.column_stack([b.columns(dd) for b in self.add])
@@ -67,6 +71,10 @@ def cross_grams(rnd: Round, C: np.ndarray):
 def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
     """Coefficients (kept columns, then new ones) fitted on the training groups, and the
     training residual sum of squares."""
+    key = (id(rnd), rnd.key(train), np.packbits(keep).tobytes())
+    hit = prop.fits.get(key)
+    if hit is not None and hit[0]() is rnd:
+        return hit[1], hit[2]
     Gx, bx, yy = rnd.train_sums(train)
     k = np.flatnonzero(keep)
     xtc = prop.xtc[train].sum(0)[k]
@@ -77,6 +85,9 @@ def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
     ref = np.concatenate([rnd.ref_diag[k], np.einsum("gii->i", prop.ctc)])
     beta = solve_normal(G, b, reference=ref)
     rss = float(yy - 2 * beta @ b + beta @ G @ beta)
+    if len(prop.fits) >= 16:
+        prop.fits.clear()
+    prop.fits[key] = (weakref.ref(rnd), beta, rss)     # never keeps an extended round's design alive
     return beta, rss
 
 

@@ -136,8 +136,22 @@ class Round:
         return hit
 
     def rows(self, train_groups: np.ndarray) -> np.ndarray:
-        """Observations (boolean) of the groups where ``train_groups`` is true."""
-        return train_groups[self.dd.group]
+        """Observations (boolean) of the groups where ``train_groups`` is true (the folds' and all
+        data's kept for the round; read-only)."""
+        key = ("rows", self.key(train_groups))
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = train_groups[self.dd.group]
+            hit.flags.writeable = False
+            if sum(1 for k in self._memo if k[0] == "rows") < 2 * self.K + 2:   # a fold's, its complement, all
+                self._memo[key] = hit
+        return hit
+
+    def taylor_spans(self) -> list[tuple[int, int]]:
+        """Columns ``[a, z)`` of every block in ``X`` (its plain and Taylor columns), computed once."""
+        if "spans" not in self._memo:
+            self._memo["spans"] = self.state.spans(self.dd, taylor=True)
+        return self._memo["spans"]
 
     def all_groups(self) -> np.ndarray:
         """Every group (boolean mask)."""
@@ -147,7 +161,7 @@ class Round:
         """Columns of ``X`` that stay when the blocks ``drop`` (blocks or uids) go."""
         keep = np.ones(self.X.shape[1], bool)
         uids = {getattr(d, "uid", d) for d in drop}
-        for blk, (a, z) in zip(self.state.blocks, self.state.spans(self.dd, taylor=True)):
+        for blk, (a, z) in zip(self.state.blocks, self.taylor_spans()):
             if blk.uid in uids:
                 keep[a:z] = False
         return keep

@@ -105,7 +105,8 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
     contribution = None
     if prop_all is not None:
         if repolish and not isinstance(cand, PeriodicCandidate):
-            movable = [b.uid for b in rnd.state.blocks if b.n_taylor(dd)] + [b.uid for b in prop_all.add]
+            movable = [b.uid for b, (a, z) in zip(rnd.state.blocks, rnd.taylor_spans()) if z - a > len(b.names)]
+            movable += [b.uid for b in prop_all.add]     # and those with Taylor columns in the round's design
             st = refine(rnd.state.replaced(prop_all.drop, prop_all.add), dd, only=set(movable))
             st_base = st.replaced([b.uid for b in prop_all.add], prop_all.drop)
             ext = Round(dd, st_base, rnd.fold, standard_errors=False)
@@ -126,8 +127,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         train = ~test
         prop = cand.propose(ext, train) if (train.any() and not train.all()) else None
         if prop is None:
-            rows = rnd.rows(test)
-            p1[rows] = p0[rows]
+            p1[rnd.rows(test)] = p0[rnd.rows(test)]
             props.append(None)
             continue
         keep = ext.keep_mask(prop.drop)
