@@ -224,3 +224,24 @@ def test_a_proposals_remembered_fit_is_the_fit_and_keeps_no_round_alive(dd):
     del rnd
     gc.collect()
     assert ref() is None                                       # the memo does not hold the round (its X)
+
+
+@pytest.mark.parametrize("seg", [np.repeat([5, 2, 9, 3], [40, 2, 25, 60]),  # contiguous, unsorted ids, a 2-row one
+                                 np.repeat([1, 2, 1, 3], [10, 20, 30, 5])])           # id 1 in two runs
+def test_a_residual_spectrums_segments_are_the_masks_of_their_ids(seg):
+    """The per-segment means, steps and spans of a residual spectrum from one pass over the
+    segment column: the same elements, in the same order, as the mask of every id (ascending)."""
+    from gearspec.diagnose.residual import _demean_by_segment, _segment_slices, _spacing
+
+    rng = np.random.default_rng(4)
+    y = rng.normal(size=len(seg))
+    theta = np.cumsum(rng.random(len(seg)))
+    parts = _segment_slices(seg)
+    masks = [seg == k for k in np.unique(seg)]
+    assert [list(np.arange(len(seg))[p]) for p in parts] == [list(np.flatnonzero(m)) for m in masks]
+    want = y.copy()
+    for m in masks:
+        want[m] -= want[m].mean()
+    assert np.array_equal(_demean_by_segment(seg, y), want)         # identical: same sums, same order
+    steps = np.concatenate([np.abs(np.diff(theta[m])) for m in masks if m.sum() > 2])
+    assert _spacing(theta, seg) == float(np.percentile(steps[steps > 0], 90))
