@@ -73,6 +73,16 @@ def test_the_rounds_held_out_prediction_is_each_fold_fitted_without_it(rnd):
     assert again is not h and again["rmse"] == h["rmse"] and again["sse"] is h["sse"]
 
 
+def test_every_candidate_of_a_round_shares_its_held_out_residual(rnd):
+    """One array of rows per round, not one per candidate (18 candidates of 10^7 rows: 1.4 GB)."""
+    from gearspec.diagnose.candidates import FixedCandidate, per_direction
+
+    a = loop._run_folds(rnd, FixedCandidate("other", "offset", per_direction(rnd, "offset", key="offset")))
+    b = loop._run_folds(rnd, PeriodicCandidate(2.1, 0.05))
+    assert a.r0 is b.r0 and np.array_equal(a.r0, rnd.dd.y - rnd.held_out_prediction())
+    assert not np.array_equal(a.p1, b.p1)                    # each its own held-out prediction
+
+
 def test_a_folds_training_residual_is_the_residual_at_its_rows(rnd):
     dd = rnd.dd
     train = rnd.fold != 1

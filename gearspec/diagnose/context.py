@@ -118,6 +118,15 @@ class Round:
         (do not write into it)."""
         return self.baseline_holdout()["prediction"]
 
+    def held_out_residual(self) -> np.ndarray:
+        """``y -`` :meth:`held_out_prediction` (Nm): one array shared by every candidate's test of
+        the round (rows x candidates on a long recording otherwise; read-only)."""
+        if "holdout_residual" not in self._memo:
+            r0 = self.dd.y - self.held_out_prediction()
+            r0.flags.writeable = False
+            self._memo["holdout_residual"] = r0
+        return self._memo["holdout_residual"]
+
     def train_residual(self, train: np.ndarray) -> np.ndarray:
         """``y - X beta(train)`` at the observations of the groups ``train`` (Nm, in their order),
         group by group on views of ``X`` (no copy of its rows); the last few kept (read-only)."""

@@ -139,7 +139,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         props.append((rnd.keep_mask(prop.drop), prop))
     if ext is not rnd and cand._cache.get("round") is ext:
         cand._cache = {}    # its memo holds the extended round's design (rows x terms), never asked again
-    return _Folds(dd.y - p0, p1, props, contribution, n_par)
+    return _Folds(rnd.held_out_residual(), p1, props, contribution, n_par)
 
 
 def _predict(out: np.ndarray, test: np.ndarray, dd: DiagnoseData, X: np.ndarray, beta: np.ndarray,
