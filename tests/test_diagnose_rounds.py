@@ -255,3 +255,33 @@ def test_a_residual_spectrums_segments_are_the_masks_of_their_ids(seg):
     assert np.array_equal(_demean_by_segment(seg, y), want)         # identical: same sums, same order
     steps = np.concatenate([np.abs(np.diff(theta[m])) for m in masks if m.sum() > 2])
     assert _spacing(theta, seg) == float(np.percentile(steps[steps > 0], 90))
+
+
+def test_per_segment_spectra_hold_memory_of_one_segment_not_of_every_one(dd):
+    """The indices of every segment's spectrum are views of one array: the spectra of every segment
+    add to the analysis's peak memory about what one segment's spectrum needs, not rows x segments
+    (a fresh index array of all rows per segment: 12 x 8 bytes per row here, 400 x 8 on the
+    default twin)."""
+    import tracemalloc
+
+    from gearspec.diagnose.residual import position_spectra
+
+    r = dd.y - dd.y.mean()
+    position_spectra(dd, r, per_segment=True)                # warm caches
+
+    def peak(per_segment):
+        tracemalloc.start()
+        try:
+            base = tracemalloc.get_traced_memory()[0]
+            out = position_spectra(dd, r, per_segment=per_segment)
+            return tracemalloc.get_traced_memory()[1] - base, out
+        finally:
+            tracemalloc.stop()
+
+    pooled, _ = peak(False)
+    every, out = peak(True)
+    n_seg = len(out["segments"])
+    assert n_seg == 2 * len(SPEEDS)
+    # what the per-segment spectra add (measured 57 bytes per row: their grids and periodograms) is
+    # below the 8 bytes x rows x segments the bug held on top of it (it measured 150)
+    assert every - pooled < 8 * len(dd) * n_seg, ((every - pooled) / len(dd), n_seg)

@@ -201,8 +201,8 @@ def position_spectra(dd: DiagnoseData, r: np.ndarray, *, per_segment: bool = Tru
         pools += [idx for _, idx in groups]
     ch = _channels(dd)
     seg = ch["segment"]
-    singles = ([np.arange(len(seg))[m] for m in _segment_slices(seg)] if per_segment and dd.kind == "plateaus"
-               else [])
+    rows = np.arange(len(seg))      # one array: each segment's indices a view of it (not one per segment)
+    singles = [rows[m] for m in _segment_slices(seg)] if per_segment and dd.kind == "plateaus" else []
     kw = dict(oversample=oversample, fap_threshold=fap_threshold, fmax=fmax, channels=ch)
     pooled = [_spectrum(dd, r, idx, max_peaks=max_peaks, pooled=True, **kw) for idx in pools]
     segments = [_spectrum(dd, r, idx, max_peaks=3, pooled=False, **kw) for idx in singles]
