@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import types
+import weakref
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -42,6 +43,9 @@ class Proposal:
     ctc: np.ndarray | None = None
     cty: np.ndarray | None = None
     describe: str = ""
+    #: :func:`train_fit`'s answers, by round, training groups and kept columns (a grid candidate's
+    #: fold asks for its best value's fit again)
+    fits: dict = field(default_factory=dict, repr=False)
 
     def columns(self, dd) -> np.ndarray:
         return np.column_stack([b.columns(dd) for b in self.add])
@@ -67,6 +71,10 @@ def cross_grams(rnd: Round, C: np.ndarray):
 def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
     """Coefficients (kept columns, then new ones) fitted on the training groups, and the
     training residual sum of squares."""
+    key = (id(rnd), rnd.key(train), np.packbits(keep).tobytes())
+    hit = prop.fits.get(key)
+    if hit is not None and hit[0]() is rnd:
+        return hit[1], hit[2]
     Gx, bx, yy = rnd.train_sums(train)
     k = np.flatnonzero(keep)
     xtc = prop.xtc[train].sum(0)[k]
@@ -77,6 +85,9 @@ def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
     ref = np.concatenate([rnd.ref_diag[k], np.einsum("gii->i", prop.ctc)])
     beta = solve_normal(G, b, reference=ref)
     rss = float(yy - 2 * beta @ b + beta @ G @ beta)
+    if len(prop.fits) >= 16:
+        prop.fits.clear()
+    prop.fits[key] = (weakref.ref(rnd), beta, rss)     # never keeps an extended round's design alive
     return beta, rss
 
 
@@ -201,19 +212,41 @@ def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01
 
     rr = dm(r)
     yy = float(rr @ rr)
+    # a speed per segment (plateaus): g(|v|) is constant within each, dm(g sn) = g dm(sn), and the
+    # normal equations of every law are weighted sums of five per-segment sums (equal to the
+    # stacked ones up to the order of the additions): one pass over the samples, not one per law
+    seg_speed = np.zeros(len(sids))
+    seg_speed[inv] = speed
+    if np.array_equal(seg_speed[inv], speed):
+        S, C = dm(sn), dm(cs)
+        sums = [np.bincount(inv, weights=a * b, minlength=len(sids)) for a, b in ((S, S), (S, C), (C, C), (S, rr),
+                                                                                  (C, rr))]
 
-    def rss(g):
-        A = np.column_stack([dm(g * sn), dm(g * cs)])
-        b = A.T @ rr
-        return yy - float(solve_normal(A.T @ A, b) @ b)
+        def rss_of(g_seg):
+            g2 = g_seg * g_seg
+            G = np.array([[g2 @ sums[0], g2 @ sums[1]], [g2 @ sums[1], g2 @ sums[2]]])
+            b = np.array([g_seg @ sums[3], g_seg @ sums[4]])
+            return yy - float(solve_normal(G, b) @ b)
+
+        speed_of = seg_speed
+    else:
+        def rss_of(g):
+            A = np.column_stack([dm(g * sn), dm(g * cs)])
+            b = A.T @ rr
+            return yy - float(solve_normal(A.T @ A, b) @ b)
+
+        speed_of = speed
+
+    def rss(law, b):
+        return rss_of(amplitude_law(law, speed_of, b))
 
     top = float(np.max(speed)) if len(speed) else 1.0
-    out = {"const": (rss(np.ones_like(speed)), 0.0)}
+    out = {"const": (rss_of(np.ones_like(speed_of)), 0.0)}
     speeds = np.unique(np.round(speed, 9))
     if len(speeds) >= 2 and top > 0:
         for law, grid in (("exp", EXP_GRID), ("rational", RAT_GRID), ("power", POW_GRID)):
             consts = [g if law == "power" else g / top for g in grid]
-            out[law] = min(((rss(amplitude_law(law, speed, b)), b) for b in consts), key=lambda vb: vb[0])
+            out[law] = min(((rss(law, b), b) for b in consts), key=lambda vb: vb[0])
     law, (val, dec) = min(out.items(), key=lambda kv: kv[1][0])
     s2 = val / max(len(r) - 3 - len(sids), 1)
     if law != "const" and (out["const"][0] - val) < stats.chi2.isf(alpha, 1) * s2:
@@ -257,14 +290,24 @@ class PeriodicCandidate(Candidate):
                 self.hint = integer_hint(self.gear, f, 3 * se)
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
+        # the all-data proposal is asked for again when the loop accepts the candidate: the same
+        # search on the same residual, kept for the round
+        if train.all():
+            cache = self._round_cache(rnd)
+            if "all" not in cache:
+                cache["all"] = self._propose(rnd, train)
+            return cache["all"]
+        return self._propose(rnd, train)
+
+    def _propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         dd = rnd.dd
         rows = rnd.rows(train)
-        r0 = dd.y[rows] - rnd.X[rows] @ rnd.beta(train)
-        theta = dd.at("theta")[rows]
-        d = dd.at("direction")[rows]
-        speed = np.abs(dd.at("v")[rows])
-        seg = dd.at("segment")[rows]
-        top = float(np.max(np.abs(dd.at("v")))) if len(dd) else 0.0
+        r0 = rnd.train_residual(train)
+        theta = rnd.channel("theta")[rows]
+        d = rnd.channel("direction")[rows]
+        speed = rnd.channel("speed")[rows]
+        seg = rnd.channel("segment")[rows]
+        top = float(np.max(rnd.channel("speed"))) if len(dd) else 0.0
         moving = speed > (0.05 * top if dd.kind == "trajectory" else 0.0)
         dirs = [x for x in (1, -1) if np.sum((d == x) & moving) >= 16]
         if not dirs:

@@ -52,6 +52,9 @@ class Round:
     dd: DiagnoseData = field(repr=False)
     state: State = field(repr=False)
     fold: np.ndarray = field(repr=False)
+    #: the standard errors of the nonlinear parameters (``fitted.nonlinear_se``); False for a round
+    #: only a candidate's held-out folds read (the extended model of :func:`~.loop._run_folds`)
+    standard_errors: bool = field(default=True, repr=False)
     fitted: FittedState = field(init=False, repr=False)
     X: np.ndarray = field(init=False, repr=False)
     grams: GroupNormals = field(init=False, repr=False)
@@ -60,6 +63,9 @@ class Round:
     keys: frozenset = field(init=False, repr=False)
     _sums: dict = field(init=False, repr=False, default_factory=dict)
     _beta: dict = field(init=False, repr=False, default_factory=dict)
+    #: what every candidate of the round reads alike: channels at the observations, the held-out
+    #: prediction of the model as it stands, the training residual of a fold (:meth:`train_residual`)
+    _memo: dict = field(init=False, repr=False, default_factory=dict)
 
     def __post_init__(self):
         dd = self.dd
@@ -69,7 +75,8 @@ class Round:
         X = state.design(dd, taylor=True)
         grams = group_normals(X, dd.y, dd.starts, dd.stops)
         G_all = grams.sum()[0]
-        fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
+        if self.standard_errors:
+            fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
         for name, value in (("state", state), ("fitted", fitted), ("X", X), ("grams", grams),
                             ("ref_diag", np.diag(G_all).copy()), ("K", int(self.fold.max()) + 1),
                             ("keys", frozenset(b.key for b in state.blocks))):
@@ -94,9 +101,66 @@ class Round:
             self._beta[k] = solve_normal(G, b, reference=self.ref_diag)
         return self._beta[k]
 
+    def channel(self, name: str) -> np.ndarray | None:
+        """A channel at the observations (:meth:`DiagnoseData.at`), read once per round (every
+        candidate reads the same); ``"speed"``: ``|v|``.  Read-only: do not write into it."""
+        key = ("channel", name)
+        if key not in self._memo:
+            a = np.abs(self.dd.at("v")) if name == "speed" else self.dd.at(name)
+            if a is not None:
+                a.flags.writeable = False
+            self._memo[key] = a
+        return self._memo[key]
+
+    def held_out_prediction(self) -> np.ndarray:
+        """The prediction of the model as it stands at every observation, fitted on the folds
+        without it (Nm): :meth:`baseline_holdout`'s, the same for every candidate of the round
+        (do not write into it)."""
+        return self.baseline_holdout()["prediction"]
+
+    def held_out_residual(self) -> np.ndarray:
+        """``y -`` :meth:`held_out_prediction` (Nm): one array shared by every candidate's test of
+        the round (rows x candidates on a long recording otherwise; read-only)."""
+        if "holdout_residual" not in self._memo:
+            r0 = self.dd.y - self.held_out_prediction()
+            r0.flags.writeable = False
+            self._memo["holdout_residual"] = r0
+        return self._memo["holdout_residual"]
+
+    def train_residual(self, train: np.ndarray) -> np.ndarray:
+        """``y - X beta(train)`` at the observations of the groups ``train`` (Nm, in their order),
+        group by group on views of ``X`` (no copy of its rows); the last few kept (read-only)."""
+        key = ("r0", self.key(train))
+        hit = self._memo.get(key)
+        if hit is None:
+            beta = self.beta(train)
+            dd = self.dd
+            parts = [dd.y[a:z] - self.X[a:z] @ beta for a, z in zip(dd.starts[train], dd.stops[train])]
+            hit = np.concatenate(parts) if parts else np.zeros(0)
+            hit.flags.writeable = False
+            old = [k for k in self._memo if k[0] == "r0"]
+            if len(old) >= self.K + 1:          # the folds' and all data's: a round asks for no others
+                del self._memo[old[0]]
+            self._memo[key] = hit
+        return hit
+
     def rows(self, train_groups: np.ndarray) -> np.ndarray:
-        """Observations (boolean) of the groups where ``train_groups`` is true."""
-        return train_groups[self.dd.group]
+        """Observations (boolean) of the groups where ``train_groups`` is true (the folds' and all
+        data's kept for the round; read-only)."""
+        key = ("rows", self.key(train_groups))
+        hit = self._memo.get(key)
+        if hit is None:
+            hit = train_groups[self.dd.group]
+            hit.flags.writeable = False
+            if sum(1 for k in self._memo if k[0] == "rows") < 2 * self.K + 2:   # a fold's, its complement, all
+                self._memo[key] = hit
+        return hit
+
+    def taylor_spans(self) -> list[tuple[int, int]]:
+        """Columns ``[a, z)`` of every block in ``X`` (its plain and Taylor columns), computed once."""
+        if "spans" not in self._memo:
+            self._memo["spans"] = self.state.spans(self.dd, taylor=True)
+        return self._memo["spans"]
 
     def all_groups(self) -> np.ndarray:
         """Every group (boolean mask)."""
@@ -106,7 +170,7 @@ class Round:
         """Columns of ``X`` that stay when the blocks ``drop`` (blocks or uids) go."""
         keep = np.ones(self.X.shape[1], bool)
         uids = {getattr(d, "uid", d) for d in drop}
-        for blk, (a, z) in zip(self.state.blocks, self.state.spans(self.dd, taylor=True)):
+        for blk, (a, z) in zip(self.state.blocks, self.taylor_spans()):
             if blk.uid in uids:
                 keep[a:z] = False
         return keep
@@ -130,14 +194,22 @@ class Round:
         """Held-out sums of squares of the model as it stands, per group (Nm^2), its held-out
         prediction at every observation (Nm) and its held-out rmse (Nm), folds as
         :func:`gearspec.core.crossval.held_out` runs them: ``{"sse", "prediction", "rmse"}``."""
-        dd = self.dd
-        pred = np.zeros(len(dd))
+        hit = self._memo.get("holdout")
+        if hit is None:
+            dd = self.dd
+            pred = np.zeros(len(dd))
 
-        def score(beta, test):
-            rows = self.rows(test)
-            pred[rows] = self.X[rows] @ beta
-            r = dd.y - pred
-            return [float(r[a:z] @ r[a:z]) for a, z in zip(dd.starts[test], dd.stops[test])]
+            def score(beta, test):
+                # group by group on views of X (no copy of its rows)
+                out = []
+                for a, z in zip(dd.starts[test], dd.stops[test]):
+                    pred[a:z] = self.X[a:z] @ beta
+                    r = dd.y[a:z] - pred[a:z]
+                    out.append(float(r @ r))
+                return out
 
-        ho = held_out(self.fold, self.beta, score, weight=dd.stops - dd.starts, catch=())
-        return {"sse": ho.sse, "prediction": pred, "rmse": ho.rmse}
+            ho = held_out(self.fold, self.beta, score, weight=dd.stops - dd.starts, catch=())
+            hit = self._memo["holdout"] = {"sse": ho.sse, "prediction": pred, "rmse": ho.rmse}
+        # the round's model does not change: the same numbers every time it is asked (a step's
+        # guard, the next round's "before", the final model)
+        return dict(hit)

@@ -1,5 +1,11 @@
 """Where the data measure a line: the position Nyquist frequency of every segment, the samples
-that resolve a frequency and hold enough of its cycles, and the speeds they span."""
+that resolve a frequency and hold enough of its cycles, and the speeds they span.
+
+Every rule here is a property of a segment (a run of equal ``segment`` in ``dd.fit``): the tables
+of :func:`_runs` hold one row per segment (its Nyquist frequency, travel and the smallest and
+largest moving speed of each direction), computed once per data set and cached on it, so that a
+question about one frequency costs the number of segments, not of samples.
+"""
 
 from __future__ import annotations
 
@@ -17,28 +23,66 @@ def _segment_bounds(f) -> list:
     return list(zip(np.concatenate(([0], bounds)), np.concatenate((bounds, [len(seg)]))))
 
 
+def _runs(dd: DiagnoseData) -> dict:
+    """Per segment of ``dd.fit`` (cached on the data): ``starts``, ``lengths`` (samples),
+    ``nyquist`` (cycles per unit; inf where unknown), ``span`` (travel, unit) and, per direction
+    ``d`` in (0, 1, -1) (0: both), ``vmin[d]`` / ``vmax[d]``: the smallest and largest |v| of its
+    samples moving in that direction (inf / -inf where none)."""
+    hit = dd.cache.get("coverage_runs")
+    if hit is not None:
+        return hit
+    f = dd.fit
+    bounds = _segment_bounds(f) if len(f) else []
+    starts = np.array([a for a, _ in bounds], dtype=np.int64)
+    lengths = np.array([z - a for a, z in bounds], dtype=np.int64)
+    nyq = np.full(len(bounds), np.inf)
+    span = np.zeros(len(bounds))
+    if f.theta is not None:
+        for i, (a, z) in enumerate(bounds):
+            if z - a > 1:
+                q = position_nyquist(f.theta[a:z])
+                if q > 0:
+                    nyq[i] = q
+            span[i] = float(np.ptp(f.theta[a:z])) if z > a else 0.0
+    vmin, vmax = {}, {}
+    if len(f):
+        sp = np.abs(f.v)
+        for d in (0, 1, -1):
+            sel = f.v != 0 if d == 0 else (f.direction == d) & (f.v != 0)
+            vmin[d] = np.minimum.reduceat(np.where(sel, sp, np.inf), starts)
+            vmax[d] = np.maximum.reduceat(np.where(sel, sp, -np.inf), starts)
+    out = dd.cache["coverage_runs"] = {"starts": starts, "lengths": lengths, "nyquist": nyq, "span": span,
+                                       "vmin": vmin, "vmax": vmax}
+    return out
+
+
 def segment_nyquist(dd: DiagnoseData) -> np.ndarray:
     """Position Nyquist frequency of the segment of every sample
     (:func:`gearspec.spectrum.position_nyquist` of the segment's positions), cached on the data."""
     hit = dd.cache.get("nyquist")
-    if hit is not None:
-        return hit
-    f = dd.fit
-    out = np.full(len(f), np.inf)
-    if f.theta is not None:
-        for a, z in _segment_bounds(f):
-            if z - a > 1:
-                nyq = position_nyquist(f.theta[a:z])
-                if nyq > 0:
-                    out[a:z] = nyq
-    dd.cache["nyquist"] = out
-    return out
+    if hit is None:
+        t = _runs(dd)
+        hit = dd.cache["nyquist"] = np.repeat(t["nyquist"], t["lengths"])
+    return hit
+
+
+def _resolved_runs(dd: DiagnoseData, frequency: float, fraction: float = MEASURABLE_FRACTION) -> np.ndarray:
+    return frequency < fraction * _runs(dd)["nyquist"]
 
 
 def resolved(dd: DiagnoseData, frequency: float, fraction: float = MEASURABLE_FRACTION) -> np.ndarray:
     """Samples whose segment resolves a line at ``frequency`` (below ``fraction`` of its position
     Nyquist frequency)."""
-    return frequency < fraction * segment_nyquist(dd)
+    return np.repeat(_resolved_runs(dd, frequency, fraction), _runs(dd)["lengths"])
+
+
+def _measurable_runs(dd: DiagnoseData, frequency: float) -> np.ndarray:
+    from ..identify import MIN_CYCLES
+
+    t = _runs(dd)
+    if dd.fit.theta is None:
+        return np.zeros(len(t["starts"]), bool)
+    return _resolved_runs(dd, frequency) & (frequency * t["span"] >= MIN_CYCLES)
 
 
 def measurable(dd: DiagnoseData, frequency: float) -> np.ndarray:
@@ -46,11 +90,7 @@ def measurable(dd: DiagnoseData, frequency: float) -> np.ndarray:
     (:func:`resolved`) and at least :data:`gearspec.identify.MIN_CYCLES` of its cycles within the
     segment's travel (the rule of :func:`gearspec.identify.fit`).  An amplitude law is chosen and
     fitted from these samples only, and held at the edges of their speeds elsewhere."""
-    from ..identify import MIN_CYCLES
-
-    if dd.fit.theta is None:
-        return np.zeros(len(dd.fit), bool)
-    return resolved(dd, frequency) & (frequency * segment_span(dd) >= MIN_CYCLES)
+    return np.repeat(_measurable_runs(dd, frequency), _runs(dd)["lengths"])
 
 
 def segment_span(dd: DiagnoseData) -> np.ndarray:
@@ -58,23 +98,23 @@ def segment_span(dd: DiagnoseData) -> np.ndarray:
     cached on the data."""
     span = dd.cache.get("segment_span")
     if span is None:
-        f = dd.fit
-        span = dd.cache["segment_span"] = np.zeros(len(f))
-        for a, z in _segment_bounds(f):
-            span[a:z] = float(np.ptp(f.theta[a:z])) if z > a else 0.0
+        t = _runs(dd)
+        span = dd.cache["segment_span"] = np.repeat(t["span"], t["lengths"])
     return span
 
 
 def line_speed_range(dd: DiagnoseData, frequency: float, direction: int = 0) -> tuple | None:
     """``(min, max)`` of |v| where ``dd`` measures a line at ``frequency`` (:func:`measurable`) in
     ``direction`` (0: both); None where it measures it nowhere.  Whole trajectories (reduced
-    data, where the lines are fitted on every sample): the range of the moving samples."""
-    f = dd.fit
-    sel = (f.direction == direction) if direction else np.ones(len(f), bool)
-    sel = sel & (f.v != 0)
-    if dd.reduce is None:
-        sel = sel & measurable(dd, frequency)
-    if not sel.any():
+    data, where the lines are fitted on every sample): the range of the moving samples.  From the
+    per-segment table of :func:`_runs` (the same minimum and maximum as over the samples)."""
+    t = _runs(dd)
+    if not len(t["starts"]):
         return None
-    sp = np.abs(f.v[sel])
-    return float(np.min(sp)), float(np.max(sp))
+    lo, hi = t["vmin"][direction], t["vmax"][direction]
+    if dd.reduce is None:
+        meas = _measurable_runs(dd, frequency)
+        lo, hi = lo[meas], hi[meas]
+    if not len(lo) or not np.isfinite(lo).any():
+        return None
+    return float(np.min(lo)), float(np.max(hi))

@@ -105,10 +105,11 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
     contribution = None
     if prop_all is not None:
         if repolish and not isinstance(cand, PeriodicCandidate):
-            movable = [b.uid for b in rnd.state.blocks if b.n_taylor(dd)] + [b.uid for b in prop_all.add]
+            movable = [b.uid for b, (a, z) in zip(rnd.state.blocks, rnd.taylor_spans()) if z - a > len(b.names)]
+            movable += [b.uid for b in prop_all.add]     # and those with Taylor columns in the round's design
             st = refine(rnd.state.replaced(prop_all.drop, prop_all.add), dd, only=set(movable))
             st_base = st.replaced([b.uid for b in prop_all.add], prop_all.drop)
-            ext = Round(dd, st_base, rnd.fold)
+            ext = Round(dd, st_base, rnd.fold, standard_errors=False)
         # what the candidate adds when fitted on all data (for the report's figure)
         p_ext = prop_all if ext is rnd else cand.propose(ext, ext.all_groups())
         if p_ext is not None:
@@ -118,16 +119,15 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
             full = np.zeros(ext.X.shape[1])
             full[keep] = beta[:nk]      # no copy of the kept columns (rows x terms) of a long recording
             contribution = ext.X @ full + p_ext.columns(dd) @ beta[nk:] - rnd.fitted.prediction
-    p0 = np.zeros(len(dd))
+    p0 = rnd.held_out_prediction()      # the same for every candidate of the round
     p1 = np.zeros(len(dd))
     props = []
     n_par = 0
     for _, test in splits(rnd.fold):
         train = ~test
-        _predict(p0, test, dd, rnd.X, rnd.beta(train))
         prop = cand.propose(ext, train) if (train.any() and not train.all()) else None
         if prop is None:
-            _predict(p1, test, dd, rnd.X, rnd.beta(train))
+            p1[rnd.rows(test)] = p0[rnd.rows(test)]
             props.append(None)
             continue
         keep = ext.keep_mask(prop.drop)
@@ -139,7 +139,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         props.append((rnd.keep_mask(prop.drop), prop))
     if ext is not rnd and cand._cache.get("round") is ext:
         cand._cache = {}    # its memo holds the extended round's design (rows x terms), never asked again
-    return _Folds(dd.y - p0, p1, props, contribution, n_par)
+    return _Folds(rnd.held_out_residual(), p1, props, contribution, n_par)
 
 
 def _predict(out: np.ndarray, test: np.ndarray, dd: DiagnoseData, X: np.ndarray, beta: np.ndarray,

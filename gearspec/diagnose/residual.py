@@ -83,34 +83,53 @@ def speed_groups(dd: DiagnoseData, ratio: float = 1.6, min_speed_fraction: float
     return out
 
 
-def _demean_by_segment(seg: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _segment_slices(seg: np.ndarray) -> list[slice]:
+    """The observations of every segment id in ``seg`` (ascending ids) as slices, when each id is
+    one contiguous run (as the loop's data keep them): the same elements in the same order as the
+    mask ``seg == id``, found in one pass instead of one per segment; else the masks."""
+    bounds = np.flatnonzero(np.diff(seg) != 0) + 1
+    starts = np.concatenate(([0], bounds)) if len(seg) else np.zeros(0, int)
+    stops = np.concatenate((bounds, [len(seg)])) if len(seg) else np.zeros(0, int)
+    ids = seg[starts]
+    if len(np.unique(ids)) != len(ids):
+        return [seg == sid for sid in np.unique(seg)]
+    return [slice(int(starts[i]), int(stops[i])) for i in np.argsort(ids, kind="stable")]
+
+
+def _demean_by_segment(seg: np.ndarray, y: np.ndarray, parts: list | None = None) -> np.ndarray:
     out = y.astype(float).copy()
-    for sid in np.unique(seg):
-        m = seg == sid
+    for m in (_segment_slices(seg) if parts is None else parts):
         out[m] -= out[m].mean()
     return out
 
 
-def _spacing(theta: np.ndarray, seg: np.ndarray) -> float:
+def _spacing(theta: np.ndarray, seg: np.ndarray, parts: list | None = None) -> float:
     """The 90th percentile of the position step between consecutive observations of a segment."""
-    steps = [np.abs(np.diff(theta[seg == sid])) for sid in np.unique(seg) if np.sum(seg == sid) > 2]
+    parts = _segment_slices(seg) if parts is None else parts
+    steps = [np.abs(np.diff(theta[m])) for m in parts if len(theta[m]) > 2]
     st = np.concatenate(steps) if steps else np.zeros(0)
     st = st[st > 0]
     return float(np.percentile(st, 90)) if len(st) else float("nan")
 
 
+def _channels(dd: DiagnoseData) -> dict:
+    """The channels a residual spectrum reads, at the observations (read once per analysis)."""
+    return {"theta": dd.at("theta"), "segment": dd.at("segment"), "direction": dd.at("direction"),
+            "speed": np.abs(dd.at("v"))}
+
+
 def _spectrum(dd: DiagnoseData, r: np.ndarray, idx: np.ndarray, *, oversample: float, fap_threshold: float,
-              max_peaks: int, fmax: float | None, pooled: bool, max_bins: int = 400_000) -> ResidualSpectrum | None:
-    theta = dd.at("theta")
-    seg = dd.at("segment")
-    d = dd.at("direction")
-    s = np.abs(dd.at("v"))
+              max_peaks: int, fmax: float | None, pooled: bool, max_bins: int = 400_000,
+              channels: dict | None = None) -> ResidualSpectrum | None:
+    ch = _channels(dd) if channels is None else channels
+    theta, seg, d, s = ch["theta"], ch["segment"], ch["direction"], ch["speed"]
     th, sg = theta[idx], seg[idx]
-    y = _demean_by_segment(sg, d[idx] * r[idx])
+    parts = _segment_slices(sg)
+    y = _demean_by_segment(sg, d[idx] * r[idx], parts)
     span = float(np.ptp(th)) if len(th) > 1 else 0.0
-    seg_spans = [float(np.ptp(th[sg == k])) for k in np.unique(sg)]
+    seg_spans = [float(np.ptp(th[m])) for m in parts]
     longest = max(seg_spans) if seg_spans else 0.0
-    step = _spacing(th, sg)
+    step = _spacing(th, sg, parts)
     if not (span > 0 and longest > 0 and np.isfinite(step) and step > 0) or len(idx) < 32:
         return None
     nyq = 0.5 / step
@@ -180,9 +199,11 @@ def position_spectra(dd: DiagnoseData, r: np.ndarray, *, per_segment: bool = Tru
     groups = speed_groups(dd, ratio)
     if len(groups) > len(dd.directions()):
         pools += [idx for _, idx in groups]
-    seg = dd.at("segment")
-    singles = [np.flatnonzero(seg == sid) for sid in np.unique(seg)] if per_segment and dd.kind == "plateaus" else []
-    kw = dict(oversample=oversample, fap_threshold=fap_threshold, fmax=fmax)
+    ch = _channels(dd)
+    seg = ch["segment"]
+    rows = np.arange(len(seg))      # one array: each segment's indices a view of it (not one per segment)
+    singles = [rows[m] for m in _segment_slices(seg)] if per_segment and dd.kind == "plateaus" else []
+    kw = dict(oversample=oversample, fap_threshold=fap_threshold, fmax=fmax, channels=ch)
     pooled = [_spectrum(dd, r, idx, max_peaks=max_peaks, pooled=True, **kw) for idx in pools]
     segments = [_spectrum(dd, r, idx, max_peaks=3, pooled=False, **kw) for idx in singles]
     return {"pooled": [sp for sp in pooled if sp is not None], "segments": [sp for sp in segments if sp is not None]}
