@@ -15,23 +15,9 @@ from gearspec.discover.law import Part, canonical, fold_ids
 from gearspec.discover.moments import moments
 from gearspec.discover.screen import _held_out_z, _segment_direction, _training_sums, joint_statistics
 from gearspec.fitdata import FitData
-from gearspec.model import RPM, FrictionModel
 from gearspec.simulate import model_recording
 
-F2, F3 = 1 / (2 * np.pi * 14), 1 / (2 * np.pi)      # SILO4 worm-shaft and motor-shaft lines, cycles/rad
-
-
-def truth(extra=()) -> FrictionModel:
-    p = {"tau_c": 7.106e-3, "tau_s": 7.106e-3 + 1.49e-3, "v_s": 28.18 * RPM, "viscous": 0.0134e-3 / RPM}
-    n = {"tau_c": 7.909e-3, "tau_s": 7.909e-3 + 1.49e-3, "v_s": 28.18 * RPM, "viscous": 0.0138e-3 / RPM}
-    p["harmonics"] = [dict(frequency=F2, amplitude=0.576e-3, decay=1.27e-4 / RPM, phase=np.pi / 2),
-                      dict(frequency=F3, amplitude=0.133e-3, decay=5.28e-5 / RPM, phase=np.pi)]
-    n["harmonics"] = [dict(frequency=F2, amplitude=0.526e-3, decay=1.12e-4 / RPM, phase=np.pi / 2),
-                      dict(frequency=F3, amplitude=0.152e-3, decay=7.49e-6 / RPM, phase=np.pi)]
-    for h in extra:
-        p["harmonics"].append(dict(h))
-        n["harmonics"].append(dict(h))
-    return FrictionModel("silo4", p, n)
+from test_discover_false import F2, F3, truth    # the SILO4 eq. 11 truth and its two shaft lines (cycles/rad)
 
 
 def twin(seed: int, model=None) -> FitData:
