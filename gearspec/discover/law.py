@@ -235,7 +235,9 @@ def _solve_law(A, Pk, q, D=None):
 def _scan(z, lay: _Layout, m: Moments, slots, sse_at):
     """The start of a refinement: each nonlinear parameter scanned over 5 inner points of its
     range (7-point grid), the others held at the best so far (``sse_at``: residual sum of squares
-    at the multipliers); only the scanned parameter's columns are recomputed at its grid points."""
+    at the multipliers); only the scanned parameter's columns are recomputed at its grid points.
+    Variable projection has local optima (a Stribeck velocity beyond the plateaus trading against
+    Coulomb and viscous friction): the refinement starts from the best point of the scan."""
     A0 = _multipliers(None, lay, m, z, slots=slots)
     best = sse_at(A0)
     for k in range(len(z)):

@@ -7,7 +7,8 @@ import numpy as np
 
 from ..candidates import Candidate, GridCandidate
 from ..context import Round
-from ..design import TermBlock, travel_range
+from ..design import TermBlock
+from ..nonlinear import travel_range
 from .registry import register_detector
 
 
