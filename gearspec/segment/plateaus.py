@@ -240,7 +240,7 @@ def _segment_piece(t, theta, window, rel_tol, min_speed, min_duration, min_sampl
     segs = []
     short_blocks = []
     for s2, e2 in runs_:
-        rows_s, rows_e = _trim_to_line(t, theta, s2 * b, e2 * b, b)
+        rows_s, rows_e = _trim_to_line(t, theta, s2 * b, e2 * b, b, noise)
         s2, e2 = rows_s // b, -(-rows_e // b)
         dur = t[rows_e - 1] - t[rows_s]
         if dur < min_dur or rows_e - rows_s < min_samples:
