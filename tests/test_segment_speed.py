@@ -8,7 +8,9 @@
 - :func:`gearspec.segment.find_segments` stops the window ladder once its choice is settled
   (``plateaus._ladder``): the same segmentation as trying every window;
 - :func:`gearspec.segment.free_motion` counts free rows before cutting blocks: the count is the rows
-  of the blocks.
+  of the blocks;
+- the ramp test's cubic (``ramps._cubic_values``) from its four Legendre columns' normal equations:
+  numpy's ``legval(x, legfit(x, y, 3))`` to 1e-13 of ``max |y|``, and the same segments.
 """
 
 from __future__ import annotations
@@ -180,3 +182,39 @@ def test_free_rows_counted_are_the_rows_of_the_blocks(motion):
     else:
         assert not blocks and seg.settings["free_rows"] > 0 and seg.settings["free_share"] < 0.5
     seg.check_ledger()
+
+
+def _legendre_values(x, y):
+    """The reference: numpy's Legendre fit of degree 3 (SVD of the scaled Vandermonde matrix)."""
+    return np.polynomial.legendre.legval(x, np.polynomial.legendre.legfit(x, y, 3))
+
+
+@pytest.mark.parametrize("n", [5, 6, 40, 977, 4096])
+def test_the_cubic_of_the_ramp_test_is_numpys_legendre_fit(n):
+    from gearspec.segment import ramps
+    rng = np.random.default_rng(n)
+    x = np.sort(rng.uniform(-1, 1, n))
+    x[0], x[-1] = -1.0, 1.0
+    cubic = 680.0 + 3.0 * x - 2.0 * x ** 2 + 5.0 * x ** 3       # a ramp's shape on a large mean speed
+    # an exact cubic is reproduced; one with ripple and noise is fitted as numpy fits it
+    np.testing.assert_allclose(ramps._cubic_values(x, cubic), cubic, rtol=0, atol=1e-12 * 680.0)
+    y = cubic + 0.3 * np.sin(40 * x) + rng.standard_normal(n)
+    np.testing.assert_allclose(ramps._cubic_values(x, y), _legendre_values(x, y), rtol=0, atol=1e-13 * np.abs(y).max())
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_ramp_test_finds_the_same_segments_with_numpys_fit(seed, monkeypatch):
+    # bell tops, creeping tails, cruises and rippled plateaus: every split decision the same
+    from gearspec.segment import ramps
+    from gearspec.simulate.synthetic import excitation_recording
+
+    recs = [excitation_recording(seed=seed)[0],
+            plateau_recording([2.0, -3.0, 0.4], duration=4.0, fs=500.0, speed_ripple=0.12, speed_ripple_frequency=1.5,
+                              noise=1e-3, one_run_per_plateau=True, seed=seed)[0]]
+    for rec in recs:
+        fast = find_segments(rec)
+        with monkeypatch.context() as m:
+            m.setattr(ramps, "_cubic_values", _legendre_values)
+            slow = find_segments(rec)
+        assert [s.to_dict() for s in fast] == [s.to_dict() for s in slow] and len(fast) > 0
+        assert fast.excluded == slow.excluded
