@@ -10,7 +10,9 @@
 - :func:`gearspec.segment.free_motion` counts free rows before cutting blocks: the count is the rows
   of the blocks;
 - the ramp test's cubic (``ramps._cubic_values``) from its four Legendre columns' normal equations:
-  numpy's ``legval(x, legfit(x, y, 3))`` to 1e-13 of ``max |y|``, and the same segments.
+  numpy's ``legval(x, legfit(x, y, 3))`` to 1e-13 of ``max |y|``, and the same segments;
+- the quasi-static gate of a run computes its statistics only as far as the rule reads them
+  (``quasistatic._at_rest_statistics(lazy=True)``): the same decision and the same numbers.
 """
 
 from __future__ import annotations
@@ -218,3 +220,32 @@ def test_the_ramp_test_finds_the_same_segments_with_numpys_fit(seed, monkeypatch
             slow = find_segments(rec)
         assert [s.to_dict() for s in fast] == [s.to_dict() for s in slow] and len(fast) > 0
         assert fast.excluded == slow.excluded
+
+
+def test_the_lazy_quasi_static_gate_decides_as_the_full_one():
+    from gearspec.segment import quasistatic as qs
+    from gearspec.simulate.synthetic import excitation_recording, quasi_static_recording
+
+    at_rest = quasi_static_recording(noise=1e-3, dt_spread=0.5, repeat_probability=0.05, seed=1)[0]
+    steady = plateau_recording([2.0, -5.0], duration=4.0, fs=500.0, ramp=0.1, one_run_per_plateau=True, seed=2)[0]
+    quantised = plateau_recording([0.02, -0.03], duration=2.0, fs=500.0, quantum=2e-5, seed=2)[0]
+    idle = _recording([(np.arange(200) * 1e-3, np.zeros(200)), (np.arange(30) * 1e-3, np.linspace(0, 1, 30))])
+    seen = {"at rest": 0, "both spreads, out": 0, "one spread": 0, "no spread": 0}
+    for rec in (at_rest, steady, quantised, excitation_recording(seed=1)[0], idle):
+        for _, a, b in rec.pieces():
+            t, th = rec.t[a:b], rec.theta[a:b]
+            full, lazy = qs._run_statistics(t, th), qs._run_statistics(t, th, lazy=True)
+            assert qs._looks_at_rest(lazy) == qs._looks_at_rest(full)
+            assert all(full[k] == v for k, v in lazy.items())     # the same numbers, as far as computed
+            if "speed_spread" not in lazy:
+                seen["no spread"] += 1
+            elif lazy["speed_spread"] < qs.QS_MIN_SPEED_SPREAD:
+                seen["one spread"] += 1
+                assert "step_spread" not in lazy
+            else:                       # both spreads needed (at rest, or failing on their ratio)
+                seen["at rest" if qs._looks_at_rest(full) else "both spreads, out"] += 1
+                assert lazy == full
+    # each way out of the rule taken: a map at rest; plateaus (steady speeds: one percentile of two);
+    # slow quantised plateaus and moves (speeds spread by the staircase or the motion: both, out on
+    # their ratio); a standstill and a run of too few steps (no percentile)
+    assert all(seen.values()), seen

@@ -36,30 +36,41 @@ def _spread(x: np.ndarray) -> float:
     return float(math.log(hi / lo)) if lo > 0 else float("inf")
 
 
-def _at_rest_statistics(t: np.ndarray, theta: np.ndarray) -> dict:
-    """Steps, repeats and the spread of steps and of row-to-row speeds of a stretch of rows."""
+def _at_rest_statistics(t: np.ndarray, theta: np.ndarray, lazy: bool = False) -> dict:
+    """Steps, repeats and the spread of steps and of row-to-row speeds of a stretch of rows.
+    ``lazy``: only as far as :func:`_looks_at_rest` reads them (it stops at the first test that
+    fails; a spread it does not need is left out of the dict): the same decision, and on a run of
+    plateaus, whose row-to-row speeds are steady, one percentile of the two."""
     dth = np.abs(np.diff(theta))
     dt = np.diff(t)
     move = dth > 0
-    steps, speeds = dth[move], dth[move] / np.maximum(dt[move], 1e-300)
-    return {"steps": int(move.sum()), "repeats": float(1 - move.mean()) if len(move) else 1.0,
-            "step_spread": _spread(steps), "speed_spread": _spread(speeds)}
+    st = {"steps": int(move.sum()), "repeats": float(1 - move.mean()) if len(move) else 1.0}
+    if lazy and not (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS):
+        return st
+    steps = dth[move]
+    st["speed_spread"] = _spread(steps / np.maximum(dt[move], 1e-300))
+    if lazy and not st["speed_spread"] >= QS_MIN_SPEED_SPREAD:
+        return st
+    st["step_spread"] = _spread(steps)
+    return st
 
 
-def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000) -> dict:
+def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: int = 10_000,
+                    lazy: bool = False) -> dict:
     """:func:`_at_rest_statistics` of a whole run, from up to ``chunks`` contiguous stretches of
     ``size`` rows (not a stride, which would sum steps)."""
     n = len(t)
     if n <= chunks * size:
-        return _at_rest_statistics(t, theta)
+        return _at_rest_statistics(t, theta, lazy)
     starts = np.linspace(0, n - size, chunks).astype(int)
     dth = np.concatenate([np.diff(theta[s:s + size]) for s in starts])
     dt = np.concatenate([np.diff(t[s:s + size]) for s in starts])
-    return _at_rest_statistics(np.concatenate(([0.0], np.cumsum(dt))), np.concatenate(([0.0], np.cumsum(dth))))
+    return _at_rest_statistics(np.concatenate(([0.0], np.cumsum(dt))), np.concatenate(([0.0], np.cumsum(dth))), lazy)
 
 
 def _looks_at_rest(st: dict) -> bool:
-    """The recognition rule (see the constants above)."""
+    """The recognition rule (see the constants above), read in this order (see ``lazy`` in
+    :func:`_at_rest_statistics`)."""
     return (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS
             and st["speed_spread"] >= QS_MIN_SPEED_SPREAD
             and st["speed_spread"] >= QS_SPREAD_RATIO * st["step_spread"])
@@ -117,7 +128,7 @@ def quasi_static_sweeps(rec: Recording, *, force: bool = False) -> list[dict]:
         a, b = int(a), int(b)
         if b - a < 2:
             continue
-        if not force and not _looks_at_rest(_run_statistics(t[a:b], theta[a:b])):
+        if not force and not _looks_at_rest(_run_statistics(t[a:b], theta[a:b], lazy=True)):
             continue
         d = np.abs(np.diff(theta[a:b]))
         nz = d[d > 0]
