@@ -272,9 +272,23 @@ def harmonic_columns(theta, frequencies, center=None) -> tuple[np.ndarray, np.nd
     m = th.mean() if center is None else np.asarray(center, dtype=float)[:, None]
     ph = _TWO_PI * (np.outer(th - m, freqs) if center is None else (th[:, None] - m) * freqs)
     sn, cs = np.sin(ph), np.cos(ph)
-    rot = _TWO_PI * freqs * m
-    c, s = np.cos(rot), np.sin(rot)
+    if center is None:
+        rot = _TWO_PI * freqs * m
+        c, s = np.cos(rot), np.sin(rot)
+    else:   # the rotation once per run of equal centres (a group's), repeated: the same values
+        first, runs = _runs(m[:, 0])
+        rot = _TWO_PI * freqs * m[first]
+        c, s = np.repeat(np.cos(rot), runs, axis=0), np.repeat(np.sin(rot), runs, axis=0)
     return sn * c + cs * s, cs * c - sn * s
+
+
+def _runs(a) -> tuple[np.ndarray, np.ndarray]:
+    """First index and length of every run of equal consecutive values of ``a`` (1-D)."""
+    new = np.empty(len(a), bool)
+    new[:1] = True
+    np.not_equal(a[1:], a[:-1], out=new[1:])
+    first = np.flatnonzero(new)
+    return first, np.diff(np.append(first, len(a)))
 
 
 def partial_out_last(G, g, yy):

@@ -208,7 +208,8 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, nyquist_frac
         sampled = freqs < nyquist_fraction * group_position_nyquist(th, starts, stops)[:, None]
         center = np.repeat(np.add.reduceat(th, starts) / n, n)
         X[:, 1:1 + 2 * K:2], X[:, 2:2 + 2 * K:2] = harmonic_columns(th, freqs, center)  # phases about each mean
-        X[:, 1:1 + 2 * K] *= np.repeat(np.repeat(sampled, 2, axis=1), n, axis=0)
+        if not sampled.all():   # (times 1 changes nothing: skipped when every line is sampled)
+            X[:, 1:1 + 2 * K] *= np.repeat(np.repeat(sampled, 2, axis=1), n, axis=0)
     if acc:
         X[:, 1 + 2 * K] = data.direction[ii] * data.acc[ii]
     if T:
