@@ -98,3 +98,23 @@ def test_folds_are_dealt_once_per_data(small):
     assert validate._folds(data, "segment", 5) is validate._folds(data, "segment", 5)
     sub = data.subset(data.segment % 2 == 0)                  # a subset deals its own
     assert np.array_equal(validate._folds(sub, "segment", 3), row_folds(sub.segment, sub.direction, sub.v, 3))
+
+
+def test_a_line_above_a_segments_position_nyquist_has_no_columns_there():
+    """Segment statistics with every line sampled skip the mask (times 1); where a line lies above
+    the measurable fraction of a segment's position Nyquist frequency its columns are zero there."""
+    from gearspec.identify.stats import segment_stats
+
+    fs, n = 500.0, 2000
+    v = np.r_[np.full(n, 0.4), np.full(n, 5.0)]                 # position Nyquist 625 and 50 cycles/rad
+    theta = np.r_[np.arange(n) * 0.4 / fs, 10 + np.arange(n) * 5.0 / fs]
+    f = 45.0                                                    # above 0.8 x 50, below 0.8 x 625
+    y = 0.01 + 1e-3 * np.sin(2 * np.pi * f * theta)
+    data = FitData(theta=theta, v=v, y=y, segment=np.repeat([0, 1], n))
+    st = segment_stats(data, [f])
+    assert st.sampled.tolist() == [[True], [False]]
+    assert np.all(st.G[1, 1:, :] == 0) and np.all(st.G[1, :, 1:] == 0) and st.G[1, 0, 0] == n
+    assert np.all(np.abs(np.diag(st.G[0])[1:] - n / 2) < 0.01 * n)    # sin^2, cos^2 over whole cycles
+    np.testing.assert_allclose(np.hypot(*st.beta_hat[0, 1:]), 1e-3, rtol=1e-9)
+    both = segment_stats(FitData(theta=theta[:n], v=v[:n], y=y[:n]), [f])    # every line sampled: no mask
+    assert np.array_equal(both.G[0], st.G[0]) and np.array_equal(both.g[0], st.g[0])
