@@ -155,8 +155,10 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
 
 #: the segments' statistics are computed a bounded number of rows at a time (their columns, sines
 #: and cosines: about 0.1 GB per 2^20 rows), whole segments each; a segment's numbers do not
-#: depend on the segments computed with it
-CHUNK_ROWS = 2 ** 20
+#: depend on the segments computed with it.  2^17 rows keeps each temporary under glibc's 32 MB
+#: mmap ceiling, so the allocator reuses its heap instead of mapping and zero-filling fresh pages
+#: for every chunk (10^7 rows: about 1 s less system time per pass over the samples)
+CHUNK_ROWS = 2 ** 17
 
 
 def _chunks(sizes) -> list[list[int]]:
