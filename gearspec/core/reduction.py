@@ -7,13 +7,14 @@ does not grow with the samples, with the lines' columns phased about the group's
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
 
 __all__ = ["GroupNormals", "harmonic_columns", "normal_equations", "group_normal_equations", "group_cross",
-           "partial_out_last", "unique_ids", "group_rows", "gram"]
+           "partial_out_last", "unique_ids", "group_rows", "gram", "one_blas_thread", "on_one_blas_thread"]
 
 _TWO_PI = 2.0 * np.pi
 
@@ -82,7 +83,8 @@ def gram(X) -> np.ndarray:
     25000 x 21 rows x columns 0.77 s against 1.1 ms; 10^6 x 21: 3.2 s against 66 ms).  The
     threads split the p x p result, not the sums over the rows, so every entry is the same to the
     last bit (checked at 5000-10^6 rows, 3-41 columns).  Products with a vector (``X^T y``,
-    ``y^T y``) keep the threads: theirs do split the sums, and the last bits would change."""
+    ``y^T y``) keep the threads here: theirs do split the sums, and the last bits would change
+    (callers whose products are all of few columns run on one thread: :func:`on_one_blas_thread`)."""
     X = np.asarray(X, dtype=float)
     with one_blas_thread():
         return X.T @ X
@@ -97,6 +99,19 @@ def one_blas_thread():
 
         _CONTROLLER = ThreadpoolController()
     return _CONTROLLER.limit(limits=1, user_api="blas")
+
+
+def on_one_blas_thread(fn):
+    """``fn`` run inside :func:`one_blas_thread` (a decorator): for work whose products are all of
+    few columns (a fit's least squares on per-segment statistics, ``X^T y`` over a group's rows),
+    where OpenBLAS's threads only contend for the cores."""
+
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        with one_blas_thread():
+            return fn(*args, **kwargs)
+
+    return run
 
 
 def normal_equations(X, y) -> tuple[np.ndarray, np.ndarray, float]:
@@ -257,9 +272,23 @@ def harmonic_columns(theta, frequencies, center=None) -> tuple[np.ndarray, np.nd
     m = th.mean() if center is None else np.asarray(center, dtype=float)[:, None]
     ph = _TWO_PI * (np.outer(th - m, freqs) if center is None else (th[:, None] - m) * freqs)
     sn, cs = np.sin(ph), np.cos(ph)
-    rot = _TWO_PI * freqs * m
-    c, s = np.cos(rot), np.sin(rot)
+    if center is None:
+        rot = _TWO_PI * freqs * m
+        c, s = np.cos(rot), np.sin(rot)
+    else:   # the rotation once per run of equal centres (a group's), repeated: the same values
+        first, runs = _runs(m[:, 0])
+        rot = _TWO_PI * freqs * m[first]
+        c, s = np.repeat(np.cos(rot), runs, axis=0), np.repeat(np.sin(rot), runs, axis=0)
     return sn * c + cs * s, cs * c - sn * s
+
+
+def _runs(a) -> tuple[np.ndarray, np.ndarray]:
+    """First index and length of every run of equal consecutive values of ``a`` (1-D)."""
+    new = np.empty(len(a), bool)
+    new[:1] = True
+    np.not_equal(a[1:], a[:-1], out=new[1:])
+    first = np.flatnonzero(new)
+    return first, np.diff(np.append(first, len(a)))
 
 
 def partial_out_last(G, g, yy):

@@ -30,6 +30,7 @@ from typing import Mapping
 import numpy as np
 from scipy import optimize
 
+from ..core.reduction import on_one_blas_thread
 from ..errors import GearspecWarning, InputError
 from ..fitdata import FitData
 from ..model import LAWS, Direction, FrictionModel, Harmonic
@@ -457,9 +458,10 @@ class JointFit:
                    bootstrap=s.get("bootstrap", 200), min_cycles=s.get("min_cycles", 1.0), name=model.name,
                    inertia=s.get("inertia", "auto"))
 
+    @on_one_blas_thread
     def fit(self, data: FitData) -> "JointFit":
         """Fit the law to ``data`` (samples in constant-speed segments, ``velocity="segment"``, or
-        quasi-static points), each direction on its own; returns the estimator, fitted."""
+        quasi-static points), each direction on its own (BLAS on one thread); returns the estimator."""
         law = self.law
         if law not in LAWS:
             raise InputError(f"unknown friction law '{law}' (known: {', '.join(LAWS)})")
@@ -509,7 +511,6 @@ class JointFit:
                 lambda tr: _fold_fit(model, tr), data, by=self.holdout, folds=self.folds)
         self.harmonics_, self.model_ = specs, model
         return self
-
 
     def _identifies_inertia(self, data: FitData) -> bool:
         """Whether the inertia is identified with the friction: ``inertia="auto"`` when the data

@@ -155,8 +155,10 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
 
 #: the segments' statistics are computed a bounded number of rows at a time (their columns, sines
 #: and cosines: about 0.1 GB per 2^20 rows), whole segments each; a segment's numbers do not
-#: depend on the segments computed with it
-CHUNK_ROWS = 2 ** 20
+#: depend on the segments computed with it.  2^17 rows keeps each temporary under glibc's 32 MB
+#: mmap ceiling, so the allocator reuses its heap instead of mapping and zero-filling fresh pages
+#: for every chunk (10^7 rows: about 1 s less system time per pass over the samples)
+CHUNK_ROWS = 2 ** 17
 
 
 def _chunks(sizes) -> list[list[int]]:
@@ -208,7 +210,8 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, nyquist_frac
         sampled = freqs < nyquist_fraction * group_position_nyquist(th, starts, stops)[:, None]
         center = np.repeat(np.add.reduceat(th, starts) / n, n)
         X[:, 1:1 + 2 * K:2], X[:, 2:2 + 2 * K:2] = harmonic_columns(th, freqs, center)  # phases about each mean
-        X[:, 1:1 + 2 * K] *= np.repeat(np.repeat(sampled, 2, axis=1), n, axis=0)
+        if not sampled.all():   # (times 1 changes nothing: skipped when every line is sampled)
+            X[:, 1:1 + 2 * K] *= np.repeat(np.repeat(sampled, 2, axis=1), n, axis=0)
     if acc:
         X[:, 1 + 2 * K] = data.direction[ii] * data.acc[ii]
     if T:

@@ -19,8 +19,12 @@ __all__ = ["holdout", "holdout_rmse", "segment_errors", "segment_row", "inverted
 
 
 def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
-    """Fold of every sample: its segment's (or run's) fold by THE rule of :mod:`gearspec.core.crossval`."""
-    return row_folds(data.groups(by), data.direction, data.v, folds)
+    """Fold of every sample: its segment's (or run's) fold by THE rule of :mod:`gearspec.core.crossval`;
+    computed once per data (every model's held-out error on them deals the same folds)."""
+    cache = data.__dict__.setdefault("_row_folds", {})
+    if (by, int(folds)) not in cache:
+        cache[by, int(folds)] = row_folds(data.groups(by), data.direction, data.v, folds)
+    return cache[by, int(folds)]
 
 
 def holdout_rmse(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: str = "segment",
