@@ -45,3 +45,22 @@ def test_nifty_periodogram_without_astropy_same_power():
     assert out[1] == ref                  # the same power (its sum to the last bit, and its peak)
     assert int(ref.split()[1]) == round((1.7 - 0.05) / 0.0125)  # at the line's frequency
     assert out[2] == "True"               # astropy's method imports and agrees afterwards
+
+
+def test_peak_to_dict_is_asdict():
+    """A peak's dict is :func:`dataclasses.asdict`'s, key for key and type for type, with its
+    ``aliased_from`` a copy (the table a report builds must not alias the result's peaks)."""
+    from dataclasses import asdict
+
+    from gearspec.spectrum.results import Peak
+
+    src = {"label": "motor shaft", "frequency": 0.159, "order": 1.0}
+    p = Peak(frequency=np.float64(2.5), amplitude=1e-4, amplitude_se=2e-6, phase=0.3, phase_se=0.01, fap=1e-9,
+             order=None, label="alias of motor shaft", declared=False, snr=np.float32(40.0), aliased_from=src,
+             quantisation_harmonic=2)
+    d, ref = p.to_dict(), asdict(p)
+    assert d == ref and list(d) == list(ref)
+    assert [type(v) for v in d.values()] == [type(v) for v in ref.values()]
+    assert d["aliased_from"] == src and d["aliased_from"] is not src
+    d["aliased_from"]["frequency"] = 0.0
+    assert p.aliased_from["frequency"] == 0.159
