@@ -30,27 +30,29 @@ METHODS = ("auto", "nifty", "astropy", "scipy")
 #: LombScargle (which gearspec never asks for): 0.45 s of CPU and 35 MB, most of nifty-ls's import
 _NIFTY_ASTROPY_HOOK = "astropy.timeseries.periodograms.lombscargle.implementations.main"
 _NIFTY_LOCK = threading.Lock()
+_NIFTY = None  # the module, once imported
 
 
 def _nifty_ls():
     """The ``nifty_ls`` module, imported without its astropy hook: while it is imported, the hook's
     module is marked missing (``sys.modules[name] = None``: the ``ImportError`` nifty-ls expects
     without astropy), then unmarked, so that astropy imports as usual afterwards (``method="astropy"``).
-    The same functions; only the registration of nifty's methods inside astropy is left out."""
-    mod = sys.modules.get("nifty_ls")
-    if mod is not None:
-        return mod
-    with _NIFTY_LOCK:  # segments run in threads: one import, one mark at a time
-        if "nifty_ls" not in sys.modules:
-            marked = _NIFTY_ASTROPY_HOOK not in sys.modules
-            if marked:
-                sys.modules[_NIFTY_ASTROPY_HOOK] = None
-            try:
-                import nifty_ls  # noqa: F401
-            finally:
-                if marked and sys.modules.get(_NIFTY_ASTROPY_HOOK, 0) is None:
-                    del sys.modules[_NIFTY_ASTROPY_HOOK]
-        return sys.modules["nifty_ls"]
+    The same functions; only the registration of nifty's methods inside astropy is left out.  Handed
+    out once imported completely (segments run in threads: never a module half initialised)."""
+    global _NIFTY
+    if _NIFTY is None:
+        with _NIFTY_LOCK:
+            if _NIFTY is None:
+                marked = _NIFTY_ASTROPY_HOOK not in sys.modules
+                if marked:
+                    sys.modules[_NIFTY_ASTROPY_HOOK] = None
+                try:
+                    import nifty_ls
+                finally:
+                    if marked and sys.modules.get(_NIFTY_ASTROPY_HOOK, 0) is None:
+                        del sys.modules[_NIFTY_ASTROPY_HOOK]
+                _NIFTY = nifty_ls
+    return _NIFTY
 
 
 class LombScargle:
