@@ -1,5 +1,6 @@
 """What ``gearspec spectrum`` no longer pays for, with the same numbers: nifty-ls imported without
-its astropy hook, the peaks table built once per report, the loader's integer run ids kept as integers."""
+its astropy hook (also from threads at once), a peak's dict without a deep copy of every number.
+(The loader's integer run ids: tests/test_spectrum_scale.py.)"""
 
 from __future__ import annotations
 
