@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+import copy
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,18 @@ class Peak:
     quantisation_harmonic: int | None = None
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """:func:`dataclasses.asdict` of the peak, the same dict (``aliased_from`` a copy), without a
+        deep copy of every number: a report builds the table of thousands of peaks more than once."""
+        d = {name: getattr(self, name) for name in _PEAK_FIELDS}
+        for k, v in d.items():
+            if not isinstance(v, _ATOMS):
+                d[k] = copy.deepcopy(v)
+        return d
+
+
+_PEAK_FIELDS = tuple(f.name for f in fields(Peak))
+#: values :func:`copy.deepcopy` returns unchanged (or as an equal scalar): no copy needed
+_ATOMS = (int, float, str, bool, type(None), np.generic)
 
 
 @dataclass
