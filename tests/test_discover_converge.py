@@ -119,3 +119,22 @@ def test_the_selection_stops_at_a_fixed_point():
     assert _select({s: pool.cands[s] for s in pool.full}, pool.M, pool.groups, pool.se_rule) == sel
     simple = {_signature(p) for p in _neighbours(_inherit(pool.cands[sel].fit), pool.M, pool.addable, adds=False)}
     assert simple and simple <= pool.full
+
+
+def test_a_law_keeps_its_held_out_error_once_computed(small):
+    # the pool holds one fit per law; a law refitted on the folds keeps that fit and its error even
+    # when a later start of the same law fits the data better (here: its fit made to look worse) --
+    # an error that changed between rounds of the selection could make it cycle
+    from gearspec.discover.pool import _Pool
+
+    M, fold = small
+    pool = _Pool(M, fold, "segment", 12, 4.0)
+    parts = _truth_law()
+    sig = pool.consider(parts, "test", None)
+    pool.screen()
+    pool.refit_holdout([sig])
+    before = pool.cands[sig].rmse_holdout
+    pool.fits[sig][0].sse = pool.fits[sig][0].sse * 10          # any new fit now looks better in-sample
+    again = canonical([Part(p.family, p.freq, p.split, None if p.param0 is None else 2 * p.param0) for p in parts])
+    assert pool.consider(again, "test", None) == sig
+    assert sig in pool.full and pool.cands[sig].rmse_holdout == before
