@@ -193,13 +193,19 @@ class _Pool:
         (fitted, screened and refitted on the folds when it is new; the pool's own numbers when
         it has them): what the acceptance test judges by, so that one law has one held-out error.
         None for a law the pool does not hold (none, or more than ``max_parts`` terms)."""
-        sig = _signature(canonical(parts))
+        parts = canonical(parts)
+        sig = _signature(parts)
         if sig not in self.full:
-            self.consider(parts, origin, None)
-            if sig not in self.fits:
+            if not parts or len(parts) > self.max_parts:
                 return None
-            self.screen()
-            self.refit_holdout([sig])
+            # what refit_holdout does, without the screen's few steps first: the all-data fit from
+            # the parts' start values (scanned), the folds from its optimum
+            fit = fit_law(self.M, parts)
+            cv, pred = cross_validate(self.M, parts, self.fold, z0=fit.z)
+            self.tried.add(parts)
+            self.fits[sig] = (fit, origin, None)
+            self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / self.M.N), origin, None, pred)
+            self.full.add(sig)
         c = self.cands[sig]
         return c.cv_sse, c.cv_pred
 
