@@ -85,6 +85,11 @@ def test_the_acceptance_test_judges_by_the_searchs_held_out_errors(searched):
     # it judged every term of the selected law in its last round (all pass: the truth's structure)
     last = res.acceptance[-len(res.best.parts):]
     assert len(last) == len(res.best.parts) and all(v["passed"] for v in last)
+    # the report says how the search's selection ended
+    from gearspec.report.discover import _rounds
+
+    n = res.settings["selection_rounds"]
+    assert res.settings["selection_settled"] and f"settled after {n} round(s)" in _rounds(res)
 
 
 def test_every_candidates_held_out_error_is_what_a_fresh_computation_gives(searched):
