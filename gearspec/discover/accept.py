@@ -28,6 +28,7 @@ from ..core.crossval import critical_z, z_statistic
 from ..core.reduction import GroupNormals
 from .law import Part, canonical, cross_validate, fit_law
 from .moments import Moments
+from .pool import _signature
 
 __all__ = ["CONSISTENCY", "TERM", "Verdict", "held_out_z", "simpler", "judge", "backward", "validate_law"]
 
@@ -105,11 +106,14 @@ def held_out_z(M: Moments, p0: np.ndarray, p1: np.ndarray, groups: np.ndarray) -
     return z_statistic(r0, delta, (q - fit1)[order].ravel(), starts, stops, blocks=B)
 
 
-def _cv(M: Moments, parts, fold):
-    """Held-out sse per segment and held-out predictions (S, K) of a law (the empty law: zeros)."""
+def _cv(M: Moments, parts, fold, holdout=None):
+    """Held-out sse per segment and held-out predictions (S, K) of a law (the empty law: zeros):
+    ``holdout(parts)``'s (the search pool's, :meth:`.pool._Pool.holdout`) where it gives them,
+    else :func:`~.law.cross_validate`'s (its folds converged from the all-data optimum)."""
     if not parts:
         return M.yy.copy(), np.zeros((M.S, M.K))
-    return cross_validate(M, canonical(parts), fold)
+    got = holdout(parts) if holdout is not None else None
+    return got if got is not None else cross_validate(M, canonical(parts), fold)
 
 
 def simpler(p: Part, families=()) -> tuple[Part | None, str]:
@@ -122,14 +126,15 @@ def simpler(p: Part, families=()) -> tuple[Part | None, str]:
 
 
 def judge(M: Moments, fold, groups, with_parts, without_parts, *, z_crit: float, min_gain: float, term: str,
-          move: str, cache: dict | None = None) -> Verdict:
-    """The held-out test of the module docstring for one term."""
+          move: str, cache: dict | None = None, holdout=None) -> Verdict:
+    """The held-out test of the module docstring for one term (``cache``: held-out results by the
+    laws' signatures; ``holdout``: see :func:`_cv`)."""
     cache = {} if cache is None else cache
     res = []
     for parts in (without_parts, with_parts):
-        key = canonical(parts)
+        key = _signature(parts)
         if key not in cache:
-            cache[key] = _cv(M, parts, fold)
+            cache[key] = _cv(M, parts, fold, holdout)
         res.append(cache[key])
     (sse0, p0), (sse1, p1) = res
     z = held_out_z(M, p0, p1, groups)
@@ -154,11 +159,12 @@ def _alternatives(parts, families):
 
 
 def backward(M: Moments, fold, groups, parts, *, alpha: float, min_gain: float, n_candidates: int,
-             families=(), label=None, progress=None) -> tuple[tuple, list[Verdict]]:
+             families=(), label=None, progress=None, holdout=None) -> tuple[tuple, list[Verdict]]:
     """Backward elimination of the module docstring: the law with every term passing, and the
     verdicts of the last round (every term) plus those of the simplifications made.  ``progress``:
     called with one line of text after every round (each refits every term's alternative on the
-    held-out folds: on a long recording a round takes seconds)."""
+    held-out folds: on a long recording a round takes seconds).  ``holdout``: where a law's held-out
+    error comes from (:func:`_cv`; the search's pool: the laws it scored keep their error)."""
     parts = canonical(_start_values(M, parts))
     z_crit = critical_z(alpha, n_candidates, len(np.unique(groups)))
     label = label or (lambda p: p.label(M.frequencies))
@@ -166,7 +172,8 @@ def backward(M: Moments, fold, groups, parts, *, alpha: float, min_gain: float, 
     made = []
     while True:
         verdicts = [(judge(M, fold, groups, parts, alt, z_crit=z_crit, min_gain=min_gain, term=label(parts[i]),
-                           move=move, cache=cache), alt) for i, alt, move in _alternatives(parts, families)]
+                           move=move, cache=cache, holdout=holdout), alt)
+                    for i, alt, move in _alternatives(parts, families)]
         failing = [(v, alt) for v, alt in verdicts if not v.passed and alt]
         if not failing:
             if progress is not None:

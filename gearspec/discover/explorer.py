@@ -206,6 +206,7 @@ def _search(run: "_Run", say) -> tuple:
     if run.local_search:
         climb(pool)
     sel = finalize(pool, run.local_search)
+    run.settings["selection_rounds"], run.settings["selection_settled"] = pool.rounds, pool.settled
     run.timings["selection"] = time.perf_counter() - t0
     say(f"search: {len(pool.cands) + len(pool1.cands)} laws screened")
     run.settings["n_screened"] = len(pool.cands) + len(pool1.cands)
@@ -400,7 +401,8 @@ def _accept(run: _Run, pool: _Pool, sel, validation, inertia, say=None):
     splittable = sum(1 for p in cand.parts if not p.split and p.fam.basis != "acc") if len(M.directions) == 2 else 0
     n_cand = max(len(_addable(run.lib)) + splittable, 1)
     final, verdicts = backward(M, run.fold, M.groups(run.by), cand.parts, alpha=run.test_alpha,
-                               min_gain=run.min_gain, n_candidates=n_cand, families=fams, progress=say)
+                               min_gain=run.min_gain, n_candidates=n_cand, families=fams, progress=say,
+                               holdout=pool.holdout)
     if validation is not None:
         Mv = _validation_moments(validation, M, inertia)
         final, more = validate_law(M, Mv, final, alpha=run.test_alpha, min_gain=run.min_gain, families=fams)

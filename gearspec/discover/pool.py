@@ -139,6 +139,7 @@ class _Pool:
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
         self.refine_top = 4
+        self.rounds, self.settled = 0, False   # of the selection (:func:`finalize`)
         self.say = lambda text: None   # progress: called with one line of text as a step of the search ends
 
     def consider(self, parts, origin, thr, refine: bool = True):
@@ -146,8 +147,12 @@ class _Pool:
         if not parts or parts in self.tried or len(parts) > self.max_parts:
             return None
         self.tried.add(parts)
-        fit = fit_law(self.M, parts, max_nfev=self.screen_nfev, refine=refine)
         sig = _signature(parts)
+        if sig in self.full:
+            # a law with a held-out error keeps it (its all-data fit converged from the best start
+            # the screen had): an error that changed between rounds could make the selection cycle
+            return sig
+        fit = fit_law(self.M, parts, max_nfev=self.screen_nfev, refine=refine)
         old = self.fits.get(sig)
         if old is None or np.sum(fit.sse) < np.sum(old[0].sse) * (1 - 1e-9):
             self.fits[sig] = (fit, origin if old is None else old[1], thr if old is None else old[2])
@@ -182,6 +187,27 @@ class _Pool:
                 c.rmse_holdout = math.sqrt(float(np.sum(c.cv_sse)) / self.M.N)
             self.full.add(sig)
             self.tick(k, len(todo), what)
+
+    def holdout(self, parts, origin: str = "the acceptance test") -> tuple | None:
+        """The held-out sse per segment and predictions of the law ``parts`` as the pool scores it
+        (fitted, screened and refitted on the folds when it is new; the pool's own numbers when
+        it has them): what the acceptance test judges by, so that one law has one held-out error.
+        None for a law the pool does not hold (none, or more than ``max_parts`` terms)."""
+        parts = canonical(parts)
+        sig = _signature(parts)
+        if sig not in self.full:
+            if not parts or len(parts) > self.max_parts:
+                return None
+            # what refit_holdout does, without the screen's few steps first: the all-data fit from
+            # the parts' start values (scanned), the folds from its optimum
+            fit = fit_law(self.M, parts)
+            cv, pred = cross_validate(self.M, parts, self.fold, z0=fit.z)
+            self.tried.add(parts)
+            self.fits[sig] = (fit, origin, None)
+            self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / self.M.N), origin, None, pred)
+            self.full.add(sig)
+        c = self.cands[sig]
+        return c.cv_sse, c.cv_pred
 
     def tick(self, k: int, n: int, what: str) -> None:
         """Progress within a long step: a line after every :data:`TICK` of its ``n`` laws but the last."""
@@ -236,12 +262,24 @@ def _climb_step(pool: _Pool, cur, compound: bool):
     return pool.best()
 
 
+#: rounds of :func:`finalize` after which it stops unsettled (a guard: every round that does not
+#: settle adds laws to the refitted set, whose errors never change, so the rounds end by themselves)
+MAX_ROUNDS = 25
+
+
 def finalize(pool: _Pool, local_search: bool = True):
     """Full held-out refits of the screened Pareto front and of every law within reach of the
     best; the selection rule on those; the selected law's simplifications checked too, until the
-    selection stands (four rounds at most).  Returns the selected signature."""
+    selection stands: a fixed point, where the selected law's simplifications are all refitted and
+    the rule selects it again.  It cannot cycle: a law's held-out error, once computed, does not
+    change (:meth:`_Pool.consider`), the rule is a function of the refitted set, and a round that
+    does not settle has added to that set.  Returns the selected signature; ``pool.rounds``: the
+    rounds it took, ``pool.settled``: whether it reached the fixed point within :data:`MAX_ROUNDS`."""
     pool.screen()
-    for rnd in range(4):
+    pool.rounds, pool.settled = 0, False
+    nsel = None
+    for rnd in range(MAX_ROUNDS):
+        pool.rounds = rnd + 1
         reach = _reachable(pool)
         n_new = len(reach - pool.full)
         pool.refit_holdout(reach, f"selection round {rnd + 1}: laws on or near the front refitted on held-out folds")
@@ -249,6 +287,7 @@ def finalize(pool: _Pool, local_search: bool = True):
         pool.say(f"selection round {rnd + 1}: {n_new} laws on or near the front refitted on held-out folds, "
                  f"selected complexity {pool.cands[sel].complexity}")
         if not local_search:
+            pool.settled = True
             return sel
         simple = _simplifications(pool, sel, f"selection round {rnd + 1}: simplifications of the selected law fitted")
         n_new = len(simple - pool.full)
@@ -258,7 +297,9 @@ def finalize(pool: _Pool, local_search: bool = True):
         pool.say(f"selection round {rnd + 1}: {n_new} simplifications refitted on held-out folds, "
                  + ("the selection stands" if nsel == sel else f"selected complexity {pool.cands[nsel].complexity}"))
         if nsel == sel:
+            pool.settled = True
             return sel
+    pool.say(f"selection: not settled after {MAX_ROUNDS} rounds")
     return nsel
 
 

@@ -52,7 +52,7 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            f"best one's by at most {result.settings['se_rule']:g} standard errors of the noise in that difference; "
            f"every term of it must then pass the closed loop's held-out test (Z against the law without it, "
            f"level {result.settings.get('test_alpha', 0.01):g} over {result.settings.get('acceptance_candidates', 1)} "
-           f"candidates, Bonferroni; rmse gain at least the minimum) or it is simplified away.", ""]
+           f"candidates, Bonferroni; rmse gain at least the minimum) or it is simplified away." + _rounds(result), ""]
     md += _acceptance_section(result)
     coef = _coefficients(sel, M.frequencies)
     md += [markdown_table(coef), "", f"Standard errors: {sel.fit.se_method or 'n/a'}.", ""]
@@ -113,6 +113,17 @@ def write_discover_report(result, rec, out, command: str = "") -> Path:
            "independent recording.", ""]
     md += bullets(result.notes, "Notes:")
     return write_report(out, md + ["Timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items()), ""])
+
+
+def _rounds(result) -> str:
+    """How the search's selection ended (rounds of refitting the selected law's simplifications)."""
+    n = result.settings.get("selection_rounds")
+    if not n:
+        return ""
+    if result.settings.get("selection_settled"):
+        return (f" The search's selection settled after {n} round(s): every simplification of the law it proposes "
+                "was refitted on the held-out folds and the rule selects that law again.")
+    return f" The search's selection did not settle within {n} rounds; the last law it selected was proposed."
 
 
 def _acceptance_section(result) -> list:
