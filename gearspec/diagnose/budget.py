@@ -7,12 +7,15 @@ from __future__ import annotations
 
 from collections import OrderedDict
 
-__all__ = ["CACHE_BYTES", "TRIG_BYTES", "bounded", "nbytes"]
+__all__ = ["CACHE_BYTES", "TRIG_BYTES", "DESIGN_BYTES", "bounded", "nbytes"]
 
 #: columns of blocks kept on the data (:meth:`~.design.Block.columns`)
 CACHE_BYTES = 256 * 2 ** 20
 #: sines and cosines of the lines kept on the data (:meth:`~.design.HarmonicBlock._trig`)
 TRIG_BYTES = 64 * 2 ** 20
+#: a round's design larger than this is let go while a candidate's extended round holds its own
+#: (:meth:`~.context.Round.release_design`)
+DESIGN_BYTES = 256 * 2 ** 20
 
 
 def nbytes(value) -> int:
