@@ -84,3 +84,9 @@ def test_column_cache_is_bounded_in_bytes_not_blocks(monkeypatch):
     assert sum(v[1].nbytes for v in cache.values()) <= 6 * 8 * len(dd) and len(cache) == 1
     last = blocks[-1].columns(dd)
     assert blocks[-1].columns(dd) is last                             # served from the cache
+    # within a large budget, a short recording's cache holds at most _CACHE_COLUMNS columns' worth
+    monkeypatch.setattr(budget, "CACHE_BYTES", 2 ** 40)
+    monkeypatch.setattr(design, "_CACHE_COLUMNS", 9)
+    for b in blocks:
+        b.columns(dd)
+    assert sum(v[1].shape[1] for v in cache.values()) == 8 and len(cache) == 2

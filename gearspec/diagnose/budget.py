@@ -9,7 +9,8 @@ from collections import OrderedDict
 
 __all__ = ["CACHE_BYTES", "TRIG_BYTES", "DESIGN_BYTES", "bounded", "nbytes"]
 
-#: columns of blocks kept on the data (:meth:`~.design.Block.columns`)
+#: columns of blocks kept on the data (:meth:`~.design.Block.columns`; on short recordings at most
+#: 64 columns' worth, as before: no more memory than that where the budget would allow it)
 CACHE_BYTES = 256 * 2 ** 20
 #: sines and cosines of the lines kept on the data (:meth:`~.design.HarmonicBlock._trig`)
 TRIG_BYTES = 64 * 2 ** 20

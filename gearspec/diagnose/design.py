@@ -43,6 +43,8 @@ LINEAR = LAW_LINEAR
 # ---------------------------------------------------------------------- blocks
 _UID = itertools.count(1)
 _CACHE_SIZE = 96
+#: ... and at most this many columns' worth of observations, within :data:`~.budget.CACHE_BYTES`
+_CACHE_COLUMNS = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,7 +80,7 @@ class Block:
             cols = raw if dd.reduce is None else (np.column_stack([dd.R(raw[:, j]) for j in range(raw.shape[1])])
                                                   if raw.shape[1] else np.zeros((len(dd), 0)))
         cache[ck] = (self, cols)
-        budget.bounded(cache, budget.CACHE_BYTES, count=_CACHE_SIZE)
+        budget.bounded(cache, min(budget.CACHE_BYTES, 8 * _CACHE_COLUMNS * len(dd)), count=_CACHE_SIZE)
         return cols
 
     def _cache_key(self, taylor: bool) -> tuple:
