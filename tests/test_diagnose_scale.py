@@ -1,6 +1,6 @@
 """What keeps the closed loop's cost linear in the rows and its memory bounded (issue 13, "Scale"):
 the per-group normal equations by BLAS on plateau-sized groups, speed laws evaluated once per
-distinct speed, and a column cache bounded in columns, not blocks.  Known answers: the same numbers
+distinct speed, and a column cache bounded in bytes, not blocks.  Known answers: the same numbers
 as the direct computation (to round-off: 1e-12 relative), counts of evaluations.  The timings of
 the default twin are a benchmark (README proposal), not a test.
 """
@@ -12,7 +12,7 @@ import pytest
 
 import gearspec.diagnose as dg
 from gearspec.core.reduction import GroupNormals
-from gearspec.diagnose import context, design
+from gearspec.diagnose import budget, context, design
 from gearspec.diagnose.data import per_speed
 from gearspec.model import FrictionModel
 from gearspec.simulate import model_recording
@@ -69,18 +69,24 @@ def test_speed_laws_are_evaluated_once_per_distinct_speed():
     assert np.array_equal(per_speed(free, law), law(free.fit.v)) and seen[-1] == n
 
 
-def test_column_cache_is_bounded_in_columns_not_blocks(monkeypatch):
-    """The cache of design columns holds at most ``_CACHE_COLUMNS`` columns of the observations
-    whatever the number of blocks (a long recording: each column is rows x 8 bytes), and still
-    serves repeated requests from memory."""
-    monkeypatch.setattr(design, "_CACHE_COLUMNS", 6)
+def test_column_cache_is_bounded_in_bytes_not_blocks(monkeypatch):
+    """The cache of design columns holds at most ``budget.CACHE_BYTES`` bytes whatever the number of
+    blocks (a long recording: each column is rows x 8 bytes), and still serves repeated requests
+    from memory."""
     dd = _plateau_data(n_speeds=4)
+    monkeypatch.setattr(budget, "CACHE_BYTES", 6 * 8 * len(dd))          # six columns' worth
     const = ((1, "const"), (-1, "const"))
     blocks = [design.HarmonicBlock(key=f"l{k}", frequency=0.3 + 0.1 * k, dirs=(1, -1), law=const,
                                    decay=((1, 0.0), (-1, 0.0))) for k in range(5)]      # 4 columns each
     for b in blocks:
         b.columns(dd)
     cache = dd.cache["columns"]
-    assert sum(v[1].shape[1] for v in cache.values()) <= 6 and len(cache) == 1
+    assert sum(v[1].nbytes for v in cache.values()) <= 6 * 8 * len(dd) and len(cache) == 1
     last = blocks[-1].columns(dd)
     assert blocks[-1].columns(dd) is last                             # served from the cache
+    # within a large budget, a short recording's cache holds at most _CACHE_COLUMNS columns' worth
+    monkeypatch.setattr(budget, "CACHE_BYTES", 2 ** 40)
+    monkeypatch.setattr(design, "_CACHE_COLUMNS", 9)
+    for b in blocks:
+        b.columns(dd)
+    assert sum(v[1].shape[1] for v in cache.values()) == 8 and len(cache) == 2

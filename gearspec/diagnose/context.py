@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.crossval import held_out
+from . import budget
 from .data import DiagnoseData
 from ..core.reduction import GroupNormals, normal_equations
 from .design import FittedState, HarmonicBlock, State, fit_state, solve_normal
@@ -56,7 +57,6 @@ class Round:
     #: only a candidate's held-out folds read (the extended model of :func:`~.loop._run_folds`)
     standard_errors: bool = field(default=True, repr=False)
     fitted: FittedState = field(init=False, repr=False)
-    X: np.ndarray = field(init=False, repr=False)
     grams: GroupNormals = field(init=False, repr=False)
     ref_diag: np.ndarray = field(init=False, repr=False)
     K: int = field(init=False)
@@ -66,6 +66,8 @@ class Round:
     #: what every candidate of the round reads alike: channels at the observations, the held-out
     #: prediction of the model as it stands, the training residual of a fold (:meth:`train_residual`)
     _memo: dict = field(init=False, repr=False, default_factory=dict)
+    #: ``[X or None, columns of X]`` (:attr:`X`, :meth:`release_design`)
+    _design: list = field(init=False, repr=False, default_factory=lambda: [None, 0])
 
     def __post_init__(self):
         dd = self.dd
@@ -77,10 +79,36 @@ class Round:
         G_all = grams.sum()[0]
         if self.standard_errors:
             fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
-        for name, value in (("state", state), ("fitted", fitted), ("X", X), ("grams", grams),
+        self._design[:] = [X, X.shape[1]]
+        for name, value in (("state", state), ("fitted", fitted), ("grams", grams),
                             ("ref_diag", np.diag(G_all).copy()), ("K", int(self.fold.max()) + 1),
                             ("keys", frozenset(b.key for b in state.blocks))):
             object.__setattr__(self, name, value)
+
+    @property
+    def X(self) -> np.ndarray:
+        """The design with the Taylor columns of every nonlinear parameter (rows x columns), built
+        again (the same array) when :meth:`release_design` let it go."""
+        if self._design[0] is None:
+            self._design[0] = self.state.design(self.dd, taylor=True)
+        return self._design[0]
+
+    @property
+    def width(self) -> int:
+        """Columns of :attr:`X` (without building it)."""
+        return self._design[1]
+
+    def release_design(self) -> bool:
+        """Let :attr:`X` go when it holds more than :data:`~.budget.DESIGN_BYTES` (a long recording:
+        a candidate's extended round then holds its own design, not both at once); it is built
+        again when asked for.  What the held-out tests read from it is kept (:meth:`held_out_residual`).
+        Whether it was let go."""
+        X = self._design[0]
+        if X is None or X.nbytes <= budget.DESIGN_BYTES:
+            return False
+        self.held_out_residual()
+        self._design[0] = None
+        return True
 
     def key(self, train: np.ndarray) -> bytes:
         """A hashable key of a boolean mask over the groups."""
@@ -168,7 +196,7 @@ class Round:
 
     def keep_mask(self, drop) -> np.ndarray:
         """Columns of ``X`` that stay when the blocks ``drop`` (blocks or uids) go."""
-        keep = np.ones(self.X.shape[1], bool)
+        keep = np.ones(self.width, bool)
         uids = {getattr(d, "uid", d) for d in drop}
         for blk, (a, z) in zip(self.state.blocks, self.taylor_spans()):
             if blk.uid in uids:

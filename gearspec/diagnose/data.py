@@ -152,6 +152,9 @@ class DiagnoseData:
         if self.index is None:
             self.index = np.arange(len(f)) if self.reduce is None else np.arange(len(self.R(np.zeros(len(f)))))
         self.index = np.asarray(self.index, dtype=np.int64)
+        # the observations are the samples, in order: :meth:`at` gives views, not copies
+        self._identity = (self.reduce is None and len(self.index) == len(f)
+                          and bool(np.array_equal(self.index, np.arange(len(f)))))
         g = f.groups(self.by)[self.index]
         # group ids 0..G-1 in order of appearance; observations of a group contiguous
         _, first, inv = np.unique(g, return_index=True, return_inverse=True)
@@ -225,9 +228,17 @@ class DiagnoseData:
         return a if self.reduce is None else self.reduce(a)
 
     def at(self, name: str):
-        """A channel of ``fit`` at the observations (None if absent)."""
+        """A channel of ``fit`` at the observations (None if absent); when the observations are the
+        samples themselves, a read-only view of the channel (no copy of rows per call)."""
         a = self.travel if name == "travel" else getattr(self.fit, name)
-        return None if a is None else np.asarray(a)[self.index]
+        if a is None:
+            return None
+        a = np.asarray(a)
+        if not self._identity:
+            return a[self.index]
+        view = a.view()
+        view.flags.writeable = False
+        return view
 
     def __len__(self) -> int:
         return len(self.y)

@@ -25,7 +25,8 @@ from ..model import DIRECTIONS, LAWS, FrictionModel, Harmonic
 from ..terms import LAW_LINEAR, TERM_LINEAR, TERMS, amplitude_law, clamp_speed, evaluate_term
 from .coverage import line_speed_range, resolved
 from .data import DiagnoseData, per_speed, speed_keys
-from .gram import hstack
+from . import budget
+from .gram import hstack, stack
 from .solve import _cov, solve_normal
 
 __all__ = ["Block", "BaseBlock", "HarmonicBlock", "TermBlock", "State", "FittedState", "fit_state",
@@ -42,7 +43,7 @@ LINEAR = LAW_LINEAR
 # ---------------------------------------------------------------------- blocks
 _UID = itertools.count(1)
 _CACHE_SIZE = 96
-#: ... and at most this many columns' worth of observations (memory bounded on long recordings)
+#: ... and at most this many columns' worth of observations, within :data:`~.budget.CACHE_BYTES`
 _CACHE_COLUMNS = 64
 
 
@@ -79,9 +80,7 @@ class Block:
             cols = raw if dd.reduce is None else (np.column_stack([dd.R(raw[:, j]) for j in range(raw.shape[1])])
                                                   if raw.shape[1] else np.zeros((len(dd), 0)))
         cache[ck] = (self, cols)
-        held = sum(v[1].shape[1] for v in cache.values())
-        while len(cache) > 1 and (len(cache) > _CACHE_SIZE or held > _CACHE_COLUMNS):
-            held -= cache.popitem(last=False)[1][1].shape[1]
+        budget.bounded(cache, min(budget.CACHE_BYTES, 8 * _CACHE_COLUMNS * len(dd)), count=_CACHE_SIZE)
         return cols
 
     def _cache_key(self, taylor: bool) -> tuple:
@@ -272,8 +271,7 @@ class HarmonicBlock(Block):
                 if not ok.all():
                     sn, cs = np.where(ok, sn, 0.0), np.where(ok, cs, 0.0)
             hit = trig[self.frequency] = (sn, cs)
-            while len(trig) > 16:
-                trig.popitem(last=False)
+            budget.bounded(trig, budget.TRIG_BYTES, count=16)
         return hit
 
     def _factors(self, dd, rng: dict, keys, only=None):
@@ -487,8 +485,10 @@ class State:
     symmetric: bool = False
 
     def design(self, dd: DiagnoseData, taylor: bool = False) -> np.ndarray:
-        cols = [b.columns(dd, taylor) for b in self.blocks]
-        return hstack(cols) if cols else np.zeros((len(dd), 0))
+        """The blocks' columns side by side (with ``taylor``, each block's Taylor columns after its
+        own), built block by block into the result (:func:`~.gram.stack`)."""
+        spans = self.spans(dd, taylor)
+        return stack((b.columns(dd, taylor) for b in self.blocks), len(dd), spans[-1][1] if spans else 0)
 
     def spans(self, dd: DiagnoseData | None = None, taylor: bool = False) -> list[tuple[int, int]]:
         out, i = [], 0

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "width", "normals", "predict", "hstack"]
+__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "width", "normals", "predict", "hstack", "stack"]
 
 #: rows per chunk: 16384 rows x 40 columns are 5 MB, a few cache-sized BLAS products each
 CHUNK_ROWS = 16384
@@ -87,4 +87,21 @@ def hstack(cols, out: np.ndarray | None = None) -> np.ndarray:
     out = np.empty((n, p)) if out is None else out
     for a in range(0, n, COPY_ROWS):
         np.concatenate([c[a:a + COPY_ROWS] for c in cols], axis=1, out=out[a:a + COPY_ROWS])
+    return out
+
+
+def stack(parts, n: int, p: int, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.column_stack`` of the 2-d blocks (``n`` rows, ``p`` columns in all) that the iterable
+    ``parts`` yields, each copied into the result as it comes and let go: the peak is the result and
+    one block (with a list of blocks, the result and every block).  The same array, bit for bit:
+    products of it are those of the stacked design."""
+    out = np.empty((n, p)) if out is None else out
+    j = 0
+    for c in parts:
+        k = c.shape[1] if c.ndim > 1 else 1
+        out[:, j:j + k] = c.reshape(n, k)
+        j += k
+        del c          # the generator computes the next block without this one held
+    if j != p:
+        raise ValueError(f"stacked {j} columns where {p} were announced")
     return out

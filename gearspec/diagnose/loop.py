@@ -99,12 +99,12 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
     With ``repolish`` (all but periodic candidates) the model it extends has its nonlinear
     parameters refined together with the candidate on all data (README: "Nonlinear parameters
     stay where the data want them")."""
-    dd = rnd.dd
-    ext = rnd
+    dd, ext = rnd.dd, rnd
     prop_all = cand.propose(rnd, rnd.all_groups())
     contribution = None
     if prop_all is not None:
         if repolish and not isinstance(cand, PeriodicCandidate):
+            rnd.release_design()    # a long recording: one round's design held at a time, not two
             movable = [b.uid for b, (a, z) in zip(rnd.state.blocks, rnd.taylor_spans()) if z - a > len(b.names)]
             movable += [b.uid for b in prop_all.add]     # and those with Taylor columns in the round's design
             st = refine(rnd.state.replaced(prop_all.drop, prop_all.add), dd, only=set(movable))
@@ -116,7 +116,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
             keep = ext.keep_mask(p_ext.drop)
             beta, _ = train_fit(ext, keep, p_ext, ext.all_groups())
             nk = int(keep.sum())
-            full = np.zeros(ext.X.shape[1])
+            full = np.zeros(ext.width)
             full[keep] = beta[:nk]      # no copy of the kept columns (rows x terms) of a long recording
             contribution = ext.X @ full + p_ext.columns(dd) @ beta[nk:] - rnd.fitted.prediction
     p0 = rnd.held_out_prediction()      # the same for every candidate of the round
@@ -133,7 +133,7 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         keep = ext.keep_mask(prop.drop)
         beta1, _ = train_fit(ext, keep, prop, train)
         n_par = prop.n_params(ext)
-        full = np.zeros(ext.X.shape[1])
+        full = np.zeros(ext.width)
         full[keep] = beta1[:int(keep.sum())]
         _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
@@ -236,7 +236,7 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         tr_rows = rnd.rows(train)
         rows = np.flatnonzero(~tr_rows)
         items = [fr.proposals[f] for fr in runs if fr.proposals[f] is not None]
-        keep = np.ones(rnd.X.shape[1], bool)
+        keep = np.ones(rnd.width, bool)
         for k, _ in items:
             keep &= k
         # this fold's design as column blocks, reduced a chunk of rows at a time (never stacked)

@@ -12,7 +12,7 @@ import numpy as np
 
 from .data import DiagnoseData
 from .design import BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
-from .gram import hstack
+from .gram import stack
 
 __all__ = ["nonlinear_standard_errors", "polish", "refine", "nonlinear_parameters", "with_parameter", "travel_range"]
 
@@ -58,8 +58,8 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
             params = nonlinear_parameters(blk, dd)
             if not params:
                 continue
-            others = [b.columns(dd) for j, b in enumerate(blocks) if j != i]
-            Xo = hstack(others) if others else np.zeros((len(dd), 0))
+            Xo = stack((b.columns(dd) for j, b in enumerate(blocks) if j != i), len(dd),
+                       sum(len(b.names) for j, b in enumerate(blocks) if j != i))
             Goo = Xo.T @ Xo
             bo = Xo.T @ y
             for key, val, lo, hi, log in params:
@@ -97,17 +97,16 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
     y = dd.y
     buf = [np.empty(0)]
 
-    def stacked(cols):
-        """The design of ``cols`` stacked into one buffer reused by every step of the refinement
-        (the same array as ``np.column_stack``, without a new rows x terms allocation per trial)."""
-        p = sum(c.shape[1] for c in cols)
+    def stacked(parts, p):
+        """The design of the blocks ``parts`` yields (``p`` columns) stacked into one buffer reused by
+        every step of the refinement, block by block (:func:`~.gram.stack`: the same array as
+        ``np.column_stack``, without a new rows x terms allocation per trial nor every block held)."""
         if buf[0].size < len(y) * p:
             buf[0] = np.empty(len(y) * p)
-        X = buf[0][:len(y) * p].reshape(len(y), p)
-        return hstack(cols, out=X) if cols else X
+        return stack(parts, len(y), p, out=buf[0][:len(y) * p].reshape(len(y), p))
 
     def sse(st):
-        X = stacked([b.columns(dd) for b in st.blocks])
+        X = stacked((b.columns(dd) for b in st.blocks), sum(len(b.names) for b in st.blocks))
         beta = solve_normal(X.T @ X, X.T @ y)
         r = y - X @ beta
         return float(r @ r), beta
@@ -116,18 +115,30 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
     for _ in range(steps):
         cur = cur.refreshed(beta)
         blocks = list(cur.blocks)
-        cols, moves, at = [], [], []     # at: the column of every Taylor coefficient
+        moves, at, taylor_of = [], [], []     # at: the column of every Taylor coefficient
+        p = 0
         for i, b in enumerate(blocks):
-            cols.append(b.columns(dd))
+            p += len(b.names)
             if (only is None or b.uid in only) and b.coef:
-                T = b.taylor_columns(dd)
-                for j, par in enumerate(nonlinear_parameters(b, dd)):
-                    at.append(sum(c.shape[1] for c in cols))
-                    cols.append(T[:, j:j + 1])
+                pars = nonlinear_parameters(b, dd)
+                taylor_of.append(bool(pars))
+                for par in pars:
+                    at.append(p)
+                    p += 1
                     moves.append((i, par))
+            else:
+                taylor_of.append(False)
         if not moves:
             return cur
-        X = stacked(cols)
+
+        def parts():
+            # every block's columns, then its Taylor columns (one per nonlinear parameter)
+            for b, t in zip(blocks, taylor_of):
+                yield b.columns(dd)
+                if t:
+                    yield b.taylor_columns(dd)
+
+        X = stacked(parts(), p)
         taylor = solve_normal(X.T @ X, X.T @ y)[at]
         improved = False
         for scale in (1.0, 0.5, 0.25):
