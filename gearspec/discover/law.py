@@ -385,7 +385,8 @@ def fit_law(m: Moments, parts, *, z0=None, refine: bool = True, se: bool = False
         # least_squares' gradient tolerance is absolute: on torques of mNm (sse ~1e-7) it stopped
         # every refinement after 2-4 evaluations, wherever it started; the residual is scaled to
         # unit norm at the start, so the tolerance is relative to the fit's own error
-        sc = 1.0 / max(math.sqrt(float(resid(z) @ resid(z))), 1e-300)
+        r0 = resid(z)
+        sc = 1.0 / max(math.sqrt(float(r0 @ r0)), 1e-300)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             sol = optimize.least_squares(lambda zz: resid(zz) * sc, z, jac=lambda zz: jac(zz) * sc,
