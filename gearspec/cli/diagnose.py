@@ -4,6 +4,7 @@ error before and after on held-out data (CONTRACTS.md section 4)."""
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 from ..jsonsafe import dumps
 from . import (
@@ -90,6 +91,9 @@ def run(args) -> int:
 
     rec = load_from_args(args)
     data = prepare(rec)
+    # what the outputs read of the recording (its summary, its lag): its samples are let go before the loop
+    summary, lag = rec.summary(), SimpleNamespace(meta=rec.meta)
+    del rec
     validation = prepare(load_from_args(args, args.validate)) if args.validate else None
     model = None
     if args.model:
@@ -102,23 +106,25 @@ def run(args) -> int:
         model = dg.baseline_model(data, "coulomb_viscous", symmetric=args.symmetric, terms=terms)
     # a model read from a file keeps its own symmetry unless --symmetric; otherwise per direction
     symmetric = True if args.symmetric else (None if args.model else False)
-    diag = dg.diagnose(data, model, law=args.law, harmonics=harmonics, symmetric=symmetric,
+    unit, torque_unit = data.unit, data.torque_unit
+    box, data = [data], None     # the loop alone holds the data (a long recording's untrimmed copy is freed)
+    diag = dg.diagnose(box.pop(), model, law=args.law, harmonics=harmonics, symmetric=symmetric,
                        folds=args.folds, alpha=args.alpha, min_gain=args.min_gain, max_rounds=args.max_rounds,
                        kinds=kinds, validation=validation,
                        progress=None if args.quiet else (lambda s: print(s, flush=True)))
     stages(args).done(f"diagnosis: {sum(e.accepted for e in diag.effects)} effect(s) accepted")
     if args.json:
-        write_json(args.json, diag.to_dict(), rec, dumps)
+        write_json(args.json, diag.to_dict(), lag, dumps)
     if args.out:
         from ..report.diagnose import write_diagnose_report
 
-        write_diagnose_report(diag, args.out, command=command_line(), recording_summary=rec.summary())
+        write_diagnose_report(diag, args.out, command=command_line(), recording_summary=summary)
     if not args.quiet:
         print()
         print(diag.summary_table().to_string(index=False, float_format=lambda x: f"{x:.4g}"))
         for e in diag.effects:
             # the one decision record of each candidate, as the report and the JSON show it
-            print(verdict_line(e, data.unit, data.torque_unit))
+            print(verdict_line(e, unit, torque_unit))
         for n in diag.notes:
             print(f"note: {n}")
         print(f"({time.perf_counter() - t0:.1f} s)")

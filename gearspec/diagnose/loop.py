@@ -298,19 +298,19 @@ def diagnose(data, model: FrictionModel | None = None, *, law: str = "silo4", ge
 
     Notes
     -----
-    BLAS runs single-threaded inside the loop: thread start-up costs more than it saves on its
-    many small matrices.
+    BLAS on one thread (small matrices); untrimmed ``data`` are freed once trimmed if the caller keeps none.
     """
     with threadpool_limits(limits=1, user_api="blas"):
-        return _diagnose(data, model, law=law, gear=gear, harmonics=harmonics, symmetric=symmetric, folds=folds,
+        box, data = [data], None
+        return _diagnose(box, model, law=law, gear=gear, harmonics=harmonics, symmetric=symmetric, folds=folds,
                          by=by, alpha=alpha, min_gain=min_gain, max_rounds=max_rounds, gate=gate, fap=fap,
                          kinds=kinds, validation=validation, per_segment_spectra=per_segment_spectra,
                          progress=progress)
 
 
-def _diagnose(data, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,
+def _diagnose(box, model, *, law, gear, harmonics, symmetric, folds, by, alpha, min_gain, max_rounds, gate, fap,
               kinds, validation, per_segment_spectra, progress) -> Diagnosis:
-    dd = _as_data(data, by, gear).without_edges()
+    dd = _as_data(box.pop(), by, gear).without_edges()
     if gear is not None and dd.gear is None:
         from ..gears import load_gear
         dd.gear = load_gear(gear)
