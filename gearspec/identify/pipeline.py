@@ -126,7 +126,8 @@ def identify_recording(rec, law: str = "silo4", *, segmentation=None, gear=None,
 
 # BLAS on one thread: every product here is of few columns (X^T y over a segment's rows, the small
 # least-squares problems of the fits), where OpenBLAS's threads only contend for the cores (10^7
-# rows: 74 -> 42 s of CPU; the sums of X^T y change order: results the same within 1e-13)
+# rows: 74 -> 42 s of CPU).  With two threads the sums of X^T y split by core count; on one thread
+# the numbers no longer depend on the machine (0.9 with two threads: 10^7-row SEs differ in their 5th digit)
 @on_one_blas_thread
 def _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds, se, load_ratio, compare_with,
               motion, inertia) -> FitResult:
