@@ -36,22 +36,33 @@ def _spread(x: np.ndarray) -> float:
     return float(math.log(hi / lo)) if lo > 0 else float("inf")
 
 
+class _OnRead(dict):
+    """A dict whose missing entries are computed when first read (``compute[key]()``), then kept."""
+
+    def __init__(self, known: dict, compute: dict):
+        super().__init__(known)
+        self._compute = compute
+
+    def __missing__(self, key):
+        value = self[key] = self._compute[key]()
+        return value
+
+
 def _at_rest_statistics(t: np.ndarray, theta: np.ndarray, lazy: bool = False) -> dict:
     """Steps, repeats and the spread of steps and of row-to-row speeds of a stretch of rows.
-    ``lazy``: only as far as :func:`_looks_at_rest` reads them (it stops at the first test that
-    fails; a spread it does not need is left out of the dict): the same decision, and on a run of
-    plateaus, whose row-to-row speeds are steady, one percentile of the two."""
+    ``lazy``: the spreads are computed when first read, so :func:`_looks_at_rest`, which stops at
+    the first test that fails, computes only those it needs (the same decision; on a run of
+    plateaus, whose row-to-row speeds are steady, one percentile of the two)."""
     dth = np.abs(np.diff(theta))
     dt = np.diff(t)
     move = dth > 0
-    st = {"steps": int(move.sum()), "repeats": float(1 - move.mean()) if len(move) else 1.0}
-    if lazy and not (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS):
-        return st
-    steps = dth[move]
-    st["speed_spread"] = _spread(steps / np.maximum(dt[move], 1e-300))
-    if lazy and not st["speed_spread"] >= QS_MIN_SPEED_SPREAD:
-        return st
-    st["step_spread"] = _spread(steps)
+    known = {"steps": int(move.sum()), "repeats": float(1 - move.mean()) if len(move) else 1.0}
+    compute = {"speed_spread": lambda: _spread(dth[move] / np.maximum(dt[move], 1e-300)),
+               "step_spread": lambda: _spread(dth[move])}
+    st = _OnRead(known, compute)
+    if not lazy:
+        for key in compute:
+            st[key]
     return st
 
 
@@ -70,7 +81,7 @@ def _run_statistics(t: np.ndarray, theta: np.ndarray, chunks: int = 20, size: in
 
 def _looks_at_rest(st: dict) -> bool:
     """The recognition rule (see the constants above), read in this order (see ``lazy`` in
-    :func:`_at_rest_statistics`)."""
+    :func:`_at_rest_statistics`: a spread is computed when this reads it)."""
     return (st["steps"] >= QS_MIN_STEPS and st["repeats"] <= QS_MAX_REPEATS
             and st["speed_spread"] >= QS_MIN_SPEED_SPREAD
             and st["speed_spread"] >= QS_SPREAD_RATIO * st["step_spread"])
