@@ -1,0 +1,77 @@
+"""gearspec.core.parallel.forked_map: the results of the loop, in order, from worker processes."""
+
+import os
+
+import numpy as np
+import pytest
+
+from gearspec.core import parallel
+from gearspec.core.parallel import forked_map, in_worker, worker_count
+
+fork_only = pytest.mark.skipif(parallel._can_fork() is False, reason="no fork on this system")
+
+
+def _lstsq_task(seed):
+    # a small least-squares fit, as a search runs thousands of: the same numbers in a worker
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(400, 12))
+    y = X @ np.arange(12.0) + rng.normal(size=400)
+    return np.linalg.lstsq(X, y, rcond=None)[0], os.getpid()
+
+
+@fork_only
+def test_results_are_the_loops_in_order_from_two_processes():
+    from gearspec.core.reduction import one_blas_thread
+
+    with one_blas_thread():
+        serial = [_lstsq_task(s)[0] for s in range(12)]
+    got = forked_map(_lstsq_task, range(12), workers=2)
+    for a, (b, _) in zip(serial, got):
+        assert np.array_equal(a, b)          # bit for bit: the same products on one BLAS thread
+    pids = {pid for _, pid in got}
+    assert os.getpid() not in pids and len(pids) == 2
+
+
+def test_one_worker_or_one_item_is_a_loop_here():
+    assert {pid for _, pid in forked_map(_lstsq_task, range(3), workers=1)} == {os.getpid()}
+    assert forked_map(_lstsq_task, [5], workers=2)[0][1] == os.getpid()
+    assert forked_map(_lstsq_task, [], workers=2) == []
+
+
+@fork_only
+def test_a_closure_over_local_data_is_not_pickled():
+    big = np.arange(1000.0)
+    fn = lambda k: float(big[k] * 2)    # noqa: E731  (a lambda cannot be pickled: it is inherited)
+    assert forked_map(fn, range(5), workers=2) == [0.0, 2.0, 4.0, 6.0, 8.0]
+
+
+@fork_only
+def test_a_map_inside_a_task_runs_in_that_worker():
+    def outer(k):
+        inner = forked_map(lambda j: os.getpid(), range(3), workers=2)
+        return in_worker(), worker_count(2), set(inner) == {os.getpid()}
+
+    assert forked_map(outer, range(2), workers=2) == [(True, 1, True)] * 2
+    assert not in_worker()
+
+
+@fork_only
+def test_an_exception_in_a_task_is_raised_here_and_the_map_ends():
+    def boom(k):
+        if k == 3:
+            raise ValueError("task 3 failed")
+        return k
+
+    with pytest.raises(ValueError, match="task 3 failed"):
+        forked_map(boom, range(6), workers=2)
+    assert parallel._JOB is None
+    assert forked_map(lambda k: k + 1, range(3), workers=2) == [1, 2, 3]
+
+
+def test_the_worker_count_follows_gearspec_threads(monkeypatch):
+    monkeypatch.setenv("GEARSPEC_THREADS", "1")
+    assert worker_count() == 1
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    assert worker_count() == (2 if parallel._can_fork() else 1)
+    with pytest.raises(Exception, match="threads"):
+        worker_count(0)
