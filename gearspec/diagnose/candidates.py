@@ -50,6 +50,10 @@ class Proposal:
     def columns(self, dd) -> np.ndarray:
         return np.column_stack([b.columns(dd) for b in self.add])
 
+    def __getstate__(self):
+        # pickled (a forked round's result) without :attr:`fits`: a memo, holding weak references
+        return {**self.__dict__, "fits": {}}
+
     def n_params(self, rnd: Round) -> int:
         return sum(len(b.names) for b in self.add) - sum(len(b.names) for b in self.drop)
 

@@ -457,10 +457,10 @@ def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
 
 
 def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) -> list:
-    """Every candidate of a round through the held-out test, the noise of Z from the held-out
-    residual of the richest model the round supports (README, Acceptance: effects present
-    together do not pass for each other's noise)."""
-    runs = [_run_folds(rnd, c) for c in cands]
+    """Every candidate of a round through the held-out test (in forked workers where they pay), the noise of Z
+    from the held-out residual of the richest model the round supports (README, Acceptance)."""
+    from .parallel_round import run_candidates
+    runs = run_candidates(rnd, cands, _run_folds)
     first = [_decide(rnd, fr, None, z_crit=z_crit, min_gain=min_gain) for fr in runs]
     # the richest model: the best promising candidate of every kind (members of one family, e.g.
     # three shapes of Stribeck term, would only fit each other's noise)
