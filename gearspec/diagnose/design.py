@@ -84,10 +84,10 @@ class Block:
         return cols
 
     def _cache_key(self, taylor: bool) -> tuple:
-        """The key of the block's columns in the data's cache: its type and the exact repr of every
-        field (floats repr round-trip); by identity when a field holds an array (repr abbreviates)."""
+        """The key of the block's columns in the data's cache: its type and the exact repr of every field
+        but its id (floats repr round-trip); by identity when a field holds an array (repr abbreviates)."""
         vals = tuple((f.name, getattr(self, f.name)) for f in dataclasses.fields(self)
-                     if taylor or f.name != "coef")
+                     if f.name != "uid" and (taylor or f.name != "coef"))
         if any(isinstance(v, np.ndarray) for _, v in vals):
             return ("id", id(self), bool(taylor))
         return ("fields", type(self), repr(vals), bool(taylor))
