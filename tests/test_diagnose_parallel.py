@@ -10,6 +10,8 @@ speed laws, drift, ...), each drawing new blocks in every fold.
 from __future__ import annotations
 
 import json
+import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -105,6 +107,11 @@ def test_what_a_candidates_run_leaves_behind_comes_back_from_its_worker(monkeypa
         assert c._cache.get("round") is rnd and c._cache.get("all") is not None
         assert c.propose(rnd, rnd.all_groups()) is c._cache["all"]
     assert next(design._UID) == after + 1
+    # what comes back from a worker: the rows of its prediction and contribution, no cached columns
+    rows = 8 * len(rnd.dd)
+    for c, fr in zip(cands, runs):
+        back = (replace(fr, r0=None), {k: v for k, v in c._cache.items() if k != "round"})
+        assert len(pickle.dumps(back)) < (2 + (fr.contribution is not None)) * rows
 
 
 def test_a_round_whose_design_exceeds_the_bound_runs_in_one_process(monkeypatch):
