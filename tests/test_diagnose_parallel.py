@@ -139,20 +139,3 @@ def test_diagnose_on_one_and_two_workers_writes_the_same_results(monkeypatch):
     assert j1 == j2 and np.array_equal(c1, c2) and l1 == l2 and t1 == t2
     assert sum(e["accepted"] for e in json.loads(j1)["effects"]) == 2      # the drift and the line
 
-
-def test_a_block_made_anew_with_the_same_parameters_is_served_its_columns_from_the_cache():
-    """A candidate makes its blocks anew in every round it is asked in (a grid value's block on the
-    round and on its extended round): new ids, the same columns, built once."""
-    from gearspec.diagnose.design import HarmonicBlock
-
-    dd = dg.DiagnoseData.from_recording(_recording())
-    law, decay = ((1, "exp"), (-1, "exp")), ((1, 0.1), (-1, 0.2))
-    a = HarmonicBlock(key="l", frequency=0.37, law=law, decay=decay)
-    b = HarmonicBlock(key="l", frequency=0.37, law=law, decay=decay)
-    c = HarmonicBlock(key="l", frequency=0.37, law=law, decay=((1, 0.1), (-1, 0.3)))
-    assert a.uid != b.uid
-    cols = a.columns(dd)
-    assert b.columns(dd) is cols                       # served: the same array
-    other = c.columns(dd)
-    assert other is not cols and not np.array_equal(other[:, 2:], cols[:, 2:])
-    assert np.array_equal(other[:, :2], cols[:, :2])   # the direction whose decay is the same

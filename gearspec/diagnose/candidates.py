@@ -199,6 +199,19 @@ RAT_GRID = (0.25, 0.5, 1.0, 2.0, 4.0)                          # decay x top spe
 POW_GRID = (0.25, 0.5, 1.0, 2.0, 3.0)                          # exponent
 
 
+def segment_index(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(np.unique(seg), np.searchsorted(that, seg))``: the distinct segment ids and every sample's
+    index into them, without a sort when ``seg`` is in order (the rows of plateaus are: one pass)."""
+    seg = np.asarray(seg)
+    if seg.ndim != 1 or seg.dtype.kind not in "iu" or (len(seg) > 1 and not np.all(seg[1:] >= seg[:-1])):
+        sids = np.unique(seg)
+        return sids, np.searchsorted(sids, seg)
+    new = np.empty(len(seg), bool)
+    new[:1] = True
+    np.not_equal(seg[1:], seg[:-1], out=new[1:])
+    return seg[new], np.cumsum(new, dtype=np.intp) - 1
+
+
 def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01) -> tuple[str, float, dict]:
     """The amplitude-vs-speed law of a line at ``frequency`` that the residual ``r`` supports:
     least squares of ``g(|v|) (a sin + c cos)`` (each segment's mean removed) for a constant
@@ -207,8 +220,7 @@ def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01
     at two speeds or more).  Returns ``(law, decay, rss_by_law)``."""
     x = _TWO_PI * frequency * theta
     sn, cs = np.sin(x), np.cos(x)
-    sids = np.unique(seg)
-    inv = np.searchsorted(sids, seg)
+    sids, inv = segment_index(seg)
     cnt = np.bincount(inv).astype(float)
 
     def dm(a):
@@ -347,8 +359,7 @@ class PeriodicCandidate(Candidate):
         for x in dirs:
             sel = (d == x) & moving
             y = x * r0[sel]
-            sids = np.unique(seg[sel])
-            inv = np.searchsorted(sids, seg[sel])
+            sids, inv = segment_index(seg[sel])
             y = y - (np.bincount(inv, weights=y) / np.bincount(inv))[inv]
             var = float(np.var(y))
             if var <= 0:
