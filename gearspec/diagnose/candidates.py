@@ -48,7 +48,7 @@ class Proposal:
     fits: dict = field(default_factory=dict, repr=False)
 
     def columns(self, dd) -> np.ndarray:
-        return np.column_stack([b.columns(dd) for b in self.add])
+        return side_by_side([b.columns(dd) for b in self.add])
 
     def __getstate__(self):
         # pickled (a forked round's result) without :attr:`fits`: a memo, holding weak references
@@ -63,6 +63,16 @@ class Proposal:
         prop = cls(add, list(drop), describe=describe)
         prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd) if C is None else C)
         return prop
+
+
+def side_by_side(cols: list) -> np.ndarray:
+    """``np.column_stack(cols)``; one block's columns as they are (cached on the data: read-only
+    for the caller) when they are what the copy would be (float, 2-D, C-ordered): no copy."""
+    if len(cols) == 1:
+        c = cols[0]
+        if isinstance(c, np.ndarray) and c.ndim == 2 and c.dtype == np.float64 and c.flags.c_contiguous:
+            return c
+    return np.column_stack(cols)
 
 
 def cross_grams(rnd: Round, C: np.ndarray):
@@ -161,7 +171,7 @@ class GridCandidate(Candidate):
             cache[i] = None
             if made is not None:
                 add, drop = made
-                C = np.column_stack([b.columns(rnd.dd) for b in add])
+                C = side_by_side([b.columns(rnd.dd) for b in add])
                 if np.linalg.norm(C) > 1e-6 * np.linalg.norm(rnd.dd.y):  # else nothing the data can see
                     cache[i] = Proposal.of(rnd, add, drop, self.describe_value(self.grid[i]), C)
         return cache[i]
@@ -461,7 +471,7 @@ class _TaylorProposal(Proposal):
     keep their Taylor columns, so that the held-out comparison differs by the candidate alone."""
 
     def columns(self, dd) -> np.ndarray:
-        return np.column_stack([b.columns(dd, taylor=True) for b in self.add])
+        return side_by_side([b.columns(dd, taylor=True) for b in self.add])
 
 
 # ---------------------------------------------------------------------- sidebands
