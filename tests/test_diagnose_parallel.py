@@ -125,6 +125,13 @@ def test_a_round_whose_design_exceeds_the_bound_runs_in_one_process(monkeypatch)
     asked = _spy(monkeypatch)
     parallel_round.run_candidates(rnd, cands[:2], loop._run_folds, workers=2)
     assert asked == [1]
+    # in one process the folds' training residuals (rows) are not computed ahead of the candidates
+    rnd, cands = _round()
+    assert any(isinstance(c, PeriodicCandidate) for c in cands)
+    parallel_round.prefetch(rnd, cands, residuals=False)
+    assert not [k for k in rnd._memo if k[0] == "r0"]
+    parallel_round.prefetch(rnd, cands)
+    assert len([k for k in rnd._memo if k[0] == "r0"]) == rnd.K
 
 
 def test_diagnose_on_one_and_two_workers_writes_the_same_results(monkeypatch):

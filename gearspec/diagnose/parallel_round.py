@@ -52,18 +52,18 @@ def fork_allowed(rnd) -> bool:
     return 8 * len(rnd.dd) * rnd.width <= FORK_DESIGN_BYTES
 
 
-def prefetch(rnd, cands) -> None:
+def prefetch(rnd, cands, *, residuals: bool = True) -> None:
     """What every candidate of the round reads alike, computed once on the round: its held-out
-    residual, the sums and coefficients of every fold and of all data, and, for the candidates that
-    search on the training residual (periodic lines), every fold's training residual and the
-    channels they read."""
+    residual, the sums and coefficients of every fold and of all data, and, with ``residuals`` for
+    the candidates that search on the training residual (periodic lines), every fold's training
+    residual (rows) and the channels they read."""
     from .candidates import PeriodicCandidate
 
     rnd.held_out_residual()
     rnd.taylor_spans()
     every = rnd.all_groups()
     rnd.beta(every)
-    periodic = any(isinstance(c, PeriodicCandidate) for c in cands)
+    periodic = residuals and any(isinstance(c, PeriodicCandidate) for c in cands)
     for _, test in splits(rnd.fold):
         train = ~test
         rnd.beta(train)
@@ -81,7 +81,9 @@ def run_candidates(rnd, cands: list, run, *, workers: int | None = None) -> list
     :func:`fork_allowed` (``workers``: :func:`~gearspec.core.parallel.worker_count`'s), with the
     side effects of the module docstring carried back: the same results, bit for bit, as the loop
     in one process (both run BLAS on one thread)."""
-    prefetch(rnd, cands)
+    fork = fork_allowed(rnd)
+    # in one process the training residuals are computed when a candidate first asks, as before
+    prefetch(rnd, cands, residuals=fork)
     base = next(design._UID)
 
     def task(i: int):
@@ -97,7 +99,7 @@ def run_candidates(rnd, cands: list, run, *, workers: int | None = None) -> list
         shared = fr.r0 is rnd.held_out_residual()
         return replace(fr, r0=None) if shared else fr, shared, kept
 
-    n = workers if fork_allowed(rnd) else 1
+    n = workers if fork else 1
     try:
         done = forked_map(task, range(len(cands)), workers=n)
     finally:
