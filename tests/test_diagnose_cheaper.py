@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import gearspec.diagnose as dg
-from gearspec.diagnose.candidates import segment_index
+from gearspec.diagnose.candidates import segment_index, side_by_side
 from gearspec.simulate import effects as fx
 
 from test_diagnose import recording
@@ -47,3 +47,15 @@ def test_segment_index_is_unique_and_searchsorted(seg):
     assert np.array_equal(inv, np.searchsorted(want, seg)) and inv.dtype == np.intp
     if len(seg):
         assert np.array_equal(sids[inv], seg)
+
+
+def test_one_blocks_columns_go_to_the_fits_as_they_are_when_a_copy_would_be_the_same():
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(50, 2)), rng.normal(size=(50, 1))
+    assert side_by_side([a]) is a                                     # C-ordered floats: no copy
+    f = np.asfortranarray(a)                                          # another layout: the copy column_stack makes
+    out = side_by_side([f])
+    assert out is not f and out.flags.c_contiguous and np.array_equal(out, np.column_stack([f]))
+    ints = np.arange(6).reshape(3, 2)
+    assert side_by_side([ints]) is not ints
+    assert np.array_equal(side_by_side([a, b]), np.column_stack([a, b]))
