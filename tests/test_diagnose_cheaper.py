@@ -54,8 +54,11 @@ def test_one_blocks_columns_go_to_the_fits_as_they_are_when_a_copy_would_be_the_
     a, b = rng.normal(size=(50, 2)), rng.normal(size=(50, 1))
     assert side_by_side([a]) is a                                     # C-ordered floats: no copy
     f = np.asfortranarray(a)                                          # another layout: the copy column_stack makes
-    out = side_by_side([f])
-    assert out is not f and out.flags.c_contiguous and np.array_equal(out, np.column_stack([f]))
+    out, want = side_by_side([f]), np.column_stack([f])
+    assert out is not f and np.array_equal(out, want)
+    assert (out.flags.c_contiguous, out.flags.f_contiguous) == (want.flags.c_contiguous, want.flags.f_contiguous)
+    v = a[:, :1]                                                      # a strided view: copied
+    assert not v.flags.c_contiguous and side_by_side([v]) is not v
     ints = np.arange(6).reshape(3, 2)
     assert side_by_side([ints]) is not ints
     assert np.array_equal(side_by_side([a, b]), np.column_stack([a, b]))
