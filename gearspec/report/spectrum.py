@@ -39,8 +39,9 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     ``pages``: the segments whose spectra are drawn (8 a page, ``spectra_NN.png``): ``"all"``,
     ``"none"`` or ``"auto"`` (at most ``AUTO_PAGES`` representative segments,
     :meth:`~gearspec.spectrum.SpectrumResult.representatives`; every segment when there are no
-    more); segments analysed without their spectra get them computed here
-    (:func:`~gearspec.spectrum.pipeline.attach_spectra`).  ``stages``: a
+    more); segments analysed without their spectra get them computed for their page
+    (:func:`~gearspec.spectrum.pipeline.attach_spectra`), where the page is drawn: in a worker
+    process (``result`` is left as it was) when the figures are drawn in two or more.  ``stages``: a
     :class:`~gearspec.progress.Stages` told of each step.
     """
     if pages not in PAGES:
