@@ -13,12 +13,12 @@ from gearspec.recording.cleaning import _exclude_saturation
 N, STUCK = 4000, 10
 
 
-def _signal(n_repeats: int) -> np.ndarray:
+def _signal(n_repeats: int, n: int = N) -> np.ndarray:
     rng = np.random.default_rng(5)
-    v = rng.uniform(-1.0, 1.0, N)
+    v = rng.uniform(-1.0, 1.0, n)
     v[2000:2000 + STUCK] = 3.0                       # stuck at the maximum: 10 rows in a row
     # repeats of the previous value, away from the stuck rows and from each other
-    at = [i for i in range(2, N, 3) if not 1995 <= i <= 2015][:n_repeats]
+    at = [i for i in range(2, n, 3) if not 1995 <= i <= 2015][:n_repeats]
     for i in at:
         v[i] = v[i - 1]
     return v
@@ -36,13 +36,15 @@ def _loop_counts(v: np.ndarray) -> tuple[int, int]:
 
 
 def test_the_repeat_fraction_decides_at_one_fifth():
-    inner, _ = _loop_counts(_signal(0))
-    k = inner // 5                                   # at most 20 %: saturation is looked for
-    assert _loop_counts(_signal(k)) == (inner, k) and k / inner <= 0.2 < (k + 1) / inner
+    # a length whose steps between rows not at an extreme are a multiple of 5: exactly 20 % repeats
+    rows = next(m for m in range(N, N + 5) if _loop_counts(_signal(0, m))[0] % 5 == 0)
+    inner, _ = _loop_counts(_signal(0, rows))
+    k = inner // 5                                   # 20 %, not more: saturation is looked for
+    assert _loop_counts(_signal(k, rows)) == (inner, k) and k / inner == 0.2
     with pytest.warns(GearspecWarning, match=f"sits at its extreme value in {STUCK} rows"):
-        frame, n = _exclude_saturation("x", pd.DataFrame({"torque": _signal(k)}), "torque")
-    assert n == STUCK and len(frame) == N - STUCK and frame["torque"].max() < 3.0
+        frame, n = _exclude_saturation("x", pd.DataFrame({"torque": _signal(k, rows)}), "torque")
+    assert n == STUCK and len(frame) == rows - STUCK and frame["torque"].max() < 3.0
     # one repeat more: above 20 %, the signal holds values by nature, nothing is excluded
-    assert _loop_counts(_signal(k + 1)) == (inner, k + 1)
-    frame, n = _exclude_saturation("x", pd.DataFrame({"torque": _signal(k + 1)}), "torque")
-    assert n == 0 and len(frame) == N
+    assert _loop_counts(_signal(k + 1, rows)) == (inner, k + 1)
+    frame, n = _exclude_saturation("x", pd.DataFrame({"torque": _signal(k + 1, rows)}), "torque")
+    assert n == 0 and len(frame) == rows
