@@ -81,10 +81,13 @@ def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: 
                 f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
                 f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
                 "several experiments, give each its own file or a 'run' column")
-        keep[idx[back]] = False
-        n_back += int(back.sum())
-        ok = idx[~back]  # non-decreasing stamps from here on
-        to = t[ok]
+        if back.any():
+            keep[idx[back]] = False
+            n_back += int(back.sum())
+            ok = idx[~back]  # non-decreasing stamps from here on
+            to = t[ok]
+        else:  # the usual run: every stamp in order, its rows and stamps as they are (no copies)
+            ok, to = idx, tr
         rep = np.concatenate(([False], to[1:] == to[:-1]))
         if not rep.any():
             continue
