@@ -181,16 +181,18 @@ def _unwrap_theta(path, frame: pd.DataFrame, unit: str, notes: list[str]) -> pd.
         th = theta[idx]
         if len(th) < 3:
             continue
-        d = np.diff(th)
+        ad = np.abs(np.diff(th))
+        if not (ad > np.pi).any():  # no step of half a turn (of either period): nothing wraps (most runs)
+            continue
         lo, hi = th.min(), th.max()
         for period, what in ((2 * np.pi, "2*pi"), (360.0, "360")):
-            big = np.abs(d) > 0.5 * period
+            big = ad > 0.5 * period
             if not big.any() or hi - lo > period * 1.02:
                 continue
-            if not np.all(np.abs(np.abs(d[big]) - period) < 0.25 * period):
+            if not np.all(np.abs(ad[big] - period) < 0.25 * period):
                 continue
             # typical step far below the jumps: it is a wrap, not fast motion
-            typical = np.median(np.abs(d[~big])) if (~big).any() else 0.0
+            typical = np.median(ad[~big]) if (~big).any() else 0.0
             if typical > 0.05 * period:
                 continue
             out[idx] = np.unwrap(th, period=period)
