@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from gearspec.cli import main
+from gearspec.core import parallel
 from gearspec.errors import InputError
 from gearspec.gears import load_gear
 from gearspec.plots.spectrum import _envelope, _spread
@@ -105,13 +106,17 @@ def test_spread_keeps_first_and_last():
 def test_report_auto_draws_pages_for_the_representatives_only(twin, tmp_path):
     rec, seg, res, _ = twin
     out = tmp_path / "auto"
+    before = sum(s.fft_frequency is not None for s in res.segments)
     write_spectrum_report(res, rec, seg, out, pages="auto")
     pages = sorted(p.name for p in out.glob("spectra_*.png"))
     assert pages == ["spectra_01.png", "spectra_02.png"]  # 12 segments, 8 a page
     text = (out / "report.md").read_text()
     assert "Pages for 12 of 28 segments" in text and "--pages all draws every one" in text
     assert "![summary](spectrum_summary.png)" in text and (out / "spectrum_summary.png").stat().st_size > 10_000
-    assert sum(s.fft_frequency is not None for s in res.segments) >= 12
+    # the spectra of the pages are computed where the pages are drawn (worker processes when the
+    # machine has two CPUs: this process's result then holds none of them)
+    held = sum(s.fft_frequency is not None for s in res.segments)
+    assert held == before if parallel.worker_count() > 1 else held >= 12
 
 
 def test_report_pages_none_and_a_bad_choice(twin, tmp_path):

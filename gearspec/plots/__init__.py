@@ -41,11 +41,18 @@ def one_direction_note(present) -> str:
     return "" if len(present) == 2 else f" ({present[0][1]} direction only: no {other} segment)"
 
 
+#: zlib level of the PNG files: the same pixels as the library's default (6) in 0.64 of its time,
+#: files 2-4 % larger (the figures of `gearspec spectrum` on the default twin: 0.34 s instead of 0.53)
+PNG_COMPRESS_LEVEL = 3
+
+
 def save(fig, path, *, tight: bool = True) -> Path:
-    """Save a figure as PNG (110 dpi) and close it.  ``tight``: crop to the drawn content (matplotlib
-    then draws the figure twice); False for a figure laid out already (one draw: long pages of spectra)."""
+    """Save a figure as PNG (110 dpi, zlib level :data:`PNG_COMPRESS_LEVEL`) and close it.  ``tight``:
+    crop to the drawn content (matplotlib then draws the figure twice); False for a figure laid out
+    already (one draw: long pages of spectra)."""
     path = Path(path)
-    fig.savefig(path, dpi=110, **({"bbox_inches": "tight"} if tight else {}))
+    png = {"pil_kwargs": {"compress_level": PNG_COMPRESS_LEVEL}} if path.suffix.lower() == ".png" else {}
+    fig.savefig(path, dpi=110, **png, **({"bbox_inches": "tight"} if tight else {}))
     plt.close(fig)
     return path
 

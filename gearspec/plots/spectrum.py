@@ -15,7 +15,7 @@ from ..spectrum.analysis import SpectrumResult
 from . import DIRS, NEG as _NEG, POS as _POS, plain_log_axis, plt, save as _save
 from .ordermap import _scale
 
-__all__ = ["plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_spectrum_summary",
+__all__ = ["PER_PAGE", "plot_segments", "plot_order_spectra", "plot_amplitude_vs_speed", "plot_spectrum_summary",
            "plot_unexplained"]
 
 #: colour of the encoder's own lines (count rate folded by the sampling) and of the quantisation limit
@@ -61,11 +61,16 @@ def plot_segments(rec: Recording, seg: Segmentation, path, max_points: int = 20_
     return _save(fig, path, tight=False)
 
 
-def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int = 8, indices=None,
-                       points: int = 1500) -> list[Path]:
+#: panels of spectra on a page (``spectra_NN.png``)
+PER_PAGE = 8
+
+
+def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int = PER_PAGE, indices=None,
+                       points: int = 1500, first_page: int = 1) -> list[Path]:
     """Order spectrum of the segments ``indices`` (default every segment that holds its spectra):
     FFT and Lomb-Scargle amplitude, noise floor, lines; ``per_page`` panels a page, each curve drawn
-    as its maximum over ``points`` logarithmic frequency bins (every peak stays visible)."""
+    as its maximum over ``points`` logarithmic frequency bins (every peak stays visible).  Pages are
+    numbered from ``first_page`` in ``path_pattern`` (a report draws its pages one task each)."""
     idx = range(len(result.segments)) if indices is None else indices
     segs = [(i, result.segments[i]) for i in idx if result.segments[i].fft_frequency is not None]
     paths = []
@@ -82,7 +87,7 @@ def plot_order_spectra(result: SpectrumResult, path_pattern: str, per_page: int 
         top = 1 - 0.75 / (3.0 * nrow + 0.9)
         fig.subplots_adjust(left=0.07, right=0.98, bottom=0.45 / (3.0 * nrow + 0.9) + 0.03, top=top - 0.03,
                             hspace=0.55, wspace=0.2)
-        paths.append(_save(fig, Path(path_pattern.format(page + 1)), tight=False))
+        paths.append(_save(fig, Path(path_pattern.format(page + first_page)), tight=False))
     return paths
 
 

@@ -81,10 +81,13 @@ def _clean_times(path, frame: pd.DataFrame, sig: str, excluded: Counter, notes: 
                 f"{path}: column 't' goes backwards in {int(back.sum())} of {len(tr)} rows (first at data "
                 f"row {frame.index[first] + 1}: t = {t[first]:g} after {prev_max[np.flatnonzero(back)[0]]:g}); if the file holds "
                 "several experiments, give each its own file or a 'run' column")
-        keep[idx[back]] = False
-        n_back += int(back.sum())
-        ok = idx[~back]  # non-decreasing stamps from here on
-        to = t[ok]
+        if back.any():
+            keep[idx[back]] = False
+            n_back += int(back.sum())
+            ok = idx[~back]  # non-decreasing stamps from here on
+            to = t[ok]
+        else:  # the usual run: every stamp in order, its rows and stamps as they are (no copies)
+            ok, to = idx, tr
         rep = np.concatenate(([False], to[1:] == to[:-1]))
         if not rep.any():
             continue
@@ -142,14 +145,17 @@ def _exclude_saturation(path, frame: pd.DataFrame, col: str):
     # Saturation shows as a signal that varies from sample to sample but sticks at its extreme.  A
     # signal that often holds its value anyway (noise-free simulation, coarse quantisation) sits at
     # its extremes by nature: that is no evidence of saturation, and nothing is excluded.
-    at_end = (v == v.max()) | (v == v.min())
+    # each extreme's rows found once (a pass each), the repeats counted without a difference array:
+    # the same counts, hence the same decisions, as (v == max) | (v == min) and mean(diff(v)[inner] == 0)
+    ats = [v == extreme for extreme in (v.max(), v.min())]
+    at_end = ats[0] | ats[1]
     inner = ~at_end[:-1] & ~at_end[1:]
-    if inner.sum() < 20 or np.mean(np.diff(v)[inner] == 0) > 0.2:
+    n_inner = int(np.count_nonzero(inner))
+    if n_inner < 20 or np.count_nonzero(inner & (v[1:] == v[:-1])) / n_inner > 0.2:
         return frame, 0
     mask = np.zeros(n, bool)
-    for extreme in (v.max(), v.min()):
-        at = v == extreme
-        count = int(at.sum())
+    for at in ats:
+        count = int(np.count_nonzero(at))
         if count < max(5, 0.002 * n):
             continue
         # longest run of consecutive samples at the extreme
@@ -175,16 +181,18 @@ def _unwrap_theta(path, frame: pd.DataFrame, unit: str, notes: list[str]) -> pd.
         th = theta[idx]
         if len(th) < 3:
             continue
-        d = np.diff(th)
+        ad = np.abs(np.diff(th))
+        if not (ad > np.pi).any():  # no step of half a turn (of either period): nothing wraps (most runs)
+            continue
         lo, hi = th.min(), th.max()
         for period, what in ((2 * np.pi, "2*pi"), (360.0, "360")):
-            big = np.abs(d) > 0.5 * period
+            big = ad > 0.5 * period
             if not big.any() or hi - lo > period * 1.02:
                 continue
-            if not np.all(np.abs(np.abs(d[big]) - period) < 0.25 * period):
+            if not np.all(np.abs(ad[big] - period) < 0.25 * period):
                 continue
             # typical step far below the jumps: it is a wrap, not fast motion
-            typical = np.median(np.abs(d[~big])) if (~big).any() else 0.0
+            typical = np.median(ad[~big]) if (~big).any() else 0.0
             if typical > 0.05 * period:
                 continue
             out[idx] = np.unwrap(th, period=period)

@@ -39,13 +39,11 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     ``pages``: the segments whose spectra are drawn (8 a page, ``spectra_NN.png``): ``"all"``,
     ``"none"`` or ``"auto"`` (at most ``AUTO_PAGES`` representative segments,
     :meth:`~gearspec.spectrum.SpectrumResult.representatives`; every segment when there are no
-    more); segments analysed without their spectra get them computed here
-    (:func:`~gearspec.spectrum.pipeline.attach_spectra`).  ``stages``: a
+    more); segments analysed without their spectra get them computed for their page
+    (:func:`~gearspec.spectrum.pipeline.attach_spectra`), where the page is drawn: in a worker
+    process (``result`` is left as it was) when the figures are drawn in two or more.  ``stages``: a
     :class:`~gearspec.progress.Stages` told of each step.
     """
-    from ..plots.spectrum import plot_spectrum_summary
-    from ..spectrum.pipeline import attach_spectra
-
     if pages not in PAGES:
         raise InputError(f"--pages must be one of {', '.join(PAGES)}, got '{pages}'")
     st = stages if stages is not None else Stages(enabled=False)
@@ -55,20 +53,7 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     n_all = len(result.segments)
     drawn = (list(range(n_all)) if pages == "all" else [] if pages == "none" else
              result.representatives(AUTO_PAGES))
-    st.start("summary figures")
-    figs = {"segments": plots.plot_segments(rec, seg, out / "segments.png"),
-            "summary": plot_spectrum_summary(result, out / "spectrum_summary.png"),
-            "amplitude": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png"),
-            "relative": plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png", relative=True),
-            "unexplained": plots.plot_unexplained(result, out / "unexplained_peaks.png")}
-    st.done("summary figures drawn")
-    if drawn:
-        st.start(f"spectra of {len(drawn)} segment(s) for the pages")
-        attach_spectra(result, rec, drawn)
-        figs["spectra"] = plots.plot_order_spectra(result, str(out / "spectra_{:02d}.png"), indices=drawn)
-        st.done(f"{len(figs['spectra'])} page(s) of spectra for {len(drawn)} of {n_all} segment(s)")
-    else:
-        figs["spectra"] = []
+    figs = _draw_figures(result, rec, seg, out, drawn, st)
     table = result.peaks_table()
     table.to_csv(out / "peaks.csv", index=False)
 
@@ -125,6 +110,46 @@ def write_spectrum_report(result: SpectrumResult, rec: Recording, seg: Segmentat
     if orders is not None:
         md += order_section(orders, out)
     return write_report(out, md + bullets(result.notes, "Notes:"))
+
+
+def _draw_figures(result: SpectrumResult, rec: Recording, seg: Segmentation, out: Path, drawn: list[int],
+                  st) -> dict:
+    """The report's figures, each drawn by one task of :func:`~gearspec.core.parallel.forked_map`
+    (in worker processes forked from this one: they inherit the results; each returns its path,
+    None for a figure with nothing to show).  A page of spectra is one task: its segments' spectra
+    are computed there (:func:`~gearspec.spectrum.pipeline.attach_spectra`) and dropped with the
+    worker, as the figure is all that needs them.  The same figures as drawn one after the other."""
+    from ..core.parallel import forked_map
+    from ..plots.spectrum import PER_PAGE, plot_spectrum_summary
+    from ..spectrum.pipeline import attach_spectra, can_hold_spectra
+
+    pattern = str(out / "spectra_{:02d}.png")
+    shown = [i for i in drawn if can_hold_spectra(result.segments[i])]
+    chunks = [shown[k:k + PER_PAGE] for k in range(0, len(shown), PER_PAGE)]
+
+    def page(k: int) -> list[Path]:
+        attach_spectra(result, rec, chunks[k])
+        return plots.plot_order_spectra(result, pattern, indices=chunks[k], first_page=k + 1)
+
+    # the longest first: the segments figure (24 panels) and the pages, then the summaries
+    tasks = ([("segments", lambda: plots.plot_segments(rec, seg, out / "segments.png"))]
+             + [("spectra", lambda k=k: page(k)) for k in range(len(chunks))]
+             + [("summary", lambda: plot_spectrum_summary(result, out / "spectrum_summary.png")),
+                ("amplitude", lambda: plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed.png")),
+                ("relative", lambda: plots.plot_amplitude_vs_speed(result, out / "amplitude_vs_speed_relative.png",
+                                                                   relative=True)),
+                ("unexplained", lambda: plots.plot_unexplained(result, out / "unexplained_peaks.png"))])
+    st.start(f"{len(tasks)} figures" + (f", spectra of {len(drawn)} segment(s) for the pages" if drawn else ""))
+    figs: dict = {"spectra": []}
+    for (name, _), path in zip(tasks, forked_map(lambda task: task[1](), tasks)):
+        if name == "spectra":
+            figs["spectra"] += path
+        else:
+            figs[name] = path
+    st.done(f"{len(tasks) - len(chunks)} summary figures drawn"
+            + (f", {len(figs['spectra'])} page(s) of spectra for {len(drawn)} of {len(result.segments)} segment(s)"
+               if drawn else ""))
+    return figs
 
 
 def _lines_sections(result: SpectrumResult, table: pd.DataFrame, figs: dict) -> list[str]:

@@ -18,7 +18,7 @@ from ..segment import FrictionTorque, Segment, Segmentation, find_segments
 from .analysis import _local, analyze_segment
 from .results import SegmentSpectrum, SpectrumResult
 
-__all__ = ["analyze", "relabel_aliases", "attach_spectra"]
+__all__ = ["analyze", "relabel_aliases", "attach_spectra", "can_hold_spectra"]
 
 
 def analyze(rec: Recording, gear=None, *, segmentation: Segmentation | None = None,
@@ -112,11 +112,18 @@ def attach_spectra(result: SpectrumResult, rec: Recording, indices) -> list[int]
     return done
 
 
+def can_hold_spectra(s: SegmentSpectrum) -> bool:
+    """Whether segment ``s`` holds the figures' spectra or :func:`attach_spectra` gives them to it
+    (a segment not fitted has none): a report numbers its pages of spectra from this before it
+    draws them."""
+    return s.fft_frequency is not None or s.fit is not None
+
+
 def _attach_one(result: SpectrumResult, rec: Recording, tau, opts: dict, i: int) -> bool:
     """The figures' spectra of segment ``i`` into ``result`` (:func:`attach_spectra`); False when
     it holds them already or was not fitted."""
     s = result.segments[i]
-    if s.fft_frequency is not None or s.fit is None:
+    if s.fft_frequency is not None or not can_hold_spectra(s):
         return False
     g = s.segment
     again = analyze_segment(rec.theta[g.rows], _magnitude(rec, tau, g), result.gear, segment=g, **opts)
