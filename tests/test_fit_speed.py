@@ -102,7 +102,8 @@ def test_segment_errors_fast_path_matches(small):
     for name, model in (("a", m), ("b", one_way)):
         ref = segment_errors(model, small)
         assert list(fast[name].columns) == list(ref.columns) and len(fast[name]) == len(ref)
-        np.testing.assert_allclose(fast[name].to_numpy(float), ref.to_numpy(float), rtol=1e-12, atol=0)
+        # from the segments' normal equations: the same numbers to rounding (sums in another order)
+        np.testing.assert_allclose(fast[name].to_numpy(float), ref.to_numpy(float), rtol=1e-10, atol=0)
     assert len(fast["b"]) == int(np.sum(fast["a"]["direction"] == 1)) > 0   # the negative segments left out
 
 
