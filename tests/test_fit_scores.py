@@ -162,3 +162,16 @@ def test_free_motion_and_terms_are_not_scored_from_statistics(small):
     assert scores.segment_sums(m.with_terms({"kind": "inertia", "inertia": 1e-3}), small) is None
     reversed_rows = small.subset(np.arange(len(small))[::-1])      # rows not in segment order
     assert scores.layout(reversed_rows) is None
+
+
+def test_a_biased_segment_s_spread_is_taken_from_the_samples(small):
+    """Data 0.1 % above a model with a spread of 1e-8 of the torque about it: the residual sum of
+    squares is resolved (1e-6 of y'y) but the spread about the mean error (1e-16 of y'y) is not; its
+    standard deviation comes from the samples (without that rule it would be rounding noise)."""
+    m = _truth(0.8)
+    pred = m.evaluate(**small.inputs())
+    y = pred * (1 + 1e-3) + 1e-8 * np.abs(pred) * np.cos(np.arange(len(pred)))
+    data = replace(small, y=y, cache={}, notes=list(small.notes))
+    fast = segment_rows({"m": m}, data)["m"]
+    ref = segment_errors(m, data)
+    np.testing.assert_allclose(fast.to_numpy(float), ref.to_numpy(float), rtol=1e-10, atol=0)
