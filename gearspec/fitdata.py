@@ -210,7 +210,8 @@ class FitData:
         """The samples where ``mask`` is true (a boolean array, or an index array).
 
         The subset's sample arrays are gathered when they are first read (its ``segment`` at
-        once): a held-out fold's fit reads the per-segment statistics cached on the data
+        once unless the rows' segments are known, :meth:`segment_groups`): a held-out fold's fit
+        reads the per-segment statistics cached on the data
         (:func:`gearspec.identify.stats.segment_stats`), not the samples, so it copies none of the
         ten or more arrays of a long recording (10^7 rows: 0.7 GB per copy).  The values are those
         of ``getattr(self, name)[mask]``."""
@@ -233,7 +234,16 @@ class FitData:
             else:
                 pending[name] = (self.__dict__[name], rows)
         new.__dict__["_lazy"] = (len(rows), pending)
-        keep = unique_ids(new.segment)
+        lay = self._layout() if mask.dtype == bool or _increasing(rows) else None
+        if lay is not None:     # rows in order: the subset's segments and their rows from this one's
+            ids, bounds, dirs = lay
+            counts = np.diff(np.searchsorted(rows, bounds))
+            has = counts > 0
+            keep = ids[has]
+            new.__dict__["_segment_layout"] = (keep, np.concatenate(([0], np.cumsum(counts[has]))),
+                                               None if dirs is None else dirs[has])
+        else:
+            keep = unique_ids(new.segment)
         new.segments = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) \
             if len(self.segments) else self.segments
         new.notes = list(self.notes)
@@ -241,7 +251,45 @@ class FitData:
         return new
 
     def direction_subset(self, direction: int) -> "FitData":
+        """:meth:`subset` of the samples moving in ``direction`` (+1 / -1); the rows found from the
+        segments' directions when every segment moves one way (:meth:`segment_groups`), without
+        reading the samples' directions."""
+        lay = self._layout()
+        if lay is not None and lay[2] is not None:
+            ids, bounds, dirs = lay
+            return self.subset(np.repeat(dirs == direction, np.diff(bounds)))
         return self.subset(self.direction == direction)
+
+    def segment_groups(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
+        """The rows of every segment: ``(order, ids, bounds)`` as
+        :func:`gearspec.core.reduction.group_rows` gives them for ``segment``, with ``order`` None
+        when the rows are in ascending segment order (segment ``ids[j]`` is rows
+        ``bounds[j]:bounds[j + 1]``).  Known without reading the samples in a subset of data
+        whose rows were in that order (as :meth:`from_recording` writes them)."""
+        lay = self._layout()
+        if lay is not None:
+            return None, lay[0], lay[1]
+        return group_rows(self.segment)
+
+    def _layout(self):
+        """``(ids, bounds, dirs)`` of the segments when the rows are in ascending segment order
+        (``dirs``: each segment's direction, None when one moves both ways), else None; computed
+        once (one pass over ``segment`` and ``direction``), a subset's from its source's."""
+        d = self.__dict__
+        if "_segment_layout" not in d:
+            seg = self.segment
+            n = len(seg)
+            lay = None
+            if n and (n == 1 or bool(np.all(seg[1:] >= seg[:-1]))):
+                new = np.empty(n, bool)
+                new[0] = True
+                np.not_equal(seg[1:], seg[:-1], out=new[1:])
+                starts = np.flatnonzero(new)
+                dr = self.direction
+                one_way = np.array_equal(np.minimum.reduceat(dr, starts), np.maximum.reduceat(dr, starts))
+                lay = (seg[starts], np.append(starts, n), dr[starts] if one_way else None)
+            d["_segment_layout"] = lay
+        return d["_segment_layout"]
 
     def groups(self, by: str = "segment") -> np.ndarray:
         """Group id per sample for held-out folds: ``"segment"`` (blocks of free motion: their whole
@@ -261,8 +309,9 @@ class FitData:
         A segment's row is computed once and kept in :attr:`cache` (shared with the subsets, whose
         segments keep their ids), as :func:`gearspec.identify.stats.segment_stats` keeps its numbers:
         the held-out folds of the published procedure and the checks of every model read them again."""
-        order, sids, bounds = group_rows(self.segment)
-        ends = self.values_at("y", order[np.concatenate((bounds[:-1], bounds[1:] - 1))]) if len(sids) else []
+        order, sids, bounds = self.segment_groups()
+        edge = np.concatenate((bounds[:-1], bounds[1:] - 1))
+        ends = self.values_at("y", edge if order is None else order[edge]) if len(sids) else []
         tags = [(int(sid), int(b - a), float(y0), float(y1))
                 for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
         channels = tuple(c for c in ("load", "temperature", "t") if self.has(c))
@@ -270,7 +319,8 @@ class FitData:
         info = self.segments.set_index("segment") if len(self.segments) else None
         for j, tag in enumerate(tags):
             if tag not in cache:
-                cache[tag] = self._plateau_row(order[bounds[j]:bounds[j + 1]], tag[0], blocks, channels, info)
+                ii = np.arange(bounds[j], bounds[j + 1]) if order is None else order[bounds[j]:bounds[j + 1]]
+                cache[tag] = self._plateau_row(ii, tag[0], blocks, channels, info)
         df = pd.DataFrame([cache[tag] for tag in tags])
         return df.sort_values(["direction", "speed"], ascending=[False, True]).reset_index(drop=True)
 
@@ -302,6 +352,12 @@ class FitData:
 
     def channels(self) -> list[str]:
         return [f.name for f in fields(self) if f.name in _ARRAYS and getattr(self, f.name) is not None]
+
+
+def _increasing(rows) -> bool:
+    """Whether the index array ``rows`` is strictly increasing (rows in their order, none twice)."""
+    rows = np.asarray(rows)
+    return rows.ndim == 1 and (len(rows) < 2 or bool(np.all(rows[1:] > rows[:-1])))
 
 
 class _Gathered:
