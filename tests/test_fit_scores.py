@@ -175,3 +175,13 @@ def test_a_biased_segment_s_spread_is_taken_from_the_samples(small):
     fast = segment_rows({"m": m}, data)["m"]
     ref = segment_errors(m, data)
     np.testing.assert_allclose(fast.to_numpy(float), ref.to_numpy(float), rtol=1e-10, atol=0)
+
+
+@pytest.mark.parametrize("by", ["segment", "run"])
+def test_segment_folds_are_the_rows_folds(small, by):
+    from gearspec.identify.validate import _folds, _segment_folds
+
+    lay = scores.layout(small)
+    fold = _segment_folds(small, lay, by, 3)
+    assert np.array_equal(fold[lay.row_segment()], _folds(small, by, 3))
+    assert len(np.unique(fold)) == 3

@@ -9,7 +9,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from ..core.crossval import held_out, row_folds
+from ..core.crossval import deal_folds, group_summary, held_out, row_folds
 from ..core.reduction import unique_ids
 from ..errors import InputError
 from ..fitdata import FitData
@@ -69,6 +69,19 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
     return h.rmse, None
 
 
+def _segment_folds(data: FitData, lay, by: str, folds: int) -> np.ndarray | None:
+    """Fold of every segment of plateau data (:func:`.scores.layout`) by THE rule of
+    :mod:`gearspec.core.crossval`, dealt from per-segment summaries (each segment's direction, speed
+    and rows as its weight: :func:`~gearspec.core.crossval.group_summary`), the folds :func:`_folds`
+    gives its rows; None when a held-out group is not made of whole segments."""
+    groups = data.groups(by)
+    first = groups[lay.starts]
+    if not np.array_equal(np.minimum.reduceat(groups, lay.starts), np.maximum.reduceat(groups, lay.starts)):
+        return None
+    ids, sign, speed = group_summary(first, lay.direction, lay.v, weight=lay.n)
+    return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, first)]
+
+
 def _by_segment(fit_fn, data: FitData, by: str, folds: int):
     """:func:`holdout`'s cross-validation with whole segments as the units (plateau data,
     :func:`.scores.layout`): the same folds, fits and training data, each held-out segment's sum of
@@ -78,9 +91,8 @@ def _by_segment(fit_fn, data: FitData, by: str, folds: int):
     lay = scores.layout(data)
     if lay is None:
         return None
-    rows = _folds(data, by, folds)
-    fold = rows[lay.starts]
-    if not np.array_equal(fold, rows[lay.stops - 1]):    # a segment split between folds: by samples
+    fold = _segment_folds(data, lay, by, folds)
+    if fold is None:
         return None
     row_segment = lay.row_segment()
 
