@@ -251,14 +251,50 @@ class FitData:
         return new
 
     def direction_subset(self, direction: int) -> "FitData":
-        """:meth:`subset` of the samples moving in ``direction`` (+1 / -1); the rows found from the
-        segments' directions when every segment moves one way (:meth:`segment_groups`), without
-        reading the samples' directions."""
+        """:meth:`subset` of the samples moving in ``direction`` (+1 / -1); when every segment moves
+        one way (:meth:`segment_groups`), :meth:`segment_subset` of those segments, without reading
+        the samples' directions."""
         lay = self._layout()
         if lay is not None and lay[2] is not None:
-            ids, bounds, dirs = lay
-            return self.subset(np.repeat(dirs == direction, np.diff(bounds)))
+            return self.segment_subset(lay[2] == direction)
         return self.subset(self.direction == direction)
+
+    def segment_subset(self, select) -> "FitData":
+        """The samples of the segments ``select`` (a boolean array over the segments of
+        :meth:`segment_groups`, whose rows must be in segment order): :meth:`subset` of their rows,
+        the same values, with the rows themselves worked out only when a sample array is read (a
+        held-out fold's fit reads the cached per-segment statistics, not the samples)."""
+        lay = self._layout()
+        if lay is None:
+            raise ValueError("segment_subset needs rows in segment order")
+        ids, bounds, dirs = lay
+        sel = np.asarray(select, bool)
+        lazy = self.__dict__.get("_lazy")
+        new = object.__new__(_Subset)
+        own = _Ranges(bounds[:-1][sel], bounds[1:][sel])       # in this data's rows
+        pending, composed = {}, {}
+        for f in fields(self):
+            name = f.name
+            if name not in _ARRAYS:
+                new.__dict__[name] = getattr(self, name)
+            elif lazy is not None and name not in self.__dict__:     # not read here yet: from its source
+                source, at = lazy[1][name]
+                if id(at) not in composed:      # ranges of this data's segments in the source: taken
+                    composed[id(at)] = at.take(sel) if isinstance(at, _Ranges) else at[own.array()]
+                pending[name] = (source, composed[id(at)])
+            elif self.__dict__[name] is None:
+                new.__dict__[name] = None
+            else:
+                pending[name] = (self.__dict__[name], own)
+        new.__dict__["_lazy"] = (len(own), pending)
+        sizes = np.diff(bounds)[sel]
+        new.__dict__["_segment_layout"] = (ids[sel], np.concatenate(([0], np.cumsum(sizes))),
+                                           None if dirs is None else dirs[sel])
+        new.segments = self.segments[self.segments["segment"].isin(ids[sel])].reset_index(drop=True) \
+            if len(self.segments) else self.segments
+        new.notes = list(self.notes)
+        new.cache = self.cache
+        return new
 
     def segment_groups(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
         """The rows of every segment: ``(order, ids, bounds)`` as
@@ -354,6 +390,40 @@ class FitData:
         return [f.name for f in fields(self) if f.name in _ARRAYS and getattr(self, f.name) is not None]
 
 
+class _Ranges:
+    """Rows of a source array as consecutive ranges ``starts[j]:stops[j]`` (one per segment of a
+    :meth:`FitData.segment_subset`, in order): indexed like the array of those rows
+    (``ranges[idx]``), which is made (:meth:`array`) only when a whole sample array is gathered."""
+
+    def __init__(self, starts, stops):
+        self.starts, self.stops = np.asarray(starts, np.intp), np.asarray(stops, np.intp)
+        self.cum = np.concatenate(([0], np.cumsum(self.stops - self.starts)))
+        self._rows = None
+
+    def __len__(self) -> int:
+        return int(self.cum[-1])
+
+    def array(self) -> np.ndarray:
+        """The rows, ascending (the ``flatnonzero`` of a mask of these segments)."""
+        if self._rows is None:
+            n = self.stops - self.starts
+            self._rows = np.arange(len(self), dtype=np.intp) + np.repeat(self.starts - self.cum[:-1], n)
+        return self._rows
+
+    def take(self, sel) -> "_Ranges":
+        """The ranges of the segments ``sel`` (a boolean array over these)."""
+        return _Ranges(self.starts[sel], self.stops[sel])
+
+    def __getitem__(self, idx):
+        if self._rows is not None:
+            return self._rows[idx]
+        idx = np.asarray(idx)
+        if idx.dtype == bool or idx.size > len(self) // 16:
+            return self.array()[idx]
+        j = np.searchsorted(self.cum, idx, side="right") - 1
+        return self.starts[j] + (idx - self.cum[j])
+
+
 def _increasing(rows) -> bool:
     """Whether the index array ``rows`` is strictly increasing (rows in their order, none twice)."""
     rows = np.asarray(rows)
@@ -372,7 +442,7 @@ class _Gathered:
         d = obj.__dict__
         if self.name not in d:
             source, rows = d["_lazy"][1][self.name]
-            d[self.name] = source[rows]
+            d[self.name] = source[rows.array() if isinstance(rows, _Ranges) else rows]
         return d[self.name]
 
     def __set__(self, obj, value):

@@ -70,3 +70,25 @@ def test_rows_out_of_order_have_no_layout(data):
     order, ids, bounds = sub.segment_groups()
     assert order is not None                             # group_rows: the rows sorted by segment
     assert np.array_equal(ids, np.unique(data.segment))
+
+
+def test_segment_subsets_are_subsets_of_their_rows(data):
+    from gearspec.fitdata import _Ranges
+
+    order, ids, bounds = data.segment_groups()
+    rng = np.random.default_rng(3)
+    sel = rng.random(len(ids)) < 0.6
+    sub = data.segment_subset(sel)
+    ranges = sub.__dict__["_lazy"][1]["y"][1]
+    assert isinstance(ranges, _Ranges) and ranges._rows is None        # no row index made yet
+    mask = np.isin(data.segment, ids[sel])
+    idx = np.array([0, 5, len(sub) // 2, len(sub) - 1])
+    assert np.array_equal(sub.values_at("y", idx), data.y[mask][idx])    # read through the ranges
+    assert ranges._rows is None
+    ref = data.subset(mask)
+    d2 = sub.direction_subset(-1)           # a segment subset of a segment subset
+    _same(sub, ref)
+    _same(d2, ref.subset(ref.direction == -1))
+    _same(data.direction_subset(1), data.subset(data.direction == 1))
+    o, i2, b2 = d2.segment_groups()
+    assert o is None and np.array_equal(i2, np.unique(data.segment[mask & (data.direction == -1)]))

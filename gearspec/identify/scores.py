@@ -72,23 +72,18 @@ def layout(data) -> Layout | None:
 
 
 def _make_layout(data) -> Layout | None:
-    n = len(data)
-    if n == 0 or data.free_motion:
+    if len(data) == 0 or data.free_motion:
         return None
-    seg = data.segment
-    if n > 1 and not bool(np.all(seg[1:] >= seg[:-1])):
+    order, ids, bounds = data.segment_groups()      # (FitData's layout: order None when in segment order)
+    if order is not None:
         return None
-    new = np.empty(n, bool)
-    new[0] = True
-    np.not_equal(seg[1:], seg[:-1], out=new[1:])
-    starts = np.flatnonzero(new)
-    stops = np.append(starts[1:], n)
-    v, dr = data.v, data.direction
-    if not (np.array_equal(np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts))
-            and np.array_equal(np.minimum.reduceat(dr, starts), np.maximum.reduceat(dr, starts))
+    starts, stops = bounds[:-1], bounds[1:]
+    dirs = data._layout()[2]
+    v = data.v
+    if not (dirs is not None and np.array_equal(np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts))
             and bool(np.all(np.isfinite(data.y))) and bool(np.all(np.isfinite(v[starts])))):
         return None
-    return Layout(seg[starts], starts, stops, v[starts].astype(float), dr[starts].astype(int))
+    return Layout(ids, starts, stops, v[starts].astype(float), dirs.astype(int))
 
 
 class Fallback(Exception):

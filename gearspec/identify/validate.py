@@ -94,7 +94,6 @@ def _by_segment(fit_fn, data: FitData, by: str, folds: int):
     fold = _segment_folds(data, lay, by, folds)
     if fold is None:
         return None
-    row_segment = lay.row_segment()
 
     def score(m, test):
         out = scores.segment_sums(m, data, test)
@@ -103,7 +102,7 @@ def _by_segment(fit_fn, data: FitData, by: str, folds: int):
         return scores.check_finite(out.sse)
 
     try:
-        return held_out(fold, lambda train: fit_fn(data.subset(train[row_segment])), score, weight=lay.n)
+        return held_out(fold, lambda train: fit_fn(data.segment_subset(train)), score, weight=lay.n)
     except scores.Fallback:
         return None
 
