@@ -96,16 +96,20 @@ class FitData:
         vel, acc, n_locked, rows_locked = fit_derivatives(rec, seg.segments, lines)
         J = rec.gear.inertia if (inertia and rec.gear is not None and rec.gear.inertia) else None
         tau = rec.tau
-        idx = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
-        sid = np.concatenate([np.full(s.n, i) for i, s in enumerate(seg.segments)])
-        d = np.concatenate([np.full(s.n, s.direction, np.int8) for s in seg.segments])
+        # per-segment values repeated over each segment's rows (one np.repeat each, not one array per segment)
+        ns = np.array([s.n for s in seg.segments], dtype=np.intp)
+        per = lambda values, dtype=None: np.repeat(np.array(values, dtype=dtype), ns)  # noqa: E731
+        idx = np.arange(int(ns.sum())) + per([s.start for s in seg.segments], np.int64) - \
+            np.repeat(np.concatenate(([0], np.cumsum(ns)[:-1])), ns)
+        sid = per(range(len(ns)), np.int64)
+        d = per([s.direction for s in seg.segments], np.int8)
         # held-out unit: the segment; a block of free motion: its stretch (numbered after the segments)
         S = len(seg.segments)
-        group = np.concatenate([np.full(s.n, i if s.unit < 0 else S + s.unit) for i, s in enumerate(seg.segments)])
+        group = per([i if s.unit < 0 else S + s.unit for i, s in enumerate(seg.segments)], np.int64)
         # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
         # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
-        qs = np.concatenate([np.full(s.n, s.kind == "quasi_static") for s in seg.segments])
-        v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
+        qs = per([s.kind == "quasi_static" for s in seg.segments], bool)
+        v = per([s.velocity for s in seg.segments], float)
         if velocity == "measured" and not qs.all():
             v = np.where(qs, v, rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx])
         a = acc[idx]
