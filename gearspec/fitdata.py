@@ -422,7 +422,7 @@ class _Ranges:
         if self._rows is not None:
             return self._rows[idx]
         idx = np.asarray(idx)
-        if idx.dtype == bool or idx.size > len(self) // 16:
+        if idx.dtype == bool or idx.size > 4096:     # many rows (a pass over the samples): the rows once
             return self.array()[idx]
         j = np.searchsorted(self.cum, idx, side="right") - 1
         return self.starts[j] + (idx - self.cum[j])
