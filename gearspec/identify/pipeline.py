@@ -176,7 +176,9 @@ def _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds
 
 
 def _segment_errors(models: dict, data: FitData) -> dict:
-    """:func:`segment_errors` of every model, the data cut into one piece per segment once (a
+    """:func:`segment_errors` of every model.  On plateau data from the segments' normal equations
+    (:func:`.validate.segment_rows`, the same numbers to rounding); a model that cannot be scored so:
+    the data cut into one piece per segment once (a
     segment's rows are found by one sort, not by a mask over all rows per segment and model: the
     cost grows with rows, not rows x segments); the same rows, in the same order, as on the whole
     data.  Each model is evaluated once on all rows, or (a model that cannot predict one direction)
