@@ -154,13 +154,10 @@ def segment_sums(model, data, select=None, *, check: bool = True) -> Sums | None
 
 
 def _stats(data, freqs, segment_stats):
-    """The segments' statistics at ``freqs`` (the model's lines), kept on ``data`` per frequency set
-    (the per-segment numbers themselves are in ``data.cache``, shared with the fits)."""
-    kept = data.__dict__.setdefault("_score_stats", {})
-    key = tuple(freqs)
-    if key not in kept:
-        kept[key] = segment_stats(data, freqs)
-    return kept[key]
+    """The segments' statistics at ``freqs`` (the model's lines): :func:`~.stats.segment_stats`,
+    whose per-segment numbers are cached on ``data`` (and checked against the segment's rows), so
+    that after the fits this reads them."""
+    return segment_stats(data, freqs)
 
 
 def _coefficients(c, speed, stats, js):
