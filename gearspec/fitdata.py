@@ -96,16 +96,20 @@ class FitData:
         vel, acc, n_locked, rows_locked = fit_derivatives(rec, seg.segments, lines)
         J = rec.gear.inertia if (inertia and rec.gear is not None and rec.gear.inertia) else None
         tau = rec.tau
-        idx = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
-        sid = np.concatenate([np.full(s.n, i) for i, s in enumerate(seg.segments)])
-        d = np.concatenate([np.full(s.n, s.direction, np.int8) for s in seg.segments])
+        # per-segment values repeated over each segment's rows (one np.repeat each, not one array per segment)
+        ns = np.array([s.n for s in seg.segments], dtype=np.intp)
+        per = lambda values, dtype=None: np.repeat(np.array(values, dtype=dtype), ns)  # noqa: E731
+        idx = np.arange(int(ns.sum())) + per([s.start for s in seg.segments], np.int64) - \
+            np.repeat(np.concatenate(([0], np.cumsum(ns)[:-1])), ns)
+        sid = per(range(len(ns)), np.int64)
+        d = per([s.direction for s in seg.segments], np.int8)
         # held-out unit: the segment; a block of free motion: its stretch (numbered after the segments)
         S = len(seg.segments)
-        group = np.concatenate([np.full(s.n, i if s.unit < 0 else S + s.unit) for i, s in enumerate(seg.segments)])
+        group = per([i if s.unit < 0 else S + s.unit for i, s in enumerate(seg.segments)], np.int64)
         # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
         # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
-        qs = np.concatenate([np.full(s.n, s.kind == "quasi_static") for s in seg.segments])
-        v = np.concatenate([np.full(s.n, s.velocity) for s in seg.segments])
+        qs = per([s.kind == "quasi_static" for s in seg.segments], bool)
+        v = per([s.velocity for s in seg.segments], float)
         if velocity == "measured" and not qs.all():
             v = np.where(qs, v, rec.data["velocity"].to_numpy(dtype=float)[idx] if "velocity" in rec.data else vel[idx])
         a = acc[idx]
@@ -210,7 +214,8 @@ class FitData:
         """The samples where ``mask`` is true (a boolean array, or an index array).
 
         The subset's sample arrays are gathered when they are first read (its ``segment`` at
-        once): a held-out fold's fit reads the per-segment statistics cached on the data
+        once unless the rows' segments are known, :meth:`segment_groups`): a held-out fold's fit
+        reads the per-segment statistics cached on the data
         (:func:`gearspec.identify.stats.segment_stats`), not the samples, so it copies none of the
         ten or more arrays of a long recording (10^7 rows: 0.7 GB per copy).  The values are those
         of ``getattr(self, name)[mask]``."""
@@ -233,7 +238,16 @@ class FitData:
             else:
                 pending[name] = (self.__dict__[name], rows)
         new.__dict__["_lazy"] = (len(rows), pending)
-        keep = unique_ids(new.segment)
+        lay = self._layout() if mask.dtype == bool or _increasing(rows) else None
+        if lay is not None:     # rows in order: the subset's segments and their rows from this one's
+            ids, bounds, dirs = lay
+            counts = np.diff(np.searchsorted(rows, bounds))
+            has = counts > 0
+            keep = ids[has]
+            new.__dict__["_segment_layout"] = (keep, np.concatenate(([0], np.cumsum(counts[has]))),
+                                               None if dirs is None else dirs[has])
+        else:
+            keep = unique_ids(new.segment)
         new.segments = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) \
             if len(self.segments) else self.segments
         new.notes = list(self.notes)
@@ -241,7 +255,81 @@ class FitData:
         return new
 
     def direction_subset(self, direction: int) -> "FitData":
+        """:meth:`subset` of the samples moving in ``direction`` (+1 / -1); when every segment moves
+        one way (:meth:`segment_groups`), :meth:`segment_subset` of those segments, without reading
+        the samples' directions."""
+        lay = self._layout()
+        if lay is not None and lay[2] is not None:
+            return self.segment_subset(lay[2] == direction)
         return self.subset(self.direction == direction)
+
+    def segment_subset(self, select) -> "FitData":
+        """The samples of the segments ``select`` (a boolean array over the segments of
+        :meth:`segment_groups`, whose rows must be in segment order): :meth:`subset` of their rows,
+        the same values, with the rows themselves worked out only when a sample array is read (a
+        held-out fold's fit reads the cached per-segment statistics, not the samples)."""
+        lay = self._layout()
+        if lay is None:
+            raise ValueError("segment_subset needs rows in segment order")
+        ids, bounds, dirs = lay
+        sel = np.asarray(select, bool)
+        lazy = self.__dict__.get("_lazy")
+        new = object.__new__(_Subset)
+        own = _Ranges(bounds[:-1][sel], bounds[1:][sel])       # in this data's rows
+        pending, composed = {}, {}
+        for f in fields(self):
+            name = f.name
+            if name not in _ARRAYS:
+                new.__dict__[name] = getattr(self, name)
+            elif lazy is not None and name not in self.__dict__:     # not read here yet: from its source
+                source, at = lazy[1][name]
+                if id(at) not in composed:      # ranges of this data's segments in the source: taken
+                    composed[id(at)] = at.take(sel) if isinstance(at, _Ranges) else at[own.array()]
+                pending[name] = (source, composed[id(at)])
+            elif self.__dict__[name] is None:
+                new.__dict__[name] = None
+            else:
+                pending[name] = (self.__dict__[name], own)
+        new.__dict__["_lazy"] = (len(own), pending)
+        sizes = np.diff(bounds)[sel]
+        new.__dict__["_segment_layout"] = (ids[sel], np.concatenate(([0], np.cumsum(sizes))),
+                                           None if dirs is None else dirs[sel])
+        new.segments = self.segments[self.segments["segment"].isin(ids[sel])].reset_index(drop=True) \
+            if len(self.segments) else self.segments
+        new.notes = list(self.notes)
+        new.cache = self.cache
+        return new
+
+    def segment_groups(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
+        """The rows of every segment: ``(order, ids, bounds)`` as
+        :func:`gearspec.core.reduction.group_rows` gives them for ``segment``, with ``order`` None
+        when the rows are in ascending segment order (segment ``ids[j]`` is rows
+        ``bounds[j]:bounds[j + 1]``).  Known without reading the samples in a subset of data
+        whose rows were in that order (as :meth:`from_recording` writes them)."""
+        lay = self._layout()
+        if lay is not None:
+            return None, lay[0], lay[1]
+        return group_rows(self.segment)
+
+    def _layout(self):
+        """``(ids, bounds, dirs)`` of the segments when the rows are in ascending segment order
+        (``dirs``: each segment's direction, None when one moves both ways), else None; computed
+        once (one pass over ``segment`` and ``direction``), a subset's from its source's."""
+        d = self.__dict__
+        if "_segment_layout" not in d:
+            seg = self.segment
+            n = len(seg)
+            lay = None
+            if n and (n == 1 or bool(np.all(seg[1:] >= seg[:-1]))):
+                new = np.empty(n, bool)
+                new[0] = True
+                np.not_equal(seg[1:], seg[:-1], out=new[1:])
+                starts = np.flatnonzero(new)
+                dr = self.direction
+                one_way = np.array_equal(np.minimum.reduceat(dr, starts), np.maximum.reduceat(dr, starts))
+                lay = (seg[starts], np.append(starts, n), dr[starts] if one_way else None)
+            d["_segment_layout"] = lay
+        return d["_segment_layout"]
 
     def groups(self, by: str = "segment") -> np.ndarray:
         """Group id per sample for held-out folds: ``"segment"`` (blocks of free motion: their whole
@@ -261,8 +349,9 @@ class FitData:
         A segment's row is computed once and kept in :attr:`cache` (shared with the subsets, whose
         segments keep their ids), as :func:`gearspec.identify.stats.segment_stats` keeps its numbers:
         the held-out folds of the published procedure and the checks of every model read them again."""
-        order, sids, bounds = group_rows(self.segment)
-        ends = self.values_at("y", order[np.concatenate((bounds[:-1], bounds[1:] - 1))]) if len(sids) else []
+        order, sids, bounds = self.segment_groups()
+        edge = np.concatenate((bounds[:-1], bounds[1:] - 1))
+        ends = self.values_at("y", edge if order is None else order[edge]) if len(sids) else []
         tags = [(int(sid), int(b - a), float(y0), float(y1))
                 for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
         channels = tuple(c for c in ("load", "temperature", "t") if self.has(c))
@@ -270,7 +359,8 @@ class FitData:
         info = self.segments.set_index("segment") if len(self.segments) else None
         for j, tag in enumerate(tags):
             if tag not in cache:
-                cache[tag] = self._plateau_row(order[bounds[j]:bounds[j + 1]], tag[0], blocks, channels, info)
+                ii = np.arange(bounds[j], bounds[j + 1]) if order is None else order[bounds[j]:bounds[j + 1]]
+                cache[tag] = self._plateau_row(ii, tag[0], blocks, channels, info)
         df = pd.DataFrame([cache[tag] for tag in tags])
         return df.sort_values(["direction", "speed"], ascending=[False, True]).reset_index(drop=True)
 
@@ -304,6 +394,46 @@ class FitData:
         return [f.name for f in fields(self) if f.name in _ARRAYS and getattr(self, f.name) is not None]
 
 
+class _Ranges:
+    """Rows of a source array as consecutive ranges ``starts[j]:stops[j]`` (one per segment of a
+    :meth:`FitData.segment_subset`, in order): indexed like the array of those rows
+    (``ranges[idx]``), which is made (:meth:`array`) only when a whole sample array is gathered."""
+
+    def __init__(self, starts, stops):
+        self.starts, self.stops = np.asarray(starts, np.intp), np.asarray(stops, np.intp)
+        self.cum = np.concatenate(([0], np.cumsum(self.stops - self.starts)))
+        self._rows = None
+
+    def __len__(self) -> int:
+        return int(self.cum[-1])
+
+    def array(self) -> np.ndarray:
+        """The rows, ascending (the ``flatnonzero`` of a mask of these segments)."""
+        if self._rows is None:
+            n = self.stops - self.starts
+            self._rows = np.arange(len(self), dtype=np.intp) + np.repeat(self.starts - self.cum[:-1], n)
+        return self._rows
+
+    def take(self, sel) -> "_Ranges":
+        """The ranges of the segments ``sel`` (a boolean array over these)."""
+        return _Ranges(self.starts[sel], self.stops[sel])
+
+    def __getitem__(self, idx):
+        if self._rows is not None:
+            return self._rows[idx]
+        idx = np.asarray(idx)
+        if idx.dtype == bool or idx.size > 4096:     # many rows (a pass over the samples): the rows once
+            return self.array()[idx]
+        j = np.searchsorted(self.cum, idx, side="right") - 1
+        return self.starts[j] + (idx - self.cum[j])
+
+
+def _increasing(rows) -> bool:
+    """Whether the index array ``rows`` is strictly increasing (rows in their order, none twice)."""
+    rows = np.asarray(rows)
+    return rows.ndim == 1 and (len(rows) < 2 or bool(np.all(rows[1:] > rows[:-1])))
+
+
 class _Gathered:
     """A sample array of a :class:`_Subset`: gathered from its source array when first read, then kept."""
 
@@ -316,7 +446,7 @@ class _Gathered:
         d = obj.__dict__
         if self.name not in d:
             source, rows = d["_lazy"][1][self.name]
-            d[self.name] = source[rows]
+            d[self.name] = source[rows.array() if isinstance(rows, _Ranges) else rows]
         return d[self.name]
 
     def __set__(self, obj, value):

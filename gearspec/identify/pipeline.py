@@ -24,7 +24,7 @@ from ..segment import find_segments, free_motion
 from .joint import fit, refit
 from .published import line_amplitudes, silo4_published
 from .stats import harmonic_specs
-from .validate import _safe_rmse, holdout, segment_errors, segment_row
+from .validate import _safe_rmse, holdout, segment_errors, segment_row, segment_rows
 
 __all__ = ["compare", "FitResult", "identify_recording"]
 
@@ -176,7 +176,9 @@ def _identify(rec, law, segmentation, gear, harmonics, published, holdout, folds
 
 
 def _segment_errors(models: dict, data: FitData) -> dict:
-    """:func:`segment_errors` of every model, the data cut into one piece per segment once (a
+    """:func:`segment_errors` of every model.  On plateau data from the segments' normal equations
+    (:func:`.validate.segment_rows`, the same numbers to rounding); a model that cannot be scored so:
+    the data cut into one piece per segment once (a
     segment's rows are found by one sort, not by a mask over all rows per segment and model: the
     cost grows with rows, not rows x segments); the same rows, in the same order, as on the whole
     data.  Each model is evaluated once on all rows, or (a model that cannot predict one direction)
@@ -185,13 +187,18 @@ def _segment_errors(models: dict, data: FitData) -> dict:
     grouped by stretch) go through :func:`segment_errors` as they are."""
     if data.free_motion or len(data) == 0:
         return {name: segment_errors(m, data) for name, m in models.items()}
+    names = list(models)
+    fast = segment_rows(models, data) or {}
+    out = {name: fast[name] for name in names if fast.get(name) is not None}
+    models = {name: m for name, m in models.items() if name not in out}
+    if not models:
+        return {name: out[name] for name in names}
     group = data.groups("segment")
     order, _, bounds = group_rows(group)
     starts = bounds[:-1]
     pieces = [order[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     first_dir = data.direction[order[starts]]
     inputs = data.inputs()
-    out = {}
     for name, m in models.items():
         try:    # every row at once (no gathered copies of the inputs); per direction if one fails
             whole = m.evaluate(**inputs)
@@ -210,4 +217,4 @@ def _segment_errors(models: dict, data: FitData) -> dict:
                 at += len(pieces[j])
         recs = [segment_row(data, pieces[j], preds[j], group[pieces[j][0]]) for j in range(len(pieces)) if j in preds]
         out[name] = pd.DataFrame(recs) if recs else pd.DataFrame([])
-    return out
+    return {name: out[name] for name in names}

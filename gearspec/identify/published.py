@@ -20,7 +20,6 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from ..core.reduction import unique_ids
 from ..fitdata import FitData
 from ..model import LAWS, RPM, Direction, FrictionModel, Harmonic
 from . import validate
@@ -104,7 +103,7 @@ def silo4_published(data: FitData, amplitudes=None, *, harmonics=None, gear=None
     model = _published(data, amplitudes, specs, high_speed, set(constant))
     if holdout:
         def fit_fold(train):  # the plateaus and line amplitudes of the training segments only
-            amp = amplitudes[amplitudes["segment"].isin(unique_ids(train.segment))]
+            amp = amplitudes[amplitudes["segment"].isin(train.segment_groups()[1])]
             return _published(train, amp, specs, high_speed, set(constant), rmse=False)
 
         model.rmse_holdout, model.rmse_holdout_reason = validate.holdout(fit_fold, data, by=holdout, folds=folds)

@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..core.reduction import GroupNormals, group_normal_equations, group_rows, harmonic_columns, partial_out_last
+from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns, partial_out_last
 from ..errors import InputError
 from ..fitdata import FitData
 from ..gears import GearTrain, load_gear
@@ -121,20 +121,22 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
     that cross-validation and refits do not pass over the samples again.
     """
     freqs = np.asarray(list(frequencies), dtype=float)
-    if acc and data.acc is None:
+    if acc and not data.has("acc"):
         raise InputError("the inertia cannot be identified: the fit data have no acceleration")
     # one entry per segment whatever min_cycles (it only decides ``active``, from the cached cycles)
     key = (tuple(freqs.tolist()), float(nyquist_fraction), bool(acc))
     cache = data.cache.setdefault(("segment_stats",) + key, {})
-    order, sids, bounds = group_rows(data.segment)
-    ends = data.values_at("y", order[np.concatenate((bounds[:-1], bounds[1:] - 1))]) if len(sids) else np.zeros(0)
+    order, sids, bounds = data.segment_groups()
+    edge = np.concatenate((bounds[:-1], bounds[1:] - 1))
+    ends = data.values_at("y", edge if order is None else order[edge]) if len(sids) else np.zeros(0)
     tags = [(int(sid), int(b - a), float(y0), float(y1))
             for sid, a, b, y0, y1 in zip(sids, bounds[:-1], bounds[1:], ends[:len(sids)], ends[len(sids):])]
     missing = [j for j, tag in enumerate(tags) if tag not in cache]
     if missing:
         change = data.speed_change()
         for part in _chunks([bounds[j + 1] - bounds[j] for j in missing]):
-            new = _segments_stats(data, [order[bounds[missing[i]]:bounds[missing[i] + 1]] for i in part], freqs,
+            new = _segments_stats(data, [np.arange(bounds[missing[i]], bounds[missing[i] + 1]) if order is None
+                                         else order[bounds[missing[i]]:bounds[missing[i] + 1]] for i in part], freqs,
                                   nyquist_fraction, acc, change)
             for i, r in zip(part, new):
                 cache[tags[missing[i]]] = r
@@ -147,7 +149,7 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
 
     sampled, cycles = stack("sampled").astype(bool), stack("cycles")
     return SegmentStats(stack("G"), stack("g"), stack("yy"), stack("n").astype(int), segment=sids, speed=stack("speed"),
-                        load=stack("load") if data.load is not None else None, active=(cycles >= min_cycles) & sampled,
+                        load=stack("load") if data.has("load") else None, active=(cycles >= min_cycles) & sampled,
                         sampled=sampled, cycles=cycles, sigma2=stack("sigma2"),
                         beta_hat=stack("beta_hat"), rss_hat=stack("rss_hat"), frequencies=freqs, acc=bool(acc),
                         free=_free_flags(data, sids))
@@ -195,16 +197,18 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, nyquist_frac
     n = np.array([len(g) for g in groups], dtype=np.int64)
     starts = np.concatenate(([0], np.cumsum(n)[:-1]))
     stops = starts + n
-    y = data.direction[ii] * data.y[ii]
-    speed = np.add.reduceat(np.abs(data.v[ii]), starts) / n
-    load = np.add.reduceat(np.abs(data.load[ii]), starts) / n if data.load is not None else np.zeros(len(n))
+    at = lambda name: data.values_at(name, ii)  # noqa: E731  (the chunk's rows only, not a subset's whole array)
+    dr = at("direction")
+    y = dr * at("y")
+    speed = np.add.reduceat(np.abs(at("v")), starts) / n
+    load = np.add.reduceat(np.abs(at("load")), starts) / n if data.has("load") else np.zeros(len(n))
     sampled = np.zeros((len(n), K), bool)
     cycles = np.zeros((len(n), K))
     X = np.ones((len(ii), P))
     if K:
-        if data.theta is None:
+        if not data.has("theta"):
             raise InputError("harmonics need positions (theta) in the fit data")
-        th = data.theta[ii]
+        th = at("theta")
         cycles = freqs * (np.maximum.reduceat(th, starts) - np.minimum.reduceat(th, starts))[:, None]
         # THE position-Nyquist rule (gearspec.spectrum.position_nyquist), on the samples in time order
         sampled = freqs < nyquist_fraction * group_position_nyquist(th, starts, stops)[:, None]
@@ -213,7 +217,7 @@ def _segments_stats(data: FitData, groups: list, freqs: np.ndarray, nyquist_frac
         if not sampled.all():   # (times 1 changes nothing: skipped when every line is sampled)
             X[:, 1:1 + 2 * K] *= np.repeat(np.repeat(sampled, 2, axis=1), n, axis=0)
     if acc:
-        X[:, 1 + 2 * K] = data.direction[ii] * data.acc[ii]
+        X[:, 1 + 2 * K] = dr * at("acc")
     if T:
         X[:, -1] = change[ii]
     G, g, yy = group_normal_equations(X, y, starts, stops)

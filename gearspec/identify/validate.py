@@ -9,13 +9,14 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from ..core.crossval import held_out, row_folds
+from ..core.crossval import deal_folds, group_summary, held_out, row_folds
 from ..core.reduction import unique_ids
 from ..errors import InputError
 from ..fitdata import FitData
 from ..model import FrictionModel
+from . import scores
 
-__all__ = ["holdout", "holdout_rmse", "segment_errors", "segment_row", "inverted_sign", "negative_viscous"]
+__all__ = ["holdout", "holdout_rmse", "segment_errors", "segment_row", "segment_rows", "inverted_sign", "negative_viscous"]
 
 
 def _folds(data: FitData, by: str, folds: int) -> np.ndarray:
@@ -54,7 +55,9 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
         r = np.asarray(m.residual(t) if residual is None else residual(m, t), dtype=float)
         return np.where(np.isfinite(r), r * r, np.nan)
 
-    h = held_out(_folds(data, by, folds), lambda train: fit_fn(data.subset(train)), score)
+    h = _by_segment(fit_fn, data, by, folds) if residual is None else None
+    if h is None:
+        h = held_out(_folds(data, by, folds), lambda train: fit_fn(data.subset(train)), score)
     n, failed = h.covered, h.failed
     if not n:
         why = failed[0] if failed else f"every {by} falls into one fold"
@@ -66,13 +69,59 @@ def holdout(fit_fn: Callable[[FitData], FrictionModel], data: FitData, *, by: st
     return h.rmse, None
 
 
+def _segment_folds(data: FitData, lay, by: str, folds: int) -> np.ndarray | None:
+    """Fold of every segment of plateau data (:func:`.scores.layout`) by THE rule of
+    :mod:`gearspec.core.crossval`, dealt from per-segment summaries (each segment's direction, speed
+    and rows as its weight: :func:`~gearspec.core.crossval.group_summary`), the folds :func:`_folds`
+    gives its rows; None when a held-out group is not made of whole segments."""
+    groups = data.groups(by)
+    first = groups[lay.starts]
+    if not np.array_equal(np.minimum.reduceat(groups, lay.starts), np.maximum.reduceat(groups, lay.starts)):
+        return None
+    ids, sign, speed = group_summary(first, lay.direction, lay.v, weight=lay.n)
+    return deal_folds(sign, speed, ids, folds)[np.searchsorted(ids, first)]
+
+
+def _by_segment(fit_fn, data: FitData, by: str, folds: int):
+    """:func:`holdout`'s cross-validation with whole segments as the units (plateau data,
+    :func:`.scores.layout`): the same folds, fits and training data, each held-out segment's sum of
+    squared errors from its normal equations (:func:`.scores.segment_sums`) instead of the model's
+    predictions at its samples.  None when the data (or a fold's model) cannot be scored so: then
+    by samples."""
+    lay = scores.layout(data)
+    if lay is None:
+        return None
+    fold = _segment_folds(data, lay, by, folds)
+    if fold is None:
+        return None
+
+    def score(m, test):
+        out = scores.segment_sums(m, data, test)
+        if out is None:
+            raise scores.Fallback
+        return scores.check_finite(out.sse)
+
+    try:
+        return held_out(fold, lambda train: fit_fn(data.segment_subset(train)), score, weight=lay.n)
+    except scores.Fallback:
+        return None
+
+
 def _safe_rmse(model: FrictionModel, data: FitData) -> float | None:
-    """In-sample rmse (Nm) on the samples of the directions ``model`` has parameters for; None if none."""
+    """In-sample rmse (Nm) on the samples of the directions ``model`` has parameters for; None if none.
+    On plateau data from the segments' normal equations (:func:`.scores.segment_sums`)."""
+    dirs = [d for d, dname in ((1, "positive"), (-1, "negative"))
+            if all(model.params(dname).get(k) is not None for k in model.law_spec.params
+                   if k not in model.law_spec.optional)]
+    lay = scores.layout(data)
+    if lay is not None:
+        sel = np.flatnonzero(np.isin(lay.direction, dirs))
+        out = scores.segment_sums(model, data, sel) if len(sel) else None
+        if out is not None and np.all(np.isfinite(out.sse)):
+            return float(np.sqrt(np.sum(out.sse) / np.sum(lay.n[sel])))
     ok = np.zeros(len(data), bool)
-    for d, dname in ((1, "positive"), (-1, "negative")):
-        p = model.params(dname)
-        if all(p.get(k) is not None for k in model.law_spec.params if k not in model.law_spec.optional):
-            ok |= data.direction == d
+    for d in dirs:
+        ok |= data.direction == d
     if ok.all():        # every sample: the data as they are (the same rows, no copy)
         return model.rmse_on(data)
     return model.rmse_on(data.subset(ok)) if ok.any() else None
@@ -102,13 +151,60 @@ def segment_row(data: FitData, ii: np.ndarray, pred: np.ndarray, sid) -> dict:
     d = int(data.direction[ii[0]])
     y = data.y[ii]
     err = d * (pred - y)
-    level = float(np.mean(d * y))
-    return {"segment": int(sid), "run": int(data.run[ii[0]]), "direction": d,
-            "speed": float(np.mean(np.abs(data.v[ii]))), "n": len(ii), "level": level,
-            "e": float(np.mean(err)), "s_e": float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
-            "rmse": float(np.sqrt(np.mean(err ** 2))),
+    return _row(sid, data.run[ii[0]], d, float(np.mean(np.abs(data.v[ii]))), len(ii), float(np.mean(d * y)),
+                float(np.mean(err)), float(np.std(err, ddof=1)) if len(err) > 1 else float("nan"),
+                float(np.sqrt(np.mean(err ** 2))))
+
+
+def _row(sid, run, d, speed, n, level, e, s_e, rmse) -> dict:
+    """:func:`segment_errors`' row from its numbers."""
+    return {"segment": int(sid), "run": int(run), "direction": d, "speed": speed, "n": n, "level": level,
+            "e": e, "s_e": s_e, "rmse": rmse,
             # in percent of the mean friction; undefined (NaN) where that mean is 0
-            "e_percent": 100 * float(np.mean(err)) / level if level != 0 else float("nan")}
+            "e_percent": 100 * e / level if level != 0 else float("nan")}
+
+
+def segment_rows(models: dict, data: FitData) -> dict | None:
+    """:func:`segment_errors`' rows of every model in ``models`` (name -> model) on plateau data
+    (:func:`.scores.layout`), from the segments' normal equations (:func:`.scores.segment_sums`): the
+    mean error ``(sum of predictions - sum of data) / n``, its standard deviation from the residual
+    sum of squares less ``n e^2``; the level, speed and run from the samples as
+    :func:`segment_row` takes them.  A segment whose deviations about its mean error would lose
+    digits to cancellation (their sum of squares below :data:`.scores.CANCEL` of the torque's, or
+    the sum of errors below it of the sum of the torque) is computed from the model's predictions
+    at its samples.  None
+    (name -> None for one model) where the data (the model) cannot be scored so."""
+    lay = scores.layout(data)
+    if lay is None:
+        return None
+    S = len(lay.ids)
+    group = data.groups("segment")
+    common = []     # model-independent: (id, run, level, speed) per segment, as segment_row has them
+    for j in range(S):
+        a, b = int(lay.starts[j]), int(lay.stops[j])
+        d = int(lay.direction[j])
+        common.append((group[a], data.run[a], float(np.mean(d * data.y[a:b])), float(np.mean(np.abs(data.v[a:b])))))
+    out = {}
+    for name, m in models.items():
+        sums = scores.segment_sums(m, data, check=False)
+        if sums is None or not np.all(np.isfinite(sums.sse[sums.ok])):
+            out[name] = None
+            continue
+        recs = []
+        for j in np.flatnonzero(sums.ok):
+            n, d = int(lay.n[j]), int(lay.direction[j])
+            sid, run, level, speed = common[j]
+            diff = sums.pred[j] - sums.y[j]
+            e = float(diff / n)
+            dev = sums.sse[j] - n * e * e
+            if n < 2 or not (abs(diff) > scores.CANCEL * abs(sums.y[j]) and dev > scores.CANCEL * sums.yy[j]):
+                a, b = int(lay.starts[j]), int(lay.stops[j])
+                recs.append(segment_row(data, np.arange(a, b), scores.predict_rows(m, data, a, b), sid))
+                continue
+            recs.append(_row(sid, run, d, speed, n, level, e, float(np.sqrt(dev / (n - 1))),
+                             float(np.sqrt(sums.sse[j] / n))))
+        out[name] = pd.DataFrame(recs) if recs else pd.DataFrame([])
+    return out
 
 
 # ---------------------------------------------------------------------- checks of a fitted model

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..core.parallel import forked_map
 from ..identify import FitResult
 from ..model import RPM
 from ..plots import fit as fplots
@@ -56,14 +57,19 @@ def write_fit_report(result: FitResult, out: str | Path, command: str = "", reco
         partial = replace(data, y=base.evaluate(data.theta, data.v) + m.residual(data), cache={})
         plate = partial.plateaus()
         points = "block means, fitted inertia and lines removed"
-    figs = {"stribeck": fplots.plot_stribeck(plate, result.models, out / "stribeck.png", unit=unit, points=points)}
+    # the figures are independent (a second each on 10^7 rows): drawn in forked workers, each as it
+    # would be here (core.parallel.forked_map; the same files)
+    draw = {"stribeck": lambda: fplots.plot_stribeck(plate, result.models, out / "stribeck.png", unit=unit,
+                                                     points=points)}
     if result.amplitudes is not None and len(result.amplitudes):
-        figs["amplitude"] = fplots.plot_amplitude_fit(result.amplitudes, result.models, out / "amplitude_fit.png",
-                                                      unit=unit)
+        draw["amplitude"] = lambda: fplots.plot_amplitude_fit(result.amplitudes, result.models,
+                                                              out / "amplitude_fit.png", unit=unit)
         result.amplitudes.to_csv(out / "line_amplitudes.csv", index=False)
     if any(h.get("amplitude") for d in (1, -1) for h in m.harmonics(d)):
-        figs["position"] = fplots.plot_model_vs_data(data, m, _example_segments(data), out / "model_vs_data.png")
-    figs["residuals"] = fplots.plot_residuals(result.errors, out / "residuals.png", unit=unit)
+        draw["position"] = lambda: fplots.plot_model_vs_data(data, m, _example_segments(data),
+                                                             out / "model_vs_data.png")
+    draw["residuals"] = lambda: fplots.plot_residuals(result.errors, out / "residuals.png", unit=unit)
+    figs = dict(zip(draw, forked_map(lambda f: f(), list(draw.values()))))
     m.to_json(out / "model.json")
     for name, df in result.errors.items():
         df.to_csv(out / f"segment_errors_{_slug(name)}.csv", index=False)
