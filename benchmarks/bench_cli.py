@@ -48,8 +48,9 @@ EXTRA = {"fit": ["--law", "silo4"]}
 
 
 def run_child(argv, max_rss: float, timeout: float, poll: float = 0.2) -> dict:
-    """Run ``argv``; wall time (s), peak RSS (bytes, ``os.wait4``), exit status, and why it was
-    stopped (memory over ``max_rss`` bytes, polled in /proc; or over ``timeout`` s)."""
+    """Run ``argv``; wall time (s), peak memory (bytes: the larger of the largest process's peak RSS,
+    ``os.wait4``, and the process tree's memory polled in /proc, :func:`_tree_rss`), exit status, and
+    why it was stopped (memory over ``max_rss`` bytes; or over ``timeout`` s)."""
     t0 = time.perf_counter()
     p = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
     stopped, seen = None, 0
@@ -74,7 +75,10 @@ def run_child(argv, max_rss: float, timeout: float, poll: float = 0.2) -> dict:
 
 
 def _tree_rss(pid: int) -> int:
-    """Resident memory (bytes) of ``pid`` and its direct children (Dask or loky workers)."""
+    """Memory (bytes) of ``pid`` and its direct children (forked workers, Dask or loky workers): the
+    sum of their proportional set sizes (``Pss`` in /proc/PID/smaps_rollup: a page shared by k
+    processes counts 1/k in each), so that a worker forked from the command does not count the
+    command's pages it shares a second time; ``VmRSS`` where the kernel has no smaps_rollup."""
     total = 0
     pids = [pid]
     try:
@@ -82,13 +86,20 @@ def _tree_rss(pid: int) -> int:
     except OSError:
         pass
     for q in pids:
+        total += _memory(q)
+    return total
+
+
+def _memory(pid: int) -> int:
+    """Proportional set size of one process (bytes), else its resident set size, else 0 (gone)."""
+    for path, key in ((f"/proc/{pid}/smaps_rollup", "Pss:"), (f"/proc/{pid}/status", "VmRSS:")):
         try:
-            for line in Path(f"/proc/{q}/status").read_text().splitlines():
-                if line.startswith("VmRSS:"):
-                    total += int(line.split()[1]) * 1024
+            for line in Path(path).read_text().splitlines():
+                if line.startswith(key):
+                    return int(line.split()[1]) * 1024
         except OSError:
             continue
-    return total
+    return 0
 
 
 def read_baseline(csv: Path, repeat: int = 2) -> tuple[float, int, int]:
