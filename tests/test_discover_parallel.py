@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gearspec.core import parallel
-from gearspec.discover import accept, pool as pool_mod
+from gearspec.discover import accept
 from gearspec.discover.law import Part, canonical, cross_validate, cross_validate_linear, fit_law, fold_ids
 from gearspec.discover.moments import moments
 from gearspec.discover.pool import _addable, _neighbours, _Pool, _signature
@@ -42,7 +42,6 @@ def two(monkeypatch):
             calls.append(len(items))
         return real(fn, items, **kw)
 
-    monkeypatch.setattr(pool_mod, "forked_map", counted)
     monkeypatch.setattr(parallel, "forked_map", counted)
     return calls
 
@@ -74,7 +73,8 @@ def _state(pool: _Pool) -> tuple:
     """Everything the pool holds, in its order: fits (signature, sse, z, w, origin, threshold),
     screened laws (held-out sse, rmse, predictions), the refitted and the tried laws."""
     fits = [(s, f.sse.tobytes(), f.z.tobytes(), f.w.tobytes(), o, t) for s, (f, o, t) in pool.fits.items()]
-    cands = [(s, c.cv_sse.tobytes(), c.rmse_holdout, c.cv_pred.tobytes(), c.fit.z.tobytes()) for s, c in pool.cands.items()]
+    cands = [(s, c.cv_sse.tobytes(), c.rmse_holdout, c.cv_pred.tobytes(), c.fit.z.tobytes())
+             for s, c in pool.cands.items()]
     return fits, cands, sorted(pool.full), sorted(pool.tried, key=repr)
 
 

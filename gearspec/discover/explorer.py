@@ -28,6 +28,7 @@ from .screen import screen_lines
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
 from .accept import backward, validate_law
 from .blocks import SegmentDesign
+from .forked import fits_map
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
@@ -155,10 +156,11 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
     -------
     DiscoveryResult
     """
-    from threadpoolctl import threadpool_limits
+    from ..core.reduction import one_blas_thread
 
-    # the work is many small dense problems: BLAS threads only add overhead (and contend)
-    with threadpool_limits(limits=1, user_api="blas"):
+    # the work is many small dense problems: BLAS threads only add overhead (and contend); the
+    # controller made here is inherited by the forked workers (forked_map), which then need not make one
+    with one_blas_thread():
         t_start = time.perf_counter()
         say = progress or (lambda text: None)
         run = _prepare(data, t_start, frequencies=frequencies, gear=gear, spectrum=spectrum, library=library,
@@ -529,11 +531,10 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     the mean friction of every segment (data, the selected law, each reference) for the plots."""
     t0 = time.perf_counter()
     M = run.M
-    refs: list[Reference] = []
-    for law in references or ():
-        refs.append(_paper_law(data, M, law, run.specs, run.fold))
-        if say is not None and refs[-1].model is not None:
-            say(f"reference law {refs[-1].name} fitted on the same folds")
+    refs: list[Reference] = fits_map(lambda law: _paper_law(data, M, law, run.specs, run.fold), references or ())
+    for r in refs:
+        if say is not None and r.model is not None:
+            say(f"reference law {r.name} fitted on the same folds")
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
     levels = {"data": M.b[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}

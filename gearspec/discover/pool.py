@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ..core.parallel import forked_map
+from .forked import MIN_QUICK, fits_map
 from .law import LawFit, Part, canonical, cross_validate, cross_validate_linear, fit_law
 from .library import FAMILIES, Library
 from .moments import Moments
@@ -137,6 +137,7 @@ class _Pool:
         self.tried: set = set()
         self.cands: dict = {}         # signature -> Candidate (screened)
         self.full: set = set()        # signatures with full held-out refits
+        self.screened: dict = {}      # signature -> (fit, its screen) computed with the fit, not yet in cands
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
         self.refine_top = 4
@@ -165,40 +166,59 @@ class _Pool:
             # a law with a held-out error keeps it (its all-data fit converged from the best start
             # the screen had): an error that changed between rounds could make the selection cycle
             plan.append((parts, sig, origin, thr, sig not in self.full))
-        M, nfev = self.M, self.screen_nfev
-        fits = iter(forked_map(lambda ps: fit_law(M, ps, max_nfev=nfev, refine=refine),
-                               [p[0] for p in plan if p is not None and p[4]]))
+        M, nfev, fold = self.M, self.screen_nfev, self.fold
+
+        def fit(ps):        # a new fit and its screen (one task: every fit kept is screened next)
+            f = fit_law(M, ps, max_nfev=nfev, refine=refine)
+            return f, cross_validate_linear(M, f, fold)
+
+        new = [p[0] for p in plan if p is not None and p[4]]
+        fits = iter(fits_map(fit, new, M, new, min_items=MIN_QUICK))
         out = []
         for k, p in enumerate(plan):
             if p is not None and p[4]:
                 _, sig, origin, thr, _ = p
-                fit = next(fits)
+                fit, screen = next(fits)
                 old = self.fits.get(sig)
                 if old is None or np.sum(fit.sse) < np.sum(old[0].sse) * (1 - 1e-9):
                     self.fits[sig] = (fit, origin if old is None else old[1], thr if old is None else old[2])
                     self.cands.pop(sig, None)
                     self.full.discard(sig)
+                    self.screened[sig] = (fit, screen)
             out.append(None if p is None else p[1])
             self.tick(k, len(plan), what)
         return out
 
     def screen(self):
         """The fast held-out screen (:func:`~.law.cross_validate_linear`) of every fit not screened
-        yet, computed at once, kept in the order of the fits."""
+        yet (computed with the fit where it was; the others at once), kept in the order of the fits."""
         todo = [(sig, v) for sig, v in self.fits.items() if sig not in self.cands]
-        M, fold = self.M, self.fold
-        res = forked_map(lambda t: cross_validate_linear(M, t[1][0], fold), todo)
-        for (sig, (fit, origin, thr)), (cv, pred) in zip(todo, res):
+        M, fold, done = self.M, self.fold, self.screened
+        # a screen computed with the fit serves only that fit (the same object, not a later one)
+        ready = {sig: done[sig][1] for sig, (fit, _, _) in todo if sig in done and done[sig][0] is fit}
+        rest = [(sig, v) for sig, v in todo if sig not in ready]
+        got = fits_map(lambda t: cross_validate_linear(M, t[1][0], fold), rest, M,
+                       [v[0].parts for _, v in rest], min_items=2 * MIN_QUICK)
+        ready.update(zip([sig for sig, _ in rest], got))
+        self.screened = {}
+        for sig, (fit, origin, thr) in todo:
+            cv, pred = ready[sig]
             self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, thr, pred)
 
     def refine(self, sigs):
         """A few refinement steps for structures screened with their start values."""
         todo = [s for s in dict.fromkeys(sigs) if any(p.free for p in self.fits[s][0].parts)]
-        M, nfev, fits = self.M, self.screen_nfev, self.fits
-        res = forked_map(lambda s: fit_law(M, fits[s][0].parts, z0=fits[s][0].z, max_nfev=nfev), todo)
-        for sig, fit in zip(todo, res):
-            self.fits[sig] = (fit, self.fits[sig][1], self.fits[sig][2])
+        M, nfev, fits, fold = self.M, self.screen_nfev, self.fits, self.fold
+
+        def fit(sig):
+            f = fit_law(M, fits[sig][0].parts, z0=fits[sig][0].z, max_nfev=nfev)
+            return f, cross_validate_linear(M, f, fold)
+
+        res = fits_map(fit, todo, M, [fits[s][0].parts for s in todo], min_items=MIN_QUICK)
+        for sig, (f, screen) in zip(todo, res):
+            self.fits[sig] = (f, self.fits[sig][1], self.fits[sig][2])
             self.cands.pop(sig, None)
+            self.screened[sig] = (f, screen)
         self.screen()
 
     def refit_holdout(self, sigs, what: str = ""):
@@ -215,7 +235,8 @@ class _Pool:
             fit = fit_law(M, c.parts, z0=c.fit.z)
             return (fit,) + tuple(cross_validate(M, c.parts, fold, z0=fit.z))
 
-        for k, (sig, got) in enumerate(zip(todo, forked_map(refit, todo))):
+        res = fits_map(refit, todo, M, [cands[s].parts for s in todo])
+        for k, (sig, got) in enumerate(zip(todo, res)):
             if got is not None:
                 c = self.cands[sig]
                 c.fit, c.cv_sse, c.cv_pred = got
@@ -256,7 +277,7 @@ class _Pool:
             fit = fit_law(M, item[0])
             return (fit,) + tuple(cross_validate(M, item[0], fold, z0=fit.z))
 
-        for (parts, sig), (fit, cv, pred) in zip(new, forked_map(score, new)):
+        for (parts, sig), (fit, cv, pred) in zip(new, fits_map(score, new, M, [p for p, _ in new])):
             self.tried.add(parts)
             self.fits[sig] = (fit, origin, None)
             self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, None, pred)
