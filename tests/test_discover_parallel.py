@@ -93,16 +93,28 @@ def _moves(M):
 def test_consider_all_keeps_the_books_of_one_law_after_another(small, two):
     _, M, fold = small
     ref, par = _Pool(M, fold, "segment", 6, 4.0), _Pool(M, fold, "segment", 6, 4.0)
-    for p in (ref, par):          # a law with a held-out error already: it keeps it
-        sig = _one(p, _law(), "start", 0.5)
+    poor = _law()[:3]                                             # screened from its start values
+    better = canonical(poor[:2] + (Part(poor[2].family, poor[2].freq, poor[2].split, 3.0),))
+    assert _signature(better) == _signature(poor) and better != poor
+    for p in (ref, par):
+        sig = _one(p, _law(), "start", 0.5)       # a law with a held-out error already: it keeps it
+        _one(p, poor, "poor", 0.2, refine=False)
         p.screen()
         p.full.add(sig)
-    items = [(m, f"move {k}", float(k)) for k, m in enumerate(_moves(M))]
+    screened = ref.cands[_signature(poor)]
+    items = [(m, f"move {k}", float(k)) for k, m in enumerate(_moves(M) + [better])]
     want = [_one(ref, parts, o, t) for parts, o, t in items]
     got = par.consider_all(items)
     assert two, "the fits ran in one process"
     assert got == want and sum(g is None for g in got) >= 3
+    # the refined start replaced the poor fit (keeping its origin) and dropped its screen
+    assert ref.fits[_signature(poor)][1] == "poor" and _signature(poor) not in ref.cands
+    assert np.sum(ref.fits[_signature(poor)][0].sse) < np.sum(screened.fit.sse)
     assert _state(par) == _state(ref)
+    # a fit put in the pool otherwise is screened afresh, not with the screen of the fit it replaced
+    s0 = next(s for s in got if s is not None and s not in par.full and any(p.free for p in par.fits[s][0].parts))
+    for p in (ref, par):
+        p.fits[s0] = (fit_law(M, p.fits[s0][0].parts, refine=False), *p.fits[s0][1:])
     ref.screen()
     par.screen()
     assert _state(par) == _state(ref)

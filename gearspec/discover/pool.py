@@ -191,19 +191,16 @@ class _Pool:
 
     def screen(self):
         """The fast held-out screen (:func:`~.law.cross_validate_linear`) of every fit not screened
-        yet (computed with the fit where it was; the others at once), kept in the order of the fits."""
-        todo = [(sig, v) for sig, v in self.fits.items() if sig not in self.cands]
-        M, fold, done = self.M, self.fold, self.screened
-        # a screen computed with the fit serves only that fit (the same object, not a later one)
-        ready = {sig: done[sig][1] for sig, (fit, _, _) in todo if sig in done and done[sig][0] is fit}
-        rest = [(sig, v) for sig, v in todo if sig not in ready]
-        got = fits_map(lambda t: cross_validate_linear(M, t[1][0], fold), rest, M,
-                       [v[0].parts for _, v in rest], min_items=2 * MIN_QUICK)
-        ready.update(zip([sig for sig, _ in rest], got))
+        yet, in the order of the fits: computed with the fit (:meth:`consider_all`, :meth:`refine`),
+        here for a fit put in the pool otherwise."""
+        M, done = self.M, self.screened
+        for sig, (fit, origin, thr) in self.fits.items():
+            if sig not in self.cands:
+                # a screen computed with a fit serves only that fit (the same object, not a later one)
+                mine = sig in done and done[sig][0] is fit
+                cv, pred = done[sig][1] if mine else cross_validate_linear(M, fit, self.fold)
+                self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, thr, pred)
         self.screened = {}
-        for sig, (fit, origin, thr) in todo:
-            cv, pred = ready[sig]
-            self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, thr, pred)
 
     def refine(self, sigs):
         """A few refinement steps for structures screened with their start values."""
