@@ -129,6 +129,16 @@ def test_held_out_refits_at_once_are_each_laws_own_and_join_the_refitted_set(sma
     pool = _Pool(M, fold, "segment", 6, 4.0)
     sigs = [s for s in pool.consider_all([(m, "move", None) for m in _moves(M)]) if s is not None]
     pool.screen()
+    # a few more refinement steps for laws screened at their start values: the refined fit, screened
+    some = [s for s in sigs if any(p.free for p in pool.fits[s][0].parts)][:9]
+    old = {s: pool.fits[s][0] for s in some}
+    assert len(some) == 9
+    pool.refine(some)
+    for s in some:
+        fit = fit_law(M, old[s].parts, z0=old[s].z, max_nfev=pool.screen_nfev)
+        c = pool.cands[s]
+        assert pool.fits[s][0] is c.fit and np.array_equal(c.fit.z, fit.z) and np.array_equal(c.fit.sse, fit.sse)
+        assert np.array_equal(c.cv_sse, cross_validate_linear(M, fit, fold)[0])
     start = {s: pool.cands[s].fit.z.copy() for s in sigs}
     todo = sigs[:6]
     pool.refit_holdout(todo)
