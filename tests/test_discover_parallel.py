@@ -38,7 +38,7 @@ def two(monkeypatch):
 
     def counted(fn, items, **kw):
         items = list(items)
-        if len(items) >= 2 and parallel.worker_count() >= 2:
+        if len(items) >= max(kw.get("min_items", 2), 2) and parallel.worker_count() >= 2:
             calls.append(len(items))
         return real(fn, items, **kw)
 

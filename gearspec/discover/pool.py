@@ -173,7 +173,7 @@ class _Pool:
             return f, cross_validate_linear(M, f, fold)
 
         new = [p[0] for p in plan if p is not None and p[4]]
-        fits = iter(fits_map(fit, new, M, new, min_items=MIN_QUICK))
+        fits = iter(fits_map(fit, new, min_items=MIN_QUICK))
         out = []
         for k, p in enumerate(plan):
             if p is not None and p[4]:
@@ -211,7 +211,7 @@ class _Pool:
             f = fit_law(M, fits[sig][0].parts, z0=fits[sig][0].z, max_nfev=nfev)
             return f, cross_validate_linear(M, f, fold)
 
-        res = fits_map(fit, todo, M, [fits[s][0].parts for s in todo], min_items=MIN_QUICK)
+        res = fits_map(fit, todo, min_items=MIN_QUICK)
         for sig, (f, screen) in zip(todo, res):
             self.fits[sig] = (f, self.fits[sig][1], self.fits[sig][2])
             self.cands.pop(sig, None)
@@ -232,7 +232,7 @@ class _Pool:
             fit = fit_law(M, c.parts, z0=c.fit.z)
             return (fit,) + tuple(cross_validate(M, c.parts, fold, z0=fit.z))
 
-        res = fits_map(refit, todo, M, [cands[s].parts for s in todo])
+        res = fits_map(refit, todo)
         for k, (sig, got) in enumerate(zip(todo, res)):
             if got is not None:
                 c = self.cands[sig]
@@ -274,7 +274,7 @@ class _Pool:
             fit = fit_law(M, item[0])
             return (fit,) + tuple(cross_validate(M, item[0], fold, z0=fit.z))
 
-        for (parts, sig), (fit, cv, pred) in zip(new, fits_map(score, new, M, [p for p, _ in new])):
+        for (parts, sig), (fit, cv, pred) in zip(new, fits_map(score, new)):
             self.tried.add(parts)
             self.fits[sig] = (fit, origin, None)
             self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, None, pred)
