@@ -159,21 +159,27 @@ def _alternatives(parts, families):
 
 
 def backward(M: Moments, fold, groups, parts, *, alpha: float, min_gain: float, n_candidates: int,
-             families=(), label=None, progress=None, holdout=None) -> tuple[tuple, list[Verdict]]:
+             families=(), label=None, progress=None, holdout=None, prefetch=None) -> tuple[tuple, list[Verdict]]:
     """Backward elimination of the module docstring: the law with every term passing, and the
     verdicts of the last round (every term) plus those of the simplifications made.  ``progress``:
     called with one line of text after every round (each refits every term's alternative on the
     held-out folds: on a long recording a round takes seconds).  ``holdout``: where a law's held-out
-    error comes from (:func:`_cv`; the search's pool: the laws it scored keep their error)."""
+    error comes from (:func:`_cv`; the search's pool: the laws it scored keep their error);
+    ``prefetch``: called with the laws a round will ask ``holdout`` for, in the order it will ask,
+    before it asks (the pool computes the new ones at once: :meth:`.pool._Pool.holdout_all`)."""
     parts = canonical(_start_values(M, parts))
     z_crit = critical_z(alpha, n_candidates, len(np.unique(groups)))
     label = label or (lambda p: p.label(M.frequencies))
     cache: dict = {}
     made = []
     while True:
+        alts = _alternatives(parts, families)
+        if prefetch is not None and holdout is not None:
+            # judge's order: each alternative, then the law itself (once: then cached)
+            prefetch([ps for _, alt, _ in alts for ps in (alt, parts) if ps and _signature(ps) not in cache])
         verdicts = [(judge(M, fold, groups, parts, alt, z_crit=z_crit, min_gain=min_gain, term=label(parts[i]),
                            move=move, cache=cache, holdout=holdout), alt)
-                    for i, alt, move in _alternatives(parts, families)]
+                    for i, alt, move in alts]
         failing = [(v, alt) for v, alt in verdicts if not v.passed and alt]
         if not failing:
             if progress is not None:

@@ -28,6 +28,7 @@ from .screen import screen_lines
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
 from .accept import backward, validate_law
 from .blocks import SegmentDesign
+from .forked import fits_map
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
@@ -155,10 +156,11 @@ def discover(data: FitData, *, frequencies=None, gear=None, spectrum=None, libra
     -------
     DiscoveryResult
     """
-    from threadpoolctl import threadpool_limits
+    from ..core.reduction import one_blas_thread
 
-    # the work is many small dense problems: BLAS threads only add overhead (and contend)
-    with threadpool_limits(limits=1, user_api="blas"):
+    # the work is many small dense problems: BLAS threads only add overhead (and contend); the
+    # controller made here is inherited by the forked workers (forked_map), which then need not make one
+    with one_blas_thread():
         t_start = time.perf_counter()
         say = progress or (lambda text: None)
         run = _prepare(data, t_start, frequencies=frequencies, gear=gear, spectrum=spectrum, library=library,
@@ -338,8 +340,7 @@ def _level_stage(run: _Run, M1: Moments, lib1: Library) -> tuple:
     path1 = []
     if len(lib1):
         path1, _ = run.path(M1, lib1)
-        for t, parts in path1:
-            pool1.consider(parts, f"level path t={t:.3g}", t)
+        pool1.consider_all([(parts, f"level path t={t:.3g}", t) for t, parts in path1])
     run.timings["level path"] = time.perf_counter() - t0
     level, z = (), None
     if pool1.fits:
@@ -357,8 +358,7 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
     its design and its number of held columns (for the bootstrap)."""
     M = run.M
     pool = run.pool(M, run.lib)
-    for c in pool1.cands.values():
-        pool.consider(c.parts, c.origin, c.threshold)
+    pool.consider_all([(c.parts, c.origin, c.threshold) for c in pool1.cands.values()])
     path2, X2, nf = [], None, 0
     if not len(lib2):
         return pool, path2, X2, nf
@@ -372,16 +372,16 @@ def _ripple_stage(run: _Run, pool1: _Pool, level, z_level, lib1: Library, lib2: 
         Xf = _fixed_columns(M, lvl, current, z_cur)      # ripple path given the level law
         nf = Xf.shape[1]
         path2, X2 = run.path(M, lib2, Xf)
-        for t, rparts in path2:
-            pool.consider(lvl + tuple(rparts), f"ripple path t={t:.3g} (round {rnd + 1})", t)
+        pool.consider_all([(lvl + tuple(rparts), f"ripple path t={t:.3g} (round {rnd + 1})", t)
+                           for t, rparts in path2])
         pool.screen()
         best = pool.cands[pool.best()]
         rip = tuple(p for p in best.parts if p.fam.basis == "ripple")
         if len(lib1) and rip and ("ripple", _signature(rip)) not in seen:    # level path given the ripple
             seen.add(("ripple", _signature(rip)))
             path1, _ = run.path(M, lib1, _fixed_columns(M, rip, best.parts, best.fit.z))
-            for t, lparts in path1:
-                pool.consider(tuple(lparts) + rip, f"level path t={t:.3g} given the ripple (round {rnd + 1})", t)
+            pool.consider_all([(tuple(lparts) + rip, f"level path t={t:.3g} given the ripple (round {rnd + 1})", t)
+                               for t, lparts in path1])
             pool.screen()
         nxt = pool.cands[pool.best()]
         if nxt.parts == current:
@@ -402,7 +402,7 @@ def _accept(run: _Run, pool: _Pool, sel, validation, inertia, say=None):
     n_cand = max(len(_addable(run.lib)) + splittable, 1)
     final, verdicts = backward(M, run.fold, M.groups(run.by), cand.parts, alpha=run.test_alpha,
                                min_gain=run.min_gain, n_candidates=n_cand, families=fams, progress=say,
-                               holdout=pool.holdout)
+                               holdout=pool.holdout, prefetch=pool.holdout_all)
     if validation is not None:
         Mv = _validation_moments(validation, M, inertia)
         final, more = validate_law(M, Mv, final, alpha=run.test_alpha, min_gain=run.min_gain, families=fams)
@@ -531,11 +531,10 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     the mean friction of every segment (data, the selected law, each reference) for the plots."""
     t0 = time.perf_counter()
     M = run.M
-    refs: list[Reference] = []
-    for law in references or ():
-        refs.append(_paper_law(data, M, law, run.specs, run.fold))
-        if say is not None and refs[-1].model is not None:
-            say(f"reference law {refs[-1].name} fitted on the same folds")
+    refs: list[Reference] = fits_map(lambda law: _paper_law(data, M, law, run.specs, run.fold), references or ())
+    for r in refs:
+        if say is not None and r.model is not None:
+            say(f"reference law {r.name} fitted on the same folds")
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
     levels = {"data": M.b[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from .forked import MIN_QUICK, fits_map
 from .law import LawFit, Part, canonical, cross_validate, cross_validate_linear, fit_law
 from .library import FAMILIES, Library
 from .moments import Moments
@@ -136,6 +137,7 @@ class _Pool:
         self.tried: set = set()
         self.cands: dict = {}         # signature -> Candidate (screened)
         self.full: set = set()        # signatures with full held-out refits
+        self.screened: dict = {}      # signature -> (fit, its screen) computed with the fit, not yet in cands
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
         self.refine_top = 4
@@ -143,48 +145,99 @@ class _Pool:
         self.say = lambda text: None   # progress: called with one line of text as a step of the search ends
 
     def consider(self, parts, origin, thr, refine: bool = True):
-        parts = canonical(parts)
-        if not parts or parts in self.tried or len(parts) > self.max_parts:
-            return None
-        self.tried.add(parts)
-        sig = _signature(parts)
-        if sig in self.full:
+        """The structure ``parts`` fitted (a few refinement steps) and kept under its signature when
+        it fits better than the law held there; its signature (None: empty, tried before or over
+        ``max_parts`` terms)."""
+        return self.consider_all([(parts, origin, thr)], refine)[0]
+
+    def consider_all(self, items, refine: bool = True, what: str = "") -> list:
+        """:meth:`consider` of every ``(parts, origin, threshold)`` of ``items`` in turn, the new
+        structures fitted at once (:func:`~gearspec.core.parallel.forked_map`: a fit depends on its
+        structure and the moments only) and the pool's bookkeeping done in the order of ``items``,
+        as one call after another would; with ``what``, :meth:`tick` after every item."""
+        plan = []
+        for parts, origin, thr in items:
+            parts = canonical(parts)
+            if not parts or parts in self.tried or len(parts) > self.max_parts:
+                plan.append(None)
+                continue
+            self.tried.add(parts)
+            sig = _signature(parts)
             # a law with a held-out error keeps it (its all-data fit converged from the best start
             # the screen had): an error that changed between rounds could make the selection cycle
-            return sig
-        fit = fit_law(self.M, parts, max_nfev=self.screen_nfev, refine=refine)
-        old = self.fits.get(sig)
-        if old is None or np.sum(fit.sse) < np.sum(old[0].sse) * (1 - 1e-9):
-            self.fits[sig] = (fit, origin if old is None else old[1], thr if old is None else old[2])
-            self.cands.pop(sig, None)
-            self.full.discard(sig)
-        return sig
+            plan.append((parts, sig, origin, thr, sig not in self.full))
+        M, nfev, fold = self.M, self.screen_nfev, self.fold
+
+        def fit(ps):        # a new fit and its screen (one task: every fit kept is screened next)
+            f = fit_law(M, ps, max_nfev=nfev, refine=refine)
+            return f, cross_validate_linear(M, f, fold)
+
+        new = [p[0] for p in plan if p is not None and p[4]]
+        fits = iter(fits_map(fit, new, min_items=MIN_QUICK))
+        out = []
+        for k, p in enumerate(plan):
+            if p is not None and p[4]:
+                _, sig, origin, thr, _ = p
+                fit, screen = next(fits)
+                old = self.fits.get(sig)
+                if old is None or np.sum(fit.sse) < np.sum(old[0].sse) * (1 - 1e-9):
+                    self.fits[sig] = (fit, origin if old is None else old[1], thr if old is None else old[2])
+                    self.cands.pop(sig, None)
+                    self.full.discard(sig)
+                    self.screened[sig] = (fit, screen)
+            out.append(None if p is None else p[1])
+            self.tick(k, len(plan), what)
+        return out
 
     def screen(self):
+        """The fast held-out screen (:func:`~.law.cross_validate_linear`) of every fit not screened
+        yet, in the order of the fits: computed with the fit (:meth:`consider_all`, :meth:`refine`),
+        here for a fit put in the pool otherwise."""
+        M, done = self.M, self.screened
         for sig, (fit, origin, thr) in self.fits.items():
             if sig not in self.cands:
-                cv, pred = cross_validate_linear(self.M, fit, self.fold)
-                self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / self.M.N), origin, thr, pred)
+                # a screen computed with a fit serves only that fit (the same object, not a later one)
+                mine = sig in done and done[sig][0] is fit
+                cv, pred = done[sig][1] if mine else cross_validate_linear(M, fit, self.fold)
+                self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, thr, pred)
+        self.screened = {}
 
     def refine(self, sigs):
         """A few refinement steps for structures screened with their start values."""
-        for sig in sigs:
-            fit, origin, thr = self.fits[sig]
-            if any(p.free for p in fit.parts):
-                self.fits[sig] = (fit_law(self.M, fit.parts, z0=fit.z, max_nfev=self.screen_nfev), origin, thr)
-                self.cands.pop(sig, None)
+        todo = [s for s in dict.fromkeys(sigs) if any(p.free for p in self.fits[s][0].parts)]
+        M, nfev, fits, fold = self.M, self.screen_nfev, self.fits, self.fold
+
+        def fit(sig):
+            f = fit_law(M, fits[sig][0].parts, z0=fits[sig][0].z, max_nfev=nfev)
+            return f, cross_validate_linear(M, f, fold)
+
+        res = fits_map(fit, todo, min_items=MIN_QUICK)
+        for sig, (f, screen) in zip(todo, res):
+            self.fits[sig] = (f, self.fits[sig][1], self.fits[sig][2])
+            self.cands.pop(sig, None)
+            self.screened[sig] = (f, screen)
         self.screen()
 
     def refit_holdout(self, sigs, what: str = ""):
-        """Full held-out refits of the laws ``sigs`` (those without one yet); with ``what``, a
-        progress line every :data:`TICK` laws (``what``: the laws, as the line names them)."""
-        todo = [s for s in sigs if s not in self.full]
-        for k, sig in enumerate(todo):
-            c = self.cands[sig]
-            if any(p.free for p in c.parts):
-                c.fit = fit_law(self.M, c.parts, z0=c.fit.z)
-                c.cv_sse, c.cv_pred = cross_validate(self.M, c.parts, self.fold, z0=c.fit.z)
-                c.rmse_holdout = math.sqrt(float(np.sum(c.cv_sse)) / self.M.N)
+        """Full held-out refits of the laws ``sigs`` (those without one yet), computed at once;
+        with ``what``, a progress line every :data:`TICK` laws (``what``: the laws, as the line
+        names them)."""
+        todo = [s for s in dict.fromkeys(sigs) if s not in self.full]
+        M, fold, cands = self.M, self.fold, self.cands
+
+        def refit(sig):
+            c = cands[sig]
+            if not any(p.free for p in c.parts):
+                return None
+            fit = fit_law(M, c.parts, z0=c.fit.z)
+            return (fit,) + tuple(cross_validate(M, c.parts, fold, z0=fit.z))
+
+        res = fits_map(refit, todo)
+        for k, (sig, got) in enumerate(zip(todo, res)):
+            if got is not None:
+                c = self.cands[sig]
+                c.fit, c.cv_sse, c.cv_pred = got
+                c.rmse_holdout = math.sqrt(float(np.sum(c.cv_sse)) / M.N)
             self.full.add(sig)
             self.tick(k, len(todo), what)
 
@@ -198,16 +251,34 @@ class _Pool:
         if sig not in self.full:
             if not parts or len(parts) > self.max_parts:
                 return None
-            # what refit_holdout does, without the screen's few steps first: the all-data fit from
-            # the parts' start values (scanned), the folds from its optimum
-            fit = fit_law(self.M, parts)
-            cv, pred = cross_validate(self.M, parts, self.fold, z0=fit.z)
-            self.tried.add(parts)
-            self.fits[sig] = (fit, origin, None)
-            self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / self.M.N), origin, None, pred)
-            self.full.add(sig)
+            self.holdout_all([parts], origin)
         c = self.cands[sig]
         return c.cv_sse, c.cv_pred
+
+    def holdout_all(self, laws, origin: str = "the acceptance test") -> None:
+        """:meth:`holdout` of every law of ``laws`` in turn (their results kept in the pool), the
+        new laws' fits and held-out refits computed at once: what the acceptance test asks of one
+        round, before it asks."""
+        new, seen = [], set()
+        for parts in laws:
+            parts = canonical(parts)
+            sig = _signature(parts)
+            if parts and len(parts) <= self.max_parts and sig not in self.full and sig not in seen:
+                seen.add(sig)
+                new.append((parts, sig))
+        M, fold = self.M, self.fold
+
+        def score(item):
+            # what refit_holdout does, without the screen's few steps first: the all-data fit from
+            # the parts' start values (scanned), the folds from its optimum
+            fit = fit_law(M, item[0])
+            return (fit,) + tuple(cross_validate(M, item[0], fold, z0=fit.z))
+
+        for (parts, sig), (fit, cv, pred) in zip(new, fits_map(score, new)):
+            self.tried.add(parts)
+            self.fits[sig] = (fit, origin, None)
+            self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, None, pred)
+            self.full.add(sig)
 
     def tick(self, k: int, n: int, what: str) -> None:
         """Progress within a long step: a line after every :data:`TICK` of its ``n`` laws but the last."""
@@ -250,11 +321,9 @@ def _climb_step(pool: _Pool, cur, compound: bool):
     base = pool.cands[cur]
     start = _inherit(base.fit)
     moves = _compound(start, pool.M) if compound else _neighbours(start, pool.M, pool.addable)
-    new = []
-    for parts in moves:
-        sig = pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold, refine=False)
-        if sig is not None:
-            new.append(sig)
+    origin = f"neighbour of {_short(base, pool.M)}"
+    new = [s for s in pool.consider_all([(parts, origin, base.threshold) for parts in moves], refine=False)
+           if s is not None]
     pool.screen()
     # neighbours start from the parent's refined values (new terms from the grid): refine the most
     # promising few
@@ -321,9 +390,11 @@ def _simplifications(pool: _Pool, sel, what: str = "") -> set:
     base = pool.cands[sel]
     nb = set()
     moves = _neighbours(_inherit(base.fit), pool.M, pool.addable, adds=False)
-    for k, parts in enumerate(moves):
-        pool.consider(parts, f"neighbour of {_short(base, pool.M)}", base.threshold)
-        pool.tick(k, len(moves), what)
+    origin = f"neighbour of {_short(base, pool.M)}"
+    pool.consider_all([(parts, origin, base.threshold) for parts in moves], what=what)
+    for parts in moves:
+        # (a move's signature is in the pool after its turn or never: fits are only added, and a
+        # later move of the same signature has as many terms)
         sig = _signature(parts)
         if sig in pool.fits:
             nb.add(sig)

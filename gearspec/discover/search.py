@@ -107,6 +107,7 @@ def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models
     fraction of replicates in which any column of each group is selected, (max group + 1,).
     ``progress``: called with one line of text after every 10 replicates but the last.
     """
+    from .forked import fits_map
     from .blocks import SegmentDesign
 
     rng = np.random.default_rng(seed)
@@ -116,10 +117,10 @@ def bootstrap_inclusion(X, m, threshold: float, *, by: str = "segment", n_models
     design = X if isinstance(X, SegmentDesign) else SegmentDesign(m, np.ones((m.S, 0)), np.zeros(0, int), X)
     cg = None if column_groups is None else np.asarray(column_groups, dtype=int)
     hits = np.zeros(design.shape[1] if cg is None else int(cg.max()) + 1)
-    for i in range(n_models):
-        pick = np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))])
-        sc = Scaled(*design.reduce(pick))
-        sel = _fit(method, threshold, alpha, sc, free) != 0
+    # the replicates drawn in turn, fitted at once (forked_map), counted in turn
+    picks = [np.concatenate([members[i] for i in rng.integers(0, len(ug), len(ug))]) for _ in range(n_models)]
+    sels = fits_map(lambda pick: _fit(method, threshold, alpha, Scaled(*design.reduce(pick)), free) != 0, picks)
+    for i, sel in enumerate(sels):
         if cg is None:
             hits += sel
         else:
