@@ -7,16 +7,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "width", "normals", "predict", "hstack", "stack"]
+__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "every_row", "width", "normals", "bordered", "rss", "predict",
+           "hstack", "stack"]
 
 #: rows per chunk: 16384 rows x 40 columns are 5 MB, a few cache-sized BLAS products each
 CHUNK_ROWS = 16384
 
 
-def spans(starts, stops, mask=None, chunk: int = CHUNK_ROWS) -> list[tuple[int, int]]:
+def spans(starts, stops, mask=None, chunk: int | None = None) -> list[tuple[int, int]]:
     """Row ranges ``[a, z)`` covering the groups ``[starts[g], stops[g])`` where ``mask`` (default:
-    all) is true: neighbouring groups merged, each range at most ``chunk`` rows (longer groups
-    split)."""
+    all) is true: neighbouring groups merged, each range at most ``chunk`` rows (default
+    :data:`CHUNK_ROWS`; longer groups split)."""
+    chunk = CHUNK_ROWS if chunk is None else chunk
     starts, stops = np.asarray(starts), np.asarray(stops)
     sel = np.arange(len(starts)) if mask is None else np.flatnonzero(mask)
     out: list = []
@@ -31,6 +33,12 @@ def spans(starts, stops, mask=None, chunk: int = CHUNK_ROWS) -> list[tuple[int, 
         if z > a:
             out.append((a, z))
     return out
+
+
+def every_row(n: int, chunk: int | None = None) -> list[tuple[int, int]]:
+    """Row ranges of at most ``chunk`` rows (default :data:`CHUNK_ROWS`) covering ``[0, n)``."""
+    chunk = CHUNK_ROWS if chunk is None else chunk
+    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
 
 
 def _rows(cols, a: int, z: int) -> np.ndarray:
@@ -55,15 +63,40 @@ def width(cols) -> int:
     return n
 
 
-def normals(cols, y: np.ndarray, ranges) -> tuple[np.ndarray, np.ndarray]:
-    """``(X^T X, X^T y)`` of the stacked design ``X`` (:func:`_rows`) over the row ranges ``ranges``."""
+def normals(cols, y: np.ndarray | None, ranges) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(X^T X, X^T y)`` of the stacked design ``X`` (:func:`_rows`) over the row ranges ``ranges``
+    (``X^T y`` None when ``y`` is)."""
     p = width(cols)
-    G, b = np.zeros((p, p)), np.zeros(p)
+    G, b = np.zeros((p, p)), (None if y is None else np.zeros(p))
     for a, z in ranges:
         Xc = _rows(cols, a, z)
         G += Xc.T @ Xc
-        b += Xc.T @ y[a:z]
+        if y is not None:
+            b += Xc.T @ y[a:z]
     return G, b
+
+
+def bordered(cols, new, y: np.ndarray, ranges) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(C^T X, C^T C, C^T y)`` of new columns ``C`` (the stacked design of the blocks ``new``)
+    against the stacked design ``X`` of ``cols``: the border of the normal equations of
+    ``[X | C]`` whose ``X`` part is known (a bounded search that changes only ``C``)."""
+    p, q = width(cols), width(new)
+    CX, CC, Cy = np.zeros((q, p)), np.zeros((q, q)), np.zeros(q)
+    for a, z in ranges:
+        Xc, Cc = _rows(cols, a, z), _rows(new, a, z)
+        CX += Cc.T @ Xc
+        CC += Cc.T @ Cc
+        Cy += Cc.T @ y[a:z]
+    return CX, CC, Cy
+
+
+def rss(cols, beta: np.ndarray, y: np.ndarray, ranges) -> float:
+    """``|y - X beta|^2`` over the row ranges ``ranges`` (the residual a chunk at a time)."""
+    out = 0.0
+    for a, z in ranges:
+        r = y[a:z] - _rows(cols, a, z) @ beta
+        out += float(r @ r)
+    return out
 
 
 def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: int | None = None) -> np.ndarray:
