@@ -27,12 +27,7 @@ class _Rows:
         return self.z - self.a, self.at[-1]
 
     def __matmul__(self, beta):
-        beta = np.asarray(beta)
-        out = np.zeros((self.z - self.a,) + beta.shape[1:])
-        for B, j, k in zip(self.blocks, self.at[:-1], self.at[1:]):
-            if k > j:
-                out += B[self.a:self.z] @ beta[j:k]
-        return out
+        return gram._times(self.blocks, np.asarray(beta, dtype=float), self.a, self.z)
 
     @property
     def T(self) -> "_RowsT":

@@ -44,11 +44,29 @@ def every_row(n: int, chunk: int | None = None) -> list[tuple[int, int]]:
 def _rows(cols, a: int, z: int) -> np.ndarray:
     """The rows ``[a, z)`` of the stacked design: every block's slice side by side.  A block is an
     array (n, k) or ``(array, columns)`` (only those columns: an index or a boolean mask)."""
-    parts = [c[a:z] if isinstance(c, np.ndarray) else c[0][a:z][:, c[1]] for c in cols]
-    parts = [p.reshape(z - a, -1) for p in parts]
+    parts = [_block(c, a, z) for c in cols]
     if not parts:
         return np.zeros((z - a, 0))
     return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+
+def _block(c, a: int, z: int) -> np.ndarray:
+    """The rows ``[a, z)`` of one block of a column list (2-d)."""
+    part = c[a:z] if isinstance(c, np.ndarray) else c[0][a:z][:, c[1]]
+    return part.reshape(z - a, -1)
+
+
+def _times(cols, beta: np.ndarray, a: int, z: int) -> np.ndarray:
+    """``X[a:z] @ beta`` of the stacked design, block by block on views of the rows (no copy)."""
+    out = np.zeros(z - a)
+    j = 0
+    for c in cols:
+        part = _block(c, a, z)
+        k = part.shape[1]
+        if k:
+            out += part @ beta[j:j + k]
+        j += k
+    return out
 
 
 def width(cols) -> int:
@@ -83,8 +101,12 @@ def bordered(cols, new, y: np.ndarray, ranges) -> tuple[np.ndarray, np.ndarray, 
     p, q = width(cols), width(new)
     CX, CC, Cy = np.zeros((q, p)), np.zeros((q, q)), np.zeros(q)
     for a, z in ranges:
-        Xc, Cc = _rows(cols, a, z), _rows(new, a, z)
-        CX += Cc.T @ Xc
+        Cc = _rows(new, a, z)
+        j = 0
+        for c in cols:              # block by block on views of the rows (no copy of X's)
+            part = _block(c, a, z)
+            CX[:, j:j + part.shape[1]] += Cc.T @ part
+            j += part.shape[1]
         CC += Cc.T @ Cc
         Cy += Cc.T @ y[a:z]
     return CX, CC, Cy
@@ -94,16 +116,17 @@ def rss(cols, beta: np.ndarray, y: np.ndarray, ranges) -> float:
     """``|y - X beta|^2`` over the row ranges ``ranges`` (the residual a chunk at a time)."""
     out = 0.0
     for a, z in ranges:
-        r = y[a:z] - _rows(cols, a, z) @ beta
+        r = y[a:z] - _times(cols, beta, a, z)
         out += float(r @ r)
     return out
 
 
 def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: int | None = None) -> np.ndarray:
-    """``X beta`` at the rows of ``ranges`` (into ``out``, created with ``n`` rows when None)."""
+    """``X beta`` at the rows of ``ranges`` (into ``out``, created with ``n`` rows when None), block
+    by block on views of the rows."""
     out = np.zeros(n) if out is None else out
     for a, z in ranges:
-        out[a:z] = _rows(cols, a, z) @ beta
+        out[a:z] = _times(cols, beta, a, z)
     return out
 
 
