@@ -135,8 +135,8 @@ def test_memory_of_a_round_and_a_candidate_test_grows_by_a_bounded_amount_per_ro
     times the round's design (8 bytes x 16 columns x 2.1 = 269 bytes; measured 242: the blocks'
     columns of the round, then of the extended round built after the round's are let go, the
     Taylor columns a design computes, the held-out predictions and residuals).  A round's design
-    stacked into one array took 294 (0.10), 326 now (the refinement's designs stacked: 326), the round's and the
-    extended round's held at once 416."""
+    stacked into one array takes 326 (294 in 0.10), the refinement's designs stacked 326 too, the
+    round's and the extended round's held at once 416 (0.10)."""
     p1, n1, w = _peak_per_run(1.0, monkeypatch)
     p4, n4, w4 = _peak_per_run(4.0, monkeypatch)
     assert w == w4 == 16 and n4 > 3.5 * n1
