@@ -16,8 +16,9 @@ __all__ = ["Design", "design_of"]
 
 
 class _Rows:
-    """The rows ``[a, z)`` of a :class:`Design`: ``rows @ beta`` and ``rows.T @ C`` block by block on
-    views of the blocks (no copy of the rows); ``np.asarray(rows)`` stacks them (one group's rows)."""
+    """The rows ``[a, z)`` of a :class:`Design`: ``rows @ beta`` a chunk of rows stacked at a time,
+    ``rows.T @ C`` block by block on views of the blocks (no copy of the rows); ``np.asarray(rows)``
+    stacks them (one group's rows)."""
 
     def __init__(self, blocks, at, a: int, z: int):
         self.blocks, self.at, self.a, self.z = blocks, at, a, z
@@ -27,7 +28,10 @@ class _Rows:
         return self.z - self.a, self.at[-1]
 
     def __matmul__(self, beta):
-        return gram._times(self.blocks, np.asarray(beta, dtype=float), self.a, self.z)
+        # a chunk of rows stacked at a time (in cache): the arithmetic of the stacked design's rows
+        out = np.empty(self.z - self.a)
+        return gram.predict([B[self.a:self.z] for B in self.blocks], np.asarray(beta, dtype=float),
+                            gram.every_row(self.z - self.a), out=out)
 
     @property
     def T(self) -> "_RowsT":

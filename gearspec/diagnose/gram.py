@@ -56,19 +56,6 @@ def _block(c, a: int, z: int) -> np.ndarray:
     return part.reshape(z - a, -1)
 
 
-def _times(cols, beta: np.ndarray, a: int, z: int) -> np.ndarray:
-    """``X[a:z] @ beta`` of the stacked design, block by block on views of the rows (no copy)."""
-    out = np.zeros(z - a)
-    j = 0
-    for c in cols:
-        part = _block(c, a, z)
-        k = part.shape[1]
-        if k:
-            out += part @ beta[j:j + k]
-        j += k
-    return out
-
-
 def width(cols) -> int:
     """Columns of the stacked design."""
     n = 0
@@ -116,17 +103,19 @@ def rss(cols, beta: np.ndarray, y: np.ndarray, ranges) -> float:
     """``|y - X beta|^2`` over the row ranges ``ranges`` (the residual a chunk at a time)."""
     out = 0.0
     for a, z in ranges:
-        r = y[a:z] - _times(cols, beta, a, z)
+        r = y[a:z] - _rows(cols, a, z) @ beta
         out += float(r @ r)
     return out
 
 
 def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: int | None = None) -> np.ndarray:
-    """``X beta`` at the rows of ``ranges`` (into ``out``, created with ``n`` rows when None), block
-    by block on views of the rows."""
+    """``X beta`` at the rows of ``ranges`` (into ``out``, created with ``n`` rows when None): each
+    chunk's rows stacked (in cache) and multiplied at once, row by row the arithmetic of ``X @ beta``
+    on the stacked design (a sum over the blocks in another order moves the predictions of an
+    ill-conditioned fit, whose coefficients cancel, far above round-off)."""
     out = np.zeros(n) if out is None else out
     for a, z in ranges:
-        out[a:z] = _times(cols, beta, a, z)
+        out[a:z] = _rows(cols, a, z) @ beta
     return out
 
 
