@@ -12,7 +12,9 @@ import numpy as np
 from ..core.crossval import held_out
 from . import budget
 from .data import DiagnoseData
-from ..core.reduction import GroupNormals, normal_equations
+from ..core.reduction import GroupNormals, group_normal_equations, normal_equations
+from . import gram
+from .chunked import Design, design_of
 from .design import FittedState, HarmonicBlock, State, fit_state, solve_normal
 from .nonlinear import nonlinear_standard_errors
 
@@ -22,22 +24,48 @@ __all__ = ["Round", "group_normals"]
 #: batched outer products of :func:`~gearspec.core.reduction.group_normal_equations` cost
 #: rows x p^2 element operations, several times a BLAS product of plateau-sized groups
 BLAS_GROUP_ROWS = 256
+#: a group of a :class:`~.chunked.Design` with more rows than this many chunks
+#: (:data:`~.gram.CHUNK_ROWS`) is reduced a chunk of rows at a time, shorter ones whole
+STACK_GROUP_CHUNKS = 4
 
 
-def group_normals(X: np.ndarray, y: np.ndarray, starts, stops) -> GroupNormals:
-    """:class:`~gearspec.core.reduction.GroupNormals` of the columns ``X`` (n, p) and ``y`` (n,) over
-    the contiguous groups ``[starts[g], stops[g])``: by one BLAS product per group
-    (:func:`~gearspec.core.reduction.normal_equations`) when the groups hold :data:`BLAS_GROUP_ROWS`
-    rows or more on average (plateaus, runs), else :meth:`GroupNormals.of` (thousands of short
-    free-motion blocks).  The same numbers up to round-off either way."""
+def group_normals(X, y: np.ndarray, starts, stops) -> GroupNormals:
+    """:class:`~gearspec.core.reduction.GroupNormals` of the columns ``X`` (n, p; an array or a
+    :class:`~.chunked.Design`) and ``y`` (n,) over the contiguous groups ``[starts[g], stops[g])``:
+    by one BLAS product per group (:func:`~gearspec.core.reduction.normal_equations`) when the groups
+    hold :data:`BLAS_GROUP_ROWS` rows or more on average (plateaus, runs), else
+    :meth:`GroupNormals.of` (thousands of short free-motion blocks; of a Design, on its rows stacked
+    for runs of whole groups of at most :data:`~.gram.CHUNK_ROWS` rows).  The same numbers up to
+    round-off either way."""
     starts, stops = np.asarray(starts), np.asarray(stops)
     n = stops - starts
     if not len(n) or float(np.mean(n)) < BLAS_GROUP_ROWS:
-        return GroupNormals.of(X, y, starts, stops)
+        if not isinstance(X, Design):
+            return GroupNormals.of(X, y, starts, stops)
+        p = X.shape[1]
+        G, b, yy = np.zeros((len(n), p, p)), np.zeros((len(n), p)), np.zeros(len(n))
+        g = 0
+        while g < len(n):
+            # a run of whole groups of at most CHUNK_ROWS rows (at least one group)
+            h = g + max(int(np.searchsorted(np.cumsum(n[g:]), gram.CHUNK_ROWS, side="right")), 1)
+            a, z = int(starts[g]), int(stops[h - 1])
+            G[g:h], b[g:h], yy[g:h] = group_normal_equations(np.asarray(X[a:z]), y[a:z], starts[g:h] - a,
+                                                             stops[g:h] - a)
+            g = h
+        return GroupNormals(G, b, yy, n)
     p = X.shape[1]
     G, b, yy = np.empty((len(n), p, p)), np.empty((len(n), p)), np.empty(len(n))
     for g, (a, z) in enumerate(zip(starts, stops)):
-        G[g], b[g], yy[g] = normal_equations(X[a:z], y[a:z])
+        if isinstance(X, Design) and z - a > STACK_GROUP_CHUNKS * gram.CHUNK_ROWS:
+            # a long group (a run held out whole) of a Design: summed a chunk of rows at a time
+            G[g], b[g], yy[g] = 0.0, 0.0, 0.0
+            for c, e in gram.spans([a], [z]):
+                Gc, bc, yc = normal_equations(np.asarray(X[c:e]), y[c:e])
+                G[g] += Gc
+                b[g] += bc
+                yy[g] += yc
+            continue
+        G[g], b[g], yy[g] = normal_equations(np.asarray(X[a:z]), y[a:z])
     return GroupNormals(G, b, yy, n)
 
 
@@ -71,14 +99,15 @@ class Round:
 
     def __post_init__(self):
         dd = self.dd
-        fitted = fit_state(self.state, dd)
+        # the designs as their blocks' columns, never stacked (:class:`~.chunked.Design`)
+        fitted = fit_state(self.state, dd, X=design_of(self.state, dd))
         state = fitted.state = self.state.refreshed(fitted.coef)
         # the held-out fits use the Taylor columns of every nonlinear parameter as well
-        X = state.design(dd, taylor=True)
+        X = design_of(state, dd, taylor=True)
         grams = group_normals(X, dd.y, dd.starts, dd.stops)
-        G_all = grams.sum()[0]
+        G_all, b_all, _ = grams.sum()
         if self.standard_errors:
-            fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X, G_all)
+            fitted.nonlinear_se = nonlinear_standard_errors(state, dd, X.blocks, G_all, b_all)
         self._design[:] = [X, X.shape[1]]
         for name, value in (("state", state), ("fitted", fitted), ("grams", grams),
                             ("ref_diag", np.diag(G_all).copy()), ("K", int(self.fold.max()) + 1),
@@ -86,11 +115,12 @@ class Round:
             object.__setattr__(self, name, value)
 
     @property
-    def X(self) -> np.ndarray:
-        """The design with the Taylor columns of every nonlinear parameter (rows x columns), built
-        again (the same array) when :meth:`release_design` let it go."""
+    def X(self) -> Design:
+        """The design with the Taylor columns of every nonlinear parameter (rows x columns), as its
+        blocks' columns (:class:`~.chunked.Design`: rows read by ranges, products a chunk of rows at
+        a time, never stacked), built again (the same arrays) when :meth:`release_design` let it go."""
         if self._design[0] is None:
-            self._design[0] = self.state.design(self.dd, taylor=True)
+            self._design[0] = design_of(self.state, self.dd, taylor=True)
         return self._design[0]
 
     @property

@@ -7,16 +7,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "width", "normals", "predict", "hstack", "stack"]
+__all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "every_row", "width", "normals", "bordered", "rss", "predict",
+           "hstack", "stack"]
 
 #: rows per chunk: 16384 rows x 40 columns are 5 MB, a few cache-sized BLAS products each
 CHUNK_ROWS = 16384
 
 
-def spans(starts, stops, mask=None, chunk: int = CHUNK_ROWS) -> list[tuple[int, int]]:
+def spans(starts, stops, mask=None, chunk: int | None = None) -> list[tuple[int, int]]:
     """Row ranges ``[a, z)`` covering the groups ``[starts[g], stops[g])`` where ``mask`` (default:
-    all) is true: neighbouring groups merged, each range at most ``chunk`` rows (longer groups
-    split)."""
+    all) is true: neighbouring groups merged, each range at most ``chunk`` rows (default
+    :data:`CHUNK_ROWS`; longer groups split)."""
+    chunk = CHUNK_ROWS if chunk is None else chunk
     starts, stops = np.asarray(starts), np.asarray(stops)
     sel = np.arange(len(starts)) if mask is None else np.flatnonzero(mask)
     out: list = []
@@ -33,14 +35,25 @@ def spans(starts, stops, mask=None, chunk: int = CHUNK_ROWS) -> list[tuple[int, 
     return out
 
 
+def every_row(n: int, chunk: int | None = None) -> list[tuple[int, int]]:
+    """Row ranges of at most ``chunk`` rows (default :data:`CHUNK_ROWS`) covering ``[0, n)``."""
+    chunk = CHUNK_ROWS if chunk is None else chunk
+    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
+
+
 def _rows(cols, a: int, z: int) -> np.ndarray:
     """The rows ``[a, z)`` of the stacked design: every block's slice side by side.  A block is an
     array (n, k) or ``(array, columns)`` (only those columns: an index or a boolean mask)."""
-    parts = [c[a:z] if isinstance(c, np.ndarray) else c[0][a:z][:, c[1]] for c in cols]
-    parts = [p.reshape(z - a, -1) for p in parts]
+    parts = [_block(c, a, z) for c in cols]
     if not parts:
         return np.zeros((z - a, 0))
     return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+
+def _block(c, a: int, z: int) -> np.ndarray:
+    """The rows ``[a, z)`` of one block of a column list (2-d)."""
+    part = c[a:z] if isinstance(c, np.ndarray) else c[0][a:z][:, c[1]]
+    return part.reshape(z - a, -1)
 
 
 def width(cols) -> int:
@@ -55,19 +68,51 @@ def width(cols) -> int:
     return n
 
 
-def normals(cols, y: np.ndarray, ranges) -> tuple[np.ndarray, np.ndarray]:
-    """``(X^T X, X^T y)`` of the stacked design ``X`` (:func:`_rows`) over the row ranges ``ranges``."""
+def normals(cols, y: np.ndarray | None, ranges) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(X^T X, X^T y)`` of the stacked design ``X`` (:func:`_rows`) over the row ranges ``ranges``
+    (``X^T y`` None when ``y`` is)."""
     p = width(cols)
-    G, b = np.zeros((p, p)), np.zeros(p)
+    G, b = np.zeros((p, p)), (None if y is None else np.zeros(p))
     for a, z in ranges:
         Xc = _rows(cols, a, z)
         G += Xc.T @ Xc
-        b += Xc.T @ y[a:z]
+        if y is not None:
+            b += Xc.T @ y[a:z]
     return G, b
 
 
+def bordered(cols, new, y: np.ndarray, ranges) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(C^T X, C^T C, C^T y)`` of new columns ``C`` (the stacked design of the blocks ``new``)
+    against the stacked design ``X`` of ``cols``: the border of the normal equations of
+    ``[X | C]`` whose ``X`` part is known (a bounded search that changes only ``C``)."""
+    p, q = width(cols), width(new)
+    CX, CC, Cy = np.zeros((q, p)), np.zeros((q, q)), np.zeros(q)
+    for a, z in ranges:
+        Cc = _rows(new, a, z)
+        j = 0
+        for c in cols:              # block by block on views of the rows (no copy of X's)
+            part = _block(c, a, z)
+            CX[:, j:j + part.shape[1]] += Cc.T @ part
+            j += part.shape[1]
+        CC += Cc.T @ Cc
+        Cy += Cc.T @ y[a:z]
+    return CX, CC, Cy
+
+
+def rss(cols, beta: np.ndarray, y: np.ndarray, ranges) -> float:
+    """``|y - X beta|^2`` over the row ranges ``ranges`` (the residual a chunk at a time)."""
+    out = 0.0
+    for a, z in ranges:
+        r = y[a:z] - _rows(cols, a, z) @ beta
+        out += float(r @ r)
+    return out
+
+
 def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: int | None = None) -> np.ndarray:
-    """``X beta`` at the rows of ``ranges`` (into ``out``, created with ``n`` rows when None)."""
+    """``X beta`` at the rows of ``ranges`` (into ``out``, created with ``n`` rows when None): each
+    chunk's rows stacked (in cache) and multiplied at once, row by row the arithmetic of ``X @ beta``
+    on the stacked design (a sum over the blocks in another order moves the predictions of an
+    ill-conditioned fit, whose coefficients cancel, far above round-off)."""
     out = np.zeros(n) if out is None else out
     for a, z in ranges:
         out[a:z] = _rows(cols, a, z) @ beta

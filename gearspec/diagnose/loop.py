@@ -240,9 +240,9 @@ def _full_residual(rnd: Round, runs: list) -> np.ndarray:
         for k, _ in items:
             keep &= k
         # this fold's design as column blocks, reduced a chunk of rows at a time (never stacked)
-        cols = [(rnd.X, keep)] + [prop.columns(dd) for _, prop in items]
+        cols = rnd.X.masked(keep) + (new := [prop.columns(dd) for _, prop in items])
         G, b = gram.normals(cols, dd.y, gram.spans(dd.starts, dd.stops, train))
-        ref = np.concatenate([rnd.ref_diag[keep]] + [np.einsum("ij,ij->j", c, c) for c in cols[1:]])
+        ref = np.concatenate([rnd.ref_diag[keep]] + [np.einsum("ij,ij->j", c, c) for c in new])
         beta = solve_normal(G, b, reference=ref)
         gram.predict(cols, beta, gram.spans(dd.starts, dd.stops, ~train), out=out)
         out[rows] = dd.y[rows] - out[rows]

@@ -12,21 +12,24 @@ import numpy as np
 
 from .data import DiagnoseData
 from .design import BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
-from .gram import stack
+from . import gram
 
 __all__ = ["nonlinear_standard_errors", "polish", "refine", "nonlinear_parameters", "with_parameter", "travel_range"]
 
 
-def nonlinear_standard_errors(state: State, dd: DiagnoseData, X: np.ndarray | None = None,
-                              G: np.ndarray | None = None) -> dict:
+def nonlinear_standard_errors(state: State, dd: DiagnoseData, cols: list | None = None,
+                              G: np.ndarray | None = None, b: np.ndarray | None = None) -> dict:
     """Standard errors of the nonlinear parameters (Stribeck velocities, decays, frequencies,
     exponents, lengths): those of the coefficients of their Taylor columns in the joint least-
-    squares fit of all data, ``{uid: {key: se}}`` (white-noise errors, like the linear ones)."""
-    X = state.design(dd, taylor=True) if X is None else X
-    G = X.T @ X if G is None else G
-    beta = solve_normal(G, X.T @ dd.y)
-    r = dd.y - X @ beta
-    s2 = float(r @ r) / max(len(r) - X.shape[1], 1)
+    squares fit of all data, ``{uid: {key: se}}`` (white-noise errors, like the linear ones).
+    ``cols``: every block's columns with its Taylor columns (:meth:`Block.columns`), ``G, b``: their
+    normal equations on all data when known; reduced a chunk of rows at a time (no stacked design)."""
+    cols = [blk.columns(dd, taylor=True) for blk in state.blocks] if cols is None else cols
+    ranges = gram.every_row(len(dd))
+    if G is None or b is None:
+        G, b = gram.normals(cols, dd.y, ranges)
+    beta = solve_normal(G, b)
+    s2 = gram.rss(cols, beta, dd.y, ranges) / max(len(dd) - len(b), 1)
     cov = _cov(G, s2)
     out = {}
     for blk, (a, z) in zip(state.blocks, state.spans(dd, taylor=True)):
@@ -50,6 +53,7 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
     blocks = list(state.blocks)
     y = dd.y
     yy = float(y @ y)
+    ranges = gram.every_row(len(y))
     for _ in range(sweeps):
         for i in range(len(blocks)):
             blk = blocks[i]
@@ -58,21 +62,19 @@ def polish(state: State, dd: DiagnoseData, *, sweeps: int = 2, only=None) -> Sta
             params = nonlinear_parameters(blk, dd)
             if not params:
                 continue
-            Xo = stack((b.columns(dd) for j, b in enumerate(blocks) if j != i), len(dd),
-                       sum(len(b.names) for j, b in enumerate(blocks) if j != i))
-            Goo = Xo.T @ Xo
-            bo = Xo.T @ y
+            # the other blocks' columns (not stacked: their normals a chunk of rows at a time)
+            Xo = [b.columns(dd) for j, b in enumerate(blocks) if j != i]
+            Goo, bo = gram.normals(Xo, y, ranges)
             for key, val, lo, hi, log in params:
                 cur = blocks[i]
 
-                def rss(x, cur=cur, key=key, log=log):
+                def rss(x, cur=cur, key=key, log=log, Xo=Xo, Goo=Goo, bo=bo):
                     b = with_parameter(cur, key, math.exp(x) if log else x)
-                    C = b.columns(dd)
-                    # one product of the cross block: the solve (an eigendecomposition) reads the lower
-                    # triangle of G only, so its upper block is the mirror of the lower one
-                    CtX = C.T @ Xo
-                    G = np.block([[Goo, CtX.T], [CtX, C.T @ C]])
-                    rhs = np.concatenate([bo, C.T @ y])
+                    # the border of the normal equations of [others | this block]; the solve (an
+                    # eigendecomposition) reads the lower triangle of G only
+                    CtX, CtC, Cty = gram.bordered(Xo, [b.columns(dd)], y, ranges)
+                    G = np.block([[Goo, CtX.T], [CtX, CtC]])
+                    rhs = np.concatenate([bo, Cty])
                     beta = solve_normal(G, rhs)
                     return yy - float(beta @ rhs)
 
@@ -95,21 +97,13 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
     scale parameters and to the bounds; halved while the error does not fall).  A cheap
     :func:`polish` for the held-out test, where every candidate needs one."""
     y = dd.y
-    buf = [np.empty(0)]
-
-    def stacked(parts, p):
-        """The design of the blocks ``parts`` yields (``p`` columns) stacked into one buffer reused by
-        every step of the refinement, block by block (:func:`~.gram.stack`: the same array as
-        ``np.column_stack``, without a new rows x terms allocation per trial nor every block held)."""
-        if buf[0].size < len(y) * p:
-            buf[0] = np.empty(len(y) * p)
-        return stack(parts, len(y), p, out=buf[0][:len(y) * p].reshape(len(y), p))
+    ranges = gram.every_row(len(y))
 
     def sse(st):
-        X = stacked((b.columns(dd) for b in st.blocks), sum(len(b.names) for b in st.blocks))
-        beta = solve_normal(X.T @ X, X.T @ y)
-        r = y - X @ beta
-        return float(r @ r), beta
+        # the blocks' columns side by side, reduced a chunk of rows at a time (never stacked)
+        cols = [b.columns(dd) for b in st.blocks]
+        beta = solve_normal(*gram.normals(cols, y, ranges))
+        return gram.rss(cols, beta, y, ranges), beta
 
     cur, (best, beta) = state, sse(state)
     for _ in range(steps):
@@ -131,15 +125,14 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
         if not moves:
             return cur
 
-        def parts():
-            # every block's columns, then its Taylor columns (one per nonlinear parameter)
-            for b, t in zip(blocks, taylor_of):
-                yield b.columns(dd)
-                if t:
-                    yield b.taylor_columns(dd)
-
-        X = stacked(parts(), p)
-        taylor = solve_normal(X.T @ X, X.T @ y)[at]
+        # every block's columns, then its Taylor columns (one per nonlinear parameter)
+        cols = []
+        for b, t in zip(blocks, taylor_of):
+            cols.append(b.columns(dd))
+            if t:
+                cols.append(b.taylor_columns(dd))
+        taylor = solve_normal(*gram.normals(cols, y, ranges))[at]
+        del cols
         improved = False
         for scale in (1.0, 0.5, 0.25):
             trial = list(blocks)
