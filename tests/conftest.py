@@ -25,6 +25,13 @@ def data_dir() -> Path:
     return root
 
 
+if os.environ.get("PYTEST_XDIST_WORKER") and not os.environ.get("GEARSPEC_THREADS"):
+    # pytest-xdist already runs one test process per core: a command's forked workers
+    # (core.parallel) and evaluation threads would only contend with the other test process.
+    # Tests of the parallel paths set GEARSPEC_THREADS (or workers=) themselves.
+    os.environ["GEARSPEC_THREADS"] = "1"
+
+
 @pytest.fixture(autouse=True)
 def _quiet_gearspec_warnings():
     from gearspec.errors import GearspecWarning

@@ -46,6 +46,7 @@ def _pixels(path):
 @fork_only
 def test_figures_from_two_workers_are_those_of_the_serial_loop(case, tmp_path, monkeypatch):
     rec, seg, res = case
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")     # two workers, whatever the test run's default
     # the reference: every page drawn in one call after the spectra are attached (the code before)
     ref = copy.deepcopy(res)
     assert attach_spectra(ref, rec, range(16)) == [i for i in range(16) if i != UNFITTED]

@@ -22,7 +22,7 @@ import pandas as pd
 from scipy import stats
 from threadpoolctl import threadpool_limits
 
-from ..core.crossval import critical_z, deal_folds, group_summary, splits, z_statistic
+from ..core.crossval import ROUNDOFF_SHARE, critical_z, deal_folds, group_summary, splits, z_statistic
 from ..errors import InputError
 from ..model import FrictionModel
 from .baseline import _as_data, baseline_model, idim_model, relative_error, residual_analysis
@@ -456,6 +456,13 @@ def _holdout_notes(rounds: list, base_ho: float, final_ho: float) -> list:
     return [out + "."]
 
 
+def promising(ev: Evaluation, n: int) -> bool:
+    """A candidate that may join the round's richest model: its held-out drop above round-off
+    (:data:`~gearspec.core.crossval.ROUNDOFF_SHARE` of the held-out sum of squares), in folds
+    carrying 90 % of the change."""
+    return ev.drop > ROUNDOFF_SHARE * n * ev.rmse_holdout_before ** 2 and ev.consistency >= 0.9
+
+
 def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) -> list:
     """Every candidate of a round through the held-out test (in forked workers where they pay), the noise of Z
     from the held-out residual of the richest model the round supports (README, Acceptance)."""
@@ -466,7 +473,7 @@ def _evaluate_round(rnd: Round, cands: list, *, z_crit: float, min_gain: float) 
     # three shapes of Stribeck term, would only fit each other's noise)
     best: dict = {}
     for c, fr, ev in zip(cands, runs, first):
-        if ev.drop > 0 and ev.consistency >= 0.9 and (c.kind not in best or ev.drop > best[c.kind][1].drop):
+        if promising(ev, len(rnd.dd)) and (c.kind not in best or ev.drop > best[c.kind][1].drop):
             best[c.kind] = (fr, ev)
     if len(best) < 2:
         return list(zip(cands, first))
