@@ -14,7 +14,7 @@ from gearspec.core import parallel
 from gearspec.discover import accept
 from gearspec.discover.law import Part, canonical, cross_validate, cross_validate_linear, fit_law, fold_ids
 from gearspec.discover.moments import moments
-from gearspec.discover.pool import _addable, _neighbours, _Pool, _signature
+from gearspec.discover.pool import _neighbours, _Pool, _signature
 from gearspec.discover.search import Scaled, _fit, bootstrap_inclusion
 
 from test_discover_false import DECOYS, F2, F3, twin
