@@ -221,23 +221,7 @@ class FitData:
         of ``getattr(self, name)[mask]``."""
         mask = np.asarray(mask)
         rows = np.flatnonzero(mask) if mask.dtype == bool else mask
-        lazy = self.__dict__.get("_lazy")
-        new = object.__new__(_Subset)
-        pending, composed = {}, {}
-        for f in fields(self):
-            name = f.name
-            if name not in _ARRAYS:
-                new.__dict__[name] = getattr(self, name)
-            elif lazy is not None and name not in self.__dict__:     # not read here yet: from its source
-                source, at = lazy[1][name]
-                if id(at) not in composed:
-                    composed[id(at)] = at[rows]
-                pending[name] = (source, composed[id(at)])
-            elif self.__dict__[name] is None:
-                new.__dict__[name] = None
-            else:
-                pending[name] = (self.__dict__[name], rows)
-        new.__dict__["_lazy"] = (len(rows), pending)
+        new = self._lazy_subset(rows, len(rows), lambda at: at[rows])
         lay = self._layout() if mask.dtype == bool or _increasing(rows) else None
         if lay is not None:     # rows in order: the subset's segments and their rows from this one's
             ids, bounds, dirs = lay
@@ -248,6 +232,33 @@ class FitData:
                                                None if dirs is None else dirs[has])
         else:
             keep = unique_ids(new.segment)
+        return self._with_segments(new, keep)
+
+    def _lazy_subset(self, here, n: int, compose) -> "FitData":
+        """A subset of ``n`` rows whose sample arrays are gathered when first read: an array read
+        here by the rows ``here`` (an index or :class:`_Ranges`), one not read yet from its source
+        by ``compose(at)`` of the rows ``at`` it has there (once per distinct ``at``)."""
+        lazy = self.__dict__.get("_lazy")
+        new = object.__new__(_Subset)
+        pending, composed = {}, {}
+        for f in fields(self):
+            name = f.name
+            if name not in _ARRAYS:
+                new.__dict__[name] = getattr(self, name)
+            elif lazy is not None and name not in self.__dict__:     # not read here yet: from its source
+                source, at = lazy[1][name]
+                if id(at) not in composed:
+                    composed[id(at)] = compose(at)
+                pending[name] = (source, composed[id(at)])
+            elif self.__dict__[name] is None:
+                new.__dict__[name] = None
+            else:
+                pending[name] = (self.__dict__[name], here)
+        new.__dict__["_lazy"] = (n, pending)
+        return new
+
+    def _with_segments(self, new, keep) -> "FitData":
+        """``new`` with this data's segment table rows of the segments ``keep``, notes and cache."""
         new.segments = self.segments[self.segments["segment"].isin(keep)].reset_index(drop=True) \
             if len(self.segments) else self.segments
         new.notes = list(self.notes)
@@ -273,32 +284,13 @@ class FitData:
             raise ValueError("segment_subset needs rows in segment order")
         ids, bounds, dirs = lay
         sel = np.asarray(select, bool)
-        lazy = self.__dict__.get("_lazy")
-        new = object.__new__(_Subset)
         own = _Ranges(bounds[:-1][sel], bounds[1:][sel])       # in this data's rows
-        pending, composed = {}, {}
-        for f in fields(self):
-            name = f.name
-            if name not in _ARRAYS:
-                new.__dict__[name] = getattr(self, name)
-            elif lazy is not None and name not in self.__dict__:     # not read here yet: from its source
-                source, at = lazy[1][name]
-                if id(at) not in composed:      # ranges of this data's segments in the source: taken
-                    composed[id(at)] = at.take(sel) if isinstance(at, _Ranges) else at[own.array()]
-                pending[name] = (source, composed[id(at)])
-            elif self.__dict__[name] is None:
-                new.__dict__[name] = None
-            else:
-                pending[name] = (self.__dict__[name], own)
-        new.__dict__["_lazy"] = (len(own), pending)
+        # ranges of this data's segments in the source: taken
+        new = self._lazy_subset(own, len(own), lambda at: at.take(sel) if isinstance(at, _Ranges) else at[own.array()])
         sizes = np.diff(bounds)[sel]
         new.__dict__["_segment_layout"] = (ids[sel], np.concatenate(([0], np.cumsum(sizes))),
                                            None if dirs is None else dirs[sel])
-        new.segments = self.segments[self.segments["segment"].isin(ids[sel])].reset_index(drop=True) \
-            if len(self.segments) else self.segments
-        new.notes = list(self.notes)
-        new.cache = self.cache
-        return new
+        return self._with_segments(new, ids[sel])
 
     def segment_groups(self) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
         """The rows of every segment: ``(order, ids, bounds)`` as
