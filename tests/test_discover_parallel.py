@@ -19,7 +19,7 @@ from gearspec.discover.search import Scaled, _fit, bootstrap_inclusion
 
 from test_discover_false import DECOYS, F2, F3, twin
 
-fork_only = pytest.mark.skipif(parallel._can_fork() is False, reason="no fork on this system")
+fork_only = pytest.mark.skipif(parallel.can_fork() is False, reason="no fork on this system")
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,7 @@ def result():
                               published=False)
 
 
-@pytest.mark.skipif(not parallel._can_fork(), reason="forked workers need fork")
+@pytest.mark.skipif(not parallel.can_fork(), reason="forked workers need fork")
 def test_forked_figures_are_the_loop_s(result, tmp_path, monkeypatch):
     calls = []
     orig = parallel.forked_map

@@ -8,7 +8,7 @@ import pytest
 from gearspec.core import parallel
 from gearspec.core.parallel import forked_map, in_worker, worker_count
 
-fork_only = pytest.mark.skipif(parallel._can_fork() is False, reason="no fork on this system")
+fork_only = pytest.mark.skipif(parallel.can_fork() is False, reason="no fork on this system")
 
 
 def _lstsq_task(seed):
@@ -82,6 +82,15 @@ def test_the_worker_count_follows_gearspec_threads(monkeypatch):
     monkeypatch.setenv("GEARSPEC_THREADS", "1")
     assert worker_count() == 1
     monkeypatch.setenv("GEARSPEC_THREADS", "2")
-    assert worker_count() == (2 if parallel._can_fork() else 1)
+    assert worker_count() == (2 if parallel.can_fork() else 1)
     with pytest.raises(Exception, match="threads"):
         worker_count(0)
+
+
+def test_a_bad_worker_count_is_refused_where_fork_is_missing_too(monkeypatch):
+    # without fork every map is a loop, but a bad count is still the caller's error, said the same way
+    monkeypatch.setattr(parallel, "can_fork", lambda: False)
+    assert worker_count(2) == 1
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(Exception, match="threads"):
+            worker_count(bad)

@@ -22,7 +22,7 @@ from gearspec.simulate import Ripple, plateau_recording
 from gearspec.spectrum import analyze
 from gearspec.spectrum.pipeline import attach_spectra, can_hold_spectra
 
-fork_only = pytest.mark.skipif(parallel._can_fork() is False, reason="no fork on this system")
+fork_only = pytest.mark.skipif(parallel.can_fork() is False, reason="no fork on this system")
 UNFITTED = 3
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Sequence
 
-__all__ = ["forked_map", "worker_count", "in_worker"]
+__all__ = ["forked_map", "worker_count", "in_worker", "can_fork"]
 
 #: set in a worker process: a :func:`forked_map` called from a task runs its tasks in a loop there
 _IN_WORKER = False
@@ -31,12 +31,13 @@ def worker_count(workers: int | None = None) -> int:
     than these tasks)."""
     from ..terms.lines import check_threads
 
-    if _IN_WORKER or not _can_fork():
-        return 1
-    return check_threads(workers)
+    n = check_threads(workers)      # a bad count is refused on every system, not only where fork exists
+    return 1 if (_IN_WORKER or not can_fork()) else n
 
 
-def _can_fork() -> bool:
+def can_fork() -> bool:
+    """Whether worker processes start here as copies of this one: Linux with the "fork" start
+    method (elsewhere a process starts anew and imports everything again)."""
     import multiprocessing
 
     return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()

@@ -19,6 +19,7 @@ from typing import Iterable
 
 import pandas as pd
 
+from ..core.parallel import can_fork
 from ..errors import GearspecWarning, InputError
 
 __all__ = ["batch", "analyse_one", "tasks", "pair_counts", "N_LINES", "BASE_COLUMNS", "DIRECTIONS"]
@@ -327,7 +328,7 @@ def _start_method(start: str | None) -> str:
             raise InputError(f"start must be one of {', '.join(multiprocessing.get_all_start_methods())} "
                              f"on this system, got {start!r}")
         return start
-    if sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods():
+    if can_fork():
         return "fork"
     return dask.config.get("distributed.worker.multiprocessing-method", "spawn")
 
