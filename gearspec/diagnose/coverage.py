@@ -45,14 +45,20 @@ def _runs(dd: DiagnoseData) -> dict:
                     nyq[i] = q
             span[i] = float(np.ptp(f.theta[a:z])) if z > a else 0.0
     vmin, vmax = {}, {}
+    speed = np.zeros(len(bounds))
+    free = np.zeros(len(bounds), bool)
     if len(f):
         sp = np.abs(f.v)
         for d in (0, 1, -1):
             sel = f.v != 0 if d == 0 else (f.direction == d) & (f.v != 0)
             vmin[d] = np.minimum.reduceat(np.where(sel, sp, np.inf), starts)
             vmax[d] = np.maximum.reduceat(np.where(sel, sp, -np.inf), starts)
+        speed = np.add.reduceat(sp, starts) / lengths
+        if f.free_motion and "kind" in f.segments:
+            ids = f.segments.loc[f.segments["kind"] == "free", "segment"].to_numpy()
+            free = np.isin(f.segment[starts], ids)
     out = dd.cache["coverage_runs"] = {"starts": starts, "lengths": lengths, "nyquist": nyq, "span": span,
-                                       "vmin": vmin, "vmax": vmax}
+                                       "vmin": vmin, "vmax": vmax, "speed": speed, "free": free}
     return out
 
 
@@ -105,16 +111,28 @@ def segment_span(dd: DiagnoseData) -> np.ndarray:
 
 def line_speed_range(dd: DiagnoseData, frequency: float, direction: int = 0) -> tuple | None:
     """``(min, max)`` of |v| where ``dd`` measures a line at ``frequency`` (:func:`measurable`) in
-    ``direction`` (0: both); None where it measures it nowhere.  Whole trajectories (reduced
-    data, where the lines are fitted on every sample): the range of the moving samples.  From the
-    per-segment table of :func:`_runs` (the same minimum and maximum as over the samples)."""
+    ``direction`` (0: both), widened, as :func:`gearspec.identify.speed_ranges` widens it, to the
+    speeds below (above) which the blocks of free motion that resolve the line together hold one
+    cycle of it (:func:`~gearspec.identify.stats.free_speed_range`: a block of a few samples holds
+    a fraction of a cycle, and the law is held at the range's edges outside it); None where it
+    measures it nowhere.  Whole trajectories (reduced data, where the lines are fitted on every
+    sample): the range of the moving samples.  From the per-segment table of :func:`_runs` (the
+    same minimum and maximum as over the samples)."""
+    from ..identify.stats import free_speed_range
+
     t = _runs(dd)
     if not len(t["starts"]):
         return None
     lo, hi = t["vmin"][direction], t["vmax"][direction]
+    free = None
     if dd.reduce is None:
         meas = _measurable_runs(dd, frequency)
+        blocks = t["free"] & _resolved_runs(dd, frequency) & np.isfinite(lo)
+        if blocks.any() and dd.fit.theta is not None:
+            free = free_speed_range(t["speed"][blocks], frequency * t["span"][blocks])
         lo, hi = lo[meas], hi[meas]
     if not len(lo) or not np.isfinite(lo).any():
-        return None
+        return free
+    if free is not None:
+        return min(float(np.min(lo)), free[0]), max(float(np.max(hi)), free[1])
     return float(np.min(lo)), float(np.max(hi))

@@ -20,7 +20,7 @@ from ..gears import GearTrain, load_gear
 from ..spectrum import MEASURABLE_FRACTION
 from ..spectrum.analysis import group_position_nyquist
 
-__all__ = ["MIN_CYCLES", "SIGNIFICANT", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges",
+__all__ = ["MIN_CYCLES", "SIGNIFICANT", "ConvergenceError", "harmonic_specs", "SegmentStats", "segment_stats", "speed_ranges", "free_speed_range",
            "pair_se"]
 
 #: a segment counts towards a line where it covers at least this fraction of a cycle (the default
@@ -254,14 +254,27 @@ def speed_ranges(stats: SegmentStats) -> np.ndarray:
         # blocks together cover one cycle of the line (:data:`FREE_RANGE_CYCLES`)
         f = stats.free & stats.sampled[:, k] if stats.free is not None else None
         if f is not None and f.any():
-            sp, cyc = stats.speed[f], stats.cycles[f, k]
-            o = np.argsort(sp, kind="stable")
-            up, down = np.cumsum(cyc[o]), np.cumsum(cyc[o][::-1])
-            if up[-1] >= FREE_RANGE_CYCLES:
-                lo = float(sp[o][np.searchsorted(up, FREE_RANGE_CYCLES)])
-                hi = float(sp[o][::-1][np.searchsorted(down, FREE_RANGE_CYCLES)])
+            got = free_speed_range(stats.speed[f], stats.cycles[f, k])
+            if got is not None:
+                lo, hi = got
                 out[k] = (lo, hi) if not m.any() else (min(out[k, 0], lo), max(out[k, 1], hi))
     return out
+
+
+def free_speed_range(speed, cycles, need: float = FREE_RANGE_CYCLES) -> tuple[float, float] | None:
+    """``(lo, hi)``: the speed below which the blocks of free motion at speeds ``speed`` (each
+    holding ``cycles`` cycles of a line) together hold ``need`` cycles, and the speed above which
+    they do; None when all of them together hold fewer.  The speed range of a line's amplitude law
+    over free motion, in :func:`speed_ranges` and in the closed loop
+    (:func:`gearspec.diagnose.coverage.line_speed_range`)."""
+    sp, cyc = np.asarray(speed, float), np.asarray(cycles, float)
+    if not len(sp):
+        return None
+    o = np.argsort(sp, kind="stable")
+    up, down = np.cumsum(cyc[o]), np.cumsum(cyc[o][::-1])
+    if up[-1] < need:
+        return None
+    return float(sp[o][np.searchsorted(up, need)]), float(sp[o][::-1][np.searchsorted(down, need)])
 
 
 def pair_se(a: float, c: float, cov) -> tuple[float, float]:
