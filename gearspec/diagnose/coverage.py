@@ -27,7 +27,8 @@ def _runs(dd: DiagnoseData) -> dict:
     """Per segment of ``dd.fit`` (cached on the data): ``starts``, ``lengths`` (samples),
     ``nyquist`` (cycles per unit; inf where unknown), ``span`` (travel, unit) and, per direction
     ``d`` in (0, 1, -1) (0: both), ``vmin[d]`` / ``vmax[d]``: the smallest and largest |v| of its
-    samples moving in that direction (inf / -inf where none)."""
+    samples moving in that direction (inf / -inf where none; in data with free motion, whose samples
+    keep their own speeds, the segment's mean speed ``speed``) and ``free``: a block of free motion."""
     hit = dd.cache.get("coverage_runs")
     if hit is not None:
         return hit
@@ -57,6 +58,11 @@ def _runs(dd: DiagnoseData) -> dict:
         if f.free_motion and "kind" in f.segments:
             ids = f.segments.loc[f.segments["kind"] == "free", "segment"].to_numpy()
             free = np.isin(f.segment[starts], ids)
+            # samples at their own speeds (DiagnoseData): a segment's speed is their mean, as in the fit
+            # (identify.stats), not the extremes of its samples
+            for d in (0, 1, -1):
+                vmin[d] = np.where(np.isfinite(vmin[d]), speed, np.inf)
+                vmax[d] = np.where(np.isfinite(vmax[d]), speed, -np.inf)
     out = dd.cache["coverage_runs"] = {"starts": starts, "lengths": lengths, "nyquist": nyq, "span": span,
                                        "vmin": vmin, "vmax": vmax, "speed": speed, "free": free}
     return out
