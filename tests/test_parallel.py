@@ -94,3 +94,25 @@ def test_a_bad_worker_count_is_refused_where_fork_is_missing_too(monkeypatch):
     for bad in (0, -1, 1.5, True):
         with pytest.raises(Exception, match="threads"):
             worker_count(bad)
+
+
+def _map_in_daemon(q):
+    try:
+        q.put(("ok", forked_map(lambda k: k * k, range(4), workers=2)))
+    except Exception as exc:      # pragma: no cover - what the test reports when the rule is missing
+        q.put(("error", repr(exc)))
+
+
+@fork_only
+def test_a_map_in_a_daemonic_process_runs_there():
+    # a Dask worker (gearspec batch) is a daemonic process: it may not have children, so its maps
+    # run in a loop ("daemonic processes are not allowed to have children" otherwise)
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    q = ctx.Queue()
+    p = ctx.Process(target=_map_in_daemon, args=(q,), daemon=True)
+    p.start()
+    got = q.get(timeout=60)
+    p.join(timeout=60)
+    assert got == ("ok", [0, 1, 4, 9])

@@ -26,13 +26,16 @@ def in_worker() -> bool:
 
 def worker_count(workers: int | None = None) -> int:
     """Processes a map uses: ``workers`` when given (>= 1), else the CPUs this process may run on
-    (:func:`gearspec.terms.lines.default_threads`: ``GEARSPEC_THREADS`` when set); 1 inside a worker
-    and where the system cannot ``fork`` (macOS and Windows start processes anew, which costs more
-    than these tasks)."""
+    (:func:`gearspec.terms.lines.default_threads`: ``GEARSPEC_THREADS`` when set); 1 inside a worker,
+    in a daemonic process (which may not start children: a Dask worker) and where the system cannot
+    ``fork`` (macOS and Windows start processes anew, which costs more than these tasks)."""
+    import multiprocessing
+
     from ..terms.lines import check_threads
 
     n = check_threads(workers)      # a bad count is refused on every system, not only where fork exists
-    return 1 if (_IN_WORKER or not can_fork()) else n
+    # a daemonic process (a Dask worker of ``gearspec batch``) may not have children
+    return 1 if (_IN_WORKER or not can_fork() or multiprocessing.current_process().daemon) else n
 
 
 def can_fork() -> bool:
