@@ -1,0 +1,83 @@
+"""discover's maps in bigger batches: the selected law's simplifications fitted and refitted on the
+held-out folds in one map (one task per signature) give the pool of a map of fits then a map of
+refits, bit for bit; and a map hands its costliest tasks out first, its results in the items' order.
+The twin: tests/test_discover_false.py's (SILO4 eq. 11, 8 speeds per direction, 2 s at 1 kHz)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gearspec.core import parallel
+from gearspec.discover import forked
+from gearspec.discover.law import Part, canonical, fit_law
+from gearspec.discover.pool import _Pool, _signature
+
+from test_discover_parallel import _law, _moves, _one, _state, fork_only, small, two  # noqa: F401
+
+
+def test_a_map_hands_out_the_costliest_tasks_first_and_returns_in_order(monkeypatch):
+    monkeypatch.setenv("GEARSPEC_THREADS", "1")      # a loop: the order the tasks run in is seen here
+    ran = []
+
+    def fn(x):
+        ran.append(x)
+        return 10 * x
+
+    items = [3, 7, 1, 7, 5, 2]
+    cost = {3: 1.0, 7: 4.0, 1: 0.5, 5: 4.0, 2: 3.0}
+    assert forked.fits_map(fn, items, cost=cost.get) == [30, 70, 10, 70, 50, 20]
+    assert ran == [7, 7, 5, 2, 3, 1]                # by cost, ties in the items' order
+    ran.clear()
+    assert forked.fits_map(fn, items) == [30, 70, 10, 70, 50, 20] and ran == items
+
+
+def _pools(M, fold):
+    """Two pools holding the same laws: one screened at its start values whose refined start comes
+    later in the batch (the fit the pool keeps is not the batch's first), and one with a held-out error."""
+    out = []
+    for _ in range(2):
+        p = _Pool(M, fold, "segment", 6, 4.0)
+        sig = _one(p, _law(), "start", 0.5)
+        _one(p, _law()[:3], "poor", 0.2, refine=False)
+        p.screen()
+        p.refit_holdout([sig])
+        out.append(p)
+    return out
+
+
+@fork_only
+def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit(small, two):
+    _, M, fold = small
+    ref, par = _pools(M, fold)
+    poor = _law()[:3]
+    better = canonical(poor[:2] + (Part(poor[2].family, poor[2].freq, poor[2].split, 3.0),))
+    # a law tried before, screened, without a held-out error: refitted though the batch does not fit it
+    tried = canonical(_law()[1:])
+    for p in (ref, par):
+        _one(p, tried, "tried", 0.3)
+        p.screen()
+    moves = _moves(M) + [better, tried]
+    items = [(m, f"move {k}", float(k)) for k, m in enumerate(moves)]
+
+    def held(pool):
+        return {_signature(m) for m in moves if _signature(m) in pool.fits}
+
+    two.clear()
+    want = ref.consider_all(items)
+    ref.screen()
+    ref.refit_holdout(held(ref))
+    n_ref = list(two)
+    two.clear()
+    got = par.consider_all(items, holdout=True)
+    assert par.prefit and all(s in par.fits for s in par.prefit)
+    par.screen()
+    par.refit_holdout(held(par))
+    assert got == want and _state(par) == _state(ref)
+    assert not par.prefit
+    # one map where there were two; every law the batch holds now has its full held-out error
+    assert len(n_ref) == 2 and len(two) == 1 and held(par) <= par.full
+    # the poor start lost to its refined start, and the refit began at the refined optimum
+    s = _signature(poor)
+    assert par.fits[s][1] == "poor" and s in par.full
+    assert np.sum(par.cands[s].fit.sse) <= np.sum(fit_law(M, poor, refine=False).sse)
+    assert _signature(tried) in par.full
