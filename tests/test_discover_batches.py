@@ -81,3 +81,45 @@ def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit
     assert par.fits[s][1] == "poor" and s in par.full
     assert np.sum(par.cands[s].fit.sse) <= np.sum(fit_law(M, poor, refine=False).sse)
     assert _signature(tried) in par.full
+
+
+def test_segment_chunks_cut_the_samples_in_equal_shares(monkeypatch):
+    from gearspec.discover.forked import segment_chunks
+
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    if parallel.worker_count() < 2:
+        return
+    # 16 segments of 10 samples: 8 chunks (4 per worker) of 2 segments
+    assert segment_chunks([10] * 16) == [(2 * i, 2 * i + 2) for i in range(8)]
+    # one long segment: alone in its chunk, the others share the rest
+    got = segment_chunks([100] + [10] * 10)
+    assert got[0] == (0, 1) and got[-1][1] == 11 and all(a < z for a, z in got)
+    assert [z for _, z in got[:-1]] == [a for a, _ in got[1:]]
+    assert segment_chunks([5, 5]) == [(0, 1), (1, 2)]
+    monkeypatch.setenv("GEARSPEC_THREADS", "1")
+    assert segment_chunks([10] * 16) == [(0, 16)]
+
+
+@fork_only
+def test_passes_over_the_samples_in_chunks_of_segments_are_the_loop_bit_for_bit(small, two, monkeypatch):
+    from gearspec.discover.moments import moments
+    from gearspec.discover.screen import joint_statistics, line_statistics
+
+    from test_discover_false import F2, F3
+
+    fd = small[0]
+    freqs = [F2, F3, 0.37]
+    out = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv("GEARSPEC_THREADS", threads)
+        two.clear()
+        M = moments(fd, freqs)
+        ls = line_statistics(fd, freqs)
+        js = joint_statistics(fd, freqs)
+        out.append(([M.G, M.b, M.yy, M.noise, M.Gb, M.bb, M.yyb, M.P], ls, js))
+        if threads == "2":
+            assert len(two) == 3 and min(two) >= 4, two      # each pass in chunks of segments, in workers
+    for a, b in zip(out[0], out[1]):
+        for x, y in zip(a, b):
+            assert np.array_equal(x, y)
+    assert out[0][0][0].shape[0] == len(np.unique(fd.segment)) > 8

@@ -3,9 +3,11 @@ run in a loop here where a map would not pay."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..core import parallel
 
-__all__ = ["fits_map", "MIN_QUICK"]
+__all__ = ["fits_map", "chunk_count", "segment_chunks", "MIN_QUICK"]
 
 #: a map costs about 0.09 s of CPU however small its tasks (two workers forked, started, ended;
 #: measured on a 300 MB discover process): batches of quick tasks (a few refinement steps each)
@@ -29,3 +31,31 @@ def fits_map(fn, items, min_items: int = 2, cost=None) -> list:
     for i, r in zip(order, got):
         out[i] = r
     return out
+
+
+#: chunks of segments per worker in :func:`segment_chunks` (a few, so that the workers finish
+#: together though segments differ in length)
+CHUNKS_PER_WORKER = 4
+
+
+def chunk_count() -> int:
+    """Chunks a pass over the segments is cut into: :data:`CHUNKS_PER_WORKER` per worker of a map,
+    1 when a map would run in a loop."""
+    n = parallel.worker_count()
+    return CHUNKS_PER_WORKER * n if n > 1 else 1
+
+
+def segment_chunks(sizes) -> list[tuple[int, int]]:
+    """``(first, stop)`` of consecutive segments (``sizes``: samples of each) holding about equal
+    numbers of samples, :data:`CHUNKS_PER_WORKER` per worker of a map (one chunk when a map would
+    run in a loop): the tasks of a pass over the samples segment by segment, whose result for a
+    segment does not depend on the chunk it is in."""
+    sizes = np.asarray(sizes, dtype=float)
+    S = len(sizes)
+    k = min(S, chunk_count())
+    if k <= 1:
+        return [(0, S)] if S else []
+    cum = np.cumsum(sizes)
+    cuts = np.searchsorted(cum, cum[-1] * np.arange(1, k) / k, side="left") + 1
+    edges = np.unique(np.concatenate([[0], np.clip(cuts, 1, S), [S]]))
+    return [(int(a), int(z)) for a, z in zip(edges[:-1], edges[1:])]
