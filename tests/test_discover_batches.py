@@ -123,3 +123,20 @@ def test_passes_over_the_samples_in_chunks_of_segments_are_the_loop_bit_for_bit(
         for x, y in zip(a, b):
             assert np.array_equal(x, y)
     assert out[0][0][0].shape[0] == len(np.unique(fd.segment)) > 8
+
+
+@fork_only
+def test_the_papers_laws_are_fitted_in_this_process_sharing_the_samples_statistics(small, monkeypatch):
+    from gearspec.discover.explorer import discover
+
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    import copy
+
+    fd = copy.copy(small[0])
+    fd.cache = {}                   # its own cache, empty
+    assert not any(k[0] == "segment_stats" for k in fd.cache if isinstance(k, tuple))
+    res = discover(fd, gear="silo4-joint3", local_search=False, n_models=0, references=("stribeck", "silo4"))
+    keys = [k for k in fd.cache if isinstance(k, tuple) and k[0] == "segment_stats"]
+    # both laws' statistics were computed here (a worker's would be lost with it), eq. 11's with its lines
+    assert len(keys) >= 2 and any(len(k[1]) >= 2 for k in keys)
+    assert [r.name for r in res.references if r.model is not None] and len(res.references) == 2
