@@ -9,6 +9,7 @@ import numpy as np
 
 from gearspec.core import parallel
 from gearspec.discover import forked
+from gearspec.discover import pool as pool_mod
 from gearspec.discover.law import Part, canonical, fit_law
 from gearspec.discover.pool import _Pool, _signature
 
@@ -46,7 +47,7 @@ def _pools(M, fold):
 
 
 @fork_only
-def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit(small, two):
+def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit(small, two, monkeypatch):
     _, M, fold = small
     ref, par = _pools(M, fold)
     poor = _law()[:3]
@@ -71,7 +72,12 @@ def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit
     got = par.consider_all(items, holdout=True)
     assert par.prefit and all(s in par.fits for s in par.prefit)
     par.screen()
+    here = []              # refits computed by refit_holdout itself (in this process or its map)
+    real = pool_mod._full_holdout
+    monkeypatch.setattr(pool_mod, "_full_holdout", lambda *a: here.append(1) or real(*a))
+    n_maps = len(two)
     par.refit_holdout(held(par))
+    assert not here and len(two) == n_maps, "refit_holdout refitted laws the batch had refitted"
     assert got == want and _state(par) == _state(ref)
     assert not par.prefit
     # one map where there were two; every law the batch holds now has its full held-out error
