@@ -93,6 +93,7 @@ def test_segment_chunks_cut_the_samples_in_equal_shares(monkeypatch):
     from gearspec.discover.forked import segment_chunks
 
     monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    monkeypatch.setattr(forked, "MIN_CELLS", 0)
     if parallel.worker_count() < 2:
         return
     # 16 segments of 10 samples: 8 chunks (4 per worker) of 2 segments
@@ -102,6 +103,10 @@ def test_segment_chunks_cut_the_samples_in_equal_shares(monkeypatch):
     assert got[0] == (0, 1) and got[-1][1] == 11 and all(a < z for a, z in got)
     assert [z for _, z in got[:-1]] == [a for a, _ in got[1:]]
     assert segment_chunks([5, 5]) == [(0, 1), (1, 2)]
+    # a pass too small to pay for a map: one chunk
+    monkeypatch.setattr(forked, "MIN_CELLS", 4_000_000)
+    assert segment_chunks([10_000] * 40, 9) == [(0, 40)]          # 3.6 M cells: one chunk
+    assert len(segment_chunks([10_000] * 40, 11)) == 8         # 4.4 M cells: split
     monkeypatch.setenv("GEARSPEC_THREADS", "1")
     assert segment_chunks([10] * 16) == [(0, 16)]
 
@@ -114,6 +119,7 @@ def test_passes_over_the_samples_in_chunks_of_segments_are_the_loop_bit_for_bit(
     from test_discover_false import F2, F3
 
     fd = small[0]
+    monkeypatch.setattr(forked, "MIN_CELLS", 0)       # the small twin's passes cut in chunks too
     freqs = [F2, F3, 0.37]
     out = []
     for threads in ("1", "2"):

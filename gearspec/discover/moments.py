@@ -249,7 +249,7 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     # its chunk): a few per worker, each within the memory bound
     sizes = np.array([sl.stop - sl.start for sl in segs])
     parts = fits_map(lambda az: _reduce_chunk(chans, change, th, y, order, segs[az[0]:az[1]], K0, freqs),
-                     list(_chunks(sizes, len(basis), chunk_count())))
+                     list(_chunks(sizes, len(basis), chunk_count(float(np.sum(sizes)) * len(basis)))))
     gn = GroupNormals(*(np.concatenate([c[0][k] for c in parts]) for k in range(4)))
     blocks = {} if change is not None else {k: np.concatenate([c[1][k] for c in parts]) for k in ("Gb", "bb", "yyb")}
     noise = np.concatenate([c[2] for c in parts])

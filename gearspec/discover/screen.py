@@ -69,7 +69,7 @@ def line_statistics(data: FitData, freqs, *, inertia="auto", min_cycles: float =
                 g[s, sl, 1] = cs.T @ y - (L.T @ cs).T @ ly
         return G, g, cycles
 
-    G, g, cycles = _joined(fits_map(chunk, segment_chunks(stops - starts)), ((0, F, 2, 2), (0, F, 2), (0, F)))
+    G, g, cycles = _joined(fits_map(chunk, segment_chunks(stops - starts, F)), ((0, F, 2, 2), (0, F, 2), (0, F)))
     bad = cycles < min_cycles
     G[bad], g[bad] = 0.0, 0.0
     return sids, G, g, cycles
@@ -102,7 +102,7 @@ def joint_statistics(data: FitData, freqs, *, inertia="auto", min_cycles: float 
             g[s] = H.T @ y - LH.T @ (iL @ (L.T @ y))
         return G, g
 
-    return _joined(fits_map(chunk, segment_chunks(stops - starts)), ((0, 2 * F, 2 * F), (0, 2 * F)))
+    return _joined(fits_map(chunk, segment_chunks(stops - starts, 2 * F)), ((0, 2 * F, 2 * F), (0, 2 * F)))
 
 
 def _joined(chunks, empty) -> tuple:
