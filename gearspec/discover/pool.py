@@ -459,7 +459,8 @@ def _reachable(pool: _Pool) -> set:
 
 def _simplifications(pool: _Pool, sel, what: str = "") -> set:
     """The selected law's neighbours that add nothing (a term dropped, made symmetric or
-    direction-dependent, reshaped), fitted and screened (``what``: progress, as in
+    direction-dependent, reshaped), fitted and screened, their full held-out refits computed in
+    the same map for the :meth:`_Pool.refit_holdout` that follows (``what``: progress, as in
     :meth:`_Pool.refit_holdout`)."""
     base = pool.cands[sel]
     nb = set()
