@@ -28,7 +28,6 @@ from .screen import screen_lines
 from .search import OPTIMIZERS, Scaled, bootstrap_inclusion, path
 from .accept import backward, validate_law
 from .blocks import SegmentDesign
-from .forked import fits_map
 
 __all__ = ["discover", "DiscoveryResult", "Candidate", "Reference", "spectrum_lines", "PAPER_LAWS"]
 
@@ -531,7 +530,10 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     the mean friction of every segment (data, the selected law, each reference) for the plots."""
     t0 = time.perf_counter()
     M = run.M
-    refs: list[Reference] = fits_map(lambda law: _paper_law(data, M, law, run.specs, run.fold), references or ())
+    # in turn, not in forked workers: a paper law's fit reads per-segment statistics of the samples
+    # cached on ``data`` (identify.stats.segment_stats), which the laws share in one process, while
+    # each worker would make (rows x columns at once, 1 GB more at 10^7 rows) and throw away its own
+    refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold) for law in references or ()]
     for r in refs:
         if say is not None and r.model is not None:
             say(f"reference law {r.name} fitted on the same folds")

@@ -20,6 +20,7 @@ import numpy as np
 from ..core.reduction import GroupNormals, group_normal_equations, harmonic_columns, partial_out_last
 from ..errors import InputError
 from ..fitdata import FitData
+from .forked import chunk_count, fits_map
 
 __all__ = ["Moments", "moments"]
 
@@ -244,8 +245,11 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
     cycles = np.outer(span, freqs) if F else np.zeros((len(segs), 0))
     y, v, dirs = data.y[order], data.v[order], data.direction[order]
     change = data.speed_change()
-    parts = [_reduce_chunk(chans, change, th, y, order, segs[a:z], K0, freqs)
-             for a, z in _chunks(np.array([sl.stop - sl.start for sl in segs]), len(basis))]
+    # chunks of whole segments reduced at once in forked workers (a segment's sums do not depend on
+    # its chunk): a few per worker, each within the memory bound
+    sizes = np.array([sl.stop - sl.start for sl in segs])
+    parts = fits_map(lambda az: _reduce_chunk(chans, change, th, y, order, segs[az[0]:az[1]], K0, freqs),
+                     list(_chunks(sizes, len(basis), chunk_count(float(np.sum(sizes)) * len(basis)))))
     gn = GroupNormals(*(np.concatenate([c[0][k] for c in parts]) for k in range(4)))
     blocks = {} if change is not None else {k: np.concatenate([c[1][k] for c in parts]) for k in ("Gb", "bb", "yyb")}
     noise = np.concatenate([c[2] for c in parts])
@@ -284,10 +288,11 @@ def moments(data: FitData, frequencies=(), labels=None, *, inertia: bool | str =
 _CHUNK_CELLS = 4_000_000
 
 
-def _chunks(sizes: np.ndarray, K: int):
+def _chunks(sizes: np.ndarray, K: int, parts: int = 1):
     """``(first, stop)`` indices of consecutive segments holding about :data:`_CHUNK_CELLS` / ``K``
-    samples together (at least one segment each)."""
-    per = max(_CHUNK_CELLS // max(K, 1), 1)
+    samples together, or fewer so as to make at least about ``parts`` chunks (at least one segment
+    each)."""
+    per = max(min(_CHUNK_CELLS // max(K, 1), -(-int(np.sum(sizes)) // max(parts, 1))), 1)
     a, S = 0, len(sizes)
     cum = np.cumsum(sizes)
     while a < S:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from .forked import MIN_QUICK, fits_map
-from .law import LawFit, Part, canonical, cross_validate, cross_validate_linear, fit_law
+from .law import LawFit, Part, canonical, complexity, cross_validate, cross_validate_linear, fit_law
 from .library import FAMILIES, Library
 from .moments import Moments
 from .results import Candidate, _paired
@@ -119,6 +119,21 @@ def _neighbours(parts, M: Moments, addable=(), adds: bool = True) -> list[tuple]
     return out
 
 
+def _better(fit: LawFit, old: LawFit) -> bool:
+    """Whether a new fit of a signature replaces the pool's: a lower in-sample error (beyond round-off)."""
+    return bool(np.sum(fit.sse) < np.sum(old.sse) * (1 - 1e-9))
+
+
+def _full_holdout(M: Moments, fold, fit: LawFit):
+    """A law's full held-out refit: its all-data fit run to convergence from ``fit``'s optimum and
+    every fold refitted from there (:func:`~.law.cross_validate`): ``(fit, cv_sse, cv_pred)``; None
+    for a law without nonlinear parameters (its screen is exact)."""
+    if not any(p.free for p in fit.parts):
+        return None
+    f = fit_law(M, fit.parts, z0=fit.z)
+    return (f,) + tuple(cross_validate(M, fit.parts, fold, z0=f.z))
+
+
 #: laws per progress line within a step of the selection (on the default twin: 10 full held-out
 #: refits of a 40-parameter law take about 7 s)
 TICK = 10
@@ -138,6 +153,7 @@ class _Pool:
         self.cands: dict = {}         # signature -> Candidate (screened)
         self.full: set = set()        # signatures with full held-out refits
         self.screened: dict = {}      # signature -> (fit, its screen) computed with the fit, not yet in cands
+        self.prefit: dict = {}        # signature -> (fit, its full held-out refit) computed with the fit (consider_all)
         self.addable = list(addable)
         self.screen_nfev = 12          # a few refinement steps while screening; full refinement later
         self.refine_top = 4
@@ -150,11 +166,18 @@ class _Pool:
         ``max_parts`` terms)."""
         return self.consider_all([(parts, origin, thr)], refine)[0]
 
-    def consider_all(self, items, refine: bool = True, what: str = "") -> list:
+    def consider_all(self, items, refine: bool = True, what: str = "", holdout: bool = False) -> list:
         """:meth:`consider` of every ``(parts, origin, threshold)`` of ``items`` in turn, the new
         structures fitted at once (:func:`~gearspec.core.parallel.forked_map`: a fit depends on its
         structure and the moments only) and the pool's bookkeeping done in the order of ``items``,
-        as one call after another would; with ``what``, :meth:`tick` after every item."""
+        as one call after another would; with ``what``, :meth:`tick` after every item.  With
+        ``holdout``: the full held-out refits (:meth:`refit_holdout`) of the signatures of ``items``
+        the pool will hold without one are computed in the same map, each in the task of its
+        signature's fits (a task fits a signature's new structures, takes the fit the bookkeeping
+        will keep and refits it: the same numbers as a map of fits then a map of refits), kept for
+        the :meth:`refit_holdout` that follows; a fit refitted so is not screened (the screen
+        would be replaced), unless its law has no nonlinear parameter (its screen is its held-out
+        error)."""
         plan = []
         for parts, origin, thr in items:
             parts = canonical(parts)
@@ -168,37 +191,90 @@ class _Pool:
             plan.append((parts, sig, origin, thr, sig not in self.full))
         M, nfev, fold = self.M, self.screen_nfev, self.fold
 
-        def fit(ps):        # a new fit and its screen (one task: every fit kept is screened next)
+        def fit(ps, screen=True):        # a new fit and its screen (every fit kept is screened next)
             f = fit_law(M, ps, max_nfev=nfev, refine=refine)
-            return f, cross_validate_linear(M, f, fold)
+            return f, (cross_validate_linear(M, f, fold) if screen else None)
 
-        new = [p[0] for p in plan if p is not None and p[4]]
-        fits = iter(fits_map(fit, new, min_items=MIN_QUICK))
+        new = [p for p in plan if p is not None and p[4]]
+        if holdout:
+            got = self._fit_refit(new, [canonical(it[0]) for it in items], fit)
+        else:
+            got = fits_map(fit, [p[0] for p in new], min_items=MIN_QUICK, cost=complexity)
+        fits = iter(got)
         out = []
         for k, p in enumerate(plan):
             if p is not None and p[4]:
                 _, sig, origin, thr, _ = p
                 fit, screen = next(fits)
                 old = self.fits.get(sig)
-                if old is None or np.sum(fit.sse) < np.sum(old[0].sse) * (1 - 1e-9):
+                if old is None or _better(fit, old[0]):
                     self.fits[sig] = (fit, origin if old is None else old[1], thr if old is None else old[2])
                     self.cands.pop(sig, None)
                     self.full.discard(sig)
                     self.screened[sig] = (fit, screen)
             out.append(None if p is None else p[1])
             self.tick(k, len(plan), what)
+        for sig, (start, _) in list(self.prefit.items()):
+            if sig not in self.fits or self.fits[sig][0] is not start:    # (cannot happen: the task's rule is ours)
+                del self.prefit[sig]
         return out
+
+    def _fit_refit(self, new, sigs_of_items, fit) -> list:
+        """The fits of the planned structures ``new`` (in their order, as :meth:`consider_all`
+        wants them) and, in the same tasks, the full held-out refits of the fits the pool will
+        hold under their signatures and under the other signatures of ``sigs_of_items`` it holds
+        without one: one task per signature, the refits kept in :attr:`prefit` (signature ->
+        (the fit refitted, :meth:`refit_holdout`'s result))."""
+        groups: dict = {}
+        for p in new:
+            groups.setdefault(p[1], []).append(p[0])
+        tasks = [(sig, ps) for sig, ps in groups.items()]
+        for parts in sigs_of_items:
+            sig = _signature(parts)
+            if sig in self.cands and sig not in self.full and sig not in groups:
+                groups[sig] = []
+                tasks.append((sig, []))
+        M, fold, fits, cands = self.M, self.fold, self.fits, self.cands
+
+        def task(t):
+            sig, group = t
+            linear = not any(p.free for p in (group[0] if group else cands[sig].parts))
+            got = [fit(ps, screen=linear) for ps in group]
+            keep, start = -1, (fits[sig][0] if sig in fits else None)
+            if not group:
+                start = cands[sig].fit
+            for i, (f, _) in enumerate(got):      # the rule of consider_all's bookkeeping
+                if start is None or _better(f, start):
+                    keep, start = i, f
+            return got, keep, _full_holdout(M, fold, start)
+
+        res = fits_map(task, tasks, cost=lambda t: complexity(t[1][0] if t[1] else
+                                                                                   cands[t[0]].parts))
+        self.prefit = {}
+        out: dict = {}
+        for (sig, group), (got, keep, full) in zip(tasks, res):
+            out[sig] = iter(got)
+            start = got[keep][0] if keep >= 0 else (fits[sig][0] if group else cands[sig].fit)
+            self.prefit[sig] = (start, full)
+        return [next(out[p[1]]) for p in new]
 
     def screen(self):
         """The fast held-out screen (:func:`~.law.cross_validate_linear`) of every fit not screened
         yet, in the order of the fits: computed with the fit (:meth:`consider_all`, :meth:`refine`),
-        here for a fit put in the pool otherwise."""
+        here for a fit put in the pool otherwise; for a fit whose full held-out refit is at hand
+        (:attr:`prefit`), that refit's numbers until :meth:`refit_holdout` applies it."""
         M, done = self.M, self.screened
         for sig, (fit, origin, thr) in self.fits.items():
             if sig not in self.cands:
                 # a screen computed with a fit serves only that fit (the same object, not a later one)
-                mine = sig in done and done[sig][0] is fit
-                cv, pred = done[sig][1] if mine else cross_validate_linear(M, fit, self.fold)
+                mine = sig in done and done[sig][0] is fit and done[sig][1] is not None
+                pre = self.prefit.get(sig, (None, None))
+                if mine:
+                    cv, pred = done[sig][1]
+                elif pre[0] is fit and pre[1] is not None:
+                    _, cv, pred = pre[1]
+                else:
+                    cv, pred = cross_validate_linear(M, fit, self.fold)
                 self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, thr, pred)
         self.screened = {}
 
@@ -211,7 +287,7 @@ class _Pool:
             f = fit_law(M, fits[sig][0].parts, z0=fits[sig][0].z, max_nfev=nfev)
             return f, cross_validate_linear(M, f, fold)
 
-        res = fits_map(fit, todo, min_items=MIN_QUICK)
+        res = fits_map(fit, todo, min_items=MIN_QUICK, cost=lambda s: complexity(fits[s][0].parts))
         for sig, (f, screen) in zip(todo, res):
             self.fits[sig] = (f, self.fits[sig][1], self.fits[sig][2])
             self.cands.pop(sig, None)
@@ -219,21 +295,19 @@ class _Pool:
         self.screen()
 
     def refit_holdout(self, sigs, what: str = ""):
-        """Full held-out refits of the laws ``sigs`` (those without one yet), computed at once;
+        """Full held-out refits of the laws ``sigs`` (those without one yet), computed at once (or
+        taken from :attr:`prefit` where :meth:`consider_all` computed them from the same fit);
         with ``what``, a progress line every :data:`TICK` laws (``what``: the laws, as the line
         names them)."""
         todo = [s for s in dict.fromkeys(sigs) if s not in self.full]
         M, fold, cands = self.M, self.fold, self.cands
-
-        def refit(sig):
-            c = cands[sig]
-            if not any(p.free for p in c.parts):
-                return None
-            fit = fit_law(M, c.parts, z0=c.fit.z)
-            return (fit,) + tuple(cross_validate(M, c.parts, fold, z0=fit.z))
-
-        res = fits_map(refit, todo)
-        for k, (sig, got) in enumerate(zip(todo, res)):
+        pre = {s: self.prefit[s][1] for s in todo if s in self.prefit and self.prefit[s][0] is cands[s].fit}
+        self.prefit = {}
+        rest = [s for s in todo if s not in pre]
+        res = dict(zip(rest, fits_map(lambda s: _full_holdout(M, fold, cands[s].fit), rest,
+                                      cost=lambda s: cands[s].complexity)))
+        for k, sig in enumerate(todo):
+            got = pre[sig] if sig in pre else res[sig]
             if got is not None:
                 c = self.cands[sig]
                 c.fit, c.cv_sse, c.cv_pred = got
@@ -274,7 +348,7 @@ class _Pool:
             fit = fit_law(M, item[0])
             return (fit,) + tuple(cross_validate(M, item[0], fold, z0=fit.z))
 
-        for (parts, sig), (fit, cv, pred) in zip(new, fits_map(score, new)):
+        for (parts, sig), (fit, cv, pred) in zip(new, fits_map(score, new, cost=lambda it: complexity(it[0]))):
             self.tried.add(parts)
             self.fits[sig] = (fit, origin, None)
             self.cands[sig] = Candidate(fit, cv, math.sqrt(float(np.sum(cv)) / M.N), origin, None, pred)
@@ -385,13 +459,14 @@ def _reachable(pool: _Pool) -> set:
 
 def _simplifications(pool: _Pool, sel, what: str = "") -> set:
     """The selected law's neighbours that add nothing (a term dropped, made symmetric or
-    direction-dependent, reshaped), fitted and screened (``what``: progress, as in
+    direction-dependent, reshaped), fitted and screened, their full held-out refits computed in
+    the same map for the :meth:`_Pool.refit_holdout` that follows (``what``: progress, as in
     :meth:`_Pool.refit_holdout`)."""
     base = pool.cands[sel]
     nb = set()
     moves = _neighbours(_inherit(base.fit), pool.M, pool.addable, adds=False)
     origin = f"neighbour of {_short(base, pool.M)}"
-    pool.consider_all([(parts, origin, base.threshold) for parts in moves], what=what)
+    pool.consider_all([(parts, origin, base.threshold) for parts in moves], what=what, holdout=True)
     for parts in moves:
         # (a move's signature is in the pool after its turn or never: fits are only added, and a
         # later move of the same signature has as many terms)

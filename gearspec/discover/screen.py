@@ -21,6 +21,7 @@ import numpy as np
 from ..core.crossval import critical_z
 from ..core.reduction import harmonic_columns
 from ..fitdata import FitData
+from .forked import fits_map, segment_chunks
 from .moments import _sample_bases
 
 __all__ = ["line_statistics", "screen_lines"]
@@ -38,32 +39,37 @@ def line_statistics(data: FitData, freqs, *, inertia="auto", min_cycles: float =
     F = len(freqs)
     order, starts, stops, chans = _segments(data, inertia)
     sids = np.unique(data.segment)
-    S = len(sids)
-    G, g, cycles = np.zeros((S, F, 2, 2)), np.zeros((S, F, 2)), np.zeros((S, F))
     th_all, y_all = np.asarray(data.theta, dtype=float), np.asarray(data.y, dtype=float)
-    for s, (a, z) in enumerate(zip(starts, stops)):
-        idx = order[a:z]
-        L = np.column_stack([c[idx] for c in chans])
-        y, th = y_all[idx], th_all[idx]
-        cycles[s] = freqs * float(np.ptp(th))
-        iL = np.linalg.pinv(L.T @ L, rcond=1e-10, hermitian=True)
-        ly = iL @ (L.T @ y)
-        step = max(1, _CHUNK // max(len(idx), 1))
-        for f0 in range(0, F, step):
-            sl = slice(f0, min(F, f0 + step))
-            sn, cs = harmonic_columns(th, freqs[sl])
-            for k, (u, v) in enumerate(((sn, sn), (sn, cs), (cs, cs))):
-                # profiled cross products: u'v - (L'u)' iL (L'v)
-                Lu, Lv = L.T @ u, L.T @ v
-                val = np.einsum("nf,nf->f", u, v) - np.einsum("kf,kl,lf->f", Lu, iL, Lv)
-                if k == 0:
-                    G[s, sl, 0, 0] = val
-                elif k == 1:
-                    G[s, sl, 0, 1] = G[s, sl, 1, 0] = val
-                else:
-                    G[s, sl, 1, 1] = val
-            g[s, sl, 0] = sn.T @ y - (L.T @ sn).T @ ly
-            g[s, sl, 1] = cs.T @ y - (L.T @ cs).T @ ly
+
+    def chunk(az):          # the segments az[0]:az[1] (chunks of segments in forked workers)
+        a0, z0 = az
+        G, g, cycles = np.zeros((z0 - a0, F, 2, 2)), np.zeros((z0 - a0, F, 2)), np.zeros((z0 - a0, F))
+        for s, (a, z) in enumerate(zip(starts[a0:z0], stops[a0:z0])):
+            idx = order[a:z]
+            L = np.column_stack([c[idx] for c in chans])
+            y, th = y_all[idx], th_all[idx]
+            cycles[s] = freqs * float(np.ptp(th))
+            iL = np.linalg.pinv(L.T @ L, rcond=1e-10, hermitian=True)
+            ly = iL @ (L.T @ y)
+            step = max(1, _CHUNK // max(len(idx), 1))
+            for f0 in range(0, F, step):
+                sl = slice(f0, min(F, f0 + step))
+                sn, cs = harmonic_columns(th, freqs[sl])
+                for k, (u, v) in enumerate(((sn, sn), (sn, cs), (cs, cs))):
+                    # profiled cross products: u'v - (L'u)' iL (L'v)
+                    Lu, Lv = L.T @ u, L.T @ v
+                    val = np.einsum("nf,nf->f", u, v) - np.einsum("kf,kl,lf->f", Lu, iL, Lv)
+                    if k == 0:
+                        G[s, sl, 0, 0] = val
+                    elif k == 1:
+                        G[s, sl, 0, 1] = G[s, sl, 1, 0] = val
+                    else:
+                        G[s, sl, 1, 1] = val
+                g[s, sl, 0] = sn.T @ y - (L.T @ sn).T @ ly
+                g[s, sl, 1] = cs.T @ y - (L.T @ cs).T @ ly
+        return G, g, cycles
+
+    G, g, cycles = _joined(fits_map(chunk, segment_chunks(stops - starts, F)), ((0, F, 2, 2), (0, F, 2), (0, F)))
     bad = cycles < min_cycles
     G[bad], g[bad] = 0.0, 0.0
     return sids, G, g, cycles
@@ -76,23 +82,35 @@ def joint_statistics(data: FitData, freqs, *, inertia="auto", min_cycles: float 
     freqs = np.asarray(freqs, dtype=float)
     F = len(freqs)
     order, starts, stops, chans = _segments(data, inertia)
-    S = len(starts)
-    G, g = np.zeros((S, 2 * F, 2 * F)), np.zeros((S, 2 * F))
     th_all, y_all = np.asarray(data.theta, dtype=float), np.asarray(data.y, dtype=float)
-    for s, (a, z) in enumerate(zip(starts, stops)):
-        idx = order[a:z]
-        L = np.column_stack([c[idx] for c in chans])
-        y, th = y_all[idx], th_all[idx]
-        sn, cs = harmonic_columns(th, freqs)
-        H = np.empty((len(idx), 2 * F))
-        H[:, 0::2], H[:, 1::2] = sn, cs
-        live = np.repeat(freqs * float(np.ptp(th)) >= min_cycles, 2)
-        H[:, ~live] = 0.0
-        iL = np.linalg.pinv(L.T @ L, rcond=1e-10, hermitian=True)
-        LH = L.T @ H
-        G[s] = H.T @ H - LH.T @ iL @ LH
-        g[s] = H.T @ y - LH.T @ (iL @ (L.T @ y))
-    return G, g
+
+    def chunk(az):          # the segments az[0]:az[1] (chunks of segments in forked workers)
+        a0, z0 = az
+        G, g = np.zeros((z0 - a0, 2 * F, 2 * F)), np.zeros((z0 - a0, 2 * F))
+        for s, (a, z) in enumerate(zip(starts[a0:z0], stops[a0:z0])):
+            idx = order[a:z]
+            L = np.column_stack([c[idx] for c in chans])
+            y, th = y_all[idx], th_all[idx]
+            sn, cs = harmonic_columns(th, freqs)
+            H = np.empty((len(idx), 2 * F))
+            H[:, 0::2], H[:, 1::2] = sn, cs
+            live = np.repeat(freqs * float(np.ptp(th)) >= min_cycles, 2)
+            H[:, ~live] = 0.0
+            iL = np.linalg.pinv(L.T @ L, rcond=1e-10, hermitian=True)
+            LH = L.T @ H
+            G[s] = H.T @ H - LH.T @ iL @ LH
+            g[s] = H.T @ y - LH.T @ (iL @ (L.T @ y))
+        return G, g
+
+    return _joined(fits_map(chunk, segment_chunks(stops - starts, 2 * F)), ((0, 2 * F, 2 * F), (0, 2 * F)))
+
+
+def _joined(chunks, empty) -> tuple:
+    """The per-segment arrays of consecutive chunks of segments, concatenated (``empty``: their
+    shapes for no segment)."""
+    if not chunks:
+        return tuple(np.zeros(e) for e in empty)
+    return tuple(np.concatenate([c[k] for c in chunks]) for k in range(len(empty)))
 
 
 def _segments(data: FitData, inertia):
