@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.reduction import one_blas_thread
 from . import gram
 
 __all__ = ["Design", "design_of"]
@@ -51,7 +52,10 @@ class _RowsT:
     def __matmul__(self, C):
         C = np.asarray(C)
         r = self.rows
-        return np.concatenate([B[r.a:r.z].T @ C for B in r.blocks], axis=0)
+        if C.ndim == 1:
+            return np.concatenate([B[r.a:r.z].T @ C for B in r.blocks], axis=0)
+        with one_blas_thread():     # matrix products: BLAS threads split only their results
+            return np.concatenate([B[r.a:r.z].T @ C for B in r.blocks], axis=0)
 
 
 class Design:
@@ -128,7 +132,7 @@ class _DesignT:
         other = np.asarray(other, dtype=float)
         out = np.zeros((X.shape[1],) + other.shape[1:])
         for a, z in ranges:
-            out += gram._rows(X.blocks, a, z).T @ other[a:z]
+            out += gram._rows(X.blocks, a, z, scratch=True).T @ other[a:z]
         return out
 
 

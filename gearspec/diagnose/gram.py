@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.reduction import one_blas_thread
+
 __all__ = ["CHUNK_ROWS", "COPY_ROWS", "spans", "every_row", "width", "normals", "bordered", "rss", "predict",
            "hstack", "stack"]
 
@@ -41,13 +43,32 @@ def every_row(n: int, chunk: int | None = None) -> list[tuple[int, int]]:
     return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
 
 
-def _rows(cols, a: int, z: int) -> np.ndarray:
+def _rows(cols, a: int, z: int, scratch: bool = False) -> np.ndarray:
     """The rows ``[a, z)`` of the stacked design: every block's slice side by side.  A block is an
-    array (n, k) or ``(array, columns)`` (only those columns: an index or a boolean mask)."""
+    array (n, k) or ``(array, columns)`` (only those columns: an index or a boolean mask).  With
+    ``scratch`` they are copied into this process's chunk buffer (:func:`_scratch`), valid until
+    the next such call: for a product used at once (no new array, and no fresh pages, per chunk)."""
     parts = [_block(c, a, z) for c in cols]
     if not parts:
         return np.zeros((z - a, 0))
-    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+    if len(parts) == 1:
+        return parts[0]
+    if not scratch:
+        return np.concatenate(parts, axis=1)
+    out = _scratch(z - a, sum(q.shape[1] for q in parts))
+    return np.concatenate(parts, axis=1, out=out)
+
+
+#: the chunk buffer of :func:`_rows` (one per process: a forked worker copies it on first write)
+_SCRATCH = [np.empty(0)]
+
+
+def _scratch(m: int, p: int) -> np.ndarray:
+    """An uninitialised C-ordered (m, p) view of the chunk buffer, grown when too small (a chunk of
+    :data:`CHUNK_ROWS` rows of the widest design so far: a few MB)."""
+    if _SCRATCH[0].size < m * p:
+        _SCRATCH[0] = np.empty(max(m * p, CHUNK_ROWS * max(p, 1)))
+    return _SCRATCH[0][:m * p].reshape(m, p)
 
 
 def _block(c, a: int, z: int) -> np.ndarray:
@@ -74,8 +95,9 @@ def normals(cols, y: np.ndarray | None, ranges) -> tuple[np.ndarray, np.ndarray 
     p = width(cols)
     G, b = np.zeros((p, p)), (None if y is None else np.zeros(p))
     for a, z in ranges:
-        Xc = _rows(cols, a, z)
-        G += Xc.T @ Xc
+        Xc = _rows(cols, a, z, scratch=True)
+        with one_blas_thread():     # threads split only the result: the same bits, without their contention
+            G += Xc.T @ Xc
         if y is not None:
             b += Xc.T @ y[a:z]
     return G, b
@@ -88,13 +110,14 @@ def bordered(cols, new, y: np.ndarray, ranges) -> tuple[np.ndarray, np.ndarray, 
     p, q = width(cols), width(new)
     CX, CC, Cy = np.zeros((q, p)), np.zeros((q, q)), np.zeros(q)
     for a, z in ranges:
-        Cc = _rows(new, a, z)
+        Cc = _rows(new, a, z, scratch=True)
         j = 0
-        for c in cols:              # block by block on views of the rows (no copy of X's)
-            part = _block(c, a, z)
-            CX[:, j:j + part.shape[1]] += Cc.T @ part
-            j += part.shape[1]
-        CC += Cc.T @ Cc
+        with one_blas_thread():     # matrix products: threads would split only their results
+            for c in cols:          # block by block on views of the rows (no copy of X's)
+                part = _block(c, a, z)
+                CX[:, j:j + part.shape[1]] += Cc.T @ part
+                j += part.shape[1]
+            CC += Cc.T @ Cc
         Cy += Cc.T @ y[a:z]
     return CX, CC, Cy
 
@@ -103,7 +126,7 @@ def rss(cols, beta: np.ndarray, y: np.ndarray, ranges) -> float:
     """``|y - X beta|^2`` over the row ranges ``ranges`` (the residual a chunk at a time)."""
     out = 0.0
     for a, z in ranges:
-        r = y[a:z] - _rows(cols, a, z) @ beta
+        r = y[a:z] - _rows(cols, a, z, scratch=True) @ beta
         out += float(r @ r)
     return out
 
@@ -115,7 +138,7 @@ def predict(cols, beta: np.ndarray, ranges, out: np.ndarray | None = None, n: in
     ill-conditioned fit, whose coefficients cancel, far above round-off)."""
     out = np.zeros(n) if out is None else out
     for a, z in ranges:
-        out[a:z] = _rows(cols, a, z) @ beta
+        out[a:z] = _rows(cols, a, z, scratch=True) @ beta
     return out
 
 
