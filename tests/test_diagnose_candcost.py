@@ -46,7 +46,7 @@ def _spy(monkeypatch) -> list:
     real = candidates.cross_grams
 
     def spy(r, C):
-        widths.append(C.shape[1])
+        widths.append(sum(c.shape[1] for c in C) if isinstance(C, list) else C.shape[1])
         return real(r, C)
 
     monkeypatch.setattr(candidates, "cross_grams", spy)
@@ -88,3 +88,39 @@ def test_grid_batch_bounded_by_bytes(rnd, monkeypatch):
         add, drop = cand.make(EXPONENTS[i])
         ref = Proposal.of(rnd, add, drop)
         assert np.array_equal(p.xtc, ref.xtc) and np.array_equal(p.ctc, ref.ctc) and np.array_equal(p.cty, ref.cty)
+
+
+def _two_blocks(rnd):
+    cand = _grid(rnd)
+    return [cand.make(0.5)[0][0].columns(rnd.dd), cand.make(2.0)[0][0].columns(rnd.dd) * 3.0]
+
+
+def test_cross_grams_of_blocks_a_group_at_a_time_bit_for_bit(rnd, monkeypatch):
+    """Blocks of new columns reduced a group's rows at a time: the numbers of their side-by-side
+    columns, bit for bit, and no rows x columns copy of them."""
+    blocks = _two_blocks(rnd)
+    ref = candidates.cross_grams(rnd, np.column_stack(blocks))
+
+    def no_stack(cols):
+        raise AssertionError("the blocks were put side by side over all rows")
+
+    monkeypatch.setattr(candidates, "side_by_side", no_stack)
+    got = candidates.cross_grams(rnd, blocks)
+    for a, b in zip(got, ref):
+        assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_fold_predictions_from_blocks_bit_for_bit(rnd):
+    from gearspec.diagnose.foldfits import predict_groups
+    blocks = _two_blocks(rnd)
+    dd = rnd.dd
+    test = rnd.fold == 1
+    beta, beta_c = rnd.beta(~test), np.array([0.7, -0.2])
+    a, b = np.zeros(len(dd)), np.zeros(len(dd))
+    predict_groups(a, test, dd, rnd.X, beta, blocks, beta_c)
+    predict_groups(b, test, dd, rnd.X, beta, [np.column_stack(blocks)], beta_c)
+    assert np.array_equal(a, b) and np.any(a != 0)
+    rows = rnd.rows(test)
+    np.testing.assert_allclose(a[rows], (np.asarray(rnd.X) @ beta + np.column_stack(blocks) @ beta_c)[rows],
+                               rtol=1e-12, atol=1e-15)
+    assert not a[~rows].any()
