@@ -194,35 +194,14 @@ class GridCandidate(Candidate):
     def _prop(self, rnd: Round, i: int) -> Proposal | None:
         cache = self._round_cache(rnd)
         if i not in cache:
-            self._props(rnd, i)
-        return cache[i]
-
-    def _props(self, rnd: Round, first: int) -> None:
-        """The proposals of the grid values from ``first`` on that the round has not made yet, their
-        cross products against the round's design reduced for several values at once: their columns
-        side by side, at most :data:`GRID_BATCH_BYTES` of them (one pass over the groups per batch,
-        not one per value; the same sums up to the order of BLAS's additions)."""
-        cache = self._round_cache(rnd)
-        dd = rnd.dd
-        batch, held = [], 0
-        for i in range(first, len(self.grid)):
-            if i in cache:
-                continue
             made = self.make(self.grid[i])
             cache[i] = None
-            if made is None:
-                continue
-            add, drop = made
-            C = side_by_side([b.columns(dd) for b in add])
-            if not np.linalg.norm(C) > 1e-6 * np.linalg.norm(dd.y):   # nothing the data can see
-                continue
-            if batch and held + C.nbytes > GRID_BATCH_BYTES:
-                _batch_proposals(rnd, batch, cache)
-                batch, held = [], 0
-            batch.append((i, add, drop, self.describe_value(self.grid[i]), C))
-            held += C.nbytes
-        if batch:
-            _batch_proposals(rnd, batch, cache)
+            if made is not None:
+                add, drop = made
+                C = side_by_side([b.columns(rnd.dd) for b in add])
+                if np.linalg.norm(C) > 1e-6 * np.linalg.norm(rnd.dd.y):  # else nothing the data can see
+                    cache[i] = Proposal.of(rnd, add, drop, self.describe_value(self.grid[i]), C)
+        return cache[i]
 
     def propose(self, rnd: Round, train: np.ndarray) -> Proposal | None:
         best = None
@@ -238,30 +217,6 @@ class GridCandidate(Candidate):
             if best is None or rss < best[0]:
                 best = (rss, p)
         return None if best is None else best[1]
-
-
-#: a grid candidate's columns reduced against the round's design together, at most this many bytes
-#: of them side by side (:meth:`GridCandidate._props`; one value at a time when its columns are larger)
-GRID_BATCH_BYTES = 64 * 2 ** 20
-
-
-def _batch_proposals(rnd: Round, batch: list, cache: dict) -> None:
-    """``cache[i]``: the :class:`Proposal` of every ``(i, add, drop, describe, C)`` of ``batch``, the
-    cross products of all their columns ``C`` computed at once (:func:`cross_grams` of the columns
-    side by side) and cut into each value's."""
-    if len(batch) == 1:
-        i, add, drop, text, C = batch[0]
-        cache[i] = Proposal.of(rnd, add, drop, text, C)
-        return
-    xtc, ctc, cty = cross_grams(rnd, [C for *_, C in batch])
-    j = 0
-    for i, add, drop, text, C in batch:
-        q = C.shape[1]
-        prop = cache[i] = Proposal(add, list(drop), describe=text)
-        prop.xtc = np.ascontiguousarray(xtc[:, :, j:j + q])
-        prop.ctc = np.ascontiguousarray(ctc[:, j:j + q, j:j + q])
-        prop.cty = np.ascontiguousarray(cty[:, j:j + q])
-        j += q
 
 
 def per_direction(rnd: Round, kind: str, fixed=(), key: str | None = None, effect_kind: str = "other",
