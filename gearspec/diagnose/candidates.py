@@ -14,13 +14,12 @@ import weakref
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
-from scipy import stats
 
-from ..core.reduction import group_cross
+from ..core.reduction import group_cross, normal_equations
 from ..gears import integer_hint
 from ..spectrum import LombScargle
-from ..terms import amplitude_law
-from .context import Round, group_normals
+from .amplitude import EXP_GRID, POW_GRID, RAT_GRID, choose_amplitude_law, segment_index  # noqa: F401 (re-exported)
+from .context import BLAS_GROUP_ROWS, Round, group_normals
 from .coverage import measurable, segment_span
 from .design import HarmonicBlock, TermBlock, solve_normal
 
@@ -48,7 +47,11 @@ class Proposal:
     fits: dict = field(default_factory=dict, repr=False)
 
     def columns(self, dd) -> np.ndarray:
-        return side_by_side([b.columns(dd) for b in self.add])
+        return side_by_side(self.column_blocks(dd))
+
+    def column_blocks(self, dd) -> list:
+        """The added blocks' columns, each as it is (:meth:`columns` puts them side by side)."""
+        return [b.columns(dd) for b in self.add]
 
     def __getstate__(self):
         # pickled (a forked round's result) without :attr:`fits`: a memo, holding weak references
@@ -61,7 +64,7 @@ class Proposal:
     def of(cls, rnd: Round, add: list, drop=(), describe: str = "", C: np.ndarray | None = None) -> "Proposal":
         """The proposal of blocks ``add`` (columns ``C``, default theirs) with their cross products."""
         prop = cls(add, list(drop), describe=describe)
-        prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.columns(rnd.dd) if C is None else C)
+        prop.xtc, prop.ctc, prop.cty = cross_grams(rnd, prop.column_blocks(rnd.dd) if C is None else C)
         return prop
 
 
@@ -75,11 +78,35 @@ def side_by_side(cols: list) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def cross_grams(rnd: Round, C: np.ndarray):
-    """Per-group X^T C, C^T C and C^T y of new columns ``C`` against the round's design."""
+def cross_grams(rnd: Round, C):
+    """Per-group X^T C, C^T C and C^T y of new columns ``C`` (an array, or a list of blocks of
+    columns: their side-by-side columns) against the round's design.  Blocks over groups that
+    :func:`~.context.group_normals` reduces one by one are put side by side a group's rows at a
+    time, never all rows at once: the same group arrays, the same products, bit for bit."""
     dd = rnd.dd
+    if isinstance(C, list):
+        n = dd.stops - dd.starts
+        if len(C) > 1 and len(n) and float(np.mean(n)) >= BLAS_GROUP_ROWS:
+            return _cross_grams_by_group(rnd, C)
+        C = side_by_side(C)
     c = group_normals(C, dd.y, dd.starts, dd.stops)
     return group_cross(rnd.X, C, dd.starts, dd.stops), c.G, c.b
+
+
+def _cross_grams_by_group(rnd: Round, blocks: list):
+    """:func:`cross_grams` of the blocks' columns side by side, one group's rows stacked at a time
+    (what :func:`~gearspec.core.reduction.group_cross` and :func:`~.context.group_normals` compute
+    from the group's rows of the stacked columns)."""
+    dd = rnd.dd
+    X = rnd.X
+    q = sum(b.shape[1] for b in blocks)
+    ng = len(dd.starts)
+    xtc, ctc, cty = np.empty((ng, X.shape[1], q)), np.empty((ng, q, q)), np.empty((ng, q))
+    for g, (a, z) in enumerate(zip(dd.starts, dd.stops)):
+        Cg = np.concatenate([b[a:z] for b in blocks], axis=1)
+        xtc[g] = X[a:z].T @ Cg
+        ctc[g], cty[g], _ = normal_equations(Cg, dd.y[a:z])
+    return xtc, ctc, cty
 
 
 def train_fit(rnd: Round, keep: np.ndarray, prop: Proposal, train: np.ndarray):
@@ -204,82 +231,6 @@ def per_direction(rnd: Round, kind: str, fixed=(), key: str | None = None, effec
 
 
 # ---------------------------------------------------------------------- periodic
-EXP_GRID = (-1.0, -0.5, 0.25, 0.5, 1.0, 2.0, 3.0, 5.0)      # decay x top speed
-RAT_GRID = (0.25, 0.5, 1.0, 2.0, 4.0)                          # decay x top speed
-POW_GRID = (0.25, 0.5, 1.0, 2.0, 3.0)                          # exponent
-
-
-def segment_index(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(np.unique(seg), np.searchsorted(that, seg))``: the distinct segment ids and every sample's
-    index into them, without a sort when ``seg`` is in order (the rows of plateaus are: one pass)."""
-    seg = np.asarray(seg)
-    if seg.ndim != 1 or seg.dtype.kind not in "iu" or (len(seg) > 1 and not np.all(seg[1:] >= seg[:-1])):
-        sids = np.unique(seg)
-        return sids, np.searchsorted(sids, seg)
-    new = np.empty(len(seg), bool)
-    new[:1] = True
-    np.not_equal(seg[1:], seg[:-1], out=new[1:])
-    return seg[new], np.cumsum(new, dtype=np.intp) - 1
-
-
-def choose_amplitude_law(theta, speed, seg, r, frequency, *, alpha: float = 0.01) -> tuple[str, float, dict]:
-    """The amplitude-vs-speed law of a line at ``frequency`` that the residual ``r`` supports:
-    least squares of ``g(|v|) (a sin + c cos)`` (each segment's mean removed) for a constant
-    amplitude and each decaying law over a grid of its constant; a decaying law is chosen only when
-    it beats the constant amplitude by a likelihood-ratio test at ``alpha`` (and the line is seen
-    at two speeds or more).  Returns ``(law, decay, rss_by_law)``."""
-    x = _TWO_PI * frequency * theta
-    sn, cs = np.sin(x), np.cos(x)
-    sids, inv = segment_index(seg)
-    cnt = np.bincount(inv).astype(float)
-
-    def dm(a):
-        return a - (np.bincount(inv, weights=a) / cnt)[inv]
-
-    rr = dm(r)
-    yy = float(rr @ rr)
-    # a speed per segment (plateaus): g(|v|) is constant within each, dm(g sn) = g dm(sn), and the
-    # normal equations of every law are weighted sums of five per-segment sums (equal to the
-    # stacked ones up to the order of the additions): one pass over the samples, not one per law
-    seg_speed = np.zeros(len(sids))
-    seg_speed[inv] = speed
-    if np.array_equal(seg_speed[inv], speed):
-        S, C = dm(sn), dm(cs)
-        sums = [np.bincount(inv, weights=a * b, minlength=len(sids)) for a, b in ((S, S), (S, C), (C, C), (S, rr),
-                                                                                  (C, rr))]
-
-        def rss_of(g_seg):
-            g2 = g_seg * g_seg
-            G = np.array([[g2 @ sums[0], g2 @ sums[1]], [g2 @ sums[1], g2 @ sums[2]]])
-            b = np.array([g_seg @ sums[3], g_seg @ sums[4]])
-            return yy - float(solve_normal(G, b) @ b)
-
-        speed_of = seg_speed
-    else:
-        def rss_of(g):
-            A = np.column_stack([dm(g * sn), dm(g * cs)])
-            b = A.T @ rr
-            return yy - float(solve_normal(A.T @ A, b) @ b)
-
-        speed_of = speed
-
-    def rss(law, b):
-        return rss_of(amplitude_law(law, speed_of, b))
-
-    top = float(np.max(speed)) if len(speed) else 1.0
-    out = {"const": (rss_of(np.ones_like(speed_of)), 0.0)}
-    speeds = np.unique(np.round(speed, 9))
-    if len(speeds) >= 2 and top > 0:
-        for law, grid in (("exp", EXP_GRID), ("rational", RAT_GRID), ("power", POW_GRID)):
-            consts = [g if law == "power" else g / top for g in grid]
-            out[law] = min(((rss(law, b), b) for b in consts), key=lambda vb: vb[0])
-    law, (val, dec) = min(out.items(), key=lambda kv: kv[1][0])
-    s2 = val / max(len(r) - 3 - len(sids), 1)
-    if law != "const" and (out["const"][0] - val) < stats.chi2.isf(alpha, 1) * s2:
-        law, dec = "const", 0.0
-    return law, float(dec), {k: v[0] for k, v in out.items()}
-
-
 class PeriodicCandidate(Candidate):
     """A line at a frequency near ``f0`` found in the residual spectrum.  In each fold: the
     frequency is searched again on the training residual (Lomb-Scargle over +-2 resolution steps,
@@ -470,8 +421,8 @@ class _TaylorProposal(Proposal):
     """Blocks replacing blocks of the model with the same nonlinear parameters (the lines, lagged)
     keep their Taylor columns, so that the held-out comparison differs by the candidate alone."""
 
-    def columns(self, dd) -> np.ndarray:
-        return side_by_side([b.columns(dd, taylor=True) for b in self.add])
+    def column_blocks(self, dd) -> list:
+        return [b.columns(dd, taylor=True) for b in self.add]
 
 
 # ---------------------------------------------------------------------- sidebands

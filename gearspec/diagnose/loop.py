@@ -29,9 +29,9 @@ from .baseline import _as_data, baseline_model, idim_model, relative_error, resi
 from .candidates import Candidate, FixedCandidate, PeriodicCandidate, train_fit
 from .context import Round
 from .data import DiagnoseData
-from .design import FittedState, HarmonicBlock, State, TermBlock, solve_normal
+from .design import FittedState, HarmonicBlock, State, TermBlock
+from .foldfits import full_residual as _full_residual, predict_groups as _predict
 from .frommodel import state_from_model
-from . import gram
 from .nonlinear import polish, refine
 from .nuisance import admit_partial_lines
 from .detectors import analyse, propose
@@ -135,22 +135,11 @@ def _run_folds(rnd: Round, cand: Candidate, *, repolish: bool = True) -> _Folds:
         n_par = prop.n_params(ext)
         full = np.zeros(ext.width)
         full[keep] = beta1[:int(keep.sum())]
-        _predict(p1, test, dd, ext.X, full, prop.columns(dd), beta1[int(keep.sum()):])
+        _predict(p1, test, dd, ext.X, full, prop.column_blocks(dd), beta1[int(keep.sum()):])
         props.append((rnd.keep_mask(prop.drop), prop))
     if ext is not rnd and cand._cache.get("round") is ext:
         cand._cache = {}    # its memo holds the extended round's design (rows x terms), never asked again
     return _Folds(rnd.held_out_residual(), p1, props, contribution, n_par)
-
-
-def _predict(out: np.ndarray, test: np.ndarray, dd: DiagnoseData, X: np.ndarray, beta: np.ndarray,
-             C: np.ndarray | None = None, beta_c: np.ndarray | None = None) -> None:
-    """``out`` at the observations of the groups ``test``: ``X beta`` (+ ``C beta_c``), group by group
-    on views of the rows (no copy of the design)."""
-    for g in np.flatnonzero(test):
-        a, z = dd.starts[g], dd.stops[g]
-        out[a:z] = X[a:z] @ beta
-        if C is not None:
-            out[a:z] += C[a:z] @ beta_c
 
 
 def _decide(rnd: Round, fr: _Folds, noise: np.ndarray | None, *, z_crit: float, min_gain: float,
@@ -224,29 +213,6 @@ def evaluate_candidate(rnd: Round, cand: Candidate, *, z_crit: float, min_gain: 
     residual estimates the noise)."""
     fr = _run_folds(rnd, cand, repolish=repolish)
     return _decide(rnd, fr, None, z_crit=z_crit, min_gain=min_gain, consistency=consistency)
-
-
-def _full_residual(rnd: Round, runs: list) -> np.ndarray:
-    """Held-out residual of the present model with every promising candidate at once (each as it
-    chose its nonlinear parameters in that fold), fitted on the training folds."""
-    dd = rnd.dd
-    out = np.zeros(len(dd))
-    for f in range(rnd.K):
-        train = rnd.fold != f
-        tr_rows = rnd.rows(train)
-        rows = np.flatnonzero(~tr_rows)
-        items = [fr.proposals[f] for fr in runs if fr.proposals[f] is not None]
-        keep = np.ones(rnd.width, bool)
-        for k, _ in items:
-            keep &= k
-        # this fold's design as column blocks, reduced a chunk of rows at a time (never stacked)
-        cols = rnd.X.masked(keep) + (new := [prop.columns(dd) for _, prop in items])
-        G, b = gram.normals(cols, dd.y, gram.spans(dd.starts, dd.stops, train))
-        ref = np.concatenate([rnd.ref_diag[keep]] + [np.einsum("ij,ij->j", c, c) for c in new])
-        beta = solve_normal(G, b, reference=ref)
-        gram.predict(cols, beta, gram.spans(dd.starts, dd.stops, ~train), out=out)
-        out[rows] = dd.y[rows] - out[rows]
-    return out
 
 
 # ---------------------------------------------------------------------- the loop
