@@ -1,0 +1,59 @@
+"""Stages of ``spectrum`` and ``fit`` run in forked workers on long recordings (issue 13, session
+29): the same results as the loop in this process (GEARSPEC_THREADS=1 against 2), and the forked
+path is taken where its rule says (so the comparison is not between two loops)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gearspec.core import parallel
+from gearspec.segment import find_segments, plateaus
+from gearspec.simulate import plateau_recording
+
+
+@pytest.fixture(scope="module")
+def many_runs():
+    """12 plateaus, one run each, 20 s at 1 kHz: 12 pieces, about 250 000 rows."""
+    speeds = [0.5, -0.5, 1.0, -1.0, 2.0, -2.0, 4.0, -4.0, 8.0, -8.0, 16.0, -16.0]
+    return plateau_recording(speeds, duration=20.0, fs=1000.0, noise=1e-3, one_run_per_plateau=True, seed=3)[0]
+
+
+def _spy(monkeypatch):
+    calls = []
+    real = parallel.forked_map
+
+    def spy(fn, items, **kw):
+        calls.append(len(list(items)))
+        return real(fn, items, **kw)
+
+    monkeypatch.setattr(parallel, "forked_map", spy)
+    return calls
+
+
+def test_segments_forked_equal_serial(many_runs, monkeypatch):
+    rec = many_runs
+    assert len(rec.pieces()) >= plateaus.FORK_MIN_PIECES and len(rec) >= plateaus.FORK_MIN_ROWS
+    monkeypatch.setenv("GEARSPEC_THREADS", "1")
+    serial = find_segments(rec)
+    calls = _spy(monkeypatch)
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    forked = find_segments(rec)
+    # 12 pieces in chunks of 2 (2 workers x 4 tasks each at most): 6 tasks, in one map
+    assert calls == [6]
+    assert len(serial) == 12
+    assert forked.segments == serial.segments
+    assert forked.excluded == serial.excluded and forked.settings == serial.settings
+    # each plateau found at its speed (the pieces came back in order)
+    speeds = [abs(v) for v in [0.5, -0.5, 1.0, -1.0, 2.0, -2.0, 4.0, -4.0, 8.0, -8.0, 16.0, -16.0]]
+    np.testing.assert_allclose([s.speed for s in forked.segments], speeds, rtol=1e-3)
+    assert [s.run for s in forked.segments] == list(range(12))
+
+
+def test_segments_few_pieces_stay_here(many_runs, monkeypatch):
+    """Fewer pieces than FORK_MIN_PIECES: no fork (one process's loop)."""
+    calls = _spy(monkeypatch)
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    monkeypatch.setattr(plateaus, "FORK_MIN_PIECES", 13)
+    find_segments(many_runs)
+    assert calls == []
