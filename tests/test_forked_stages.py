@@ -57,3 +57,50 @@ def test_segments_few_pieces_stay_here(many_runs, monkeypatch):
     monkeypatch.setattr(plateaus, "FORK_MIN_PIECES", 13)
     find_segments(many_runs)
     assert calls == []
+
+
+def test_segments_not_forked_in_daemonic_process(many_runs, monkeypatch):
+    """A daemonic process (a Dask worker of ``gearspec batch``) may not fork: the loop here, no error."""
+    import multiprocessing
+
+    calls = _spy(monkeypatch)
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    monkeypatch.setitem(multiprocessing.current_process()._config, "daemon", True)
+    seg = find_segments(many_runs)
+    assert calls == [] and len(seg) == 12
+
+
+@pytest.fixture(scope="module")
+def fit_data(many_runs):
+    from gearspec.fitdata import FitData
+
+    return FitData.from_recording(many_runs, find_segments(many_runs, workers=1))
+
+
+def test_segment_stats_forked_equal_serial(fit_data, monkeypatch):
+    """The segments' statistics (the pass over the samples of every fit) in forked chunks: the same
+    numbers as in this process, bit for bit; the forked map is used (chunk rows made small here)."""
+    from dataclasses import replace
+
+    from gearspec.core.reduction import one_blas_thread
+    from gearspec.identify import stats
+
+    monkeypatch.setattr(stats, "CHUNK_ROWS", 2 ** 14)
+    monkeypatch.setattr(stats, "FORK_MIN_ROWS", 2 ** 16)
+    freqs = [3.0, 7.5, 11.0]
+    sub = fit_data.direction_subset(1)
+    calls = _spy(monkeypatch)
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    stats.segment_stats(replace(sub, cache={}), freqs)   # BLAS on its threads here: the loop
+    assert calls == []
+    with one_blas_thread():                               # as in ``fit``
+        monkeypatch.setenv("GEARSPEC_THREADS", "1")
+        serial = stats.segment_stats(replace(sub, cache={}), freqs)
+        monkeypatch.setenv("GEARSPEC_THREADS", "2")
+        forked = stats.segment_stats(replace(sub, cache={}), freqs)
+    assert len(calls) == 1 and calls[0] >= 2
+    assert len(serial.segment) == 6
+    for name in ("G", "g", "yy", "beta_hat", "rss_hat", "sigma2", "cycles", "speed"):
+        np.testing.assert_array_equal(getattr(forked, name), getattr(serial, name), err_msg=name)
+    # the constant of each segment's local fit is its mean friction magnitude (no ripple simulated)
+    np.testing.assert_allclose(forked.beta_hat[:, 0], 0.01, atol=2e-4)
