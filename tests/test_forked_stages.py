@@ -104,3 +104,28 @@ def test_segment_stats_forked_equal_serial(fit_data, monkeypatch):
         np.testing.assert_array_equal(getattr(forked, name), getattr(serial, name), err_msg=name)
     # the constant of each segment's local fit is its mean friction magnitude (no ripple simulated)
     np.testing.assert_allclose(forked.beta_hat[:, 0], 0.01, atol=2e-4)
+
+
+def test_plateau_acceleration_forked_equal_serial(many_runs, monkeypatch):
+    """The position-locked accelerations of the plateaus (``fit``'s derivatives) in forked chunks:
+    the same numbers as the loop here (both on one BLAS thread, as ``fit`` runs them)."""
+    from gearspec.core.reduction import one_blas_thread
+    from gearspec.segment import poslock
+
+    rec = many_runs
+    seg = find_segments(rec, workers=1)
+    acc0 = np.zeros(len(rec))
+    monkeypatch.setattr(poslock, "FORK_MIN_ROWS", 100_000)
+    with one_blas_thread():
+        monkeypatch.setenv("GEARSPEC_THREADS", "1")
+        serial = poslock.plateau_acceleration(rec, seg.segments, [0.5], acc0)
+        calls = _spy(monkeypatch)
+        monkeypatch.setenv("GEARSPEC_THREADS", "2")
+        forked = poslock.plateau_acceleration(rec, seg.segments, [0.5], acc0)
+    assert calls == [6]
+    assert forked[1:] == serial[1:] and serial[1] == 12
+    np.testing.assert_array_equal(forked[0], serial[0])
+    # constant speed on every plateau (no ripple simulated): the locked acceleration is about 0
+    # there, while the ramps between keep acc0
+    rows = np.concatenate([np.arange(s.start, s.stop) for s in seg.segments])
+    assert np.abs(forked[0][rows]).max() < 1.0 and np.count_nonzero(forked[0][rows]) > 0.9 * len(rows)
