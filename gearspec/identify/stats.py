@@ -134,10 +134,15 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
     missing = [j for j, tag in enumerate(tags) if tag not in cache]
     if missing:
         change = data.speed_change()
-        for part in _chunks([bounds[j + 1] - bounds[j] for j in missing]):
-            new = _segments_stats(data, [np.arange(bounds[missing[i]], bounds[missing[i] + 1]) if order is None
-                                         else order[bounds[missing[i]]:bounds[missing[i] + 1]] for i in part], freqs,
-                                  nyquist_fraction, acc, change)
+        parts = _chunks([bounds[j + 1] - bounds[j] for j in missing])
+
+        def part_stats(part):
+            return _segments_stats(data, [np.arange(bounds[missing[i]], bounds[missing[i] + 1]) if order is None
+                                          else order[bounds[missing[i]]:bounds[missing[i] + 1]] for i in part], freqs,
+                                   nyquist_fraction, acc, change)
+
+        rows_missing = int(sum(bounds[j + 1] - bounds[j] for j in missing))
+        for part, new in zip(parts, _map_chunks(part_stats, parts, rows_missing)):
             for i, r in zip(part, new):
                 cache[tags[missing[i]]] = r
     rows = [cache[tag] for tag in tags]
@@ -161,6 +166,24 @@ def segment_stats(data: FitData, frequencies: Sequence[float], *, min_cycles: fl
 #: mmap ceiling, so the allocator reuses its heap instead of mapping and zero-filling fresh pages
 #: for every chunk (10^7 rows: about 1 s less system time per pass over the samples)
 CHUNK_ROWS = 2 ** 17
+
+
+#: segments' statistics of at least this many rows (and two chunks or more) are computed in forked
+#: worker processes (:func:`~gearspec.core.parallel.forked_map`), a chunk per task: the same numbers
+FORK_MIN_ROWS = 4 * CHUNK_ROWS
+
+
+def _map_chunks(fn, parts: list, rows: int) -> list:
+    """``[fn(p) for p in parts]``, by :func:`~gearspec.core.parallel.forked_map` when the chunks hold
+    at least :data:`FORK_MIN_ROWS` rows between them and BLAS runs on one thread here (as in the
+    workers: ``yy`` is a BLAS dot product, whose sum splits by thread count)."""
+    from ..core.parallel import forked_map
+    from ..segment.forks import fork_workers, on_one_blas_thread_now
+
+    n = fork_workers() if rows >= FORK_MIN_ROWS and len(parts) >= 2 and on_one_blas_thread_now() else 1
+    if n < 2:
+        return [fn(p) for p in parts]
+    return forked_map(fn, parts, workers=n)
 
 
 def _chunks(sizes) -> list[list[int]]:

@@ -54,33 +54,16 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
     segments, excluded, taken = ([], Counter(), []) if quasi_static is False else \
         _quasi_static_segments(rec, force=bool(quasi_static), min_samples=min_samples)
     n_quasi_static = len(segments)
-    for run, a, b in _outside(rec.pieces(), taken):
-        ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
-        noise = _position_noise(theta[a:b]) if b - a >= 3 else None
-        dt = float(np.median(np.diff(t[a:min(b, a + 100_000)]))) if b - a >= 2 else None  # once per piece
+    pieces = list(_outside(rec.pieces(), taken))
 
-        def one(w, a=a, b=b, noise=noise, dt=dt):
-            return _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise, dt)
+    def piece(p):
+        return _piece_plateaus(t, theta, *p, window, rel_tol, min_speed, min_duration, min_samples, workers)
 
-        n_workers = ((2 if (os.cpu_count() or 1) >= 2 and b - a >= PARALLEL_MIN_SAMPLES else 1)
-                     if workers == "auto" else int(workers))
-        if n_workers > 1 and len(ladder) > 1:
-            from concurrent.futures import ThreadPoolExecutor
-
-            # the shortest windows (most blocks) are the most work: they go first
-            with ThreadPoolExecutor(max_workers=min(n_workers, len(ladder)),
-                                    thread_name_prefix="gearspec-window") as pool:
-                results = list(pool.map(one, ladder))
-        else:
-            results = _ladder(one, ladder, b - a)
-        tried = [(_cover(res), w, res) for w, res in zip(ladder, results) if res is not None]
-        if not tried:  # piece too short for any window
+    for (run, a, b), found in zip(pieces, _map_pieces(piece, pieces, workers)):
+        if found is None:  # piece too short for any window
             excluded["transient"] += b - a
             continue
-        # the shortest window that finds nearly as much plateau as any: long windows would
-        # also swallow short transients at the edges of plateaus
-        top = max(c for c, _, _ in tried)
-        _, w, (segs, labels) = next(x for x in tried if x[0] >= _COVER_FRACTION * top)
+        w, segs, labels = found
         chosen[(run, a)] = w
         for s, e, direction, speed, ripple in segs:
             segments.append(Segment(int(run), int(a + s), int(a + e), int(direction), float(speed), ripple, float(w)))
@@ -94,6 +77,61 @@ def find_segments(rec: Recording, *, window: float | str = "auto", rel_tol: floa
     seg = Segmentation(segments, excluded, len(rec), settings)
     seg.check_ledger()
     return seg
+
+
+def _piece_plateaus(t, theta, run, a, b, window, rel_tol, min_speed, min_duration, min_samples, workers):
+    """The plateaus of one piece ``(run, a, b)``: ``(window chosen, segments, excluded rows by
+    reason)`` (rows counted from ``a``), or None when the piece is too short for any window."""
+    ladder = [window] if window != "auto" else list(_WINDOW_LADDER)
+    noise = _position_noise(theta[a:b]) if b - a >= 3 else None
+    dt = float(np.median(np.diff(t[a:min(b, a + 100_000)]))) if b - a >= 2 else None  # once per piece
+
+    def one(w):
+        return _segment_piece(t[a:b], theta[a:b], w, rel_tol, min_speed, min_duration, min_samples, noise, dt)
+
+    n_workers = ((2 if (os.cpu_count() or 1) >= 2 and b - a >= PARALLEL_MIN_SAMPLES else 1)
+                 if workers == "auto" else int(workers))
+    if n_workers > 1 and len(ladder) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        # the shortest windows (most blocks) are the most work: they go first
+        with ThreadPoolExecutor(max_workers=min(n_workers, len(ladder)),
+                                thread_name_prefix="gearspec-window") as pool:
+            results = list(pool.map(one, ladder))
+    else:
+        results = _ladder(one, ladder, b - a)
+    tried = [(_cover(res), w, res) for w, res in zip(ladder, results) if res is not None]
+    if not tried:
+        return None
+    # the shortest window that finds nearly as much plateau as any: long windows would
+    # also swallow short transients at the edges of plateaus
+    top = max(c for c, _, _ in tried)
+    _, w, (segs, labels) = next(x for x in tried if x[0] >= _COVER_FRACTION * top)
+    return w, segs, labels
+
+
+#: ``workers="auto"``: pieces are segmented in forked worker processes when there are at least this
+#: many (a recording of many runs or gaps) holding at least ``FORK_MIN_ROWS`` rows between them
+FORK_MIN_PIECES = 8
+FORK_MIN_ROWS = 200_000
+#: pieces per task of a forked map: a few tasks per worker (one result pickled per task)
+_TASKS_PER_WORKER = 4
+
+
+def _map_pieces(piece, pieces: list, workers) -> list:
+    """``[piece(p) for p in pieces]``; with ``workers="auto"`` and many pieces
+    (:data:`FORK_MIN_PIECES`, :data:`FORK_MIN_ROWS`) in contiguous chunks by
+    :func:`~gearspec.core.parallel.forked_map` (the same results: each piece is segmented alone)."""
+    from ..core.parallel import forked_map
+    from .forks import fork_workers
+
+    rows = sum(b - a for _, a, b in pieces)
+    n = fork_workers() if workers == "auto" and len(pieces) >= FORK_MIN_PIECES and rows >= FORK_MIN_ROWS else 1
+    if n < 2:
+        return [piece(p) for p in pieces]
+    size = -(-len(pieces) // (n * _TASKS_PER_WORKER))
+    chunks = [pieces[k:k + size] for k in range(0, len(pieces), size)]
+    return [r for part in forked_map(lambda c: [piece(p) for p in c], chunks, workers=n) for r in part]
 
 
 def _cover(res) -> int:

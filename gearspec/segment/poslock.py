@@ -137,14 +137,43 @@ def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray) -> tuple[n
     if frequencies is None or not len(frequencies):
         return out, 0, 0
     t, theta = rec.t, rec.theta
-    for s in segments:
-        if s.kind != "plateau":
-            continue
+    plateaus = [s for s in segments if s.kind == "plateau"]
+
+    def one(s):
         th = theta[s.start:s.stop]
         f = locked_frequencies(th, frequencies)
         if not len(f) or s.n < 2 * (3 + 2 * len(f)):   # at least two rows per coefficient
+            return None
+        return locked_acceleration(t[s.start:s.stop], th, f)
+
+    for s, a in zip(plateaus, _map_plateaus(one, plateaus)):
+        if a is None:
             continue
-        out[s.start:s.stop] = locked_acceleration(t[s.start:s.stop], th, f)
+        out[s.start:s.stop] = a
         n_seg += 1
         n_rows += s.n
     return out, n_seg, n_rows
+
+
+#: plateaus of at least this many rows between them (and ``FORK_MIN_PLATEAUS`` or more) get their
+#: accelerations in forked worker processes (:func:`~gearspec.core.parallel.forked_map`) when BLAS
+#: runs on one thread here (as ``fit`` holds it, and as in the workers): the same numbers
+FORK_MIN_ROWS = 500_000
+FORK_MIN_PLATEAUS = 8
+#: plateaus per task: a few tasks per worker
+_TASKS_PER_WORKER = 4
+
+
+def _map_plateaus(one, plateaus: list) -> list:
+    """``[one(s) for s in plateaus]``, in contiguous chunks by a forked map when the rule above allows."""
+    from ..core.parallel import forked_map
+    from .forks import fork_workers, on_one_blas_thread_now
+
+    rows = sum(s.n for s in plateaus)
+    n = (fork_workers() if len(plateaus) >= FORK_MIN_PLATEAUS and rows >= FORK_MIN_ROWS
+         and on_one_blas_thread_now() else 1)
+    if n < 2:
+        return [one(s) for s in plateaus]
+    size = -(-len(plateaus) // (n * _TASKS_PER_WORKER))
+    chunks = [plateaus[k:k + size] for k in range(0, len(plateaus), size)]
+    return [a for part in forked_map(lambda c: [one(s) for s in c], chunks, workers=n) for a in part]
