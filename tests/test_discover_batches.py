@@ -47,7 +47,7 @@ def _pools(M, fold):
 
 
 @fork_only
-def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit(small, two, monkeypatch):
+def test_simplifications_fitted_and_refitted_in_one_map_are_two_maps_bit_for_bit(small, two, monkeypatch):  # noqa: F811 (pytest fixtures imported above)
     _, M, fold = small
     ref, par = _pools(M, fold)
     poor = _law()[:3]
@@ -112,7 +112,7 @@ def test_segment_chunks_cut_the_samples_in_equal_shares(monkeypatch):
 
 
 @fork_only
-def test_passes_over_the_samples_in_chunks_of_segments_are_the_loop_bit_for_bit(small, two, monkeypatch):
+def test_passes_over_the_samples_in_chunks_of_segments_are_the_loop_bit_for_bit(small, two, monkeypatch):  # noqa: F811 (pytest fixtures imported above)
     from gearspec.discover.moments import moments
     from gearspec.discover.screen import joint_statistics, line_statistics
 
@@ -138,7 +138,7 @@ def test_passes_over_the_samples_in_chunks_of_segments_are_the_loop_bit_for_bit(
 
 
 @fork_only
-def test_the_papers_laws_are_fitted_in_this_process_sharing_the_samples_statistics(small, monkeypatch):
+def test_the_papers_laws_are_fitted_in_this_process_sharing_the_samples_statistics(small, monkeypatch):  # noqa: F811 (pytest fixtures imported above)
     from gearspec.discover.explorer import discover
 
     monkeypatch.setenv("GEARSPEC_THREADS", "2")

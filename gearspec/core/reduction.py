@@ -90,15 +90,26 @@ def gram(X) -> np.ndarray:
         return X.T @ X
 
 
-def one_blas_thread():
-    """A context in which BLAS runs on one thread (``threadpoolctl``; its controller made once, so
-    that entering costs microseconds)."""
+def _controller():
+    """The process's ``threadpoolctl`` controller, made once (entering a limit then costs microseconds)."""
     global _CONTROLLER
     if _CONTROLLER is None:
         from threadpoolctl import ThreadpoolController
 
         _CONTROLLER = ThreadpoolController()
-    return _CONTROLLER.limit(limits=1, user_api="blas")
+    return _CONTROLLER
+
+
+def one_blas_thread():
+    """A context in which BLAS runs on one thread (``threadpoolctl``)."""
+    return _controller().limit(limits=1, user_api="blas")
+
+
+def blas_on_one_thread() -> bool:
+    """Whether BLAS runs on one thread here now (as in a forked worker of
+    :func:`gearspec.core.parallel.forked_map`): work whose sums BLAS splits by thread count gives a
+    worker's numbers only then, so a map that must equal the loop forks only then."""
+    return all(c.num_threads == 1 for c in _controller().select(user_api="blas").lib_controllers)
 
 
 def on_one_blas_thread(fn):

@@ -178,9 +178,10 @@ def _map_chunks(fn, parts: list, rows: int) -> list:
     at least :data:`FORK_MIN_ROWS` rows between them and BLAS runs on one thread here (as in the
     workers: ``yy`` is a BLAS dot product, whose sum splits by thread count)."""
     from ..core.parallel import forked_map
-    from ..segment.forks import fork_workers, on_one_blas_thread_now
+    from ..core.parallel import worker_count
+    from ..core.reduction import blas_on_one_thread
 
-    n = fork_workers() if rows >= FORK_MIN_ROWS and len(parts) >= 2 and on_one_blas_thread_now() else 1
+    n = worker_count() if rows >= FORK_MIN_ROWS and len(parts) >= 2 and blas_on_one_thread() else 1
     if n < 2:
         return [fn(p) for p in parts]
     return forked_map(fn, parts, workers=n)

@@ -123,10 +123,10 @@ def _map_pieces(piece, pieces: list, workers) -> list:
     (:data:`FORK_MIN_PIECES`, :data:`FORK_MIN_ROWS`) in contiguous chunks by
     :func:`~gearspec.core.parallel.forked_map` (the same results: each piece is segmented alone)."""
     from ..core.parallel import forked_map
-    from .forks import fork_workers
+    from ..core.parallel import worker_count
 
     rows = sum(b - a for _, a, b in pieces)
-    n = fork_workers() if workers == "auto" and len(pieces) >= FORK_MIN_PIECES and rows >= FORK_MIN_ROWS else 1
+    n = worker_count() if workers == "auto" and len(pieces) >= FORK_MIN_PIECES and rows >= FORK_MIN_ROWS else 1
     if n < 2:
         return [piece(p) for p in pieces]
     size = -(-len(pieces) // (n * _TASKS_PER_WORKER))

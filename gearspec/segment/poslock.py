@@ -167,11 +167,12 @@ _TASKS_PER_WORKER = 4
 def _map_plateaus(one, plateaus: list) -> list:
     """``[one(s) for s in plateaus]``, in contiguous chunks by a forked map when the rule above allows."""
     from ..core.parallel import forked_map
-    from .forks import fork_workers, on_one_blas_thread_now
+    from ..core.parallel import worker_count
+    from ..core.reduction import blas_on_one_thread
 
     rows = sum(s.n for s in plateaus)
-    n = (fork_workers() if len(plateaus) >= FORK_MIN_PLATEAUS and rows >= FORK_MIN_ROWS
-         and on_one_blas_thread_now() else 1)
+    n = (worker_count() if len(plateaus) >= FORK_MIN_PLATEAUS and rows >= FORK_MIN_ROWS
+         and blas_on_one_thread() else 1)
     if n < 2:
         return [one(s) for s in plateaus]
     size = -(-len(plateaus) // (n * _TASKS_PER_WORKER))
