@@ -67,6 +67,21 @@ def test_a_small_design_is_left_to_qr():
     assert NormalSolver.of(rng.standard_normal((lsq.MIN_SIZE // 10 + 1, 10))) is not None
 
 
+def count_normal_solves(monkeypatch) -> list:
+    """A list that records, for every :meth:`NormalSolver.of` from now on, whether the normal
+    equations took the solve (True) or left it to QR (False)."""
+    used = []
+    of = NormalSolver.of.__func__
+
+    def counting(cls, X):
+        s = of(cls, X)
+        used.append(s is not None)
+        return s
+
+    monkeypatch.setattr(NormalSolver, "of", classmethod(counting))
+    return used
+
+
 @pytest.fixture(scope="module")
 def many_segments():
     """The SILO4 truth (eq. 11, Table 2) at 8 speeds per direction, 0.5 s at 1 kHz, 0.1 mNm noise,
@@ -89,15 +104,7 @@ def test_a_law_fitted_through_the_normal_equations_equals_the_qr_fit(many_segmen
     M = many_segments
     parts = (Part("coulomb", split=True), Part("viscous", split=True), Part("stribeck_exp", param0=5.0),
              Part("ripple_exp", 0, True, 1e-3), Part("ripple_rational", 1, False, 1e-3))
-    used = []
-    of = NormalSolver.of.__func__
-
-    def counting(cls, X):
-        s = of(cls, X)
-        used.append(s is not None)
-        return s
-
-    monkeypatch.setattr(NormalSolver, "of", classmethod(counting))
+    used = count_normal_solves(monkeypatch)
     fast = fit_law(M, parts, se=True)
     assert sum(used) > 10                       # the normal equations did the refinement
     monkeypatch.setattr(lsq, "MIN_SIZE", 10 ** 12)

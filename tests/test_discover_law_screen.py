@@ -9,10 +9,10 @@ import pytest
 
 from gearspec.discover import law
 from gearspec.discover.law import Part, cross_validate_linear, fit_law, fold_ids
-from gearspec.discover.lsq import NormalSolver
 from gearspec.discover.moments import moments
 from gearspec.fitdata import FitData
 from gearspec.simulate import model_recording
+from test_discover_fast import count_normal_solves
 
 F2, F3 = 1 / (2 * np.pi * 14), 1 / (2 * np.pi)      # SILO4 worm-shaft and motor-shaft lines, cycles/rad
 
@@ -35,15 +35,7 @@ def test_the_screens_fold_refits_are_the_direct_least_squares_by_the_normal_equa
              Part("ripple_exp", 0, True, 1e-3), Part("ripple_rational", 1, False, 1e-3), Part("ripple_const", 2))
     fit = fit_law(M, parts)
     fold = fold_ids(M)
-    used = []
-    of = NormalSolver.of.__func__
-
-    def counting(cls, X):
-        s = of(cls, X)
-        used.append(s is not None)
-        return s
-
-    monkeypatch.setattr(NormalSolver, "of", classmethod(counting))
+    used = count_normal_solves(monkeypatch)
     sse, _ = cross_validate_linear(M, fit, fold)
     assert sum(used) == 5                         # every fold's refit by the normal equations
     # the direct computation: each fold's coefficients by numpy's least squares on its training
