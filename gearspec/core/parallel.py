@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Sequence
 
-__all__ = ["forked_map", "worker_count", "in_worker", "can_fork"]
+__all__ = ["forked_map", "forked_map_chunked", "worker_count", "in_worker", "can_fork"]
 
 #: set in a worker process: a :func:`forked_map` called from a task runs its tasks in a loop there
 _IN_WORKER = False
@@ -83,3 +83,14 @@ def forked_map(fn: Callable, items: Sequence, *, workers: int | None = None, min
     finally:
         _JOB = None
 
+
+
+def forked_map_chunked(fn: Callable, items: Sequence, *, workers: int, tasks_per_worker: int = 4) -> list:
+    """``[fn(x) for x in items]``, in order, by :func:`forked_map` over contiguous chunks of
+    ``items`` (``tasks_per_worker`` chunks per worker: many small items, one task per chunk); a loop
+    here when ``workers`` < 2."""
+    if workers < 2:
+        return [fn(x) for x in items]
+    size = -(-len(items) // (workers * tasks_per_worker))
+    chunks = [items[k:k + size] for k in range(0, len(items), size)]
+    return [r for part in forked_map(lambda c: [fn(x) for x in c], chunks, workers=workers) for r in part]

@@ -177,8 +177,7 @@ def _map_chunks(fn, parts: list, rows: int) -> list:
     """``[fn(p) for p in parts]``, by :func:`~gearspec.core.parallel.forked_map` when the chunks hold
     at least :data:`FORK_MIN_ROWS` rows between them and BLAS runs on one thread here (as in the
     workers: ``yy`` is a BLAS dot product, whose sum splits by thread count)."""
-    from ..core.parallel import forked_map
-    from ..core.parallel import worker_count
+    from ..core.parallel import forked_map, worker_count
     from ..core.reduction import blas_on_one_thread
 
     n = worker_count() if rows >= FORK_MIN_ROWS and len(parts) >= 2 and blas_on_one_thread() else 1

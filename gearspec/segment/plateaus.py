@@ -122,16 +122,11 @@ def _map_pieces(piece, pieces: list, workers) -> list:
     """``[piece(p) for p in pieces]``; with ``workers="auto"`` and many pieces
     (:data:`FORK_MIN_PIECES`, :data:`FORK_MIN_ROWS`) in contiguous chunks by
     :func:`~gearspec.core.parallel.forked_map` (the same results: each piece is segmented alone)."""
-    from ..core.parallel import forked_map
-    from ..core.parallel import worker_count
+    from ..core.parallel import forked_map_chunked, worker_count
 
     rows = sum(b - a for _, a, b in pieces)
     n = worker_count() if workers == "auto" and len(pieces) >= FORK_MIN_PIECES and rows >= FORK_MIN_ROWS else 1
-    if n < 2:
-        return [piece(p) for p in pieces]
-    size = -(-len(pieces) // (n * _TASKS_PER_WORKER))
-    chunks = [pieces[k:k + size] for k in range(0, len(pieces), size)]
-    return [r for part in forked_map(lambda c: [piece(p) for p in c], chunks, workers=n) for r in part]
+    return forked_map_chunked(piece, pieces, workers=n, tasks_per_worker=_TASKS_PER_WORKER)
 
 
 def _cover(res) -> int:

@@ -166,15 +166,10 @@ _TASKS_PER_WORKER = 4
 
 def _map_plateaus(one, plateaus: list) -> list:
     """``[one(s) for s in plateaus]``, in contiguous chunks by a forked map when the rule above allows."""
-    from ..core.parallel import forked_map
-    from ..core.parallel import worker_count
+    from ..core.parallel import forked_map_chunked, worker_count
     from ..core.reduction import blas_on_one_thread
 
     rows = sum(s.n for s in plateaus)
     n = (worker_count() if len(plateaus) >= FORK_MIN_PLATEAUS and rows >= FORK_MIN_ROWS
          and blas_on_one_thread() else 1)
-    if n < 2:
-        return [one(s) for s in plateaus]
-    size = -(-len(plateaus) // (n * _TASKS_PER_WORKER))
-    chunks = [plateaus[k:k + size] for k in range(0, len(plateaus), size)]
-    return [a for part in forked_map(lambda c: [one(s) for s in c], chunks, workers=n) for a in part]
+    return forked_map_chunked(one, plateaus, workers=n, tasks_per_worker=_TASKS_PER_WORKER)
