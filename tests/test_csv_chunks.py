@@ -88,3 +88,24 @@ def test_reader_uses_chunks_above_the_size_and_gives_the_same_frame(tmp_path, mo
     got = readers._read_csv(q, ",", True, None)
     assert got["x"].dtype == np.float64 and got["x"].iloc[-1] == 2.75
     assert calls == [True, False]
+
+
+def test_trailing_separator_and_extra_fields_as_one_read(tmp_path, monkeypatch):
+    """A separator at the end of every line is read as one read reads it (the empty last field
+    dropped); a named-less extra field is refused with the same message, read in chunks or not."""
+    monkeypatch.setattr(readers, "read_numeric_chunks",
+                        lambda *a, **k: csvchunks.read_numeric_chunks(*a, **{**k, "chunk_rows": 7}))
+    trail = _write(tmp_path / "g.csv", "t,theta,torque\n" + "".join(f"{i * 0.001!r},{i * 0.5!r},{i % 7 - 3.25!r},\n"
+                                                                   for i in range(30)))
+    extra = _write(tmp_path / "h.csv", "t,theta,torque\n" + "".join(f"{i * 0.001!r},{i * 0.5!r},{i % 7 - 3.25!r},{i}\n"
+                                                                   for i in range(30)))
+    monkeypatch.setattr(readers, "_CHUNKED_BYTES", 1 << 40)
+    whole = readers._read_csv(trail, ",", True, None)
+    with pytest.raises(readers.InputError) as e1:
+        readers._read_csv(extra, ",", True, None)
+    monkeypatch.setattr(readers, "_CHUNKED_BYTES", 0)
+    _same(readers._read_csv(trail, ",", True, None), whole)
+    assert list(whole.columns) == ["t", "theta", "torque"]
+    with pytest.raises(readers.InputError) as e2:
+        readers._read_csv(extra, ",", True, None)
+    assert str(e1.value) == str(e2.value) and "data rows have 4 fields" in str(e2.value)
