@@ -106,7 +106,10 @@ class FitData:
         d = per([s.direction for s in seg.segments], np.int8)
         # held-out unit: the segment; a block of free motion: its stretch (numbered after the segments)
         S = len(seg.segments)
-        group = per([i if s.unit < 0 else S + s.unit for i, s in enumerate(seg.segments)], np.int64)
+        units = [i if s.unit < 0 else S + s.unit for i, s in enumerate(seg.segments)]
+        # no block of free motion: every unit is its segment, and the array is ``sid`` itself (one
+        # full-length array less; nothing writes into either)
+        group = sid if units == list(range(S)) else per(units, np.int64)
         # quasi-static sweeps were taken at rest: no time derivative is used there (acceleration 0,
         # no inertia torque; the velocity is the sweep's nominal one, travel over duration)
         qs = per([s.kind == "quasi_static" for s in seg.segments], bool)

@@ -67,6 +67,10 @@ def test_arrays_equal_the_direct_computation(velocity, lines):
     for name, want in expect.items():
         have = getattr(got, name)
         assert have.dtype == want.dtype and have.tobytes() == want.tobytes(), name   # bit for bit
+    ns = [s.n for s in seg.segments]
+    assert np.array_equal(got.segment, np.repeat(np.arange(4), ns)) and got.segment.dtype == np.int64
+    assert np.array_equal(got.group, got.segment) and got.group.dtype == np.int64
+    assert got.group is got.segment                      # plateaus only: one array, not two
     assert f"{len(idx)} samples in 4 segments" in got.notes[0]
     assert any("9 rows in segments are in pieces too short" in n for n in got.notes)
     assert (n_locked > 0) == (lines is not None)
@@ -96,3 +100,16 @@ def test_plateau_acceleration_in_place_equals_the_copy():
     assert same is acc and (n1, r1) == (n2, r2) and n1 >= 1
     assert np.array_equal(same, copy, equal_nan=True)
     assert not np.array_equal(copy, before, equal_nan=True)
+
+
+def test_free_motion_blocks_keep_their_own_held_out_units():
+    """Blocks of free motion are held out by their stretch (numbered after the segments): then the
+    group array is its own, not the segment ids."""
+    rec = _recording()
+    seg = _segmentation(rec)
+    free = [Segment(s.run, s.start, s.stop, s.direction, s.speed, kind="free", unit=7)
+            if i < 2 else s for i, s in enumerate(seg.segments)]
+    got = FitData.from_recording(rec, Segmentation(free, seg.excluded, seg.n_rows))
+    ns = [s.n for s in free]
+    assert np.array_equal(got.group, np.repeat([4 + 7, 4 + 7, 2, 3], ns))
+    assert got.group is not got.segment
