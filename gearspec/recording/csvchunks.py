@@ -65,10 +65,11 @@ def _parse(path, start: int, stop: int, read_kw: dict) -> pd.DataFrame:
     return pd.read_csv(io.BytesIO(raw), **read_kw)
 
 
-def read_numeric_chunks(path, *, block_bytes: int = BLOCK_BYTES, workers: int = 2,
+def read_numeric_chunks(path, *, block_bytes: int = BLOCK_BYTES, workers: int | None = None,
                         **read_kw) -> pd.DataFrame | None:
     """``pandas.read_csv(path, header=0, **read_kw)`` (the C engine) read in blocks of whole lines
-    (:func:`line_blocks`), ``workers`` threads at a time, into columns allocated once: the same
+    (:func:`line_blocks`), ``workers`` threads at a time (default two, or one when ``GEARSPEC_THREADS``
+    is 1: :func:`gearspec.terms.lines.default_threads`), into columns allocated once: the same
     frame (columns, values bit for bit, dtypes, a RangeIndex), or None when the file is not one of
     numbers of one type per column (a column of text or booleans, or one whose type changes between
     blocks, e.g. integers first and a decimal or an empty cell later) or cannot be split at its line
@@ -106,6 +107,10 @@ def read_numeric_chunks(path, *, block_bytes: int = BLOCK_BYTES, workers: int = 
             out[at[i]:at[i] + m] = part[c].to_numpy()
         return m
 
+    if workers is None:
+        from ..terms.lines import default_threads
+
+        workers = min(2, default_threads())
     if len(blocks) > 1:
         with ThreadPoolExecutor(max_workers=max(1, min(workers, len(blocks) - 1)),
                                 thread_name_prefix="gearspec-csv") as pool:
