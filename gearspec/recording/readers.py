@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError, warn
+from .csvchunks import read_numeric_chunks
 
 _SUFFIXES = {".csv": "csv", ".txt": "csv", ".dat": "csv", ".tsv": "csv", ".parquet": "parquet",
              ".pq": "parquet", ".mat": "mat", ".npz": "npz"}
@@ -19,6 +20,9 @@ _SUFFIXES = {".csv": "csv", ".txt": "csv", ".dat": "csv", ".tsv": "csv", ".parqu
 
 #: csv files at least this large (bytes) return the parser's freed memory to the system after the read
 _TRIM_BYTES = 64 << 20
+#: csv files with a header row at least this large (bytes) are read in chunks when they hold numbers
+#: only (:func:`.csvchunks.read_numeric_chunks`): the same frame with half the peak memory
+_CHUNKED_BYTES = 64 << 20
 
 
 def _release_freed_memory() -> bool:
@@ -212,7 +216,12 @@ def _read_csv(path: Path, sep: str, header: bool, names: Sequence[str] | None, d
     _refuse_duplicate_names(path, header_row.iloc[0].tolist() if len(header_row) else [])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", pd.errors.ParserWarning)
-        frame = pd.read_csv(path, header=0, index_col=False, **data_kw)
+        frame = None
+        if "engine" not in kw and path.stat().st_size >= _CHUNKED_BYTES:
+            # a large file of numbers: read in chunks into its columns (the same frame, half the peak)
+            frame = read_numeric_chunks(path, header=0, index_col=False, **kw)
+        if frame is None:
+            frame = pd.read_csv(path, header=0, index_col=False, **data_kw)
     if any(issubclass(w.category, pd.errors.ParserWarning) for w in caught):
         # data rows have more fields than the header: allowed only if the extra ones are all empty
         rows = pd.read_csv(path, header=None, skiprows=1, **kw)

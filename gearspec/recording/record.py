@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..core.reduction import unique_ids
 from ..errors import InputError
 from ..gears import GearTrain, load_gear
 from .readers import _SUFFIXES
@@ -104,7 +105,9 @@ class Recording:
         return self._pieces_cache[1], self._pieces_cache[2]
 
     def summary(self) -> str:
-        n_runs = len(np.unique(self.run)) if len(self) else 0
+        # the distinct runs in one pass when they are in order (the usual case), not a sorted copy of
+        # every row's id (10^7 rows: 0.16 GB and half a second at the report's peak)
+        n_runs = len(unique_ids(self.run)) if len(self) else 0
         dur = sum(self.t[e - 1] - self.t[s] for _, s, e in self.pieces() if e - s > 1)
         lines = [f"{len(self)} usable rows of {self.n_read} read, {n_runs} run(s), {dur:.4g} s in all; "
                  f"theta in {self.unit}, analysing {self.signal}"]

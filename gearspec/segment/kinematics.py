@@ -81,7 +81,7 @@ def fit_derivatives(rec: Recording, segments, lines=None, deriv_window: int | No
     vel, acc = derivatives(rec, deriv_window)
     if lines is None or not len(lines):
         return vel, acc, 0, 0
-    acc, n_seg, n_rows = plateau_acceleration(rec, segments, lines, acc)
+    acc, n_seg, n_rows = plateau_acceleration(rec, segments, lines, acc, in_place=True)  # acc is ours
     return vel, acc, n_seg, n_rows
 
 

@@ -112,7 +112,8 @@ def _time_fit(t, theta, frequencies, residual: bool = True):
     return -v ** 3 * d2, v, (tc - X @ coef) if residual else None
 
 
-def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray) -> tuple[np.ndarray, int, int]:
+def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray,
+                         in_place: bool = False) -> tuple[np.ndarray, int, int]:
     """``acc`` (one per row of ``rec``, e.g. the Savitzky-Golay one) with the rows of each plateau
     segment that qualifies (:func:`locked_frequencies`) replaced by :func:`locked_acceleration`.
 
@@ -125,14 +126,17 @@ def plateau_acceleration(rec, segments, frequencies, acc: np.ndarray) -> tuple[n
     frequencies : sequence of float
         The lines the fit models (cycles per unit of theta).
     acc : array
-        The acceleration elsewhere (unit/s^2); not modified.
+        The acceleration elsewhere (unit/s^2); not modified unless ``in_place``.
+    in_place : bool
+        Write the plateaus' accelerations into ``acc`` (a float64 array) and return it, instead of
+        into a copy (a caller that owns ``acc``: one full-length array less).
 
     Returns
     -------
     (array, int, int)
         The acceleration, and how many plateaus and rows got the position-locked one.
     """
-    out = np.array(acc, dtype=float, copy=True)
+    out = acc if (in_place and acc.dtype == np.float64) else np.array(acc, dtype=float, copy=True)
     n_seg = n_rows = 0
     if frequencies is None or not len(frequencies):
         return out, 0, 0
