@@ -10,6 +10,7 @@ import numpy as np
 from ..core.crossval import held_out, n_params as _n_params
 from ..errors import InputError
 from ..fitdata import FitData
+from ..identify.joint import fold_fit
 from ..model import FrictionModel
 from ..terms import BASE_LAWS, fittable_laws
 from .moments import Moments
@@ -69,7 +70,9 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
         return Reference(label, "paper law", None, None, None, None,
                          note=f"identify.fit failed ({type(exc).__name__}: {exc})")
     seg = M.rows(data.segment)
-    ho = held_out(fold, lambda train: identify.fit(data.subset(train[seg]), law, **kw),
+    # each fold refitted with the settings of the fit on all data, only for its predictions (no
+    # in-sample rmse of the fold's training data, no warning repeated once per fold)
+    ho = held_out(fold, lambda train: fold_fit(model, data.subset(train[seg])),
                   lambda mf, test: _segment_sse(data, mf, M, test[seg])[test], weight=M.n,
                   catch=(InputError, np.linalg.LinAlgError, ValueError, FloatingPointError))
     failed = len(ho.failed)

@@ -1,0 +1,59 @@
+"""The papers' laws beside the explorer's (:mod:`gearspec.discover.references`): every held-out
+fold refitted with the settings of the fit on all data, for its predictions only -- the same
+held-out numbers as a full fit per fold, without the fold's in-sample rmse and checks (on a
+10^7-row recording each fold's in-sample rmse evaluated the law at 8 million samples, and a
+check's warning was said once per fold)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from gearspec import identify
+from gearspec.core.crossval import held_out
+from gearspec.discover.law import fold_ids
+from gearspec.discover.moments import moments
+from gearspec.discover.references import _paper_law, _segment_sse
+from gearspec.errors import GearspecWarning
+from gearspec.fitdata import FitData
+
+
+def _falling(seed=3):
+    """12 plateaus per direction, 300 samples each: friction 0.3 - 0.002 |v| (a viscous coefficient
+    falling with speed, which the Coulomb + viscous law's check flags) + white noise 0.01."""
+    rng = np.random.default_rng(seed)
+    th, vv, yy, ss = [], [], [], []
+    t0 = 0.0
+    for i, v in enumerate(np.concatenate([np.geomspace(0.5, 40, 12), -np.geomspace(0.5, 40, 12)])):
+        n = 300
+        vv.append(np.full(n, v))
+        yy.append(np.sign(v) * (0.3 - 0.002 * abs(v)) + 0.01 * rng.standard_normal(n))
+        th.append(t0 + v * np.arange(n) * 1e-3)
+        t0 = th[-1][-1]
+        ss.append(np.full(n, i))
+    return FitData(theta=np.concatenate(th), v=np.concatenate(vv), y=np.concatenate(yy), segment=np.concatenate(ss))
+
+
+def test_a_paper_laws_folds_give_a_full_fits_numbers_and_warn_once():
+    fd = _falling()
+    M = moments(fd)
+    fold = fold_ids(M, "segment", 5)
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        ref = _paper_law(fd, M, "coulomb_viscous", [], fold)
+    said = [str(w.message) for w in got if issubclass(w.category, GearspecWarning)]
+    # the fit on all data flags each direction's negative viscous coefficient once; its five
+    # folds say nothing (a full fit per fold: 12 warnings)
+    assert len(said) == 2 and all("viscous coefficient" in s for s in said), said
+    # the held-out numbers of a full identify.fit per fold, exactly (the same fits)
+    seg = M.rows(fd.segment)
+    kw = {"harmonics": None, "weights": "uniform", "holdout": None, "inertia": "none"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        full = held_out(fold, lambda train: identify.fit(fd.subset(train[seg]), "coulomb_viscous", **kw),
+                        lambda mf, test: _segment_sse(fd, mf, M, test[seg])[test], weight=M.n, catch=())
+    assert np.array_equal(ref.cv_sse, full.sse)
+    assert ref.rmse_holdout == full.rmse
+    # the law falls with speed: the coefficient the check flags is negative, many errors below 0
+    assert ref.model.directions["positive"].values["viscous"] < -0.001
