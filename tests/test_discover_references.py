@@ -9,11 +9,14 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 
 from gearspec import identify
+from gearspec.core import parallel
 from gearspec.core.crossval import held_out
 from gearspec.discover.law import fold_ids
 from gearspec.discover.moments import moments
+from gearspec.discover import references
 from gearspec.discover.references import _paper_law, _segment_sse
 from gearspec.errors import GearspecWarning
 from gearspec.fitdata import FitData
@@ -35,7 +38,13 @@ def _falling(seed=3):
     return FitData(theta=np.concatenate(th), v=np.concatenate(vv), y=np.concatenate(yy), segment=np.concatenate(ss))
 
 
-def test_a_paper_laws_folds_give_a_full_fits_numbers_and_warn_once():
+fork_only = pytest.mark.skipif(parallel.can_fork() is False, reason="no fork on this system")
+
+
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_a_paper_laws_folds_give_a_full_fits_numbers_and_warn_once(threads, monkeypatch):
+    # the folds run in forked workers with 2 (the fit on all data, and its warnings, in this process)
+    monkeypatch.setenv("GEARSPEC_THREADS", threads)
     fd = _falling()
     M = moments(fd)
     fold = fold_ids(M, "segment", 5)
@@ -57,3 +66,35 @@ def test_a_paper_laws_folds_give_a_full_fits_numbers_and_warn_once():
     assert ref.rmse_holdout == full.rmse
     # the law falls with speed: the coefficient the check flags is negative, many errors below 0
     assert ref.model.directions["positive"].values["viscous"] < -0.001
+
+
+@fork_only
+def test_a_fold_that_fails_in_a_worker_is_skipped_and_counted(monkeypatch):
+    # a fold's error raised in a forked worker reaches held_out as it would in this process: that
+    # fold skipped (its segments without a held-out error), counted in the note
+    monkeypatch.setenv("GEARSPEC_THREADS", "2")
+    fd = _falling()
+    M = moments(fd)
+    fold = fold_ids(M, "segment", 5)
+    real = references.fold_fit
+
+    def flaky(model, data):
+        if 1 not in set(np.unique(data.segment).tolist()):      # the fold that holds segment 1 out
+            raise ValueError("a singular fold")
+        return real(model, data)
+
+    monkeypatch.setattr(references, "fold_fit", flaky)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = _paper_law(fd, M, "coulomb_viscous", [], fold)
+    out = fold[M.rows(np.array([1]))[0]]
+    assert ref.note.startswith("fit failed in 1 fold(s)")
+    assert ref.cv_sse is None and ref.rmse_holdout is not None
+    monkeypatch.setattr(references, "fold_fit", real)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        whole = _paper_law(fd, M, "coulomb_viscous", [], fold)
+    kept = fold != out
+    # the other folds' held-out error, as with every fold fitted
+    n = M.n
+    assert ref.rmse_holdout == pytest.approx(np.sqrt(np.sum(whole.cv_sse[kept]) / np.sum(n[kept])), rel=1e-12)

@@ -7,12 +7,13 @@ import math
 
 import numpy as np
 
-from ..core.crossval import held_out, n_params as _n_params
+from ..core.crossval import held_out, n_params as _n_params, splits
 from ..errors import InputError
 from ..fitdata import FitData
 from ..identify.joint import fold_fit
 from ..model import FrictionModel
 from ..terms import BASE_LAWS, fittable_laws
+from .forked import fits_map
 from .moments import Moments
 from .results import Reference
 
@@ -21,6 +22,8 @@ __all__ = ["PAPER_LAWS"]
 #: the papers' laws the explorer compares with: every base law of :mod:`gearspec.terms` with
 #: parameters (names of :func:`gearspec.identify.fit`)
 PAPER_LAWS = fittable_laws()
+#: what a fold's fit or prediction may raise: the fold is skipped (counted), not the comparison
+_FOLD_ERRORS = (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError)
 
 #: how the comparison names them (a law not listed: by its name)
 _LABELS = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per direction)",
@@ -70,11 +73,26 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
         return Reference(label, "paper law", None, None, None, None,
                          note=f"identify.fit failed ({type(exc).__name__}: {exc})")
     seg = M.rows(data.segment)
-    # each fold refitted with the settings of the fit on all data, only for its predictions (no
-    # in-sample rmse of the fold's training data, no warning repeated once per fold)
-    ho = held_out(fold, lambda train: fold_fit(model, data.subset(train[seg])),
-                  lambda mf, test: _segment_sse(data, mf, M, test[seg])[test], weight=M.n,
-                  catch=(InputError, np.linalg.LinAlgError, ValueError, FloatingPointError))
+
+    def one(test):
+        # a fold refitted with the settings of the fit on all data, only for its predictions (no
+        # in-sample rmse of its training data, no warning repeated once per fold), and scored
+        try:
+            return _segment_sse(data, fold_fit(model, data.subset((~test)[seg])), M, test[seg])[test]
+        except _FOLD_ERRORS as exc:
+            return exc
+
+    # the folds at once in forked workers (the fit on all data above, here, left the samples'
+    # per-segment statistics on ``data`` for them to read); held_out takes their results in turn
+    done = iter(fits_map(one, [test for _, test in splits(fold)]))
+
+    def score(_, test):
+        got = next(done)
+        if isinstance(got, Exception):
+            raise got
+        return got
+
+    ho = held_out(fold, lambda train: None, score, weight=M.n, catch=_FOLD_ERRORS)
     failed = len(ho.failed)
     note = f"fit failed in {failed} fold(s): held-out error over the other folds" if failed else ""
     return Reference(label, "paper law", _rmse_all(data, model), ho.rmse, _n_params(model),
