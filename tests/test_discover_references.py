@@ -98,3 +98,26 @@ def test_a_fold_that_fails_in_a_worker_is_skipped_and_counted(monkeypatch):
     # the other folds' held-out error, as with every fold fitted
     n = M.n
     assert ref.rmse_holdout == pytest.approx(np.sqrt(np.sum(whole.cv_sse[kept]) / np.sum(n[kept])), rel=1e-12)
+
+
+def test_a_long_recordings_folds_run_in_turn(monkeypatch):
+    # above FORK_MAX_ROWS the folds are fitted here in turn (each worker would gather and reduce its
+    # own copy of the training samples); below, in a map; the same numbers either way
+    fd = _falling()
+    M = moments(fd)
+    fold = fold_ids(M, "segment", 5)
+    maps = []
+
+    def spy(fn, items, *a, **k):
+        maps.append(len(items))
+        return [fn(x) for x in items]
+
+    monkeypatch.setattr(references, "fits_map", spy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        short = _paper_law(fd, M, "coulomb_viscous", [], fold)
+        assert maps == [5]
+        monkeypatch.setattr(references, "FORK_MAX_ROWS", len(fd) - 1)
+        long = _paper_law(fd, M, "coulomb_viscous", [], fold)
+    assert maps == [5]
+    assert np.array_equal(short.cv_sse, long.cv_sse)

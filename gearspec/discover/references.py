@@ -22,6 +22,10 @@ __all__ = ["PAPER_LAWS"]
 #: the papers' laws the explorer compares with: every base law of :mod:`gearspec.terms` with
 #: parameters (names of :func:`gearspec.identify.fit`)
 PAPER_LAWS = fittable_laws()
+#: a paper law's held-out folds run in forked workers for data of at most this many rows, in turn
+#: above: a fold's refit gathers its training samples and, with the inertia held, reduces them again
+#: (about 0.5 GB a worker on the 10^7-row benchmark recording, whose peak it set: 2.4 -> 2.9 GB)
+FORK_MAX_ROWS = 3_000_000
 #: what a fold's fit or prediction may raise: the fold is skipped (counted), not the comparison
 _FOLD_ERRORS = (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError)
 
@@ -83,8 +87,10 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
             return exc
 
     # the folds at once in forked workers (the fit on all data above, here, left the samples'
-    # per-segment statistics on ``data`` for them to read); held_out takes their results in turn
-    done = iter(fits_map(one, [test for _, test in splits(fold)]))
+    # per-segment statistics on ``data`` for them to read), on long recordings in turn (memory);
+    # held_out takes their results in turn
+    tests = [test for _, test in splits(fold)]
+    done = iter(fits_map(one, tests) if len(data) <= FORK_MAX_ROWS else [one(t) for t in tests])
 
     def score(_, test):
         got = next(done)
