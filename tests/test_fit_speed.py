@@ -10,7 +10,7 @@
   (:func:`gearspec.identify.validate.segment_rows`; models it cannot score so are evaluated once on
   all rows, once per direction when they cannot predict one): the numbers of :func:`segment_errors`
   to 1e-10 (sums in another order; ``tests/test_fit_scores.py`` bounds the rounding).
-- The held-out folds of :meth:`JointFit.fit` (``joint._fold_fit``) skip the in-sample rmse and the
+- The held-out folds of :meth:`JointFit.fit` (``joint.fold_fit``) skip the in-sample rmse and the
   checks' flags of the fold's model, which nobody reads: its predictions are those of
   :func:`refit` bit for bit, and so is the held-out rmse.
 """
@@ -111,7 +111,7 @@ def test_fold_fit_predicts_as_refit(small):
     m = fit(small, "silo4", harmonics=[{"frequency": 0.8}], holdout="segment", folds=3)
     train = small.subset(small.segment % 3 != 0)
     test = small.subset(small.segment % 3 == 0)
-    quick, full = joint._fold_fit(m, train), joint.refit(m, train, holdout=None)
+    quick, full = joint.fold_fit(m, train), joint.refit(m, train, holdout=None)
     assert np.array_equal(quick.evaluate(**test.inputs()), full.evaluate(**test.inputs()))
     assert quick.rmse is None and full.rmse is not None     # the unread in-sample rmse is skipped
     ref, _ = holdout(lambda tr: joint.refit(m, tr, holdout=None), small, by="segment", folds=3)

@@ -182,8 +182,7 @@ def _print_summary(result, elapsed, args) -> None:
             print(f"{i:>3} {s.segment.run:>3} {s.direction:>+3d} {s.speed:>10.4g} {s.segment.n:>8}  {txt}")
     un = result.unexplained()
     if len(un):
-        print(f"{len(un)} significant peak(s) no declared line explains; see the report"
-              + ("" if args.out else " (--out DIR)"))
+        print(result.unexplained_sentence() + "; see the report" + ("" if args.out else " (--out DIR)"))
     print_outputs(args, as_path=True)
 
 

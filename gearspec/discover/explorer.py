@@ -530,13 +530,15 @@ def _compare(data: FitData, run: _Run, selected: Candidate, references, publishe
     the mean friction of every segment (data, the selected law, each reference) for the plots."""
     t0 = time.perf_counter()
     M = run.M
-    # in turn, not in forked workers: a paper law's fit reads per-segment statistics of the samples
-    # cached on ``data`` (identify.stats.segment_stats), which the laws share in one process, while
-    # each worker would make (rows x columns at once, 1 GB more at 10^7 rows) and throw away its own
-    refs: list[Reference] = [_paper_law(data, M, law, run.specs, run.fold) for law in references or ()]
-    for r in refs:
-        if say is not None and r.model is not None:
-            say(f"reference law {r.name} fitted on the same folds")
+    # the laws in turn, not in forked workers: a paper law's fit reads per-segment statistics of the
+    # samples cached on ``data`` (identify.stats.segment_stats), which the laws share in one process,
+    # while each worker would make (rows x columns at once, 1 GB more at 10^7 rows) and throw away its
+    # own; a law's held-out folds, which read those its fit on all data left, run in forked workers
+    refs: list[Reference] = []
+    for law in references or ():
+        refs.append(_paper_law(data, M, law, run.specs, run.fold))
+        if say is not None and refs[-1].model is not None:      # as each ends (a long recording: a minute each)
+            say(f"reference law {refs[-1].name} fitted on the same folds")
     refs += [_published(data, M, name, model) for name, model in (published or {}).items()]
     run.timings["references"] = time.perf_counter() - t0
     levels = {"data": M.b[:, 0] / M.n, "selected": _mean_prediction(selected.fit, M)}

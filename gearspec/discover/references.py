@@ -7,11 +7,13 @@ import math
 
 import numpy as np
 
-from ..core.crossval import held_out, n_params as _n_params
+from ..core.crossval import held_out, n_params as _n_params, splits
 from ..errors import InputError
 from ..fitdata import FitData
+from ..identify.joint import fold_fit
 from ..model import FrictionModel
 from ..terms import BASE_LAWS, fittable_laws
+from .forked import fits_map
 from .moments import Moments
 from .results import Reference
 
@@ -20,6 +22,12 @@ __all__ = ["PAPER_LAWS"]
 #: the papers' laws the explorer compares with: every base law of :mod:`gearspec.terms` with
 #: parameters (names of :func:`gearspec.identify.fit`)
 PAPER_LAWS = fittable_laws()
+#: a paper law's held-out folds run in forked workers for data of at most this many rows, in turn
+#: above: a fold's refit gathers its training samples and, with the inertia held, reduces them again
+#: (about 0.5 GB a worker on the 10^7-row benchmark recording, whose peak it set: 2.4 -> 2.9 GB)
+FORK_MAX_ROWS = 3_000_000
+#: what a fold's fit or prediction may raise: the fold is skipped (counted), not the comparison
+_FOLD_ERRORS = (InputError, np.linalg.LinAlgError, ValueError, FloatingPointError)
 
 #: how the comparison names them (a law not listed: by its name)
 _LABELS = {"coulomb_viscous": "Coulomb + viscous (IDIM-LS structure, per direction)",
@@ -69,9 +77,28 @@ def _paper_law(data: FitData, M: Moments, law: str, specs, fold) -> Reference:
         return Reference(label, "paper law", None, None, None, None,
                          note=f"identify.fit failed ({type(exc).__name__}: {exc})")
     seg = M.rows(data.segment)
-    ho = held_out(fold, lambda train: identify.fit(data.subset(train[seg]), law, **kw),
-                  lambda mf, test: _segment_sse(data, mf, M, test[seg])[test], weight=M.n,
-                  catch=(InputError, np.linalg.LinAlgError, ValueError, FloatingPointError))
+
+    def one(test):
+        # a fold refitted with the settings of the fit on all data, only for its predictions (no
+        # in-sample rmse of its training data, no warning repeated once per fold), and scored
+        try:
+            return _segment_sse(data, fold_fit(model, data.subset((~test)[seg])), M, test[seg])[test]
+        except _FOLD_ERRORS as exc:
+            return exc
+
+    # the folds at once in forked workers (the fit on all data above, here, left the samples'
+    # per-segment statistics on ``data`` for them to read), on long recordings in turn (memory);
+    # held_out takes their results in turn
+    tests = [test for _, test in splits(fold)]
+    done = iter(fits_map(one, tests) if len(data) <= FORK_MAX_ROWS else [one(t) for t in tests])
+
+    def score(_, test):
+        got = next(done)
+        if isinstance(got, Exception):
+            raise got
+        return got
+
+    ho = held_out(fold, lambda train: None, score, weight=M.n, catch=_FOLD_ERRORS)
     failed = len(ho.failed)
     note = f"fit failed in {failed} fold(s): held-out error over the other folds" if failed else ""
     return Reference(label, "paper law", _rmse_all(data, model), ho.rmse, _n_params(model),

@@ -43,7 +43,7 @@ from .covariance import SE_METHODS, _carry_se, _common_inertia, jacobian
 from .jointlines import covariance, faint_lines, few_speeds, grid_starts, hold_constant, not_converged
 from .validate import _safe_rmse, holdout, inverted_sign, negative_viscous
 
-__all__ = ["JointFit", "clone", "fit", "refit", "negative_viscous", "inverted_sign"]
+__all__ = ["JointFit", "clone", "fit", "refit", "fold_fit", "negative_viscous", "inverted_sign"]
 
 
 # ---------------------------------------------------------------------- the joint fit of one direction
@@ -498,7 +498,7 @@ class JointFit:
                               not_identified=not_identified, notes=notes, name=self.name or law,
                               meta={"fit": settings})
         if getattr(self, "_predict_only", False):
-            # a held-out fold's model (:func:`_fold_fit`): only its predictions are read
+            # a held-out fold's model (:func:`fold_fit`): only its predictions are read
             self.harmonics_, self.model_ = specs, model
             return self
         model.rmse = _safe_rmse(model, data)
@@ -508,7 +508,7 @@ class JointFit:
                 _warn(msg)
         if self.holdout:
             model.rmse_holdout, model.rmse_holdout_reason = holdout(
-                lambda tr: _fold_fit(model, tr), data, by=self.holdout, folds=self.folds)
+                lambda tr: fold_fit(model, tr), data, by=self.holdout, folds=self.folds)
         self.harmonics_, self.model_ = specs, model
         return self
 
@@ -562,10 +562,12 @@ def clone(estimator: JointFit) -> JointFit:
     return type(estimator)(**copy.deepcopy(estimator.get_params()))
 
 
-def _fold_fit(model: FrictionModel, data: FitData) -> FrictionModel:
+def fold_fit(model: FrictionModel, data: FitData) -> FrictionModel:
     """``refit(model, data, holdout=None)`` for a held-out fold, whose model is only asked for its
     predictions: the same parameters, without the in-sample rmse and the checks' flags (which
-    :meth:`JointFit.fit` would compute on the fold's training data and nobody reads)."""
+    :meth:`JointFit.fit` would compute on the fold's training data and nobody reads; a flag
+    would be said once per fold).  The folds of :meth:`JointFit.fit` and of the explorer's
+    reference laws (:mod:`gearspec.discover.references`)."""
     est = JointFit.from_model(model).set_params(se="covariance", check=False, holdout=None)
     est._predict_only = True
     return est.fit(data).model_

@@ -191,6 +191,8 @@ def _lines_sections(result: SpectrumResult, table: pd.DataFrame, figs: dict) -> 
     if found.empty:
         md += ["_None significant (false-alarm probability < 0.01)._", ""]
     else:
+        md += [result.unexplained_sentence() + "; below, every peak found that no declared line fits "
+               "(`label`: those a harmonic, sideband or alias of one explains).", ""]
         if figs["unexplained"] is not None:
             md += [f"![unexplained peaks]({figs['unexplained'].name})", ""]
         cols = [c for c in ("segment", "direction", "speed", "frequency", "order", "amplitude", "amplitude_se", "fap",
