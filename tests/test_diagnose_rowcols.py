@@ -30,6 +30,8 @@ from gearspec.simulate import model_recording
 F_MOTOR = 1 / (2 * np.pi)
 #: cycles per rad above 0.8 of the position Nyquist limit at the faster plateaus (500 Hz, > 10 rad/s)
 F_HIGH = 20.0
+#: cycles per rad measured (a whole cycle in a plateau) only from 2 rad/s up
+F_SLOW = 0.05
 
 
 def _model(load: bool = False) -> FrictionModel:
@@ -37,7 +39,9 @@ def _model(load: bool = False) -> FrictionModel:
         out = [{"frequency": F_MOTOR, "amplitude": a, "decay": 0.05, "phase": ph, "label": "motor shaft"},
                {"frequency": 17 * F_MOTOR, "amplitude": 0.6 * a, "decay": 0.15, "phase": ph + 1, "law": "rational",
                 "label": "mesh"},
-               {"frequency": F_HIGH, "amplitude": 0.3 * a, "decay": 0.02, "phase": ph - 1, "label": "high"}]
+               {"frequency": F_HIGH, "amplitude": 0.3 * a, "decay": 0.02, "phase": ph - 1, "label": "high"},
+               # a cycle within a plateau only from 2 rad/s: its amplitude law held below (the data's range)
+               {"frequency": F_SLOW, "amplitude": 0.5 * a, "decay": 0.3, "phase": ph + 2, "label": "slow"}]
         if load:
             out[0]["load_coefficient"] = 2e-3
         return out
@@ -84,6 +88,8 @@ def test_lazy_rows_are_the_whole_arrays_rows_bit_for_bit(symmetric, load, monkey
     dd = _data(load=load)
     ok = resolved(dd, F_HIGH)
     assert 0 < ok.mean() < 1            # the high line is above its Nyquist limit in part of the segments
+    slow = next(b for b in _blocks(dd, symmetric, load) if getattr(b, "frequency", 0) == F_SLOW)
+    assert all(lo > 1.5 for lo, _ in slow.ranges(dd).values())     # its law held below 2 rad/s (of 0.5)
     blocks = _blocks(dd, symmetric, load)
     n = len(dd)
     ranges = [(0, n), (0, 1), (n - 1, n), (7, 8), (3, 777), (1234, 5678), (n - 2, n)]
