@@ -1,8 +1,8 @@
 """A block's columns a range of rows at a time on long data (issue 13: "memory stays bounded:
 reductions, never a dense rows x terms matrix of a long recording"; helper "diaglazy").
 
-Above :data:`gearspec.diagnose.budget.LAZY_BYTES` a base law's and a line's columns (plain and with
-their Taylor columns) are :class:`~gearspec.diagnose.rowcols.Columns`: rows computed on demand from
+Above :data:`gearspec.diagnose.budget.LAZY_BYTES` a base law's, a line's and an elementwise term's
+columns (plain and with their Taylor columns) are :class:`~gearspec.diagnose.rowcols.Columns`: rows computed on demand from
 facts of the whole data.  Known answer: the whole arrays the blocks build below the threshold --
 equal bit for bit, for every kind, both directions and a symmetric model, a line above its position
 Nyquist limit in part of the segments, a sideband pooled over long plateaus, a load-dependent line,
@@ -67,6 +67,15 @@ def _blocks(dd, symmetric=False, load=False):
     blocks.append(SidebandBlock(key="sb", frequency=3 * F_MOTOR, dirs=line.dirs, symmetric=line.symmetric,
                                 law=line.law, decay=line.decay, min_travel=float(span),
                                 coef=tuple(np.linspace(0.7, 1.3, 2 * (1 if line.symmetric else len(line.dirs))))))
+    dirs = [0] if symmetric else [1, -1]
+    terms = [("viscous_power", (("exponent", 1.7),)), ("stribeck_extra", (("v_s", 2.0), ("shape", "gauss"))),
+             ("drift", (("reference", 0.0),)), ("offset", ()), ("cogging", (("frequency", 3.0),)), ("inertia", ())]
+    terms += [("load_viscous", ())] if load else []
+    for kind, fixed in terms:
+        for d in (dirs if kind not in ("offset", "inertia", "cogging") else [0]):
+            k = 2 if kind == "cogging" else 1
+            blocks.append(design.TermBlock(key=kind, kind=kind, fixed=fixed, direction=d,
+                                           coef=tuple(np.linspace(0.9, 1.1, k))))
     return blocks
 
 
@@ -102,8 +111,7 @@ def test_lazy_rows_are_the_whole_arrays_rows_bit_for_bit(symmetric, load, monkey
                 continue
             assert isinstance(lazy, rowcols.Columns), type(blk)
             assert lazy.shape == whole.shape and lazy.nbytes == 0
-            if taylor:
-                assert whole.shape[1] > len(blk.names)
+            assert whole.shape[1] == len(blk.names) + (blk.n_taylor(dd) if taylor else 0)
             for a, z in ranges:
                 assert np.array_equal(lazy[a:z], whole[a:z]), (type(blk).__name__, taylor, a, z)
             assert np.array_equal(np.asarray(lazy), whole)
@@ -112,7 +120,9 @@ def test_lazy_rows_are_the_whole_arrays_rows_bit_for_bit(symmetric, load, monkey
             mask = (np.arange(n) % 7) == 2
             assert np.array_equal(lazy[mask], whole[mask])
             kinds.add(type(blk).__name__)
-    assert kinds == ({"HarmonicBlock", "SidebandBlock"} | ({"BaseBlock"} if not load else set()))
+    assert kinds == ({"HarmonicBlock", "SidebandBlock", "TermBlock"} | ({"BaseBlock"} if not load else set()))
+    # the Taylor columns of the terms' own nonlinear parameters (exponent, Stribeck velocity) among them
+    assert sum(b.n_taylor(dd) for b in blocks if isinstance(b, design.TermBlock)) >= 2
     # the load-dependent column is among them
     if load:
         assert any(b.load_phase for b in blocks if isinstance(b, design.HarmonicBlock))
@@ -122,6 +132,8 @@ def test_blocks_that_cannot_compute_rows_keep_whole_arrays(monkeypatch):
     dd = _data()
     line = next(b for b in _blocks(dd) if isinstance(b, design.HarmonicBlock))
     monkeypatch.setattr(budget, "LAZY_BYTES", 0)
+    hyst = design.TermBlock(key="h", kind="hysteresis", fixed=(("length", 0.1),), coef=(1.0,))
+    assert isinstance(hyst.columns(dd), np.ndarray)     # the travel since the last reversal: whole
     lag = lagged(line, 2e-3)
     assert isinstance(lag, LaggedHarmonicBlock)
     assert isinstance(lag.columns(dd), np.ndarray)      # a shifted view of positions: whole

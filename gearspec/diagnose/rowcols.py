@@ -1,7 +1,8 @@
 """A block's columns computed a range of rows at a time (:class:`Columns`): on a long recording a
 block whose columns would hold more than :data:`~.budget.LAZY_BYTES` keeps only what its rows are
 computed from -- facts of the whole data, small or one per row at most (the law at the distinct
-speed keys, a line's amplitude factor at them, its speed range, the segments that resolve it) --
+speed keys, a line's amplitude factor at them, its speed range, the segments that resolve it; an
+elementwise term's inputs, :data:`ELEMENTWISE_TERMS`) --
 and every product of the closed loop (:mod:`.gram`, :mod:`.chunked`) asks for the rows of the
 chunk it works on (issue 13: memory bounded on long recordings, no rows x terms array).
 
@@ -20,11 +21,15 @@ import numpy as np
 from . import budget, gram
 from .coverage import resolved
 from .data import DiagnoseData, speed_keys
-from .design import BaseBlock, Block, HarmonicBlock
+from ..terms import TERM_LINEAR, TERMS, evaluate_term
+from .design import BaseBlock, Block, HarmonicBlock, TermBlock
 
 __all__ = ["Columns", "source", "chunk_ranges"]
 
 _TWO_PI = 2.0 * math.pi
+#: additive terms whose value at a sample depends on that sample's inputs alone (elementwise)
+ELEMENTWISE_TERMS = frozenset({"viscous_power", "stribeck_extra", "load_coulomb", "load_viscous", "temperature",
+                               "drift", "inertia", "offset", "cogging"})
 
 
 class Columns:
@@ -145,12 +150,16 @@ def _lazy_kind(blk: Block) -> str | None:
         return "base"
     if raw is HarmonicBlock._raw or raw is SidebandBlock._raw and getattr(blk, "lag", 0.0) == 0.0:
         return "line"
+    if raw is TermBlock._raw and blk.kind in ELEMENTWISE_TERMS:
+        return "term"
     return None
 
 
 def _plain(blk: Block, dd: DiagnoseData):
     """``(k, make)``: the block's columns, ``make(a, z)`` their rows; None when they are not computed by rows."""
     kind = _lazy_kind(blk)
+    if kind == "term":
+        return _term(blk, dd)
     keys = speed_keys(dd)
     f = dd.fit
     if kind is None or keys is None or f.load is not None and kind == "base":
@@ -185,6 +194,27 @@ def _plain(blk: Block, dd: DiagnoseData):
                 j += 1
         return out if travel is None else np.where(travel[a:z, None], out, 0.0)   # SidebandBlock._raw
     return k, make
+
+
+def _term(blk: TermBlock, dd: DiagnoseData):
+    """An elementwise additive term's rows, as :meth:`TermBlock._raw` computes them on the samples."""
+    f = dd.fit
+    n = len(f)
+    inputs = f.inputs()
+    signed = TERMS[blk.kind].signed
+    lin = TERM_LINEAR[blk.kind]
+    terms = ([blk.term(amplitude=1.0, phase=ph) for ph in (0.0, math.pi / 2)] if lin == "trig"
+             else [blk.term(**{lin: 1.0})])
+
+    def make(a, z):
+        sub = {k: (x[a:z] if isinstance(x, np.ndarray) and x.ndim == 1 and len(x) == n else x) for k, x in inputs.items()}
+        sgn = np.sign(f.v[a:z])
+        out = np.empty((z - a, len(terms)))
+        for j, t in enumerate(terms):
+            c, _ = evaluate_term(t, **sub)
+            out[:, j] = c if signed else sgn * c
+        return out
+    return len(terms), make
 
 
 def _step(blk: Block, dd: DiagnoseData, up: Block, dn: Block, c: np.ndarray, h: float):
