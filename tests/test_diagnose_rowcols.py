@@ -201,3 +201,20 @@ def test_a_round_on_lazy_columns_holds_no_rows_x_columns_array(monkeypatch):
     assert len(dd) > 80_000 and rnd.width >= 20, (len(dd), rnd.width)
     assert peaks["lazy"] < design_bytes / 4, (peaks, design_bytes)
     assert peaks["whole"] > design_bytes, (peaks, design_bytes)
+
+
+def test_a_round_on_lazy_columns_may_fork_its_candidates(monkeypatch):
+    """The fork rule reads the bytes the design's arrays hold: none for lazy columns, the whole
+    rows x columns for arrays (:func:`~gearspec.diagnose.parallel_round.fork_allowed`)."""
+    from gearspec.diagnose import parallel_round
+    dd = _data()
+    st = state_from_model(_model(), dd)
+    fold = np.arange(dd.n_groups) % 5
+    monkeypatch.setattr(parallel_round, "FORK_DESIGN_BYTES", 8 * len(dd))     # one column's worth
+    monkeypatch.setattr(budget, "LAZY_BYTES", 1 << 62)
+    whole = Round(dd, st, fold)
+    assert whole.design_bytes() == 8 * len(dd) * whole.width and not parallel_round.fork_allowed(whole)
+    dd.cache.clear()
+    monkeypatch.setattr(budget, "LAZY_BYTES", 0)
+    lazy = Round(dd, st, fold)
+    assert lazy.width == whole.width and lazy.design_bytes() == 0 and parallel_round.fork_allowed(lazy)
