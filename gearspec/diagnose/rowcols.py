@@ -18,13 +18,13 @@ import math
 
 import numpy as np
 
+from ..terms import TERM_LINEAR, TERMS, evaluate_term
 from . import budget, gram
 from .coverage import resolved
 from .data import DiagnoseData, speed_keys
-from ..terms import TERM_LINEAR, TERMS, evaluate_term
 from .design import BaseBlock, Block, HarmonicBlock, TermBlock
 
-__all__ = ["Columns", "source", "chunk_ranges"]
+__all__ = ["ELEMENTWISE_TERMS", "Columns", "chunk_ranges", "side_by_side", "source"]
 
 _TWO_PI = 2.0 * math.pi
 #: additive terms whose value at a sample depends on that sample's inputs alone (elementwise)
