@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 
-__all__ = ["CACHE_BYTES", "TRIG_BYTES", "DESIGN_BYTES", "bounded", "nbytes"]
+__all__ = ["CACHE_BYTES", "TRIG_BYTES", "DESIGN_BYTES", "LAZY_BYTES", "bounded", "nbytes"]
 
 #: columns of blocks kept on the data (:meth:`~.design.Block.columns`; on short recordings at most
 #: 64 columns' worth, as before: no more memory than that where the budget would allow it)
@@ -17,6 +17,10 @@ TRIG_BYTES = 64 * 2 ** 20
 #: a round's design larger than this is let go while a candidate's extended round holds its own
 #: (:meth:`~.context.Round.release_design`)
 DESIGN_BYTES = 256 * 2 ** 20
+#: a block whose columns (rows x columns, with its Taylor columns when asked, 8-byte floats) would
+#: hold more than this computes them a range of rows at a time when asked (:mod:`.rowcols`), if its
+#: kind can; at most two such blocks' columns fit in :data:`CACHE_BYTES`
+LAZY_BYTES = CACHE_BYTES // 2
 
 
 def nbytes(value) -> int:

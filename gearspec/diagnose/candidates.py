@@ -22,6 +22,8 @@ from .amplitude import EXP_GRID, POW_GRID, RAT_GRID, choose_amplitude_law, segme
 from .context import BLAS_GROUP_ROWS, Round, group_normals
 from .coverage import measurable, segment_span
 from .design import HarmonicBlock, TermBlock, solve_normal
+from . import rowcols
+from .rowcols import Columns
 
 __all__ = ["Candidate", "Proposal", "PeriodicCandidate", "GridCandidate", "FixedCandidate",
            "LagCandidate", "LaggedHarmonicBlock", "SidebandCandidate", "SidebandBlock", "choose_amplitude_law",
@@ -73,8 +75,11 @@ def side_by_side(cols: list) -> np.ndarray:
     for the caller) when they are what the copy would be (float, 2-D, C-ordered): no copy."""
     if len(cols) == 1:
         c = cols[0]
-        if isinstance(c, np.ndarray) and c.ndim == 2 and c.dtype == np.float64 and c.flags.c_contiguous:
+        if isinstance(c, Columns) or (isinstance(c, np.ndarray) and c.ndim == 2 and c.dtype == np.float64
+                                      and c.flags.c_contiguous):
             return c
+    if any(isinstance(c, Columns) for c in cols):     # a long recording's: side by side a range of rows at a time
+        return rowcols.side_by_side(cols)
     return np.column_stack(cols)
 
 
@@ -199,7 +204,8 @@ class GridCandidate(Candidate):
             if made is not None:
                 add, drop = made
                 C = side_by_side([b.columns(rnd.dd) for b in add])
-                if np.linalg.norm(C) > 1e-6 * np.linalg.norm(rnd.dd.y):  # else nothing the data can see
+                norm = math.sqrt(C.sum_of_squares()) if isinstance(C, Columns) else np.linalg.norm(C)
+                if norm > 1e-6 * np.linalg.norm(rnd.dd.y):  # else nothing the data can see
                     cache[i] = Proposal.of(rnd, add, drop, self.describe_value(self.grid[i]), C)
         return cache[i]
 

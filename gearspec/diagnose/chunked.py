@@ -3,7 +3,8 @@ fits of the closed loop read from a round's design (its normal equations, predic
 of a group) computed block by block or a chunk of rows at a time (:mod:`.gram`), so that no rows x
 terms copy of the blocks' columns is made (issue 13: memory bounded on long recordings).  The
 blocks' arrays are those :meth:`~.design.Block.columns` returns (shared with the data's cache of
-columns while it holds them).  The numbers are those of the stacked design up to the order of the
+columns while it holds them; on a long recording lazy columns, :class:`~.rowcols.Columns`, whose
+rows are computed when a chunk asks for them).  The numbers are those of the stacked design up to the order of the
 floating-point additions (about 1e-16 relative per entry)."""
 
 from __future__ import annotations

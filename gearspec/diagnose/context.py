@@ -123,6 +123,12 @@ class Round:
             self._design[0] = design_of(self.state, self.dd, taylor=True)
         return self._design[0]
 
+    def design_bytes(self) -> int:
+        """Bytes the arrays of :attr:`X` hold (lazy columns, :mod:`.rowcols`, hold none; a design let
+        go counts as the rows x columns it had)."""
+        X = self._design[0]
+        return int(X.nbytes) if X is not None else 8 * len(self.dd) * self.width
+
     @property
     def width(self) -> int:
         """Columns of :attr:`X` (without building it)."""

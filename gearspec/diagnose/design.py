@@ -71,7 +71,11 @@ class Block:
         if hit is not None and (hit[0] is self or ck[0] == "fields"):
             cache.move_to_end(ck)
             return hit[1]
-        if taylor:
+        from .rowcols import source      # long data: the columns a range of rows at a time
+        lazy = source(self, dd, taylor)
+        if lazy is not None:
+            cols = lazy
+        elif taylor:
             plain = self.columns(dd)
             T = self.taylor_columns(dd)
             cols = hstack([plain, T]) if T.shape[1] else plain
@@ -96,18 +100,21 @@ class Block:
         """First-order columns of the nonlinear parameters: the derivative of the block's present
         contribution (``columns @ coef``) with respect to each (a linear refit with them is one
         Gauss-Newton step: every fit of the held-out test refits them on its own data)."""
+        out = [dd.R(self._difference(dd, up, dn, c, h)) for up, dn, c, h in self.taylor_steps(dd)]
+        return np.column_stack(out) if out else np.zeros((len(dd), 0))
+
+    def taylor_steps(self, dd: DiagnoseData) -> list:
+        """``(up, dn, coef, h)`` of every nonlinear parameter: the copies of the block a step ``h``
+        above and below it whose central difference (:meth:`_difference`) is its Taylor column."""
         from .nonlinear import nonlinear_parameters, with_parameter
-        if not self.coef:
-            return np.zeros((len(dd), 0))
         c = np.asarray(self.coef, dtype=float)
         out = []
-        for key, val, lo, hi, log in nonlinear_parameters(self, dd):
+        for key, val, lo, hi, log in (nonlinear_parameters(self, dd) if self.coef else ()):
             h = 1e-4 * (abs(val) if log or val != 0 else 1.0) if key[0] != "frequency" else 1e-7 * abs(val)
             if key[0] == "decay" and val == 0:
                 h = 1e-4 / max(float(np.max(np.abs(dd.fit.v))), 1e-12)
-            out.append(dd.R(self._difference(dd, with_parameter(self, key, val + h),
-                                             with_parameter(self, key, val - h), c, h)))
-        return np.column_stack(out) if out else np.zeros((len(dd), 0))
+            out.append((with_parameter(self, key, val + h), with_parameter(self, key, val - h), c, h))
+        return out
 
     def _difference(self, dd: DiagnoseData, up: "Block", dn: "Block", c: np.ndarray, h: float) -> np.ndarray:
         """The central difference ``(up - dn) @ c / 2h`` of two copies of the block at the samples."""
@@ -283,13 +290,16 @@ class HarmonicBlock(Block):
             sgn = np.sign(f.v)
             return [(d, np.where(sel, sgn * per_speed(dd, lambda sp, d=d: self._g(d, sp, rng.get(d))), 0.0))
                     for d, sel in self._groups(f) if only is None or d == only]
-        u, kidx, ksg, kdir, kinv = keys
+        return [(d, np.take(t, keys[4])) for d, t in self.factor_tables(rng, keys, only)]
+
+    def factor_tables(self, rng: dict, keys, only=None) -> list:
+        """``(d, factor)`` per direction at the keys of :func:`speed_keys` (:meth:`_factors` gathers them)."""
+        u, kidx, ksg, kdir, _ = keys
         out = []
         for d in ((0,) if self.symmetric else self.dirs):
-            if only is not None and d != only:
-                continue
-            sel = np.ones(len(kidx), bool) if self.symmetric else kdir == d
-            out.append((d, np.take(np.where(sel, ksg * np.asarray(self._g(d, u, rng.get(d)))[kidx], 0.0), kinv)))
+            if only is None or d == only:
+                sel = np.ones(len(kidx), bool) if self.symmetric else kdir == d
+                out.append((d, np.where(sel, ksg * np.asarray(self._g(d, u, rng.get(d)))[kidx], 0.0)))
         return out
 
     def _groups(self, f):
@@ -535,6 +545,7 @@ class FittedState:
     def model(self, name: str | None = None, rmse_holdout: float | None = None) -> FrictionModel:
         """The fitted state as a FrictionModel (base parameters, harmonics and terms, with
         standard errors)."""
+        from .nonlinear import write_nonlinear_se
         tmpl = self.state.template
         m = FrictionModel(tmpl.law, copy.deepcopy(tmpl.directions["positive"]),
                           copy.deepcopy(tmpl.directions["negative"]), unit=tmpl.unit,
@@ -547,29 +558,11 @@ class FittedState:
             n_terms = len(m.terms)
             kw = {"ranges": self.speed_ranges.get(blk.uid)} if isinstance(blk, HarmonicBlock) else {}
             blk.write(m, self.coef[a:z], self.se[a:z], **kw)
-            _write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
+            write_nonlinear_se(m, blk, self.nonlinear_se.get(blk.uid, {}), m.terms[n_terms:])
         # through the constructor: the parameters cleaned as every model's are
         return FrictionModel(m.law, m.directions["positive"], m.directions["negative"], terms=m.terms, unit=m.unit,
                              rmse=self.rmse, rmse_holdout=rmse_holdout, not_identified=m.not_identified,
                              notes=m.notes, name=m.name, meta=m.meta)
-
-
-def _write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list) -> None:
-    for key, se in ses.items():
-        se = float(se)
-        if key[0] == "base":
-            _, d, k = key
-            for nm in (DIRECTIONS if d == 0 else (_DNAME[d],)):
-                m.directions[nm].se[k] = se
-        elif key[0] in ("decay", "frequency"):
-            names = DIRECTIONS if (key[0] == "frequency" or key[1] == 0) else (_DNAME[key[1]],)
-            for nm in names:
-                for h in m.directions[nm].harmonics:
-                    if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
-                        h.se[key[0]] = se
-        elif key[0] == "fixed":
-            for t in new_terms:
-                t[key[1] + "_se"] = se
 
 
 def fit_state(state: State, dd: DiagnoseData, *, X: np.ndarray | None = None) -> FittedState:

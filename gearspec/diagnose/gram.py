@@ -73,7 +73,7 @@ def _scratch(m: int, p: int) -> np.ndarray:
 
 def _block(c, a: int, z: int) -> np.ndarray:
     """The rows ``[a, z)`` of one block of a column list (2-d)."""
-    part = c[a:z] if isinstance(c, np.ndarray) else c[0][a:z][:, c[1]]
+    part = c[0][a:z][:, c[1]] if isinstance(c, tuple) else c[a:z]
     return part.reshape(z - a, -1)
 
 
@@ -81,7 +81,7 @@ def width(cols) -> int:
     """Columns of the stacked design."""
     n = 0
     for c in cols:
-        if isinstance(c, np.ndarray):
+        if not isinstance(c, tuple):      # an array, or lazy columns (:class:`~.rowcols.Columns`)
             n += c.shape[1] if c.ndim > 1 else 1
         else:
             idx = np.asarray(c[1])
@@ -167,7 +167,8 @@ def stack(parts, n: int, p: int, out: np.ndarray | None = None) -> np.ndarray:
     j = 0
     for c in parts:
         k = c.shape[1] if c.ndim > 1 else 1
-        out[:, j:j + k] = c.reshape(n, k)
+        for a, z in ([(0, n)] if isinstance(c, np.ndarray) else every_row(n)):   # lazy columns: by rows
+            out[a:z, j:j + k] = c[a:z].reshape(z - a, k)
         j += k
         del c          # the generator computes the next block without this one held
     if j != p:

@@ -11,7 +11,8 @@ from dataclasses import replace
 import numpy as np
 
 from .data import DiagnoseData
-from .design import BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
+from ..model import DIRECTIONS, FrictionModel
+from .design import _DNAME, BaseBlock, Block, HarmonicBlock, State, TermBlock, _cov, solve_normal
 from . import gram
 
 __all__ = ["nonlinear_standard_errors", "polish", "refine", "nonlinear_parameters", "with_parameter", "travel_range"]
@@ -127,10 +128,8 @@ def refine(state: State, dd: DiagnoseData, *, only=None, steps: int = 4) -> Stat
 
         # every block's columns, then its Taylor columns (one per nonlinear parameter)
         cols = []
-        for b, t in zip(blocks, taylor_of):
-            cols.append(b.columns(dd))
-            if t:
-                cols.append(b.taylor_columns(dd))
+        for b, t in zip(blocks, taylor_of):     # (its plain columns, then its Taylor columns)
+            cols.append(b.columns(dd, taylor=t))
         taylor = solve_normal(*gram.normals(cols, y, ranges))[at]
         del cols
         improved = False
@@ -249,3 +248,22 @@ def with_parameter(blk: Block, key: tuple, value: float) -> Block:
         k = key[1]
         return replace(blk, fixed=tuple((kk, value if kk == k else v) for kk, v in blk.fixed))
     raise KeyError(key)
+
+
+def write_nonlinear_se(m: FrictionModel, blk: Block, ses: dict, new_terms: list) -> None:
+    """The standard errors ``ses`` of a block's nonlinear parameters into the model ``m`` (its new terms ``new_terms``)."""
+    for key, se in ses.items():
+        se = float(se)
+        if key[0] == "base":
+            _, d, k = key
+            for nm in (DIRECTIONS if d == 0 else (_DNAME[d],)):
+                m.directions[nm].se[k] = se
+        elif key[0] in ("decay", "frequency"):
+            names = DIRECTIONS if (key[0] == "frequency" or key[1] == 0) else (_DNAME[key[1]],)
+            for nm in names:
+                for h in m.directions[nm].harmonics:
+                    if math.isclose(h.frequency, blk.frequency, rel_tol=1e-12):
+                        h.se[key[0]] = se
+        elif key[0] == "fixed":
+            for t in new_terms:
+                t[key[1] + "_se"] = se

@@ -47,9 +47,10 @@ UID_STRIDE = 2 ** 20
 
 
 def fork_allowed(rnd) -> bool:
-    """Whether the round's candidates may run in forked workers: its design (:attr:`~.context.Round.width`
-    columns of the rows) holds at most :data:`FORK_DESIGN_BYTES`."""
-    return 8 * len(rnd.dd) * rnd.width <= FORK_DESIGN_BYTES
+    """Whether the round's candidates may run in forked workers: its design's arrays
+    (:meth:`~.context.Round.design_bytes`: lazy columns of a long recording hold none) hold at most
+    :data:`FORK_DESIGN_BYTES`."""
+    return rnd.design_bytes() <= FORK_DESIGN_BYTES
 
 
 def prefetch(rnd, cands, *, residuals: bool = True) -> None:
