@@ -563,11 +563,9 @@ def clone(estimator: JointFit) -> JointFit:
 
 
 def fold_fit(model: FrictionModel, data: FitData) -> FrictionModel:
-    """``refit(model, data, holdout=None)`` for a held-out fold, whose model is only asked for its
-    predictions: the same parameters, without the in-sample rmse and the checks' flags (which
-    :meth:`JointFit.fit` would compute on the fold's training data and nobody reads; a flag
-    would be said once per fold).  The folds of :meth:`JointFit.fit` and of the explorer's
-    reference laws (:mod:`gearspec.discover.references`)."""
+    """``refit(model, data, holdout=None)`` for a held-out fold (of :meth:`JointFit.fit`, of the
+    explorer's reference laws), whose model is only asked for its predictions: the same parameters,
+    without the in-sample rmse and the checks' flags (which nobody reads; said once per fold)."""
     est = JointFit.from_model(model).set_params(se="covariance", check=False, holdout=None)
     est._predict_only = True
     return est.fit(data).model_
