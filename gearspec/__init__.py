@@ -22,7 +22,7 @@ import types
 
 from .errors import GearspecWarning, InputError
 
-__version__ = "0.12.0"
+__version__ = "0.13.0"
 
 #: public name -> (module, attribute); attribute None: the module itself
 _LAZY = {
